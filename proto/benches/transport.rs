@@ -1,0 +1,146 @@
+//! Round trip of interface kinematics between two processes on loopback, against a memcpy
+//! of the same bytes (REFERENCE D, "Transport"). Prints figures; it is not a timed test.
+//!
+//! `cargo bench -p proto --bench transport` (set COSIM_BENCH_ROUNDS to change the count).
+//! The echo side is this same executable, started again with COSIM_BENCH_ECHO set.
+
+use std::time::{Duration, Instant};
+
+use proto::link::free_loopback_port;
+use proto::participant::Participant;
+use proto::{Hello, InterfaceForces, InterfaceKinematics, LinkConfig, Role, PROTOCOL_VERSION};
+
+const RUN: &str = "bench-transport";
+
+fn hello(role: Role) -> Hello {
+    Hello {
+        software: "transport-bench".into(),
+        role,
+        capabilities: vec![],
+        pid: std::process::id(),
+    }
+}
+
+/// The echo process: the DEM side, answering each window's kinematics with forces of the
+/// same size (the positions array, re-sent), like a coupling window's exchange.
+async fn echo(listen: u16, connect: u16, sizes: &[usize], rounds: usize) {
+    let mut dem = Participant::connect(
+        &LinkConfig::loopback_peer(Some(listen), &[connect]),
+        RUN,
+        "dem",
+        hello(Role::Dem),
+    )
+    .await
+    .expect("echo connects");
+    let ifaces: Vec<String> = sizes.iter().map(|n| format!("n{n}")).collect();
+    dem.open_interfaces(Role::Dem, &ifaces).await.expect("open");
+    dem.wait_for_peers(Duration::from_secs(30))
+        .await
+        .expect("peer");
+    for (&n, name) in sizes.iter().zip(&ifaces) {
+        for k in 0..(rounds + 10) as u64 {
+            let kin = dem
+                .read_kinematics(name, k, n, Duration::from_secs(60))
+                .await
+                .expect("kinematics");
+            let f = InterfaceForces {
+                version: PROTOCOL_VERSION,
+                run_id: RUN.into(),
+                interface: name.clone(),
+                window: k,
+                time: kin.time,
+                forces: kin.positions,
+                averaged: false,
+                substeps: 1,
+            };
+            dem.write_forces(&f).await.expect("forces");
+        }
+    }
+    dem.finish().await.ok();
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(|a, b| a.partial_cmp(b).unwrap());
+    v[v.len() / 2]
+}
+
+#[tokio::main(flavor = "multi_thread", worker_threads = 2)]
+async fn main() {
+    let sizes = [1_000usize, 10_000, 100_000];
+    let rounds: usize = std::env::var("COSIM_BENCH_ROUNDS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(200);
+    if let Ok(ports) = std::env::var("COSIM_BENCH_ECHO") {
+        let (l, c) = ports.split_once(',').expect("ports");
+        echo(l.parse().unwrap(), c.parse().unwrap(), &sizes, rounds).await;
+        return;
+    }
+    let (pf, pd) = (free_loopback_port().unwrap(), free_loopback_port().unwrap());
+    let mut fem = Participant::connect(
+        &LinkConfig::loopback_peer(Some(pf), &[]),
+        RUN,
+        "fem",
+        hello(Role::Fem),
+    )
+    .await
+    .unwrap();
+    let ifaces: Vec<String> = sizes.iter().map(|n| format!("n{n}")).collect();
+    fem.open_interfaces(Role::Fem, &ifaces).await.unwrap();
+    let mut child = std::process::Command::new(std::env::current_exe().unwrap())
+        .env("COSIM_BENCH_ECHO", format!("{pd},{pf}"))
+        .spawn()
+        .expect("spawn echo process");
+    fem.wait_for_peers(Duration::from_secs(30)).await.unwrap();
+    println!("interface kinematics round trip between two processes on loopback (zenoh peers, TCP), {rounds} rounds after 10 warm-up");
+    println!(
+        "{:>8} {:>10} {:>12} {:>12} {:>12} {:>12}",
+        "nodes", "bytes", "median_us", "p90_us", "MB/s", "memcpy_us"
+    );
+    for (&n, name) in sizes.iter().zip(&ifaces) {
+        let bytes = 72 * n; // P, V, A as f64
+        let mut times = Vec::with_capacity(rounds);
+        for k in 0..(rounds + 10) as u64 {
+            let kin = InterfaceKinematics {
+                version: PROTOCOL_VERSION,
+                run_id: RUN.into(),
+                interface: name.clone(),
+                window: k,
+                time: k as f64,
+                positions: vec![k as f64; 3 * n].into(),
+                velocities: vec![1.0; 3 * n].into(),
+                accelerations: vec![2.0; 3 * n].into(),
+            };
+            let t = Instant::now();
+            fem.write_kinematics(&kin).await.unwrap();
+            let f = fem
+                .read_forces(name, k, n, Duration::from_secs(60))
+                .await
+                .unwrap();
+            let dt = t.elapsed().as_secs_f64();
+            assert_eq!(f.forces.0[0], k as f64);
+            if k >= 10 {
+                times.push(dt * 1e6);
+            }
+        }
+        let mut sorted = times.clone();
+        let med = median(&mut sorted);
+        let p90 = sorted[(sorted.len() * 9) / 10];
+        // memcpy of the same bytes (the floor of any transport)
+        let src = vec![1.0f64; 9 * n];
+        let mut dst = vec![0.0f64; 9 * n];
+        let mut mc = Vec::new();
+        for _ in 0..50 {
+            let t = Instant::now();
+            dst.copy_from_slice(std::hint::black_box(&src));
+            std::hint::black_box(&dst);
+            mc.push(t.elapsed().as_secs_f64() * 1e6);
+        }
+        let mcm = median(&mut mc);
+        // bytes moved per round trip: kinematics out (72 B/node) + forces back (24 B/node)
+        let mbps = (96 * n) as f64 / (med * 1e-6) / 1e6;
+        println!("{n:>8} {bytes:>10} {med:>12.1} {p90:>12.1} {mbps:>12.1} {mcm:>12.1}");
+    }
+    let _ = child.wait();
+    fem.finish().await.ok();
+}

@@ -1,0 +1,410 @@
+//! Encoding and decoding with validation at the boundary (PROTOCOL.md, "Encoding").
+//!
+//! `decode` never panics: it checks the protocol version first (so a peer of another version
+//! gets an error naming both versions, not a confusing field error), then the full message,
+//! then the run id.
+
+use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
+
+use crate::messages::{Command, InterfaceForces, InterfaceKinematics, InterfaceMesh, Status};
+use crate::{ProtoError, PROTOCOL_VERSION};
+
+/// A message type of the protocol.
+pub trait Message: Serialize + DeserializeOwned {
+    /// Name used in errors.
+    const WHAT: &'static str;
+    fn version(&self) -> u32;
+    fn run_id(&self) -> &str;
+}
+
+macro_rules! message {
+    ($t:ty, $what:literal) => {
+        impl Message for $t {
+            const WHAT: &'static str = $what;
+            fn version(&self) -> u32 {
+                self.version
+            }
+            fn run_id(&self) -> &str {
+                &self.run_id
+            }
+        }
+    };
+}
+message!(Command, "command");
+message!(Status, "status");
+message!(InterfaceMesh, "interface mesh");
+message!(InterfaceKinematics, "interface kinematics");
+message!(InterfaceForces, "interface forces");
+
+/// Encodes a message as a MessagePack map with named fields.
+pub fn encode<M: Message>(msg: &M) -> Result<Vec<u8>, ProtoError> {
+    rmp_serde::to_vec_named(msg).map_err(|e| ProtoError::Encode {
+        what: M::WHAT,
+        reason: e.to_string(),
+    })
+}
+
+#[derive(Deserialize)]
+struct VersionProbe {
+    version: u32,
+}
+
+/// Decodes and checks a message: version, structure, run id. Never panics.
+pub fn decode<M: Message>(bytes: &[u8], expected_run: &str) -> Result<M, ProtoError> {
+    let probe: VersionProbe = rmp_serde::from_slice(bytes).map_err(|e| ProtoError::Decode {
+        what: M::WHAT,
+        reason: format!("not a MessagePack map with a `version` field: {e}"),
+    })?;
+    if probe.version != PROTOCOL_VERSION {
+        return Err(ProtoError::Version {
+            what: M::WHAT,
+            got: probe.version,
+            expected: PROTOCOL_VERSION,
+        });
+    }
+    let msg: M = rmp_serde::from_slice(bytes).map_err(|e| ProtoError::Decode {
+        what: M::WHAT,
+        reason: e.to_string(),
+    })?;
+    if msg.run_id() != expected_run {
+        return Err(ProtoError::WrongRun {
+            what: M::WHAT,
+            got: msg.run_id().to_string(),
+            expected: expected_run.to_string(),
+        });
+    }
+    Ok(msg)
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::BTreeMap;
+
+    use proptest::prelude::*;
+
+    use super::*;
+    use crate::messages::*;
+
+    const RUN: &str = "r1";
+
+    fn all_messages() -> (
+        Vec<Command>,
+        Vec<Status>,
+        InterfaceMesh,
+        InterfaceKinematics,
+        InterfaceForces,
+    ) {
+        let commands = vec![
+            CommandBody::Init(Init {
+                scene_path: "scenes/beam.toml".into(),
+                scene_toml: "[scene]\nname = \"beam\"\n".into(),
+                out_dir: "out/beam".into(),
+                interfaces: vec!["top".into()],
+                check_only: false,
+            }),
+            CommandBody::Publish { window: 0 },
+            CommandBody::AdvanceWindow(AdvanceWindow {
+                window: 3,
+                t_start: 3e-4,
+                dt: 1e-4,
+                substeps: 100,
+                motion: MotionRule::Linear,
+                force_averaging: true,
+                input_window: Some(2),
+                output_window: Some(3),
+                static_solve: false,
+            }),
+            CommandBody::Snapshot {
+                window: 7,
+                path: "ck/7".into(),
+            },
+            CommandBody::Restore {
+                window: 7,
+                path: "ck/7".into(),
+            },
+            CommandBody::Stop {
+                reason: "end time reached".into(),
+            },
+        ]
+        .into_iter()
+        .enumerate()
+        .map(|(i, b)| Command::new(RUN, i as u64, b))
+        .collect();
+        let limits = BTreeMap::from([("time_step".to_string(), 1e-6)]);
+        let statuses = vec![
+            StatusBody::Hello(Hello {
+                software: "dem-node 0.1".into(),
+                role: Role::Dem,
+                capabilities: vec!["snapshot".into()],
+                pid: 42,
+            }),
+            StatusBody::Ready {
+                limits: limits.clone(),
+                warnings: vec!["w".into()],
+            },
+            StatusBody::WindowDone {
+                window: 3,
+                t_end: 4e-4,
+                compute_s: 0.1,
+                wait_s: 0.01,
+                monitor: limits.clone(),
+            },
+            StatusBody::SnapshotDone {
+                window: 7,
+                path: "ck/7".into(),
+            },
+            StatusBody::Restored { window: 7 },
+            StatusBody::Stopped {
+                results: limits,
+                compute_s: 1.0,
+                wait_s: 0.5,
+            },
+            StatusBody::Error {
+                code: ErrorCode::Unstable,
+                message: "NaN".into(),
+                window: Some(9),
+            },
+        ]
+        .into_iter()
+        .map(|b| Status::new(RUN, "dem", b))
+        .collect();
+        let mesh = InterfaceMesh {
+            version: PROTOCOL_VERSION,
+            run_id: RUN.into(),
+            interface: "top".into(),
+            node_ids: vec![1, 2, 3],
+            positions: vec![0., 0., 0., 1., 0., 0., 0., 1., 0.].into(),
+            triangles: vec![0, 1, 2],
+        };
+        let kin = InterfaceKinematics {
+            version: PROTOCOL_VERSION,
+            run_id: RUN.into(),
+            interface: "top".into(),
+            window: 5,
+            time: 0.5,
+            positions: vec![0.5; 9].into(),
+            velocities: vec![-1.0; 9].into(),
+            accelerations: vec![2.0; 9].into(),
+        };
+        let forces = InterfaceForces {
+            version: PROTOCOL_VERSION,
+            run_id: RUN.into(),
+            interface: "top".into(),
+            window: 5,
+            time: 0.5,
+            forces: vec![1e3; 9].into(),
+            averaged: true,
+            substeps: 10,
+        };
+        (commands, statuses, mesh, kin, forces)
+    }
+
+    fn round_trip<M: Message + PartialEq + std::fmt::Debug>(m: &M) {
+        let bytes = encode(m).unwrap();
+        let back: M = decode(&bytes, RUN).unwrap();
+        assert_eq!(&back, m);
+    }
+
+    #[test]
+    fn every_message_type_round_trips() {
+        let (commands, statuses, mesh, kin, forces) = all_messages();
+        commands.iter().for_each(round_trip);
+        statuses.iter().for_each(round_trip);
+        round_trip(&mesh);
+        round_trip(&kin);
+        round_trip(&forces);
+        mesh.validate().unwrap();
+        kin.validate(3, 5).unwrap();
+        forces.validate(3, 5).unwrap();
+    }
+
+    #[test]
+    fn another_protocol_version_is_refused_naming_both() {
+        let (_, _, _, mut kin, _) = all_messages();
+        kin.version = PROTOCOL_VERSION + 1;
+        let bytes = encode(&kin).unwrap();
+        let err = decode::<InterfaceKinematics>(&bytes, RUN).unwrap_err();
+        let text = err.to_string();
+        assert!(
+            matches!(err, ProtoError::Version { got, expected, .. } if got == PROTOCOL_VERSION + 1 && expected == PROTOCOL_VERSION)
+        );
+        assert!(
+            text.contains(&format!("version {}", PROTOCOL_VERSION + 1)),
+            "{text}"
+        );
+        assert!(
+            text.contains(&format!("version {PROTOCOL_VERSION}")),
+            "{text}"
+        );
+    }
+
+    #[test]
+    fn another_run_is_refused() {
+        let (_, _, _, _, forces) = all_messages();
+        let bytes = encode(&forces).unwrap();
+        let err = decode::<InterfaceForces>(&bytes, "other").unwrap_err();
+        assert!(matches!(err, ProtoError::WrongRun { .. }), "{err}");
+    }
+
+    #[test]
+    fn validation_names_window_size_and_nan() {
+        let (_, _, mut mesh, mut kin, mut forces) = all_messages();
+        assert!(matches!(
+            kin.validate(3, 6),
+            Err(ProtoError::WrongWindow {
+                got: 5,
+                expected: 6,
+                ..
+            })
+        ));
+        assert!(matches!(
+            kin.validate(4, 5),
+            Err(ProtoError::Size {
+                field: "positions",
+                got: 9,
+                expected: 12,
+                ..
+            })
+        ));
+        kin.accelerations.0[4] = f64::NAN;
+        let e = kin.validate(3, 5).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                ProtoError::NotFinite {
+                    field: "accelerations",
+                    index: 4,
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        forces.forces.0[8] = f64::INFINITY;
+        assert!(matches!(
+            forces.validate(3, 5),
+            Err(ProtoError::NotFinite {
+                field: "forces",
+                index: 8,
+                ..
+            })
+        ));
+        mesh.triangles = vec![0, 1, 3];
+        assert!(mesh
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .contains("node index 3"));
+        mesh.triangles = vec![0, 1];
+        assert!(mesh.validate().is_err());
+    }
+
+    #[test]
+    fn f64_arrays_are_little_endian_bins_and_also_accepted_as_arrays() {
+        let (_, _, _, kin, _) = all_messages();
+        let bytes = encode(&kin).unwrap();
+        // `positions` is a bin 8 (0xc4) of 72 bytes: 9 doubles.
+        let needle = [0xc4u8, 72];
+        assert!(bytes.windows(2).any(|w| w == needle));
+        // A hand-written message with plain float arrays decodes too.
+        #[derive(Serialize)]
+        struct Plain {
+            version: u32,
+            run_id: &'static str,
+            interface: &'static str,
+            window: u64,
+            time: f64,
+            positions: Vec<f64>,
+            velocities: Vec<f64>,
+            accelerations: Vec<f64>,
+        }
+        let plain = Plain {
+            version: PROTOCOL_VERSION,
+            run_id: RUN,
+            interface: "top",
+            window: 5,
+            time: 0.5,
+            positions: vec![0.5; 9],
+            velocities: vec![-1.0; 9],
+            accelerations: vec![2.0; 9],
+        };
+        let back: InterfaceKinematics =
+            decode(&rmp_serde::to_vec_named(&plain).unwrap(), RUN).unwrap();
+        assert_eq!(back, kin);
+    }
+
+    #[test]
+    fn a_bin_that_is_not_whole_doubles_is_an_error() {
+        let (_, _, _, kin, _) = all_messages();
+        let mut bytes = encode(&kin).unwrap();
+        let pos = bytes.windows(2).position(|w| w == [0xc4, 72]).unwrap();
+        bytes[pos + 1] = 71; // claims 71 bytes: the rest of the message shifts
+        assert!(decode::<InterfaceKinematics>(&bytes, RUN).is_err());
+    }
+
+    #[test]
+    fn protocol_md_byte_example_is_what_the_codec_writes() {
+        let doc = include_str!("../PROTOCOL.md");
+        let section = &doc[doc.find("### Byte-level example").expect("section")..];
+        let block = section.split("```").nth(1).expect("code block");
+        let mut expected = Vec::new();
+        for line in block.lines() {
+            for tok in line.split_whitespace() {
+                match (tok.len(), u8::from_str_radix(tok, 16)) {
+                    (2, Ok(b)) => expected.push(b),
+                    _ => break,
+                }
+            }
+        }
+        let msg = Status::new(
+            "r1",
+            "dem",
+            StatusBody::Ready {
+                limits: BTreeMap::from([("time_step".to_string(), 1e-6)]),
+                warnings: vec![],
+            },
+        );
+        assert_eq!(encode(&msg).unwrap(), expected);
+    }
+
+    fn decode_all(bytes: &[u8]) {
+        let _ = decode::<Command>(bytes, RUN);
+        let _ = decode::<Status>(bytes, RUN);
+        let _ = decode::<InterfaceMesh>(bytes, RUN);
+        let _ = decode::<InterfaceKinematics>(bytes, RUN);
+        let _ = decode::<InterfaceForces>(bytes, RUN);
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(4000))]
+
+        #[test]
+        fn random_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..512)) {
+            decode_all(&bytes);
+        }
+
+        #[test]
+        fn truncated_and_mutated_messages_give_errors_not_panics(
+            which in 0usize..16, cut in 0.0f64..1.0, flip in any::<(usize, u8)>()
+        ) {
+            let (commands, statuses, mesh, kin, forces) = all_messages();
+            let mut all: Vec<Vec<u8>> = commands.iter().map(|m| encode(m).unwrap()).collect();
+            all.extend(statuses.iter().map(|m| encode(m).unwrap()));
+            all.push(encode(&mesh).unwrap());
+            all.push(encode(&kin).unwrap());
+            all.push(encode(&forces).unwrap());
+            let full = &all[which % all.len()];
+            let n = ((full.len() as f64) * cut) as usize;
+            // Any strict prefix is an incomplete message: always an error.
+            let truncated = &full[..n.min(full.len() - 1)];
+            prop_assert!(decode::<Command>(truncated, RUN).is_err());
+            prop_assert!(decode::<Status>(truncated, RUN).is_err());
+            prop_assert!(decode::<InterfaceKinematics>(truncated, RUN).is_err());
+            decode_all(truncated);
+            let mut mutated = full.clone();
+            let i = flip.0 % mutated.len();
+            mutated[i] ^= flip.1;
+            decode_all(&mutated);
+        }
+    }
+}

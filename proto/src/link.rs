@@ -1,0 +1,186 @@
+//! Opening a zenoh session for a run (PROTOCOL.md, "Transport").
+//!
+//! Defaults follow the network rules of the project: peer mode, explicit `tcp/127.0.0.1:<port>`
+//! endpoints, multicast scouting **always off** (also when a config file is given), a short
+//! lease so that a dead node is noticed within seconds.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use serde::{Deserialize, Serialize};
+use zenoh::Config;
+
+use crate::ProtoError;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum LinkMode {
+    /// Direct links between the run's processes (one machine, or a few with explicit endpoints).
+    #[default]
+    Peer,
+    /// Connect to a zenoh router (`zenohd`), for runs over several machines (`deploy/`).
+    Client,
+}
+
+/// How a process joins the zenoh network of a run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LinkConfig {
+    pub mode: LinkMode,
+    /// Endpoints to listen on, e.g. `tcp/127.0.0.1:7447`.
+    pub listen: Vec<String>,
+    /// Endpoints to connect to.
+    pub connect: Vec<String>,
+    /// A zenoh JSON5 configuration file (TLS, credentials, ...). Its settings are the base;
+    /// `mode`, `listen` and `connect` above override it when non-empty, and multicast
+    /// scouting is switched off regardless.
+    pub zenoh_config: Option<PathBuf>,
+    /// Lease of the transport links: a peer silent for this long is declared gone.
+    pub lease: Duration,
+}
+
+impl Default for LinkConfig {
+    fn default() -> Self {
+        LinkConfig {
+            mode: LinkMode::Peer,
+            listen: Vec::new(),
+            connect: Vec::new(),
+            zenoh_config: None,
+            lease: Duration::from_millis(3000),
+        }
+    }
+}
+
+fn json_list(items: &[String]) -> String {
+    serde_json::to_string(items).expect("strings serialise")
+}
+
+/// Checks an endpoint: `proto/address:port`, with a known transport.
+pub fn validate_endpoint(endpoint: &str) -> Result<(), ProtoError> {
+    let (proto, rest) = endpoint.split_once('/').ok_or_else(|| {
+        ProtoError::Config(format!(
+            "endpoint `{endpoint}` lacks a transport prefix such as `tcp/`"
+        ))
+    })?;
+    if !matches!(
+        proto,
+        "tcp" | "tls" | "udp" | "quic" | "unixsock-stream" | "ws"
+    ) {
+        return Err(ProtoError::Config(format!(
+            "endpoint `{endpoint}`: unknown transport `{proto}`"
+        )));
+    }
+    if proto != "unixsock-stream" && !rest.contains(':') {
+        return Err(ProtoError::Config(format!(
+            "endpoint `{endpoint}` lacks a port (`{proto}/host:port`)"
+        )));
+    }
+    Ok(())
+}
+
+impl LinkConfig {
+    /// A peer on loopback listening on `listen_port` and connecting to the given loopback ports.
+    pub fn loopback_peer(listen_port: Option<u16>, connect_ports: &[u16]) -> Self {
+        LinkConfig {
+            listen: listen_port
+                .map(|p| vec![format!("tcp/127.0.0.1:{p}")])
+                .unwrap_or_default(),
+            connect: connect_ports
+                .iter()
+                .map(|p| format!("tcp/127.0.0.1:{p}"))
+                .collect(),
+            ..Default::default()
+        }
+    }
+
+    /// The zenoh configuration this link opens with.
+    pub fn to_zenoh_config(&self) -> Result<Config, ProtoError> {
+        let mut config = match &self.zenoh_config {
+            Some(path) => Config::from_file(path).map_err(|e| {
+                ProtoError::Config(format!("zenoh config file {}: {e}", path.display()))
+            })?,
+            None => Config::default(),
+        };
+        let set = |config: &mut Config, key: &str, value: String| {
+            config
+                .insert_json5(key, &value)
+                .map_err(|e| ProtoError::Config(format!("setting `{key}` to {value}: {e}")))
+        };
+        if self.zenoh_config.is_none() || self.mode == LinkMode::Client {
+            let mode = match self.mode {
+                LinkMode::Peer => "\"peer\"",
+                LinkMode::Client => "\"client\"",
+            };
+            set(&mut config, "mode", mode.to_string())?;
+        }
+        for e in self.listen.iter().chain(&self.connect) {
+            validate_endpoint(e)?;
+        }
+        if !self.listen.is_empty() {
+            set(&mut config, "listen/endpoints", json_list(&self.listen))?;
+        }
+        if !self.connect.is_empty() {
+            set(&mut config, "connect/endpoints", json_list(&self.connect))?;
+        }
+        // Nothing may leave the machine unless configured: no multicast scouting, ever.
+        set(&mut config, "scouting/multicast/enabled", "false".into())?;
+        if self.zenoh_config.is_none() {
+            // Peers learn each other only from explicit endpoints.
+            set(&mut config, "scouting/gossip/enabled", "false".into())?;
+            set(
+                &mut config,
+                "transport/link/tx/lease",
+                self.lease.as_millis().max(100).to_string(),
+            )?;
+            set(&mut config, "transport/link/tx/keep_alive", "4".into())?;
+        }
+        Ok(config)
+    }
+
+    /// Opens the session.
+    pub async fn open(&self) -> Result<zenoh::Session, ProtoError> {
+        let config = self.to_zenoh_config()?;
+        zenoh::open(config).await.map_err(ProtoError::zenoh)
+    }
+}
+
+/// A free TCP port on 127.0.0.1 (bind to port 0, read it, release it).
+pub fn free_loopback_port() -> std::io::Result<u16> {
+    let l = std::net::TcpListener::bind(("127.0.0.1", 0))?;
+    Ok(l.local_addr()?.port())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_config_has_multicast_off_and_explicit_endpoints() {
+        let c = LinkConfig::loopback_peer(Some(7000), &[7001])
+            .to_zenoh_config()
+            .unwrap();
+        let json = format!("{c}");
+        let v: serde_json::Value = serde_json::from_str(&json).unwrap();
+        assert_eq!(v["scouting"]["multicast"]["enabled"], false);
+        assert_eq!(
+            v["listen"]["endpoints"],
+            serde_json::json!(["tcp/127.0.0.1:7000"])
+        );
+        assert_eq!(
+            v["connect"]["endpoints"],
+            serde_json::json!(["tcp/127.0.0.1:7001"])
+        );
+    }
+
+    #[test]
+    fn bad_endpoints_are_refused_with_the_endpoint_named() {
+        for bad in ["127.0.0.1:7000", "foo/127.0.0.1:1", "tcp/127.0.0.1"] {
+            let e = LinkConfig {
+                listen: vec![bad.into()],
+                ..Default::default()
+            }
+            .to_zenoh_config()
+            .unwrap_err();
+            assert!(e.to_string().contains(bad), "{e}");
+        }
+    }
+}

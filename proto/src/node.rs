@@ -1,0 +1,218 @@
+//! The node loop shared by every Rust node: a solver implements [`Solver`] (six methods) and
+//! calls [`serve`]; commands, status, errors, snapshots and shutdown are handled here.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::time::Instant;
+
+use crate::cli::NodeArgs;
+use crate::messages::*;
+use crate::participant::Participant;
+use crate::ProtoError;
+
+/// An error a node reports to the coordinator before it leaves.
+#[derive(Debug, Clone)]
+pub struct NodeError {
+    pub code: ErrorCode,
+    pub message: String,
+    /// The coordinator said `stop` while the node waited: not an error to report back.
+    pub stopped: bool,
+}
+
+impl NodeError {
+    pub fn new(code: ErrorCode, message: impl Into<String>) -> Self {
+        NodeError {
+            code,
+            message: message.into(),
+            stopped: false,
+        }
+    }
+}
+
+impl std::fmt::Display for NodeError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{:?}: {}", self.code, self.message)
+    }
+}
+
+impl From<ProtoError> for NodeError {
+    fn from(e: ProtoError) -> Self {
+        let code = match &e {
+            ProtoError::Timeout { .. } => ErrorCode::Timeout,
+            _ => ErrorCode::Protocol,
+        };
+        let stopped = matches!(e, ProtoError::Stopped { .. });
+        NodeError {
+            stopped,
+            ..NodeError::new(code, e.to_string())
+        }
+    }
+}
+
+/// What a window cost.
+#[derive(Debug, Clone, Default)]
+pub struct WindowReport {
+    /// Time spent waiting for the other solver's data (s).
+    pub wait_s: f64,
+    /// Simulation time at the end of the window.
+    pub t_end: f64,
+    /// Values the coordinator's monitor looks at (e.g. `kinetic_energy`).
+    pub monitor: BTreeMap<String, f64>,
+}
+
+/// A solver as the coupling sees it.
+#[allow(async_fn_in_trait)]
+pub trait Solver {
+    /// Reads the node's table of the scene, builds the model, opens the interfaces.
+    /// Returns the physics limits (`time_step`, ...) and warnings for `ready`.
+    async fn init(
+        &mut self,
+        p: &mut Participant,
+        init: &Init,
+    ) -> Result<(BTreeMap<String, f64>, Vec<String>), NodeError>;
+    /// One coupling window (reads its input, computes, publishes its output).
+    async fn advance(
+        &mut self,
+        p: &mut Participant,
+        w: &AdvanceWindow,
+    ) -> Result<WindowReport, NodeError>;
+    /// Publishes the current interface output labelled `window`, without stepping.
+    async fn publish(&mut self, p: &mut Participant, window: u64) -> Result<(), NodeError>;
+    fn snapshot(&self) -> Result<Vec<u8>, NodeError>;
+    fn restore(&mut self, bytes: &[u8]) -> Result<(), NodeError>;
+    /// Final outputs; the scene's result quantities for `summary.json`.
+    fn finish(&mut self) -> Result<BTreeMap<String, f64>, NodeError>;
+}
+
+/// Writes `bytes` to `path` atomically (temporary file, fsync, rename).
+pub fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    use std::io::Write;
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir)?;
+    }
+    let tmp = path.with_extension("tmp");
+    let mut f = std::fs::File::create(&tmp)?;
+    f.write_all(bytes)?;
+    f.sync_all()?;
+    std::fs::rename(&tmp, path)
+}
+
+/// Joins the run and serves commands until `stop`. Errors are reported to the coordinator
+/// (when it can still be reached) and returned.
+pub async fn serve<S: Solver>(
+    args: &NodeArgs,
+    hello: Hello,
+    mut solver: S,
+) -> Result<(), NodeError> {
+    let mut p = Participant::connect(&args.link(), &args.run_id, &args.node, hello).await?;
+    let mut window: Option<u64> = None;
+    let mut compute_s = 0.0;
+    let mut wait_s = 0.0;
+    let result: Result<(), NodeError> = async {
+        loop {
+            let cmd = match p.next_command(None).await {
+                Ok(c) => c,
+                Err(e) => return Err(e.into()),
+            };
+            match cmd {
+                CommandBody::Init(init) => {
+                    let (limits, warnings) = solver.init(&mut p, &init).await?;
+                    p.report(StatusBody::Ready { limits, warnings }).await?;
+                }
+                CommandBody::AdvanceWindow(w) => {
+                    window = Some(w.window);
+                    let t = Instant::now();
+                    let r = solver.advance(&mut p, &w).await?;
+                    let total = t.elapsed().as_secs_f64();
+                    let compute = (total - r.wait_s).max(0.0);
+                    compute_s += compute;
+                    wait_s += r.wait_s;
+                    p.report(StatusBody::WindowDone {
+                        window: w.window,
+                        t_end: r.t_end,
+                        compute_s: compute,
+                        wait_s: r.wait_s,
+                        monitor: r.monitor,
+                    })
+                    .await?;
+                }
+                CommandBody::Publish { window: k } => solver.publish(&mut p, k).await?,
+                CommandBody::Snapshot { window: k, path } => {
+                    let bytes = solver.snapshot()?;
+                    write_atomically(Path::new(&path), &bytes).map_err(|e| {
+                        NodeError::new(ErrorCode::Io, format!("writing snapshot {path}: {e}"))
+                    })?;
+                    p.report(StatusBody::SnapshotDone { window: k, path })
+                        .await?;
+                }
+                CommandBody::Restore { window: k, path } => {
+                    let bytes = std::fs::read(&path).map_err(|e| {
+                        NodeError::new(ErrorCode::Io, format!("reading snapshot {path}: {e}"))
+                    })?;
+                    solver.restore(&bytes)?;
+                    p.report(StatusBody::Restored { window: k }).await?;
+                }
+                CommandBody::Stop { reason } => {
+                    tracing::info!("stop: {reason}");
+                    let results = solver.finish()?;
+                    p.report(StatusBody::Stopped {
+                        results,
+                        compute_s,
+                        wait_s,
+                    })
+                    .await?;
+                    return Ok(());
+                }
+            }
+        }
+    }
+    .await;
+    match result {
+        Ok(()) => {
+            p.finish().await?;
+            Ok(())
+        }
+        Err(e) => {
+            if e.stopped {
+                tracing::info!("{}", e.message);
+                let _ = p.finish().await;
+                return Ok(());
+            }
+            {
+                let _ = p
+                    .report(StatusBody::Error {
+                        code: e.code,
+                        message: e.message.clone(),
+                        window,
+                    })
+                    .await;
+                // let the error reach the coordinator before the liveliness token goes
+                tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+            }
+            let _ = p.finish().await;
+            Err(e)
+        }
+    }
+}
+
+/// Runs `serve` on a fresh runtime and turns the outcome into an exit code; for `main`.
+pub fn main_with<S: Solver>(args: NodeArgs, hello: Hello, solver: S) -> std::process::ExitCode {
+    let rt = match tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()
+    {
+        Ok(rt) => rt,
+        Err(e) => {
+            eprintln!("error: cannot start the async runtime: {e}");
+            return std::process::ExitCode::FAILURE;
+        }
+    };
+    match rt.block_on(serve(&args, hello, solver)) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: node `{}` in run `{}`: {e}", args.node, args.run_id);
+            std::process::ExitCode::FAILURE
+        }
+    }
+}

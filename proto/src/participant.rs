@@ -1,0 +1,663 @@
+//! The solver-facing API, in the spirit of preCICE's `Participant`: a solver joins a run with
+//! [`Participant::connect`], receives commands with [`Participant::next_command`], reads and
+//! writes interface data for a window, reports its status, and [`Participant::finish`]es.
+//!
+//! The coordinator's side of the same wire is [`CoordinatorLink`].
+
+use std::collections::HashMap;
+use std::time::{Duration, Instant};
+
+use zenoh::handlers::FifoChannelHandler;
+use zenoh::liveliness::LivelinessToken;
+use zenoh::pubsub::{Publisher, Subscriber};
+use zenoh::qos::CongestionControl;
+use zenoh::query::Queryable;
+use zenoh::sample::{Sample, SampleKind};
+use zenoh::Wait;
+
+use crate::codec::{decode, encode, Message};
+use crate::keys::{validate_name, Keys};
+use crate::link::LinkConfig;
+use crate::messages::*;
+use crate::{ProtoError, PROTOCOL_VERSION};
+
+/// Queue length of data subscribers: windows are consumed one at a time, a few may queue.
+const DATA_QUEUE: usize = 8;
+const CONTROL_QUEUE: usize = 256;
+
+/// Node name of the coordinator's liveliness token (reserved).
+pub const COORDINATOR: &str = "coordinator";
+
+fn payload(sample: &Sample) -> std::borrow::Cow<'_, [u8]> {
+    sample.payload().to_bytes()
+}
+
+async fn declare_data_publisher(
+    session: &zenoh::Session,
+    key: String,
+) -> Result<Publisher<'static>, ProtoError> {
+    // Interface data must never be dropped: block the sender rather than lose a window.
+    session
+        .declare_publisher(key)
+        .congestion_control(CongestionControl::Block)
+        .await
+        .map_err(ProtoError::zenoh)
+}
+
+async fn put<M: Message>(publisher: &Publisher<'static>, msg: &M) -> Result<(), ProtoError> {
+    let bytes = encode(msg)?;
+    publisher.put(bytes).await.map_err(ProtoError::zenoh)
+}
+
+/// Name of a command as written on the wire (`type`).
+pub fn command_name(c: &CommandBody) -> &'static str {
+    match c {
+        CommandBody::Init(_) => "init",
+        CommandBody::Publish { .. } => "publish",
+        CommandBody::AdvanceWindow(_) => "advance_window",
+        CommandBody::Snapshot { .. } => "snapshot",
+        CommandBody::Restore { .. } => "restore",
+        CommandBody::Stop { .. } => "stop",
+    }
+}
+
+/// A node (solver) in a run.
+pub struct Participant {
+    session: zenoh::Session,
+    keys: Keys,
+    node: String,
+    _token: LivelinessToken,
+    commands: Subscriber<FifoChannelHandler<Sample>>,
+    coordinator_alive: Subscriber<FifoChannelHandler<Sample>>,
+    status: Publisher<'static>,
+    next_seq: u64,
+    publishers: HashMap<String, Publisher<'static>>,
+    subscribers: HashMap<String, Subscriber<FifoChannelHandler<Sample>>>,
+    queryables: Vec<Queryable<()>>,
+}
+
+impl Participant {
+    /// Joins run `run_id` as `node`: opens the session, listens for commands, declares the
+    /// node's liveliness token and sends `hello`.
+    pub async fn connect(
+        link: &LinkConfig,
+        run_id: &str,
+        node: &str,
+        hello: Hello,
+    ) -> Result<Participant, ProtoError> {
+        validate_name("node", node)?;
+        if node == COORDINATOR {
+            return Err(ProtoError::Name {
+                what: "node (reserved for the coordinator)",
+                name: node.into(),
+            });
+        }
+        let keys = Keys::new(run_id)?;
+        let session = link.open().await?;
+        let commands = session
+            .declare_subscriber(keys.command(node))
+            .with(zenoh::handlers::FifoChannel::new(CONTROL_QUEUE))
+            .await
+            .map_err(ProtoError::zenoh)?;
+        let status = session
+            .declare_publisher(keys.status(node))
+            .congestion_control(CongestionControl::Block)
+            .await
+            .map_err(ProtoError::zenoh)?;
+        let token = session
+            .liveliness()
+            .declare_token(keys.alive(node))
+            .await
+            .map_err(ProtoError::zenoh)?;
+        let coordinator_alive = session
+            .liveliness()
+            .declare_subscriber(keys.alive(COORDINATOR))
+            .with(zenoh::handlers::FifoChannel::new(CONTROL_QUEUE))
+            .await
+            .map_err(ProtoError::zenoh)?;
+        let p = Participant {
+            session,
+            keys,
+            node: node.to_string(),
+            _token: token,
+            commands,
+            coordinator_alive,
+            status,
+            next_seq: 0,
+            publishers: HashMap::new(),
+            subscribers: HashMap::new(),
+            queryables: Vec::new(),
+        };
+        p.report(StatusBody::Hello(hello)).await?;
+        Ok(p)
+    }
+
+    pub fn node(&self) -> &str {
+        &self.node
+    }
+
+    pub fn run_id(&self) -> &str {
+        self.keys.run_id()
+    }
+
+    /// The next command from the coordinator. Commands are numbered; a gap or repeat is a
+    /// protocol error. `None` waits forever.
+    pub async fn next_command(
+        &mut self,
+        timeout: Option<Duration>,
+    ) -> Result<CommandBody, ProtoError> {
+        let deadline = timeout.map(|t| tokio::time::Instant::now() + t);
+        let sample = loop {
+            let sleep = async {
+                match deadline {
+                    Some(d) => tokio::time::sleep_until(d).await,
+                    None => std::future::pending().await,
+                }
+            };
+            tokio::select! {
+                s = self.commands.recv_async() => break s.map_err(|_| ProtoError::Closed)?,
+                a = self.coordinator_alive.recv_async() => {
+                    let a = a.map_err(|_| ProtoError::Closed)?;
+                    if a.kind() == SampleKind::Delete {
+                        return Err(ProtoError::PeerLost {
+                            node: COORDINATOR.into(),
+                            context: format!("while node `{}` waited for its next command", self.node),
+                        });
+                    }
+                }
+                _ = sleep => return Err(ProtoError::Timeout {
+                    what: "a command from the coordinator".into(),
+                    waited: timeout.unwrap_or_default(),
+                }),
+            }
+        };
+        self.accept_command(&sample)
+    }
+
+    fn accept_command(&mut self, sample: &Sample) -> Result<CommandBody, ProtoError> {
+        let cmd: Command = decode(&payload(sample), self.keys.run_id())?;
+        if cmd.seq != self.next_seq {
+            return Err(ProtoError::Invalid {
+                what: "command",
+                reason: format!(
+                    "sequence number {} where {} was expected",
+                    cmd.seq, self.next_seq
+                ),
+            });
+        }
+        self.next_seq += 1;
+        Ok(cmd.body)
+    }
+
+    /// Sends a status message to the coordinator.
+    pub async fn report(&self, body: StatusBody) -> Result<(), ProtoError> {
+        put(
+            &self.status,
+            &Status::new(self.keys.run_id(), &self.node, body),
+        )
+        .await
+    }
+
+    /// Declares what this node exchanges on each interface: it subscribes to what it reads
+    /// and declares publishers for what it writes. Call before reporting `ready`.
+    pub async fn open_interfaces(
+        &mut self,
+        role: Role,
+        interfaces: &[String],
+    ) -> Result<(), ProtoError> {
+        for name in interfaces {
+            validate_name("interface", name)?;
+            let (read, write) = match role {
+                Role::Dem => (self.keys.kinematics(name), self.keys.forces(name)),
+                Role::Fem => (self.keys.forces(name), self.keys.kinematics(name)),
+            };
+            let sub = self
+                .session
+                .declare_subscriber(read.clone())
+                .with(zenoh::handlers::FifoChannel::new(DATA_QUEUE))
+                .await
+                .map_err(ProtoError::zenoh)?;
+            self.subscribers.insert(read, sub);
+            let publisher = declare_data_publisher(&self.session, write.clone()).await?;
+            self.publishers.insert(write, publisher);
+        }
+        Ok(())
+    }
+
+    /// Waits until every data publisher has a matching subscriber (the peer node opened its
+    /// side), so that the first window's data cannot be published into the void.
+    pub async fn wait_for_peers(&self, timeout: Duration) -> Result<(), ProtoError> {
+        let start = Instant::now();
+        for (key, publisher) in &self.publishers {
+            loop {
+                let status = publisher
+                    .matching_status()
+                    .await
+                    .map_err(ProtoError::zenoh)?;
+                if status.matching() {
+                    break;
+                }
+                if start.elapsed() > timeout {
+                    return Err(ProtoError::Timeout {
+                        what: format!("a subscriber of `{key}` (the other solver)"),
+                        waited: timeout,
+                    });
+                }
+                tokio::time::sleep(Duration::from_millis(5)).await;
+            }
+        }
+        Ok(())
+    }
+
+    /// FEM side: serve the interface mesh to whoever asks (the DEM node, the coordinator).
+    pub async fn provide_mesh(&mut self, mesh: &InterfaceMesh) -> Result<(), ProtoError> {
+        mesh.validate()?;
+        let bytes = encode(mesh)?;
+        let key = self.keys.mesh(&mesh.interface);
+        let reply_key = key.clone();
+        let q = self
+            .session
+            .declare_queryable(key)
+            .callback(move |query| {
+                if let Err(e) = query.reply(reply_key.clone(), bytes.clone()).wait() {
+                    tracing::warn!("could not reply with the interface mesh: {e}");
+                }
+            })
+            .await
+            .map_err(ProtoError::zenoh)?;
+        self.queryables.push(q);
+        Ok(())
+    }
+
+    /// DEM side: fetch the interface mesh, retrying until the FEM node serves it.
+    pub async fn read_mesh(
+        &self,
+        interface: &str,
+        timeout: Duration,
+    ) -> Result<InterfaceMesh, ProtoError> {
+        fetch_mesh(&self.session, &self.keys, interface, timeout).await
+    }
+
+    /// Publishes interface kinematics (FEM side).
+    pub async fn write_kinematics(&self, k: &InterfaceKinematics) -> Result<(), ProtoError> {
+        self.write(&self.keys.kinematics(&k.interface), k).await
+    }
+
+    /// Publishes interface forces (DEM side).
+    pub async fn write_forces(&self, f: &InterfaceForces) -> Result<(), ProtoError> {
+        self.write(&self.keys.forces(&f.interface), f).await
+    }
+
+    async fn write<M: Message>(&self, key: &str, msg: &M) -> Result<(), ProtoError> {
+        let publisher = self
+            .publishers
+            .get(key)
+            .ok_or_else(|| ProtoError::Invalid {
+                what: M::WHAT,
+                reason: format!("`{key}` was not opened by open_interfaces for this node's role"),
+            })?;
+        put(publisher, msg).await
+    }
+
+    /// Waits for and validates the kinematics of `window` (DEM side).
+    pub async fn read_kinematics(
+        &mut self,
+        interface: &str,
+        window: u64,
+        nodes: usize,
+        timeout: Duration,
+    ) -> Result<InterfaceKinematics, ProtoError> {
+        let key = self.keys.kinematics(interface);
+        let k: InterfaceKinematics = self.read(&key, window, timeout).await?;
+        k.validate(nodes, window)?;
+        Ok(k)
+    }
+
+    /// Waits for and validates the forces of `window` (FEM side).
+    pub async fn read_forces(
+        &mut self,
+        interface: &str,
+        window: u64,
+        nodes: usize,
+        timeout: Duration,
+    ) -> Result<InterfaceForces, ProtoError> {
+        let key = self.keys.forces(interface);
+        let f: InterfaceForces = self.read(&key, window, timeout).await?;
+        f.validate(nodes, window)?;
+        Ok(f)
+    }
+
+    /// Waits for data on `key`, watching the coordinator meanwhile: a `stop` command or the
+    /// coordinator's disappearance ends the wait at once instead of at the timeout.
+    async fn read<M: Message>(
+        &mut self,
+        key: &str,
+        window: u64,
+        timeout: Duration,
+    ) -> Result<M, ProtoError> {
+        let what = format!("{} of window {window} on `{key}`", M::WHAT);
+        let deadline = tokio::time::Instant::now() + timeout;
+        loop {
+            let sub = self
+                .subscribers
+                .get(key)
+                .ok_or_else(|| ProtoError::Invalid {
+                    what: M::WHAT,
+                    reason: format!(
+                        "`{key}` was not opened by open_interfaces for this node's role"
+                    ),
+                })?;
+            tokio::select! {
+                s = sub.recv_async() => {
+                    let sample = s.map_err(|_| ProtoError::Closed)?;
+                    return decode::<M>(&payload(&sample), self.keys.run_id());
+                }
+                c = self.commands.recv_async() => {
+                    let sample = c.map_err(|_| ProtoError::Closed)?;
+                    return match self.accept_command(&sample)? {
+                        CommandBody::Stop { reason } => Err(ProtoError::Stopped { reason }),
+                        other => Err(ProtoError::Invalid {
+                            what: "command",
+                            reason: format!("received {} while waiting for {what}", command_name(&other)),
+                        }),
+                    };
+                }
+                a = self.coordinator_alive.recv_async() => {
+                    let a = a.map_err(|_| ProtoError::Closed)?;
+                    if a.kind() == SampleKind::Delete {
+                        return Err(ProtoError::PeerLost { node: COORDINATOR.into(), context: format!("while waiting for {what}") });
+                    }
+                }
+                _ = tokio::time::sleep_until(deadline) => {
+                    return Err(ProtoError::Timeout { what, waited: timeout });
+                }
+            }
+        }
+    }
+
+    /// Leaves the run: withdraws the liveliness token and closes the session.
+    pub async fn finish(self) -> Result<(), ProtoError> {
+        let Participant {
+            session, _token, ..
+        } = self;
+        _token.undeclare().await.map_err(ProtoError::zenoh)?;
+        session.close().await.map_err(ProtoError::zenoh)
+    }
+}
+
+async fn fetch_mesh(
+    session: &zenoh::Session,
+    keys: &Keys,
+    interface: &str,
+    timeout: Duration,
+) -> Result<InterfaceMesh, ProtoError> {
+    validate_name("interface", interface)?;
+    let key = keys.mesh(interface);
+    let start = Instant::now();
+    loop {
+        let replies = session
+            .get(key.clone())
+            .timeout(Duration::from_millis(500))
+            .await
+            .map_err(ProtoError::zenoh)?;
+        while let Ok(reply) = replies.recv_async().await {
+            match reply.result() {
+                Ok(sample) => {
+                    let mesh: InterfaceMesh = decode(&payload(sample), keys.run_id())?;
+                    if mesh.interface != interface {
+                        return Err(ProtoError::Invalid {
+                            what: "interface mesh",
+                            reason: format!("asked for `{interface}`, got `{}`", mesh.interface),
+                        });
+                    }
+                    mesh.validate()?;
+                    return Ok(mesh);
+                }
+                Err(e) => tracing::warn!("mesh query error reply: {:?}", e.payload().to_bytes()),
+            }
+        }
+        if start.elapsed() > timeout {
+            return Err(ProtoError::Timeout {
+                what: format!("the interface mesh `{interface}` (is the FEM node running?)"),
+                waited: timeout,
+            });
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+}
+
+/// What the coordinator hears.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Event {
+    /// A status message from a node (key and message agree on the node name).
+    Status(Status),
+    /// A node's liveliness token appeared.
+    Joined(String),
+    /// A node's liveliness token disappeared: it died or its link was cut.
+    Left(String),
+    /// A message that failed decoding or validation; the run decides what to do.
+    Rejected { key: String, error: String },
+}
+
+/// The coordinator's end of the wire: commands out, status and liveliness in.
+pub struct CoordinatorLink {
+    session: zenoh::Session,
+    _token: LivelinessToken,
+    keys: Keys,
+    status: Subscriber<FifoChannelHandler<Sample>>,
+    alive: Subscriber<FifoChannelHandler<Sample>>,
+    commands: HashMap<String, (Publisher<'static>, u64)>,
+}
+
+impl CoordinatorLink {
+    pub async fn open(link: &LinkConfig, run_id: &str) -> Result<CoordinatorLink, ProtoError> {
+        let keys = Keys::new(run_id)?;
+        let session = link.open().await?;
+        let status = session
+            .declare_subscriber(keys.status_all())
+            .with(zenoh::handlers::FifoChannel::new(CONTROL_QUEUE))
+            .await
+            .map_err(ProtoError::zenoh)?;
+        let alive = session
+            .liveliness()
+            .declare_subscriber(keys.alive_all())
+            .history(true)
+            .with(zenoh::handlers::FifoChannel::new(CONTROL_QUEUE))
+            .await
+            .map_err(ProtoError::zenoh)?;
+        let token = session
+            .liveliness()
+            .declare_token(keys.alive(COORDINATOR))
+            .await
+            .map_err(ProtoError::zenoh)?;
+        Ok(CoordinatorLink {
+            session,
+            _token: token,
+            keys,
+            status,
+            alive,
+            commands: HashMap::new(),
+        })
+    }
+
+    pub fn keys(&self) -> &Keys {
+        &self.keys
+    }
+
+    /// Sends a command to `node` (sequence numbers are kept per node).
+    pub async fn send(&mut self, node: &str, body: CommandBody) -> Result<(), ProtoError> {
+        validate_name("node", node)?;
+        if !self.commands.contains_key(node) {
+            let p = self
+                .session
+                .declare_publisher(self.keys.command(node))
+                .congestion_control(CongestionControl::Block)
+                .await
+                .map_err(ProtoError::zenoh)?;
+            self.commands.insert(node.to_string(), (p, 0));
+        }
+        let (publisher, seq) = self.commands.get_mut(node).expect("inserted above");
+        let cmd = Command::new(self.keys.run_id(), *seq, body);
+        *seq += 1;
+        put(publisher, &cmd).await
+    }
+
+    /// The next event, or a timeout error naming `waiting_for`.
+    pub async fn next_event(
+        &self,
+        timeout: Duration,
+        waiting_for: &str,
+    ) -> Result<Event, ProtoError> {
+        let deadline = tokio::time::Instant::now() + timeout;
+        loop {
+            tokio::select! {
+                s = self.status.recv_async() => {
+                    let sample = s.map_err(|_| ProtoError::Closed)?;
+                    let key = sample.key_expr().as_str().to_string();
+                    return Ok(match decode::<Status>(&payload(&sample), self.keys.run_id()) {
+                        Ok(st) if self.keys.node_of(&key).as_deref() == Some(st.node.as_str()) => Event::Status(st),
+                        Ok(st) => Event::Rejected { key, error: format!("status claims node `{}` on another node's key", st.node) },
+                        Err(e) => Event::Rejected { key, error: e.to_string() },
+                    });
+                }
+                a = self.alive.recv_async() => {
+                    let sample = a.map_err(|_| ProtoError::Closed)?;
+                    let key = sample.key_expr().as_str().to_string();
+                    match self.keys.node_of(&key) {
+                        // our own token
+                        Some(node) if node == COORDINATOR => continue,
+                        Some(node) if sample.kind() == SampleKind::Put => return Ok(Event::Joined(node)),
+                        Some(node) => return Ok(Event::Left(node)),
+                        None => return Ok(Event::Rejected { key, error: "liveliness token outside the run's names".into() }),
+                    }
+                }
+                _ = tokio::time::sleep_until(deadline) => {
+                    return Err(ProtoError::Timeout { what: waiting_for.to_string(), waited: timeout });
+                }
+            }
+        }
+    }
+
+    /// Fetches an interface mesh (the coordinator keeps it to monitor mesh drift).
+    pub async fn read_mesh(
+        &self,
+        interface: &str,
+        timeout: Duration,
+    ) -> Result<InterfaceMesh, ProtoError> {
+        fetch_mesh(&self.session, &self.keys, interface, timeout).await
+    }
+
+    /// Subscribes to all interface data of the run (monitoring). Declare only after every
+    /// node is ready, so that nodes' publishers wait for each other, not for the monitor.
+    /// A ring buffer: a slow monitor loses old samples, it never slows the solvers down.
+    pub async fn monitor(&self) -> Result<Monitor, ProtoError> {
+        let sub = self
+            .session
+            .declare_subscriber(self.keys.iface_all())
+            .with(zenoh::handlers::RingChannel::new(64))
+            .await
+            .map_err(ProtoError::zenoh)?;
+        Ok(Monitor {
+            sub,
+            run_id: self.keys.run_id().to_string(),
+        })
+    }
+
+    pub async fn close(self) -> Result<(), ProtoError> {
+        self.session.close().await.map_err(ProtoError::zenoh)
+    }
+}
+
+/// Digest of one interface data message, for the coordinator's stability monitor.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Digest {
+    pub interface: String,
+    pub window: u64,
+    pub time: f64,
+    /// `forces` or `kinematics`.
+    pub kind: &'static str,
+    /// Largest nodal force norm (forces) or largest nodal speed (kinematics).
+    pub max_norm: f64,
+    /// Sum of nodal forces (forces) or mean position (kinematics).
+    pub total: [f64; 3],
+    /// First non-finite value, if any.
+    pub non_finite: Option<(&'static str, usize)>,
+}
+
+fn digest_arrays(a: &[f64]) -> (f64, [f64; 3]) {
+    let mut max: f64 = 0.0;
+    let mut total = [0.0; 3];
+    for v in a.chunks_exact(3) {
+        max = max.max((v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt());
+        for i in 0..3 {
+            total[i] += v[i];
+        }
+    }
+    (max, total)
+}
+
+/// The coordinator's tap on interface data.
+pub struct Monitor {
+    sub: Subscriber<zenoh::handlers::RingChannelHandler<Sample>>,
+    run_id: String,
+}
+
+impl Monitor {
+    /// Digests of everything that arrived since the last call (never blocks).
+    pub fn drain(&self) -> Vec<Result<Digest, (String, ProtoError)>> {
+        let mut out = Vec::new();
+        while let Ok(Some(sample)) = self.sub.try_recv() {
+            let key = sample.key_expr().as_str().to_string();
+            let bytes = payload(&sample);
+            let d = if key.ends_with("/forces") {
+                decode::<InterfaceForces>(&bytes, &self.run_id).map(|f| {
+                    let (max_norm, total) = digest_arrays(f.forces.as_slice());
+                    Digest {
+                        interface: f.interface.clone(),
+                        window: f.window,
+                        time: f.time,
+                        kind: "forces",
+                        max_norm,
+                        total,
+                        non_finite: f.forces.first_non_finite().map(|(i, _)| ("forces", i)),
+                    }
+                })
+            } else if key.ends_with("/kinematics") {
+                decode::<InterfaceKinematics>(&bytes, &self.run_id).map(|k| {
+                    let (max_norm, _) = digest_arrays(k.velocities.as_slice());
+                    let (_, sum) = digest_arrays(k.positions.as_slice());
+                    let n = (k.positions.len() / 3).max(1) as f64;
+                    Digest {
+                        interface: k.interface.clone(),
+                        window: k.window,
+                        time: k.time,
+                        kind: "kinematics",
+                        max_norm,
+                        total: sum.map(|s| s / n),
+                        non_finite: k
+                            .positions
+                            .first_non_finite()
+                            .map(|(i, _)| ("positions", i))
+                            .or(k
+                                .velocities
+                                .first_non_finite()
+                                .map(|(i, _)| ("velocities", i)))
+                            .or(k
+                                .accelerations
+                                .first_non_finite()
+                                .map(|(i, _)| ("accelerations", i))),
+                    }
+                })
+            } else {
+                continue;
+            };
+            out.push(d.map_err(|e| (key, e)));
+        }
+        out
+    }
+}
+
+/// Protocol version of this build, for `hello` texts.
+pub fn version() -> u32 {
+    PROTOCOL_VERSION
+}
