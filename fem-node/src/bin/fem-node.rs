@@ -1,0 +1,253 @@
+//! `fem-node`: the FEM engine as a node of a co-simulation run. A thin adapter: it speaks
+//! `proto` over zenoh and calls the `fem` engine; all mechanics is in the library.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use clap::Parser;
+use fem::Model;
+use proto::cli::NodeArgs;
+use proto::node::{main_with, NodeError, Solver, WindowReport};
+use proto::participant::Participant;
+use proto::{
+    AdvanceWindow, ErrorCode, Hello, Init, InterfaceKinematics, InterfaceMesh, MotionRule, Role,
+    PROTOCOL_VERSION,
+};
+
+#[derive(Parser)]
+#[command(
+    name = "fem-node",
+    version,
+    about = "FEM solver node of a cosim run (started by `cosim run`)"
+)]
+struct Args {
+    #[command(flatten)]
+    node: NodeArgs,
+}
+
+struct FemNode {
+    model: Option<Model>,
+    /// The single coupled interface of this node (name, nodes).
+    interface: Option<(String, usize)>,
+    out_dir: PathBuf,
+    data_timeout: std::time::Duration,
+}
+
+fn scene_error(e: impl std::fmt::Display) -> NodeError {
+    NodeError::new(ErrorCode::Scene, e.to_string())
+}
+
+fn fem_error(code: ErrorCode, e: impl std::fmt::Display) -> NodeError {
+    NodeError::new(code, e.to_string())
+}
+
+impl FemNode {
+    fn model(&mut self) -> Result<&mut Model, NodeError> {
+        self.model.as_mut().ok_or_else(|| {
+            NodeError::new(ErrorCode::Protocol, "a window command came before `init`")
+        })
+    }
+
+    async fn write_kinematics(
+        &self,
+        p: &Participant,
+        window: u64,
+        time: f64,
+        (positions, velocities, accelerations): (Vec<f64>, Vec<f64>, Vec<f64>),
+    ) -> Result<(), NodeError> {
+        let Some((name, _)) = &self.interface else {
+            return Ok(());
+        };
+        p.write_kinematics(&InterfaceKinematics {
+            version: PROTOCOL_VERSION,
+            run_id: p.run_id().to_string(),
+            interface: name.clone(),
+            window,
+            time,
+            positions: positions.into(),
+            velocities: velocities.into(),
+            accelerations: accelerations.into(),
+        })
+        .await?;
+        Ok(())
+    }
+}
+
+impl Solver for FemNode {
+    async fn init(
+        &mut self,
+        p: &mut Participant,
+        init: &Init,
+    ) -> Result<(BTreeMap<String, f64>, Vec<String>), NodeError> {
+        let cfg = fem::parse_scene_section(&init.scene_toml)
+            .map_err(|e| scene_error(format!("{}: {e}", init.scene_path)))?
+            .ok_or_else(|| {
+                scene_error(format!("{}: the scene has no [fem] table", init.scene_path))
+            })?;
+        let base = Path::new(&init.scene_path)
+            .parent()
+            .unwrap_or(Path::new("."));
+        let model = Model::from_config(&cfg, base)
+            .map_err(|e| scene_error(format!("{}: {e}", init.scene_path)))?;
+        self.out_dir = PathBuf::from(&init.out_dir).join("fem");
+        std::fs::create_dir_all(&self.out_dir).map_err(|e| {
+            NodeError::new(
+                ErrorCode::Io,
+                format!("creating {}: {e}", self.out_dir.display()),
+            )
+        })?;
+        if init.interfaces.len() > 1 {
+            return Err(scene_error(format!(
+                "coupling.interfaces lists {} interfaces; the FEM node couples one surface",
+                init.interfaces.len()
+            )));
+        }
+        p.open_interfaces(Role::Fem, &init.interfaces).await?;
+        if let Some(name) = init.interfaces.first() {
+            let m = model.interface_mesh();
+            let mesh = InterfaceMesh {
+                version: PROTOCOL_VERSION,
+                run_id: p.run_id().to_string(),
+                interface: name.clone(),
+                node_ids: m.node_ids,
+                positions: m.positions.into(),
+                triangles: m.triangles,
+            };
+            self.interface = Some((name.clone(), mesh.num_nodes()));
+            p.provide_mesh(&mesh).await?;
+            p.wait_for_peers(self.data_timeout).await?;
+        }
+        let mut limits = BTreeMap::from([("dofs".to_string(), model.num_dofs() as f64)]);
+        if let Some(dt) = model.critical_time_step() {
+            limits.insert("critical_time_step".to_string(), dt);
+        }
+        self.model = Some(model);
+        Ok((limits, Vec::new()))
+    }
+
+    async fn advance(
+        &mut self,
+        p: &mut Participant,
+        w: &AdvanceWindow,
+    ) -> Result<WindowReport, NodeError> {
+        let t_wait = Instant::now();
+        let forces = match (w.input_window, &self.interface) {
+            (Some(k), Some((name, nodes))) => {
+                let (name, nodes) = (name.clone(), *nodes);
+                Some(p.read_forces(&name, k, nodes, self.data_timeout).await?)
+            }
+            _ => None,
+        };
+        let wait_s = t_wait.elapsed().as_secs_f64();
+        let model = self.model()?;
+        if let Some(f) = forces {
+            model
+                .set_interface_forces(f.forces.as_slice())
+                .map_err(|e| fem_error(ErrorCode::Protocol, e))?;
+        }
+        let start_positions = model.interface_kinematics().0;
+        if w.static_solve {
+            model
+                .solve_static()
+                .map_err(|e| fem_error(ErrorCode::Unstable, format!("window {}: {e}", w.window)))?;
+        } else {
+            model
+                .advance(w.dt)
+                .map_err(|e| fem_error(ErrorCode::Unstable, format!("window {}: {e}", w.window)))?;
+        }
+        let out_dir = self.out_dir.clone();
+        model
+            .write_outputs(&out_dir)
+            .map_err(|e| fem_error(ErrorCode::Io, e))?;
+        let t_end = model.time();
+        let (pos, vel, acc) = model.interface_kinematics();
+        let monitor = BTreeMap::from([(
+            "max_interface_speed".to_string(),
+            vel.chunks_exact(3)
+                .map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt())
+                .fold(0.0, f64::max),
+        )]);
+        if let Some(k) = w.output_window {
+            let kin = match w.motion {
+                // Ullrich (3.4)–(3.7): predictive velocity V = (P_{i+1} − P_i)/Δt^F, A = 0, so
+                // that the DEM mesh, moving x = P_i + Vτ, lands on the FEM's end position.
+                MotionRule::Linear => {
+                    let v: Vec<f64> = pos
+                        .iter()
+                        .zip(&start_positions)
+                        .map(|(e, s)| (e - s) / w.dt)
+                        .collect();
+                    let zeros = vec![0.0; v.len()];
+                    (start_positions, v, zeros)
+                }
+                MotionRule::Quadratic | MotionRule::Fixed => (pos, vel, acc),
+            };
+            let time = if w.motion == MotionRule::Linear {
+                w.t_start
+            } else {
+                t_end
+            };
+            self.write_kinematics(p, k, time, kin).await?;
+        }
+        Ok(WindowReport {
+            wait_s,
+            t_end,
+            monitor,
+        })
+    }
+
+    async fn publish(&mut self, p: &mut Participant, window: u64) -> Result<(), NodeError> {
+        let model = self.model()?;
+        let time = model.time();
+        let kin = model.interface_kinematics();
+        self.write_kinematics(p, window, time, kin).await
+    }
+
+    fn snapshot(&self) -> Result<Vec<u8>, NodeError> {
+        self.model
+            .as_ref()
+            .map(|m| m.snapshot())
+            .ok_or_else(|| NodeError::new(ErrorCode::Protocol, "snapshot before `init`"))
+    }
+
+    fn restore(&mut self, bytes: &[u8]) -> Result<(), NodeError> {
+        self.model()?
+            .restore(bytes)
+            .map_err(|e| fem_error(ErrorCode::Io, format!("restoring the FEM state: {e}")))
+    }
+
+    fn finish(&mut self) -> Result<BTreeMap<String, f64>, NodeError> {
+        let out_dir = self.out_dir.clone();
+        match self.model.as_mut() {
+            Some(m) => {
+                m.write_outputs(&out_dir)
+                    .map_err(|e| fem_error(ErrorCode::Io, e))?;
+                Ok(m.results().into_iter().collect())
+            }
+            None => Ok(BTreeMap::new()),
+        }
+    }
+}
+
+fn main() -> std::process::ExitCode {
+    let args = Args::parse();
+    tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .init();
+    let hello = Hello {
+        software: format!("fem-node {}", env!("CARGO_PKG_VERSION")),
+        role: Role::Fem,
+        capabilities: vec!["snapshot".into(), "static".into(), "dynamic".into()],
+        pid: std::process::id(),
+    };
+    let data_timeout = args.node.data_timeout();
+    let node = FemNode {
+        model: None,
+        interface: None,
+        out_dir: PathBuf::new(),
+        data_timeout,
+    };
+    main_with(args.node, hello, node)
+}

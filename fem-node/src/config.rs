@@ -1,0 +1,844 @@
+//! The `[fem]` table of a scene file. SI units throughout (m, Pa, kg/m³, N, s).
+//! See `fem-node/FEM.md` for the format with examples.
+
+use crate::element::ElementKind;
+use crate::history::History;
+use serde::de::{self, MapAccess, Visitor};
+use serde::{Deserialize, Deserializer, Serialize};
+use std::collections::BTreeMap;
+use std::fmt;
+
+/// A scene-file error with its 1-based position.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct SceneError {
+    pub line: usize,
+    pub column: usize,
+    pub message: String,
+}
+
+impl fmt::Display for SceneError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "line {}, column {}: {}",
+            self.line, self.column, self.message
+        )
+    }
+}
+
+impl std::error::Error for SceneError {}
+
+/// `[fem]`: the structure of a scene.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct FemConfig {
+    /// Mesh file (`"beam.msh"`, `"beam.inp"`, relative to the scene file) or a generated box.
+    pub mesh: MeshSpec,
+    pub material: Material,
+    /// `"static"` (default), `"dynamic"`, `"explicit"`, or a table with `type` and parameters.
+    #[serde(default)]
+    pub analysis: Analysis,
+    /// Fixed displacement components (zero) on selected nodes.
+    #[serde(default)]
+    pub supports: Vec<Support>,
+    /// External loads, each scaled by an optional history.
+    #[serde(default)]
+    pub loads: Vec<Load>,
+    /// Named load histories referenced by `loads[].history` or `{ type = "ref", name = ... }`.
+    #[serde(default)]
+    pub histories: BTreeMap<String, History>,
+    /// Coupled part of the exterior surface (default: all of it).
+    #[serde(default)]
+    pub interface: Option<InterfaceSpec>,
+    /// Points whose displacement is reported (CSV, summary).
+    #[serde(default)]
+    pub probes: Vec<Probe>,
+    #[serde(default)]
+    pub output: Output,
+}
+
+/// Mesh source.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub enum MeshSpec {
+    /// A `.msh` (Gmsh 4.1 ASCII) or `.inp` (Abaqus/CalculiX) file; `hex8_incompatible`
+    /// switches C3D8 hexahedra to the incompatible-modes formulation.
+    File {
+        path: String,
+        hex8_incompatible: bool,
+    },
+    /// Structured box `[origin, origin + size]` [m] with element edge ≈ `element_size` [m]
+    /// (or explicit `divisions`).
+    Box {
+        size: [f64; 3],
+        origin: [f64; 3],
+        element_size: Option<f64>,
+        divisions: Option<[usize; 3]>,
+        element: ElementKind,
+    },
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MeshTable {
+    file: Option<String>,
+    #[serde(default)]
+    hex8: Option<Hex8Formulation>,
+    size: Option<[f64; 3]>,
+    origin: Option<[f64; 3]>,
+    element_size: Option<f64>,
+    divisions: Option<[usize; 3]>,
+    element: Option<ElementKind>,
+}
+
+#[derive(Deserialize, Clone, Copy, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+enum Hex8Formulation {
+    Full,
+    Incompatible,
+}
+
+impl<'de> Deserialize<'de> for MeshSpec {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct V;
+        impl<'de> Visitor<'de> for V {
+            type Value = MeshSpec;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str(
+                    "a mesh file path or a table { size, element_size, element } / { file }",
+                )
+            }
+            fn visit_str<E: de::Error>(self, s: &str) -> Result<MeshSpec, E> {
+                Ok(MeshSpec::File {
+                    path: s.to_string(),
+                    hex8_incompatible: false,
+                })
+            }
+            fn visit_map<A: MapAccess<'de>>(self, map: A) -> Result<MeshSpec, A::Error> {
+                let t = MeshTable::deserialize(de::value::MapAccessDeserializer::new(map))?;
+                if let Some(path) = t.file {
+                    if t.size.is_some()
+                        || t.element_size.is_some()
+                        || t.divisions.is_some()
+                        || t.element.is_some()
+                        || t.origin.is_some()
+                    {
+                        return Err(de::Error::custom("mesh: give either `file` or a generated box (`size`, `element_size`, `element`), not both"));
+                    }
+                    return Ok(MeshSpec::File {
+                        path,
+                        hex8_incompatible: t.hex8 == Some(Hex8Formulation::Incompatible),
+                    });
+                }
+                let size = t
+                    .size
+                    .ok_or_else(|| de::Error::custom("mesh: missing `file` or box `size`"))?;
+                if t.hex8.is_some() {
+                    return Err(de::Error::custom(
+                        "mesh.hex8 applies to mesh files; for a box use element = \"hex8i\"",
+                    ));
+                }
+                Ok(MeshSpec::Box {
+                    size,
+                    origin: t.origin.unwrap_or([0.0; 3]),
+                    element_size: t.element_size,
+                    divisions: t.divisions,
+                    element: t.element.unwrap_or(ElementKind::Hex8),
+                })
+            }
+        }
+        d.deserialize_any(V)
+    }
+}
+
+/// Isotropic linear elastic material.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Material {
+    /// Young's modulus E [Pa].
+    #[serde(alias = "E")]
+    pub youngs_modulus: f64,
+    /// Poisson's ratio ν, −1 < ν < 0.5.
+    #[serde(alias = "nu")]
+    pub poisson_ratio: f64,
+    /// Density ρ [kg/m³].
+    #[serde(alias = "rho")]
+    pub density: f64,
+}
+
+/// Analysis type and its parameters.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub enum Analysis {
+    /// K u = F(t) at each `advance` (2.28).
+    Static,
+    /// Bossak–Newmark (Wood–Bossak–Zienkiewicz, REFERENCE A6).
+    Dynamic {
+        /// α_B ∈ [−1/3, 0]; γ = 1/2 − α_B, β = (1 − α_B)²/4. Default −0.1.
+        alpha_b: f64,
+        /// Rayleigh damping C = a M + b K (2.84): a [1/s], b [s].
+        rayleigh_a: f64,
+        rayleigh_b: f64,
+        /// Consistent (default) or lumped mass matrix.
+        lumped_mass: bool,
+    },
+    /// Central differences with lumped mass; substeps of `safety` × critical Δt.
+    Explicit {
+        safety: f64,
+        rayleigh_a: f64,
+        rayleigh_b: f64,
+    },
+}
+
+impl Default for Analysis {
+    fn default() -> Self {
+        Analysis::Static
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct AnalysisTable {
+    #[serde(rename = "type")]
+    kind: String,
+    alpha_b: Option<f64>,
+    rayleigh_a: Option<f64>,
+    rayleigh_b: Option<f64>,
+    mass: Option<String>,
+    safety: Option<f64>,
+}
+
+fn analysis_from(t: AnalysisTable) -> Result<Analysis, String> {
+    let only = |allowed: &[&str]| -> Result<(), String> {
+        let given = [
+            ("alpha_b", t.alpha_b.is_some()),
+            ("rayleigh_a", t.rayleigh_a.is_some()),
+            ("rayleigh_b", t.rayleigh_b.is_some()),
+            ("mass", t.mass.is_some()),
+            ("safety", t.safety.is_some()),
+        ];
+        for (name, set) in given {
+            if set && !allowed.contains(&name) {
+                return Err(format!(
+                    "analysis.{name} does not apply to analysis type \"{}\"",
+                    t.kind
+                ));
+            }
+        }
+        Ok(())
+    };
+    match t.kind.as_str() {
+        "static" => {
+            only(&[])?;
+            Ok(Analysis::Static)
+        }
+        "dynamic" => {
+            only(&["alpha_b", "rayleigh_a", "rayleigh_b", "mass"])?;
+            let lumped = match t.mass.as_deref() {
+                None | Some("consistent") => false,
+                Some("lumped") => true,
+                Some(o) => return Err(format!("analysis.mass: unknown value \"{o}\", expected \"consistent\" or \"lumped\"")),
+            };
+            Ok(Analysis::Dynamic {
+                alpha_b: t.alpha_b.unwrap_or(-0.1),
+                rayleigh_a: t.rayleigh_a.unwrap_or(0.0),
+                rayleigh_b: t.rayleigh_b.unwrap_or(0.0),
+                lumped_mass: lumped,
+            })
+        }
+        "explicit" => {
+            only(&["safety", "rayleigh_a", "rayleigh_b"])?;
+            Ok(Analysis::Explicit {
+                safety: t.safety.unwrap_or(0.9),
+                rayleigh_a: t.rayleigh_a.unwrap_or(0.0),
+                rayleigh_b: t.rayleigh_b.unwrap_or(0.0),
+            })
+        }
+        o => Err(format!("analysis.type: unknown analysis \"{o}\", expected \"static\", \"dynamic\" or \"explicit\"")),
+    }
+}
+
+impl<'de> Deserialize<'de> for Analysis {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct V;
+        impl<'de> Visitor<'de> for V {
+            type Value = Analysis;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str("\"static\", \"dynamic\", \"explicit\" or a table with `type`")
+            }
+            fn visit_str<E: de::Error>(self, s: &str) -> Result<Analysis, E> {
+                analysis_from(AnalysisTable {
+                    kind: s.to_string(),
+                    alpha_b: None,
+                    rayleigh_a: None,
+                    rayleigh_b: None,
+                    mass: None,
+                    safety: None,
+                })
+                .map_err(E::custom)
+            }
+            fn visit_map<A: MapAccess<'de>>(self, map: A) -> Result<Analysis, A::Error> {
+                let t = AnalysisTable::deserialize(de::value::MapAccessDeserializer::new(map))?;
+                analysis_from(t).map_err(de::Error::custom)
+            }
+        }
+        d.deserialize_any(V)
+    }
+}
+
+/// Node / face selection: exactly one of `set`, `box`, `plane`.
+#[derive(Clone, Debug, Deserialize, Serialize, Default, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Selector {
+    /// Named node set of the mesh (Gmsh physical group, Abaqus *NSET, box face `xmin` ...).
+    pub set: Option<String>,
+    /// Nodes inside the axis-aligned box [m] (inclusive).
+    #[serde(rename = "box")]
+    pub bbox: Option<BoxSelector>,
+    /// Nodes with |x_axis − value| ≤ tol [m].
+    pub plane: Option<PlaneSelector>,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct BoxSelector {
+    pub min: [f64; 3],
+    pub max: [f64; 3],
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct PlaneSelector {
+    /// "x", "y" or "z".
+    pub axis: Axis,
+    pub value: f64,
+    /// Default 1e-6 × the mesh's bounding-box diagonal.
+    pub tol: Option<f64>,
+}
+
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum Axis {
+    X,
+    Y,
+    Z,
+}
+
+impl Axis {
+    pub fn index(self) -> usize {
+        match self {
+            Axis::X => 0,
+            Axis::Y => 1,
+            Axis::Z => 2,
+        }
+    }
+}
+
+/// `[[fem.supports]]`: fixes displacement components of the selected nodes to zero.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Support {
+    pub on: Selector,
+    /// Components to fix (default all three).
+    #[serde(default = "all_axes")]
+    pub fix: Vec<Axis>,
+}
+
+fn all_axes() -> Vec<Axis> {
+    vec![Axis::X, Axis::Y, Axis::Z]
+}
+
+/// `[[fem.loads]]`, scaled by `history(t)` (default 1).
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Load {
+    /// Uniform pressure [Pa] on the exterior faces whose nodes are all selected; positive
+    /// pushes into the body. Consistent nodal loads.
+    Pressure {
+        on: Selector,
+        value: f64,
+        #[serde(default)]
+        history: Option<String>,
+    },
+    /// Nodal force [N]: `per_node` on every selected node, or `total` split equally.
+    Force {
+        on: Selector,
+        #[serde(default)]
+        per_node: Option<[f64; 3]>,
+        #[serde(default)]
+        total: Option<[f64; 3]>,
+        #[serde(default)]
+        history: Option<String>,
+    },
+    /// Body force ρ g [N/m³] from an acceleration field g [m/s²] (e.g. [0, 0, −9.81]).
+    Gravity {
+        acceleration: [f64; 3],
+        #[serde(default)]
+        history: Option<String>,
+    },
+}
+
+/// `[fem.interface]`: the coupled part of the exterior surface.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct InterfaceSpec {
+    pub on: Selector,
+}
+
+/// `[[fem.probes]]`: a named node (by file id) or the node nearest to a point.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Probe {
+    pub name: String,
+    pub node: Option<u64>,
+    pub point: Option<[f64; 3]>,
+}
+
+/// `[fem.output]`.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Output {
+    /// Write a `.vtu` every this many coupling windows (0 = never). Default 1.
+    #[serde(default = "one")]
+    pub vtu_every: u64,
+    /// Append probe rows to `fem_probes.csv` after each window. Default true.
+    #[serde(default = "yes")]
+    pub csv: bool,
+}
+
+fn one() -> u64 {
+    1
+}
+fn yes() -> bool {
+    true
+}
+
+impl Default for Output {
+    fn default() -> Self {
+        Output {
+            vtu_every: 1,
+            csv: true,
+        }
+    }
+}
+
+#[derive(Deserialize)]
+struct SceneFile {
+    fem: Option<FemConfig>,
+}
+
+/// Parses the `[fem]` table of a whole scene file; other top-level tables are ignored.
+/// `Ok(None)` when there is no `[fem]` table.
+pub fn parse_scene_section(text: &str) -> Result<Option<FemConfig>, SceneError> {
+    let scene: SceneFile = toml::from_str(text).map_err(|e| {
+        let offset = e.span().map(|s| s.start).unwrap_or(0);
+        let (line, column) = line_col(text, offset);
+        let mut message = e.message().trim().to_string();
+        if let Some(path) = spans::path_at(text, offset) {
+            if !message.contains(&path) {
+                message = format!("{path}: {message}");
+            }
+        }
+        SceneError {
+            line,
+            column,
+            message,
+        }
+    })?;
+    let Some(cfg) = scene.fem else {
+        return Ok(None);
+    };
+    if let Err((path, msg)) = cfg.validate() {
+        let (line, column) = spans::locate(text, &path);
+        return Err(SceneError {
+            line,
+            column,
+            message: format!("{path}: {msg}"),
+        });
+    }
+    Ok(Some(cfg))
+}
+
+fn line_col(text: &str, offset: usize) -> (usize, usize) {
+    let offset = offset.min(text.len());
+    let before = &text[..offset];
+    let line = before.matches('\n').count() + 1;
+    let col = before
+        .rfind('\n')
+        .map_or(before.chars().count(), |p| before[p + 1..].chars().count())
+        + 1;
+    (line, col)
+}
+
+impl FemConfig {
+    /// Value checks; the error carries the field path (e.g. `fem.material.poisson_ratio`).
+    pub fn validate(&self) -> Result<(), (String, String)> {
+        let m = &self.material;
+        if !(m.youngs_modulus.is_finite() && m.youngs_modulus > 0.0) {
+            return Err((
+                "fem.material.youngs_modulus".into(),
+                format!("must be > 0 Pa, got {}", m.youngs_modulus),
+            ));
+        }
+        if !(m.poisson_ratio > -1.0 && m.poisson_ratio < 0.5) {
+            return Err((
+                "fem.material.poisson_ratio".into(),
+                format!("must satisfy −1 < ν < 0.5, got {}", m.poisson_ratio),
+            ));
+        }
+        if !(m.density.is_finite() && m.density > 0.0) {
+            return Err((
+                "fem.material.density".into(),
+                format!("must be > 0 kg/m³, got {}", m.density),
+            ));
+        }
+        match &self.mesh {
+            MeshSpec::File { path, .. } => {
+                if path.trim().is_empty() {
+                    return Err(("fem.mesh".into(), "empty mesh file path".into()));
+                }
+            }
+            MeshSpec::Box {
+                size,
+                element_size,
+                divisions,
+                origin,
+                ..
+            } => {
+                if size.iter().any(|&s| !(s.is_finite() && s > 0.0)) {
+                    return Err((
+                        "fem.mesh.size".into(),
+                        format!("all sizes must be > 0 m, got {size:?}"),
+                    ));
+                }
+                if origin.iter().any(|o| !o.is_finite()) {
+                    return Err(("fem.mesh.origin".into(), "must be finite".into()));
+                }
+                match (element_size, divisions) {
+                    (Some(_), Some(_)) => {
+                        return Err((
+                            "fem.mesh.divisions".into(),
+                            "give either element_size or divisions, not both".into(),
+                        ))
+                    }
+                    (None, None) => {
+                        return Err((
+                            "fem.mesh".into(),
+                            "a generated box needs element_size (or divisions)".into(),
+                        ))
+                    }
+                    (Some(h), None) => {
+                        if !(h.is_finite() && *h > 0.0) {
+                            return Err((
+                                "fem.mesh.element_size".into(),
+                                format!("must be > 0 m, got {h}"),
+                            ));
+                        }
+                        let n: f64 = size.iter().map(|s| (s / h).round().max(1.0)).product();
+                        if n > 5e6 {
+                            return Err((
+                                "fem.mesh.element_size".into(),
+                                format!("would generate {n:.0} cells (limit 5e6)"),
+                            ));
+                        }
+                    }
+                    (None, Some(d)) => {
+                        if d.iter().any(|&k| k == 0) {
+                            return Err((
+                                "fem.mesh.divisions".into(),
+                                "must be ≥ 1 in every direction".into(),
+                            ));
+                        }
+                    }
+                }
+            }
+        }
+        match &self.analysis {
+            Analysis::Static => {}
+            Analysis::Dynamic {
+                alpha_b,
+                rayleigh_a,
+                rayleigh_b,
+                ..
+            } => {
+                if !(*alpha_b >= -1.0 / 3.0 && *alpha_b <= 0.0) {
+                    return Err((
+                        "fem.analysis.alpha_b".into(),
+                        format!("must lie in [−1/3, 0] (Bossak α_B ≤ 0), got {alpha_b}"),
+                    ));
+                }
+                check_rayleigh(*rayleigh_a, *rayleigh_b)?;
+            }
+            Analysis::Explicit {
+                safety,
+                rayleigh_a,
+                rayleigh_b,
+            } => {
+                if !(*safety > 0.0 && *safety <= 1.0) {
+                    return Err((
+                        "fem.analysis.safety".into(),
+                        format!("must be in (0, 1], got {safety}"),
+                    ));
+                }
+                check_rayleigh(*rayleigh_a, *rayleigh_b)?;
+            }
+        }
+        for (i, s) in self.supports.iter().enumerate() {
+            check_selector(&s.on, &format!("fem.supports[{i}].on"))?;
+            if s.fix.is_empty() {
+                return Err((
+                    format!("fem.supports[{i}].fix"),
+                    "fixes no component".into(),
+                ));
+            }
+        }
+        for (name, h) in &self.histories {
+            h.validate(&self.histories, 0)
+                .map_err(|(p, m)| (join(&format!("fem.histories.{name}"), &p), m))?;
+        }
+        for (i, l) in self.loads.iter().enumerate() {
+            let base = format!("fem.loads[{i}]");
+            let history = match l {
+                Load::Pressure { on, value, history } => {
+                    check_selector(on, &format!("{base}.on"))?;
+                    if !value.is_finite() {
+                        return Err((format!("{base}.value"), "must be finite".into()));
+                    }
+                    history
+                }
+                Load::Force {
+                    on,
+                    per_node,
+                    total,
+                    history,
+                } => {
+                    check_selector(on, &format!("{base}.on"))?;
+                    match (per_node, total) {
+                        (Some(_), Some(_)) | (None, None) => {
+                            return Err((
+                                format!("{base}.per_node"),
+                                "give exactly one of per_node or total [N]".into(),
+                            ))
+                        }
+                        (Some(f), None) | (None, Some(f)) => {
+                            if f.iter().any(|v| !v.is_finite()) {
+                                return Err((format!("{base}.total"), "must be finite".into()));
+                            }
+                        }
+                    }
+                    history
+                }
+                Load::Gravity {
+                    acceleration,
+                    history,
+                } => {
+                    if acceleration.iter().any(|v| !v.is_finite()) {
+                        return Err((format!("{base}.acceleration"), "must be finite".into()));
+                    }
+                    history
+                }
+            };
+            if let Some(h) = history {
+                if !self.histories.contains_key(h) {
+                    return Err((
+                        format!("{base}.history"),
+                        format!(
+                            "unknown history '{h}' (defined in [fem.histories]: {})",
+                            self.histories
+                                .keys()
+                                .cloned()
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ),
+                    ));
+                }
+            }
+        }
+        if let Some(i) = &self.interface {
+            check_selector(&i.on, "fem.interface.on")?;
+        }
+        let mut names = std::collections::BTreeSet::new();
+        for (i, p) in self.probes.iter().enumerate() {
+            if p.name.is_empty() || !names.insert(p.name.clone()) {
+                return Err((
+                    format!("fem.probes[{i}].name"),
+                    format!("probe name '{}' is empty or repeated", p.name),
+                ));
+            }
+            if p.node.is_some() == p.point.is_some() {
+                return Err((
+                    format!("fem.probes[{i}]"),
+                    "give exactly one of node (file id) or point [m]".into(),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+fn join(a: &str, b: &str) -> String {
+    let b = b.trim_end_matches('.');
+    if b.is_empty() {
+        a.to_string()
+    } else {
+        format!("{a}.{b}")
+    }
+}
+
+fn check_rayleigh(a: f64, b: f64) -> Result<(), (String, String)> {
+    if !(a.is_finite() && a >= 0.0) {
+        return Err((
+            "fem.analysis.rayleigh_a".into(),
+            format!("must be ≥ 0 1/s, got {a}"),
+        ));
+    }
+    if !(b.is_finite() && b >= 0.0) {
+        return Err((
+            "fem.analysis.rayleigh_b".into(),
+            format!("must be ≥ 0 s, got {b}"),
+        ));
+    }
+    Ok(())
+}
+
+fn check_selector(s: &Selector, path: &str) -> Result<(), (String, String)> {
+    let n = s.set.is_some() as u8 + s.bbox.is_some() as u8 + s.plane.is_some() as u8;
+    if n != 1 {
+        return Err((
+            path.to_string(),
+            "give exactly one of set, box, plane".into(),
+        ));
+    }
+    if let Some(b) = &s.bbox {
+        if (0..3).any(|k| !(b.min[k] <= b.max[k])) {
+            return Err((
+                format!("{path}.box"),
+                "min must be ≤ max in every direction".into(),
+            ));
+        }
+    }
+    if let Some(p) = &s.plane {
+        if let Some(t) = p.tol {
+            if !(t >= 0.0) {
+                return Err((format!("{path}.plane.tol"), "must be ≥ 0".into()));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Locating field paths in the TOML text via toml's spanned document tree.
+mod spans {
+    use toml::de::{DeTable, DeValue};
+    use toml::Spanned;
+
+    /// (line, column) of the value at a path such as `fem.loads[2].on.box`; falls back to the
+    /// deepest existing prefix, then to the start of the file.
+    pub fn locate(text: &str, path: &str) -> (usize, usize) {
+        let Ok(root) = DeTable::parse(text) else {
+            return (1, 1);
+        };
+        let segs = split(path);
+        let mut best: Option<std::ops::Range<usize>> = None;
+        let mut cur_table: Option<&DeTable> = Some(root.get_ref());
+        let mut cur_array: Option<&[Spanned<DeValue>]> = None;
+        for seg in &segs {
+            let next: Option<&Spanned<DeValue>> = match (seg, cur_table, cur_array) {
+                (Seg::Key(k), Some(t), _) => t
+                    .iter()
+                    .find(|(key, _)| key.get_ref().as_ref() == k.as_str())
+                    .map(|(key, v)| {
+                        best = Some(key.span());
+                        v
+                    }),
+                (Seg::Index(i), _, Some(a)) => a.get(*i),
+                _ => None,
+            };
+            let Some(v) = next else { break };
+            if matches!(seg, Seg::Index(_)) {
+                best = Some(v.span());
+            }
+            cur_table = None;
+            cur_array = None;
+            match v.get_ref() {
+                DeValue::Table(t) => cur_table = Some(t),
+                DeValue::Array(a) => cur_array = Some(&a[..]),
+                _ => {}
+            }
+        }
+        match best {
+            Some(r) => super::line_col(text, r.start),
+            None => (1, 1),
+        }
+    }
+
+    /// Dotted path of the innermost key whose value contains `offset`.
+    pub fn path_at(text: &str, offset: usize) -> Option<String> {
+        let root = DeTable::parse(text).ok()?;
+        let mut path = String::new();
+        walk_table(root.get_ref(), offset, &mut path);
+        if path.is_empty() {
+            None
+        } else {
+            Some(path)
+        }
+    }
+
+    fn walk_table(t: &DeTable, offset: usize, path: &mut String) -> bool {
+        for (k, v) in t.iter() {
+            let ks = k.span();
+            let vs = v.span();
+            if ks.contains(&offset) || vs.contains(&offset) {
+                if !path.is_empty() {
+                    path.push('.');
+                }
+                path.push_str(k.get_ref());
+                walk_value(v, offset, path);
+                return true;
+            }
+        }
+        false
+    }
+
+    fn walk_value(v: &Spanned<DeValue>, offset: usize, path: &mut String) {
+        match v.get_ref() {
+            DeValue::Table(t) => {
+                walk_table(t, offset, path);
+            }
+            DeValue::Array(a) => {
+                for (i, e) in a.iter().enumerate() {
+                    if e.span().contains(&offset) {
+                        path.push_str(&format!("[{i}]"));
+                        walk_value(e, offset, path);
+                        return;
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+
+    enum Seg {
+        Key(String),
+        Index(usize),
+    }
+
+    fn split(path: &str) -> Vec<Seg> {
+        let mut out = Vec::new();
+        for part in path.split('.') {
+            let mut rest = part;
+            if let Some(p) = rest.find('[') {
+                out.push(Seg::Key(rest[..p].to_string()));
+                rest = &rest[p..];
+                while let Some(stripped) = rest.strip_prefix('[') {
+                    let end = stripped.find(']').unwrap_or(stripped.len());
+                    if let Ok(i) = stripped[..end].parse() {
+                        out.push(Seg::Index(i));
+                    }
+                    rest = stripped.get(end + 1..).unwrap_or("");
+                }
+            } else {
+                out.push(Seg::Key(rest.to_string()));
+            }
+        }
+        out
+    }
+}

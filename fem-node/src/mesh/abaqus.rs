@@ -1,0 +1,330 @@
+//! Abaqus / CalculiX `.inp` reader: *NODE, *ELEMENT (C3D4, C3D10, C3D8, C3D8I, C3D20),
+//! *NSET / *ELSET (with GENERATE and nested set names). Other keywords are skipped.
+
+use super::{sort_dedup, Mesh};
+use crate::element::ElementKind;
+use crate::FemError;
+use std::collections::HashMap;
+
+enum Block {
+    None,
+    Node(Option<String>),
+    Element {
+        kind: ElementKind,
+        elset: Option<String>,
+    },
+    Nset {
+        name: String,
+        generate: bool,
+    },
+    Elset {
+        name: String,
+        generate: bool,
+    },
+    Skip,
+}
+
+fn element_kind(ty: &str) -> Option<ElementKind> {
+    Some(match ty {
+        "C3D4" | "C3D4H" => ElementKind::Tet4,
+        "C3D10" | "C3D10M" | "C3D10H" | "C3D10T" => ElementKind::Tet10,
+        "C3D8" | "C3D8H" => ElementKind::Hex8,
+        "C3D8I" => ElementKind::Hex8i,
+        "C3D20" | "C3D20R" | "C3D20H" => ElementKind::Hex20,
+        _ => return None,
+    })
+}
+
+pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
+    let err = |line: usize, message: String| FemError::Mesh {
+        file: file.into(),
+        line,
+        message,
+    };
+    let mut mesh = Mesh {
+        source: file.to_string(),
+        ..Default::default()
+    };
+    let mut node_index: HashMap<u64, (u32, usize)> = HashMap::new();
+    let mut elem_index: HashMap<u64, (u32, usize)> = HashMap::new();
+    // Set members are resolved at the end so sets may reference nodes/elements defined later.
+    let mut nset_raw: Vec<(String, usize, String)> = Vec::new();
+    let mut elset_raw: Vec<(String, usize, String, bool)> = Vec::new();
+    let mut nset_gen: Vec<(String, usize, Vec<i64>)> = Vec::new();
+    let mut block = Block::None;
+    // Element data may continue over several lines (trailing comma).
+    let mut pending: Vec<u64> = Vec::new();
+    let mut pending_line = 0usize;
+
+    for (i, raw) in text.lines().enumerate() {
+        let ln = i + 1;
+        let line = raw.trim();
+        if line.is_empty() || line.starts_with("**") {
+            continue;
+        }
+        if let Some(kw) = line.strip_prefix('*') {
+            if !pending.is_empty() {
+                return Err(err(
+                    pending_line,
+                    "element definition is incomplete (missing nodes)".into(),
+                ));
+            }
+            let mut parts = kw.split(',').map(|s| s.trim());
+            let name = parts.next().unwrap_or("").to_ascii_uppercase();
+            let mut params: HashMap<String, String> = HashMap::new();
+            for p in parts {
+                if p.is_empty() {
+                    continue;
+                }
+                let mut kv = p.splitn(2, '=');
+                let k = kv.next().unwrap_or("").trim().to_ascii_uppercase();
+                let v = kv.next().unwrap_or("").trim().to_string();
+                params.insert(k, v);
+            }
+            block = match name.as_str() {
+                "NODE" => Block::Node(params.get("NSET").cloned()),
+                "ELEMENT" => {
+                    let ty = params
+                        .get("TYPE")
+                        .ok_or_else(|| err(ln, "*ELEMENT without TYPE=".into()))?
+                        .to_ascii_uppercase();
+                    let kind = element_kind(&ty).ok_or_else(|| {
+                        err(ln, format!("unknown element type '{ty}' (supported: C3D4, C3D10, C3D8, C3D8I, C3D20, C3D20R)"))
+                    })?;
+                    Block::Element {
+                        kind,
+                        elset: params.get("ELSET").cloned(),
+                    }
+                }
+                "NSET" => Block::Nset {
+                    name: params
+                        .get("NSET")
+                        .cloned()
+                        .ok_or_else(|| err(ln, "*NSET without NSET=".into()))?,
+                    generate: params.contains_key("GENERATE"),
+                },
+                "ELSET" => Block::Elset {
+                    name: params
+                        .get("ELSET")
+                        .cloned()
+                        .ok_or_else(|| err(ln, "*ELSET without ELSET=".into()))?,
+                    generate: params.contains_key("GENERATE"),
+                },
+                "INCLUDE" => {
+                    return Err(err(
+                        ln,
+                        "*INCLUDE is not supported; inline the included file".into(),
+                    ))
+                }
+                _ => Block::Skip,
+            };
+            continue;
+        }
+        let fields: Vec<&str> = line.split(',').map(|s| s.trim()).collect();
+        match &block {
+            Block::None => return Err(err(ln, format!("data line '{line}' before any keyword"))),
+            Block::Skip => {}
+            Block::Node(nset) => {
+                let vals: Vec<&str> = fields.iter().copied().filter(|s| !s.is_empty()).collect();
+                if vals.len() < 3 {
+                    return Err(err(
+                        ln,
+                        format!("node line '{line}': expected 'id, x, y[, z]'"),
+                    ));
+                }
+                let id: u64 = vals[0]
+                    .parse()
+                    .map_err(|_| err(ln, format!("bad node id '{}'", vals[0])))?;
+                let mut x = [0.0; 3];
+                for k in 0..(vals.len() - 1).min(3) {
+                    x[k] = vals[k + 1].parse().map_err(|_| {
+                        err(ln, format!("node {id}: bad coordinate '{}'", vals[k + 1]))
+                    })?;
+                }
+                let idx = mesh.nodes.len() as u32;
+                if let Some((_, prev)) = node_index.insert(id, (idx, ln)) {
+                    return Err(err(
+                        ln,
+                        format!("duplicate node id {id} (first defined on line {prev})"),
+                    ));
+                }
+                mesh.nodes.push(x);
+                mesh.node_ids.push(id);
+                if let Some(s) = nset {
+                    mesh.node_sets.entry(s.clone()).or_default().push(idx);
+                }
+            }
+            Block::Element { kind, elset } => {
+                if pending.is_empty() {
+                    pending_line = ln;
+                }
+                for f in fields.iter().filter(|s| !s.is_empty()) {
+                    pending.push(
+                        f.parse()
+                            .map_err(|_| err(ln, format!("bad integer '{f}' in element data")))?,
+                    );
+                }
+                let nn = kind.num_nodes();
+                if pending.len() > nn + 1 {
+                    return Err(err(
+                        pending_line,
+                        format!(
+                            "element {}: {} nodes given, {} expects {nn}",
+                            pending[0],
+                            pending.len() - 1,
+                            kind.name()
+                        ),
+                    ));
+                }
+                if pending.len() == nn + 1 {
+                    let id = pending[0];
+                    let mut nodes = Vec::with_capacity(nn);
+                    for nid in &pending[1..] {
+                        let (ix, _) = node_index.get(nid).ok_or_else(|| {
+                            err(
+                                pending_line,
+                                format!("element {id} references missing node {nid}"),
+                            )
+                        })?;
+                        nodes.push(*ix);
+                    }
+                    let e = mesh.kinds.len() as u32;
+                    if let Some((_, prev)) = elem_index.insert(id, (e, pending_line)) {
+                        return Err(err(
+                            pending_line,
+                            format!("duplicate element id {id} (first defined on line {prev})"),
+                        ));
+                    }
+                    mesh.push_element(*kind, id, pending_line, &nodes);
+                    if let Some(s) = elset {
+                        mesh.elem_sets.entry(s.clone()).or_default().push(e);
+                    }
+                    pending.clear();
+                } else if !line.ends_with(',') {
+                    return Err(err(
+                        pending_line,
+                        format!(
+                            "element {}: {} nodes given, {} expects {nn}",
+                            pending[0],
+                            pending.len() - 1,
+                            kind.name()
+                        ),
+                    ));
+                }
+            }
+            Block::Nset { name, generate } => {
+                if *generate {
+                    let v: Result<Vec<i64>, _> = fields
+                        .iter()
+                        .filter(|s| !s.is_empty())
+                        .map(|s| s.parse::<i64>())
+                        .collect();
+                    let v = v.map_err(|_| {
+                        err(
+                            ln,
+                            format!("*NSET {name}, GENERATE: expected 'first, last[, step]'"),
+                        )
+                    })?;
+                    nset_gen.push((name.clone(), ln, v));
+                } else {
+                    for f in fields.iter().filter(|s| !s.is_empty()) {
+                        nset_raw.push((name.clone(), ln, f.to_string()));
+                    }
+                }
+            }
+            Block::Elset { name, generate } => {
+                for f in fields.iter().filter(|s| !s.is_empty()) {
+                    elset_raw.push((name.clone(), ln, f.to_string(), *generate));
+                }
+            }
+        }
+    }
+    if !pending.is_empty() {
+        return Err(err(
+            pending_line,
+            "element definition is incomplete at end of file".into(),
+        ));
+    }
+    let generate = |name: &str, ln: usize, v: &[i64]| -> Result<Vec<u64>, FemError> {
+        if !(v.len() == 2 || v.len() == 3) || v[0] < 0 || v[1] < v[0] || (v.len() == 3 && v[2] <= 0)
+        {
+            return Err(err(ln, format!("set {name}, GENERATE: expected 'first, last[, step]' with first ≤ last, step > 0")));
+        }
+        let step = if v.len() == 3 { v[2] } else { 1 };
+        Ok((v[0]..=v[1])
+            .step_by(step as usize)
+            .map(|x| x as u64)
+            .collect())
+    };
+    for (name, ln, v) in nset_gen {
+        for id in generate(&name, ln, &v)? {
+            let (ix, _) = node_index
+                .get(&id)
+                .ok_or_else(|| err(ln, format!("*NSET {name} references missing node {id}")))?;
+            mesh.node_sets.entry(name.clone()).or_default().push(*ix);
+        }
+    }
+    for (name, ln, tok) in nset_raw {
+        if let Ok(id) = tok.parse::<u64>() {
+            let (ix, _) = node_index
+                .get(&id)
+                .ok_or_else(|| err(ln, format!("*NSET {name} references missing node {id}")))?;
+            mesh.node_sets.entry(name).or_default().push(*ix);
+        } else {
+            let members = mesh.node_set(&tok).cloned().ok_or_else(|| {
+                err(
+                    ln,
+                    format!("*NSET {name} references unknown node set '{tok}'"),
+                )
+            })?;
+            mesh.node_sets.entry(name).or_default().extend(members);
+        }
+    }
+    // ELSET data: either GENERATE triples (one per line) or ids / set names.
+    let mut gen_lines: HashMap<(String, usize), Vec<i64>> = HashMap::new();
+    let mut order: Vec<(String, usize)> = Vec::new();
+    for (name, ln, tok, gen) in elset_raw {
+        if gen {
+            let v = tok
+                .parse::<i64>()
+                .map_err(|_| err(ln, format!("*ELSET {name}, GENERATE: bad integer '{tok}'")))?;
+            let key = (name.clone(), ln);
+            if !gen_lines.contains_key(&key) {
+                order.push(key.clone());
+            }
+            gen_lines.entry(key).or_default().push(v);
+        } else if let Ok(id) = tok.parse::<u64>() {
+            let (ix, _) = elem_index
+                .get(&id)
+                .ok_or_else(|| err(ln, format!("*ELSET {name} references missing element {id}")))?;
+            mesh.elem_sets.entry(name).or_default().push(*ix);
+        } else {
+            let members = mesh.elem_set(&tok).cloned().ok_or_else(|| {
+                err(
+                    ln,
+                    format!("*ELSET {name} references unknown element set '{tok}'"),
+                )
+            })?;
+            mesh.elem_sets.entry(name).or_default().extend(members);
+        }
+    }
+    for key in order {
+        let v = &gen_lines[&key];
+        for id in generate(&key.0, key.1, v)? {
+            let (ix, _) = elem_index.get(&id).ok_or_else(|| {
+                err(
+                    key.1,
+                    format!("*ELSET {} references missing element {id}", key.0),
+                )
+            })?;
+            mesh.elem_sets.entry(key.0.clone()).or_default().push(*ix);
+        }
+    }
+    for v in mesh.node_sets.values_mut() {
+        *v = sort_dedup(std::mem::take(v));
+    }
+    for v in mesh.elem_sets.values_mut() {
+        *v = sort_dedup(std::mem::take(v));
+    }
+    Ok(mesh)
+}

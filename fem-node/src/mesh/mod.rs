@@ -1,0 +1,215 @@
+//! Volume meshes: storage, readers (Gmsh `.msh` 4.1 ASCII, Abaqus/CalculiX `.inp`) and the
+//! structured box generator.
+
+mod abaqus;
+mod generate;
+mod gmsh;
+
+pub use generate::box_mesh;
+
+use crate::element::{self, ElementKind};
+use crate::FemError;
+use rayon::prelude::*;
+use std::collections::{BTreeMap, HashMap};
+use std::path::Path;
+
+/// A volume mesh: flat, data-oriented storage (node-major coordinates, CSR connectivity).
+#[derive(Clone, Debug, Default)]
+pub struct Mesh {
+    /// Reference coordinates [m].
+    pub nodes: Vec<[f64; 3]>,
+    /// The file's node ids (1-based sequential for generated meshes).
+    pub node_ids: Vec<u64>,
+    pub kinds: Vec<ElementKind>,
+    /// `conn[offsets[e]..offsets[e + 1]]` are the node indices of element e (Abaqus order).
+    pub offsets: Vec<usize>,
+    pub conn: Vec<u32>,
+    pub elem_ids: Vec<u64>,
+    /// Line of the element's definition in its file (0 for generated meshes).
+    pub elem_lines: Vec<usize>,
+    /// Named node sets (Gmsh physical groups, Abaqus *NSET, generated box faces).
+    pub node_sets: BTreeMap<String, Vec<u32>>,
+    /// Named element sets (Gmsh 3-D physical groups, Abaqus *ELSET / ELSET=).
+    pub elem_sets: BTreeMap<String, Vec<u32>>,
+    /// Where the mesh came from, for error messages.
+    pub source: String,
+}
+
+impl Mesh {
+    pub fn num_nodes(&self) -> usize {
+        self.nodes.len()
+    }
+    pub fn num_elements(&self) -> usize {
+        self.kinds.len()
+    }
+    pub fn element_nodes(&self, e: usize) -> &[u32] {
+        &self.conn[self.offsets[e]..self.offsets[e + 1]]
+    }
+    pub fn element_coords(&self, e: usize, buf: &mut Vec<[f64; 3]>) {
+        buf.clear();
+        buf.extend(
+            self.element_nodes(e)
+                .iter()
+                .map(|&n| self.nodes[n as usize]),
+        );
+    }
+    pub(crate) fn push_element(&mut self, kind: ElementKind, id: u64, line: usize, nodes: &[u32]) {
+        if self.offsets.is_empty() {
+            self.offsets.push(0);
+        }
+        self.kinds.push(kind);
+        self.conn.extend_from_slice(nodes);
+        self.offsets.push(self.conn.len());
+        self.elem_ids.push(id);
+        self.elem_lines.push(line);
+    }
+
+    /// Reads a `.msh` (Gmsh 4.1 ASCII) or `.inp` (Abaqus / CalculiX) file.
+    pub fn read(path: &Path) -> Result<Mesh, FemError> {
+        let text = std::fs::read_to_string(path).map_err(|e| FemError::Io {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        })?;
+        let name = path.display().to_string();
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .unwrap_or("")
+            .to_ascii_lowercase();
+        let mesh = match ext.as_str() {
+            "msh" => gmsh::parse(&text, &name)?,
+            "inp" => abaqus::parse(&text, &name)?,
+            _ => {
+                return Err(FemError::Mesh {
+                    file: name,
+                    line: 0,
+                    message: format!("unknown mesh format '.{ext}' (expected .msh or .inp)"),
+                })
+            }
+        };
+        mesh.check_elements()?;
+        Ok(mesh)
+    }
+
+    /// Parses mesh text in the given format ("msh" or "inp"); `name` is used in errors.
+    pub fn parse(text: &str, format: &str, name: &str) -> Result<Mesh, FemError> {
+        let mesh = match format {
+            "msh" => gmsh::parse(text, name)?,
+            "inp" => abaqus::parse(text, name)?,
+            _ => {
+                return Err(FemError::Mesh {
+                    file: name.into(),
+                    line: 0,
+                    message: format!("unknown mesh format '{format}'"),
+                })
+            }
+        };
+        mesh.check_elements()?;
+        Ok(mesh)
+    }
+
+    /// Detects inverted or degenerate elements from the Jacobian at the integration points.
+    pub fn check_elements(&self) -> Result<(), FemError> {
+        if self.kinds.is_empty() {
+            return Err(FemError::Mesh {
+                file: self.source.clone(),
+                line: 0,
+                message: "mesh has no volume elements (tet4, tet10, hex8, hex20)".into(),
+            });
+        }
+        let bad: Option<(usize, element::BadJacobian)> = (0..self.num_elements())
+            .into_par_iter()
+            .map(|e| {
+                let mut x = Vec::new();
+                self.element_coords(e, &mut x);
+                element::check_jacobian(self.kinds[e], &x)
+                    .err()
+                    .map(|b| (e, b))
+            })
+            .find_first(|r| r.is_some())
+            .flatten();
+        if let Some((e, b)) = bad {
+            let what = if b.inverted { "inverted" } else { "degenerate" };
+            return Err(FemError::Mesh {
+                file: self.source.clone(),
+                line: self.elem_lines[e],
+                message: format!(
+                    "element {} ({}) is {what}: Jacobian determinant {:.3e} at an integration point",
+                    self.elem_ids[e],
+                    self.kinds[e].name(),
+                    b.det_j
+                ),
+            });
+        }
+        Ok(())
+    }
+
+    /// Map from file node id to node index.
+    pub fn node_index_map(&self) -> HashMap<u64, u32> {
+        self.node_ids
+            .iter()
+            .enumerate()
+            .map(|(i, &id)| (id, i as u32))
+            .collect()
+    }
+
+    /// Switches 8-node hexahedra between full integration and incompatible modes.
+    pub fn set_hex8_incompatible(&mut self, incompatible: bool) {
+        for k in &mut self.kinds {
+            match (*k, incompatible) {
+                (ElementKind::Hex8, true) => *k = ElementKind::Hex8i,
+                (ElementKind::Hex8i, false) => *k = ElementKind::Hex8,
+                _ => {}
+            }
+        }
+    }
+
+    /// Node set by name (exact, then case-insensitive as Abaqus names are).
+    pub fn node_set(&self, name: &str) -> Option<&Vec<u32>> {
+        self.node_sets.get(name).or_else(|| {
+            self.node_sets
+                .iter()
+                .find(|(k, _)| k.eq_ignore_ascii_case(name))
+                .map(|(_, v)| v)
+        })
+    }
+
+    /// Element set by name (exact, then case-insensitive).
+    pub fn elem_set(&self, name: &str) -> Option<&Vec<u32>> {
+        self.elem_sets.get(name).or_else(|| {
+            self.elem_sets
+                .iter()
+                .find(|(k, _)| k.eq_ignore_ascii_case(name))
+                .map(|(_, v)| v)
+        })
+    }
+
+    /// Marks which nodes are referenced by at least one element.
+    pub fn used_nodes(&self) -> Vec<bool> {
+        let mut used = vec![false; self.num_nodes()];
+        for &n in &self.conn {
+            used[n as usize] = true;
+        }
+        used
+    }
+
+    /// Bounding box (min, max).
+    pub fn bounds(&self) -> ([f64; 3], [f64; 3]) {
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for p in &self.nodes {
+            for k in 0..3 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+        (lo, hi)
+    }
+}
+
+/// Sorted, de-duplicated node list.
+pub(crate) fn sort_dedup(mut v: Vec<u32>) -> Vec<u32> {
+    v.sort_unstable();
+    v.dedup();
+    v
+}

@@ -1,0 +1,1133 @@
+//! The FEM model: mesh + material + boundary conditions + solvers, behind the small
+//! solver-facing API the `fem-node` adapter calls (set forces → advance → read kinematics).
+
+use crate::assembly::{self, DofMap, Factor, Operator, Pattern, FIXED};
+use crate::config::{Analysis, FemConfig, Load, MeshSpec, Output};
+use crate::element::{self, Lame};
+use crate::history::History;
+use crate::mesh::{box_mesh, Mesh};
+use crate::output;
+use crate::surface::{self, Boundary, Interface};
+use crate::{FemError, InterfaceMesh};
+use faer::sparse::linalg::solvers::SymbolicLlt;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::sync::OnceLock;
+
+const SNAPSHOT_FORMAT: u32 = 1;
+
+/// Everything that evolves in time; `snapshot` / `restore` serialise exactly this.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+struct State {
+    format: u32,
+    n_dofs: usize,
+    time: f64,
+    /// Full dof vectors (3 per node, node-major).
+    u: Vec<f64>,
+    v: Vec<f64>,
+    a: Vec<f64>,
+    /// Prescribed displacement of fixed dofs (g of (2.48)); zero unless set.
+    prescribed: Vec<f64>,
+    interface_forces: Vec<f64>,
+    /// Whether `a` is consistent with the equation of motion (initial acceleration solved).
+    accel_ready: bool,
+    steps: u64,
+    windows: u64,
+    csv_started: bool,
+}
+
+struct LoadVector {
+    history: Option<String>,
+    /// Spatial pattern (full dof vector) multiplied by history(t).
+    f: Vec<f64>,
+}
+
+/// A finite element model ready to be stepped.
+pub struct Model {
+    mesh: Mesh,
+    mat: Lame,
+    rho: f64,
+    analysis: Analysis,
+    dofs: DofMap,
+    pattern: Pattern,
+    k: Vec<f64>,
+    m_consistent: Option<Vec<f64>>,
+    m_lumped: Vec<f64>,
+    diag_pos: Vec<usize>,
+    symbolic: Option<SymbolicLlt<u32>>,
+    k_factor: Option<Factor>,
+    eff_factor: Option<(u64, Factor)>,
+    m_factor: Option<Factor>,
+    loads: Vec<LoadVector>,
+    histories: BTreeMap<String, History>,
+    boundary: Boundary,
+    iface: Interface,
+    probes: Vec<(String, u32)>,
+    output: Output,
+    st: State,
+    crit: OnceLock<Option<f64>>,
+    vtu_files: Vec<(f64, String)>,
+}
+
+impl Model {
+    /// Builds the model of a scene's `[fem]` table; relative mesh paths are resolved against
+    /// `base_dir` (the scene file's directory).
+    pub fn from_config(cfg: &FemConfig, base_dir: &Path) -> Result<Model, FemError> {
+        cfg.validate()
+            .map_err(|(field, message)| FemError::Config { field, message })?;
+        let mesh = match &cfg.mesh {
+            MeshSpec::File {
+                path,
+                hex8_incompatible,
+            } => {
+                let p = base_dir.join(path);
+                let mut m = Mesh::read(&p)?;
+                if *hex8_incompatible {
+                    m.set_hex8_incompatible(true);
+                }
+                m
+            }
+            MeshSpec::Box {
+                size,
+                origin,
+                element_size,
+                divisions,
+                element,
+            } => {
+                let div = match (divisions, element_size) {
+                    (Some(d), _) => *d,
+                    (None, Some(h)) => [0, 1, 2].map(|k| ((size[k] / h).round() as usize).max(1)),
+                    (None, None) => unreachable!("validated"),
+                };
+                box_mesh(*origin, *size, div, *element)
+            }
+        };
+        Model::from_mesh(cfg, mesh)
+    }
+
+    /// Builds the model on a given mesh (the config's `mesh` entry is ignored).
+    pub fn from_mesh(cfg: &FemConfig, mut mesh: Mesh) -> Result<Model, FemError> {
+        cfg.validate()
+            .map_err(|(field, message)| FemError::Config { field, message })?;
+        if let MeshSpec::File {
+            hex8_incompatible: true,
+            ..
+        } = cfg.mesh
+        {
+            mesh.set_hex8_incompatible(true);
+        }
+        mesh.check_elements()?;
+        let mat = Lame::from_young_poisson(cfg.material.youngs_modulus, cfg.material.poisson_ratio);
+        let rho = cfg.material.density;
+        let nd = 3 * mesh.num_nodes();
+
+        // Supports: eliminated dofs (η_g of (2.52)–(2.53)).
+        let mut fixed = vec![false; nd];
+        for (i, s) in cfg.supports.iter().enumerate() {
+            let nodes = surface::select_nodes(&mesh, &s.on, &format!("fem.supports[{i}].on"))?;
+            for n in nodes {
+                for ax in &s.fix {
+                    fixed[3 * n as usize + ax.index()] = true;
+                }
+            }
+        }
+        let dofs = DofMap::new(&fixed, &mesh.used_nodes());
+        let pattern = Pattern::build(&mesh, &dofs)?;
+        let k = assembly::assemble(&mesh, &dofs, &pattern, Operator::Stiffness, mat, rho)?;
+        let m_lumped = assembly::lumped_mass(&mesh, rho)?;
+        let diag_pos: Vec<usize> = (0..pattern.n)
+            .map(|j| {
+                let (a, b) = (pattern.col_ptr[j] as usize, pattern.col_ptr[j + 1] as usize);
+                a + pattern.row_idx[a..b]
+                    .binary_search(&(j as u32))
+                    .expect("diagonal present")
+            })
+            .collect();
+        let m_consistent = match cfg.analysis {
+            Analysis::Dynamic {
+                lumped_mass: false, ..
+            } => Some(assembly::assemble(
+                &mesh,
+                &dofs,
+                &pattern,
+                Operator::Mass,
+                mat,
+                rho,
+            )?),
+            _ => None,
+        };
+
+        let boundary = Boundary::extract(&mesh);
+        let mut loads = Vec::new();
+        for (i, l) in cfg.loads.iter().enumerate() {
+            let what = format!("fem.loads[{i}].on");
+            let mut f = vec![0.0; nd];
+            let history = match l {
+                Load::Pressure { on, value, history } => {
+                    let faces = surface::select_faces(&mesh, &boundary, on, &what)?;
+                    let mut fx = Vec::new();
+                    let mut out = vec![[0.0; 3]; 8];
+                    for fc in faces {
+                        let nodes = boundary.face(fc);
+                        fx.clear();
+                        fx.extend(nodes.iter().map(|&n| mesh.nodes[n as usize]));
+                        element::face_pressure_loads(&fx, *value, &mut out[..nodes.len()]);
+                        for (a, &n) in nodes.iter().enumerate() {
+                            for c in 0..3 {
+                                f[3 * n as usize + c] += out[a][c];
+                            }
+                        }
+                    }
+                    history
+                }
+                Load::Force {
+                    on,
+                    per_node,
+                    total,
+                    history,
+                } => {
+                    let nodes = surface::select_nodes(&mesh, on, &what)?;
+                    let per = match (per_node, total) {
+                        (Some(p), _) => *p,
+                        (None, Some(t)) => t.map(|v| v / nodes.len() as f64),
+                        (None, None) => unreachable!("validated"),
+                    };
+                    for n in nodes {
+                        for c in 0..3 {
+                            f[3 * n as usize + c] += per[c];
+                        }
+                    }
+                    history
+                }
+                Load::Gravity {
+                    acceleration,
+                    history,
+                } => {
+                    gravity_loads(&mesh, rho, *acceleration, &mut f)?;
+                    history
+                }
+            };
+            loads.push(LoadVector {
+                history: history.clone(),
+                f,
+            });
+        }
+
+        let iface = match &cfg.interface {
+            Some(spec) => {
+                let faces = surface::select_faces(&mesh, &boundary, &spec.on, "fem.interface.on")?;
+                Interface::from_faces(&mesh, &boundary, &faces)
+            }
+            None => {
+                Interface::from_faces(&mesh, &boundary, &(0..boundary.len()).collect::<Vec<_>>())
+            }
+        };
+
+        let used = mesh.used_nodes();
+        let mut probes = Vec::new();
+        for (i, p) in cfg.probes.iter().enumerate() {
+            let node = if let Some(id) = p.node {
+                let ix = mesh.node_ids.iter().position(|&x| x == id).ok_or_else(|| {
+                    FemError::Selection(format!(
+                        "fem.probes[{i}] '{}': node {id} is not in {}",
+                        p.name, mesh.source
+                    ))
+                })?;
+                ix as u32
+            } else {
+                let q = p.point.expect("validated");
+                let mut best = (f64::INFINITY, 0u32);
+                for (n, x) in mesh.nodes.iter().enumerate() {
+                    if !used[n] {
+                        continue;
+                    }
+                    let d = (0..3).map(|k| (x[k] - q[k]).powi(2)).sum::<f64>();
+                    if d < best.0 {
+                        best = (d, n as u32);
+                    }
+                }
+                best.1
+            };
+            probes.push((p.name.clone(), node));
+        }
+
+        let n_iface = iface.nodes.len();
+        Ok(Model {
+            st: State {
+                format: SNAPSHOT_FORMAT,
+                n_dofs: nd,
+                time: 0.0,
+                u: vec![0.0; nd],
+                v: vec![0.0; nd],
+                a: vec![0.0; nd],
+                prescribed: vec![0.0; nd],
+                interface_forces: vec![0.0; 3 * n_iface],
+                accel_ready: false,
+                steps: 0,
+                windows: 0,
+                csv_started: false,
+            },
+            mesh,
+            mat,
+            rho,
+            analysis: cfg.analysis.clone(),
+            dofs,
+            pattern,
+            k,
+            m_consistent,
+            m_lumped,
+            diag_pos,
+            symbolic: None,
+            k_factor: None,
+            eff_factor: None,
+            m_factor: None,
+            loads,
+            histories: cfg.histories.clone(),
+            boundary,
+            iface,
+            probes,
+            output: cfg.output.clone(),
+            crit: OnceLock::new(),
+            vtu_files: Vec::new(),
+        })
+    }
+
+    // ----------------------------------------------------------------------------------------
+    // The adapter-facing API
+    // ----------------------------------------------------------------------------------------
+
+    /// Number of degrees of freedom (3 per mesh node).
+    pub fn num_dofs(&self) -> usize {
+        3 * self.mesh.num_nodes()
+    }
+
+    /// Number of free (unknown) equations after eliminating supports.
+    pub fn num_equations(&self) -> usize {
+        self.dofs.n_eq
+    }
+
+    pub fn time(&self) -> f64 {
+        self.st.time
+    }
+
+    /// The coupled surface in the reference configuration.
+    pub fn interface_mesh(&self) -> InterfaceMesh {
+        InterfaceMesh {
+            node_ids: self
+                .iface
+                .nodes
+                .iter()
+                .map(|&n| self.mesh.node_ids[n as usize])
+                .collect(),
+            positions: self
+                .iface
+                .nodes
+                .iter()
+                .flat_map(|&n| self.mesh.nodes[n as usize])
+                .collect(),
+            triangles: self.iface.triangles.clone(),
+        }
+    }
+
+    /// Nodal interface forces [N] (flat xyz, interface node order), held until the next call.
+    pub fn set_interface_forces(&mut self, forces: &[f64]) -> Result<(), FemError> {
+        let expected = 3 * self.iface.nodes.len();
+        if forces.len() != expected {
+            return Err(FemError::InterfaceSize {
+                expected,
+                got: forces.len(),
+            });
+        }
+        if let Some(i) = forces.iter().position(|f| !f.is_finite()) {
+            return Err(FemError::NonFinite(format!(
+                "interface force of node {} (component {})",
+                self.mesh.node_ids[self.iface.nodes[i / 3] as usize],
+                i % 3
+            )));
+        }
+        self.st.interface_forces.copy_from_slice(forces);
+        Ok(())
+    }
+
+    /// Advances by `dt`: static solve at t + dt, one Bossak step, or ⌈dt / Δt_safe⌉ explicit
+    /// central-difference substeps, depending on the analysis type.
+    pub fn advance(&mut self, dt: f64) -> Result<(), FemError> {
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(FemError::TimeStep(dt));
+        }
+        match self.analysis {
+            Analysis::Static => {
+                let t = self.st.time + dt;
+                self.static_solve_at(t)?;
+                self.st.time = t;
+            }
+            Analysis::Dynamic { .. } => self.bossak_step(dt)?,
+            Analysis::Explicit { safety, .. } => {
+                let crit = self.critical_time_step().ok_or_else(|| {
+                    FemError::Solver("no free dofs: explicit stepping undefined".into())
+                })?;
+                let h_max = safety * crit;
+                let n = (dt / h_max).ceil().max(1.0) as u64;
+                let h = dt / n as f64;
+                let t_end = self.st.time + dt;
+                self.explicit_steps(h, n)?;
+                // avoid drift of t from summing substeps
+                self.st.time = t_end;
+            }
+        }
+        self.st.steps += 1;
+        Ok(())
+    }
+
+    /// Static solve at the current time (loads(t) + interface forces), any analysis type.
+    pub fn solve_static(&mut self) -> Result<(), FemError> {
+        let t = self.st.time;
+        self.static_solve_at(t)
+    }
+
+    /// Current positions (reference + u), velocities and accelerations of the interface nodes.
+    pub fn interface_kinematics(&self) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+        let n = self.iface.nodes.len();
+        let (mut p, mut v, mut a) = (
+            Vec::with_capacity(3 * n),
+            Vec::with_capacity(3 * n),
+            Vec::with_capacity(3 * n),
+        );
+        for &node in &self.iface.nodes {
+            let x = self.mesh.nodes[node as usize];
+            for c in 0..3 {
+                let d = 3 * node as usize + c;
+                p.push(x[c] + self.st.u[d]);
+                v.push(self.st.v[d]);
+                a.push(self.st.a[d]);
+            }
+        }
+        (p, v, a)
+    }
+
+    /// Stability limit of explicit central differences with the lumped mass:
+    /// Δt_crit = 2/ω_max (√(1+ξ²) − ξ), ξ = a/(2ω_max) + b ω_max/2 for Rayleigh damping,
+    /// ω_max² the largest eigenvalue of M_L⁻¹K (Lanczos). None when nothing is free.
+    pub fn critical_time_step(&self) -> Option<f64> {
+        *self.crit.get_or_init(|| {
+            let lam = self.max_eigenvalue()?;
+            let w = lam.sqrt();
+            let (ra, rb) = match self.analysis {
+                Analysis::Dynamic {
+                    rayleigh_a,
+                    rayleigh_b,
+                    ..
+                }
+                | Analysis::Explicit {
+                    rayleigh_a,
+                    rayleigh_b,
+                    ..
+                } => (rayleigh_a, rayleigh_b),
+                Analysis::Static => (0.0, 0.0),
+            };
+            let xi = ra / (2.0 * w) + rb * w / 2.0;
+            Some(2.0 / w * ((1.0 + xi * xi).sqrt() - xi))
+        })
+    }
+
+    /// MessagePack bytes of the time-dependent state.
+    pub fn snapshot(&self) -> Vec<u8> {
+        rmp_serde::to_vec(&self.st).expect("state serialises")
+    }
+
+    /// Restores a `snapshot` of a model built from the same scene; continuation is bitwise.
+    pub fn restore(&mut self, bytes: &[u8]) -> Result<(), FemError> {
+        let st: State = rmp_serde::from_slice(bytes)
+            .map_err(|e| FemError::Snapshot(format!("cannot decode: {e}")))?;
+        if st.format != SNAPSHOT_FORMAT {
+            return Err(FemError::Snapshot(format!(
+                "format {} (expected {SNAPSHOT_FORMAT})",
+                st.format
+            )));
+        }
+        let nd = self.num_dofs();
+        if st.n_dofs != nd
+            || st.u.len() != nd
+            || st.v.len() != nd
+            || st.a.len() != nd
+            || st.prescribed.len() != nd
+            || st.interface_forces.len() != 3 * self.iface.nodes.len()
+        {
+            return Err(FemError::Snapshot(format!(
+                "snapshot has {} dofs / {} interface values, model has {nd} / {}",
+                st.n_dofs,
+                st.interface_forces.len(),
+                3 * self.iface.nodes.len()
+            )));
+        }
+        self.st = st;
+        Ok(())
+    }
+
+    /// Called after each coupling window: appends probe rows to `fem_probes.csv` and writes
+    /// `fem_<window>.vtu` (+ `fem.pvd`) every `output.vtu_every` windows.
+    pub fn write_outputs(&mut self, out_dir: &Path) -> Result<(), FemError> {
+        let io = |e: std::io::Error, p: &Path| FemError::Io {
+            path: p.display().to_string(),
+            message: e.to_string(),
+        };
+        std::fs::create_dir_all(out_dir).map_err(|e| io(e, out_dir))?;
+        self.st.windows += 1;
+        if self.output.csv && !self.probes.is_empty() {
+            let path = out_dir.join("fem_probes.csv");
+            let mut text = String::new();
+            if !self.st.csv_started {
+                text.push_str("time");
+                for (name, _) in &self.probes {
+                    for c in ["ux", "uy", "uz"] {
+                        text.push_str(&format!(",probe.{name}.{c}"));
+                    }
+                }
+                text.push('\n');
+            }
+            text.push_str(&format!("{:.9e}", self.st.time));
+            for &(_, n) in &self.probes {
+                for c in 0..3 {
+                    text.push_str(&format!(",{:.9e}", self.st.u[3 * n as usize + c]));
+                }
+            }
+            text.push('\n');
+            output::append(&path, &text, !self.st.csv_started).map_err(|e| io(e, &path))?;
+            self.st.csv_started = true;
+        }
+        if self.output.vtu_every > 0 && self.st.windows % self.output.vtu_every == 0 {
+            let name = format!("fem_{:06}.vtu", self.st.windows);
+            let path = out_dir.join(&name);
+            let stress = self.element_stresses();
+            output::write_vtu(&path, &self.mesh, &self.st.u, &self.st.v, &stress)
+                .map_err(|e| io(e, &path))?;
+            self.vtu_files.push((self.st.time, name));
+            let pvd = out_dir.join("fem.pvd");
+            output::write_pvd(&pvd, &self.vtu_files).map_err(|e| io(e, &pvd))?;
+        }
+        Ok(())
+    }
+
+    /// Result quantities for `summary.json`.
+    pub fn results(&self) -> Vec<(String, f64)> {
+        let mut r = vec![
+            ("dofs".to_string(), self.num_dofs() as f64),
+            ("free_dofs".to_string(), self.dofs.n_eq as f64),
+            ("elements".to_string(), self.mesh.num_elements() as f64),
+            ("time".to_string(), self.st.time),
+        ];
+        for (name, n) in &self.probes {
+            for (c, ax) in ["ux", "uy", "uz"].iter().enumerate() {
+                r.push((format!("probe.{name}.{ax}"), self.st.u[3 * *n as usize + c]));
+            }
+        }
+        let mut total = [0.0; 3];
+        for (i, f) in self.st.interface_forces.iter().enumerate() {
+            total[i % 3] += f;
+        }
+        for (c, ax) in ["x", "y", "z"].iter().enumerate() {
+            r.push((format!("interface_force.{ax}"), total[c]));
+        }
+        let umax = (0..self.mesh.num_nodes())
+            .map(|n| {
+                (0..3)
+                    .map(|c| self.st.u[3 * n + c].powi(2))
+                    .sum::<f64>()
+                    .sqrt()
+            })
+            .fold(0.0, f64::max);
+        r.push(("max_displacement".to_string(), umax));
+        if let Some(Some(dt)) = self.crit.get() {
+            r.push(("critical_time_step".to_string(), *dt));
+        }
+        r
+    }
+
+    // ----------------------------------------------------------------------------------------
+    // Further public API (tests, benchmarks, tools)
+    // ----------------------------------------------------------------------------------------
+
+    pub fn mesh(&self) -> &Mesh {
+        &self.mesh
+    }
+    /// Exterior faces of the mesh.
+    pub fn boundary(&self) -> &Boundary {
+        &self.boundary
+    }
+    /// Full displacement vector (3 per node) [m].
+    pub fn displacements(&self) -> &[f64] {
+        &self.st.u
+    }
+    pub fn velocities(&self) -> &[f64] {
+        &self.st.v
+    }
+    pub fn accelerations(&self) -> &[f64] {
+        &self.st.a
+    }
+    /// Displacement of a probe by name.
+    pub fn probe_displacement(&self, name: &str) -> Option<[f64; 3]> {
+        self.probes
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|&(_, node)| {
+                let d = 3 * node as usize;
+                [self.st.u[d], self.st.u[d + 1], self.st.u[d + 2]]
+            })
+    }
+    /// Whether a dof is eliminated by a support (or belongs to an unused node).
+    pub fn is_fixed(&self, dof: usize) -> bool {
+        self.dofs.eq[dof] == FIXED
+    }
+    /// Prescribes the displacement of a fixed dof (g of (2.48)); used from the next solve on.
+    pub fn set_prescribed_displacement(&mut self, dof: usize, value: f64) -> Result<(), FemError> {
+        if dof >= self.num_dofs() || !self.is_fixed(dof) {
+            return Err(FemError::Selection(format!(
+                "dof {dof} is not a supported (fixed) dof"
+            )));
+        }
+        self.st.prescribed[dof] = value;
+        self.st.u[dof] = value;
+        Ok(())
+    }
+    /// Sets initial displacements and velocities (full vectors; supported dofs keep their
+    /// prescribed values, velocity zero); the initial acceleration is solved at the next step.
+    pub fn set_initial_conditions(&mut self, u0: &[f64], v0: &[f64]) -> Result<(), FemError> {
+        let nd = self.num_dofs();
+        if u0.len() != nd || v0.len() != nd {
+            return Err(FemError::Solver(format!(
+                "initial conditions need {nd} values each"
+            )));
+        }
+        for d in 0..nd {
+            if self.is_fixed(d) {
+                self.st.u[d] = self.st.prescribed[d];
+                self.st.v[d] = 0.0;
+            } else {
+                self.st.u[d] = u0[d];
+                self.st.v[d] = v0[d];
+            }
+            self.st.a[d] = 0.0;
+        }
+        self.st.accel_ready = false;
+        Ok(())
+    }
+    /// Strain energy ½ uᵀ K u over the free dofs [J].
+    pub fn strain_energy(&self) -> f64 {
+        let u = self.dofs.gather(&self.st.u);
+        let mut ku = vec![0.0; u.len()];
+        self.pattern.mul(&self.k, &u, &mut ku);
+        0.5 * dot(&u, &ku)
+    }
+    /// Kinetic energy ½ vᵀ M v with the analysis' mass matrix [J].
+    pub fn kinetic_energy(&self) -> f64 {
+        let v = self.dofs.gather(&self.st.v);
+        let mut mv = vec![0.0; v.len()];
+        self.mass_mul(&v, &mut mv);
+        0.5 * dot(&v, &mv)
+    }
+    /// External load vector F(t) (loads × histories + interface forces), full dofs [N].
+    pub fn external_forces(&self, t: f64) -> Vec<f64> {
+        let mut f = vec![0.0; self.num_dofs()];
+        for l in &self.loads {
+            let h = match &l.history {
+                Some(name) => self
+                    .histories
+                    .get(name)
+                    .map_or(f64::NAN, |h| h.eval(t, &self.histories)),
+                None => 1.0,
+            };
+            if h != 0.0 {
+                for (fi, li) in f.iter_mut().zip(&l.f) {
+                    *fi += h * li;
+                }
+            }
+        }
+        for (i, &n) in self.iface.nodes.iter().enumerate() {
+            for c in 0..3 {
+                f[3 * n as usize + c] += self.st.interface_forces[3 * i + c];
+            }
+        }
+        f
+    }
+    /// Internal forces K u assembled element by element over all dofs [N].
+    pub fn internal_forces(&self) -> Vec<f64> {
+        self.element_forces(&self.st.u)
+    }
+    /// Support reactions R = K u − F(t) (non-zero only on supported dofs) [N].
+    pub fn reactions(&self) -> Vec<f64> {
+        let fi = self.internal_forces();
+        let fe = self.external_forces(self.st.time);
+        (0..self.num_dofs())
+            .map(|d| if self.is_fixed(d) { fi[d] - fe[d] } else { 0.0 })
+            .collect()
+    }
+    /// Element-mean stress (Voigt xx, yy, zz, xy, yz, zx) [Pa].
+    pub fn element_stresses(&self) -> Vec<[f64; 6]> {
+        (0..self.mesh.num_elements())
+            .into_par_iter()
+            .map(|e| {
+                let mut x = Vec::new();
+                self.mesh.element_coords(e, &mut x);
+                let u: Vec<[f64; 3]> = self
+                    .mesh
+                    .element_nodes(e)
+                    .iter()
+                    .map(|&n| {
+                        let d = 3 * n as usize;
+                        [self.st.u[d], self.st.u[d + 1], self.st.u[d + 2]]
+                    })
+                    .collect();
+                element::mean_stress(self.mesh.kinds[e], &x, &u, self.mat).unwrap_or([f64::NAN; 6])
+            })
+            .collect()
+    }
+    /// One explicit central-difference step of exactly `h` (no stability check).
+    pub fn explicit_step(&mut self, h: f64) -> Result<(), FemError> {
+        if !(h.is_finite() && h > 0.0) {
+            return Err(FemError::TimeStep(h));
+        }
+        self.explicit_steps(h, 1)?;
+        self.st.steps += 1;
+        Ok(())
+    }
+    /// Total mass from the lumped mass [kg].
+    pub fn total_mass(&self) -> f64 {
+        self.m_lumped.iter().step_by(3).sum()
+    }
+    pub fn density(&self) -> f64 {
+        self.rho
+    }
+
+    // ----------------------------------------------------------------------------------------
+    // Solvers
+    // ----------------------------------------------------------------------------------------
+
+    /// Free-equation right-hand side F_f(t) − K_fg g (2.57).
+    fn free_rhs(&self, t: f64) -> Vec<f64> {
+        let kg = self.prescribed_load();
+        self.free_rhs_with(t, kg.as_deref())
+    }
+
+    /// K_fg g on the free equations, when any support has a non-zero prescribed value.
+    fn prescribed_load(&self) -> Option<Vec<f64>> {
+        if self.st.prescribed.iter().any(|&g| g != 0.0) {
+            Some(self.dofs.gather(&self.element_forces(&self.st.prescribed)))
+        } else {
+            None
+        }
+    }
+
+    fn free_rhs_with(&self, t: f64, kg: Option<&[f64]>) -> Vec<f64> {
+        let f = self.external_forces(t);
+        let mut rhs = self.dofs.gather(&f);
+        if let Some(kg) = kg {
+            for (r, k) in rhs.iter_mut().zip(kg) {
+                *r -= k;
+            }
+        }
+        rhs
+    }
+
+    fn set_free(&mut self, which: u8, free: &[f64]) {
+        let target = match which {
+            0 => &mut self.st.u,
+            1 => &mut self.st.v,
+            _ => &mut self.st.a,
+        };
+        self.dofs.scatter(free, target);
+        if which == 0 {
+            for (d, &e) in self.dofs.eq.iter().enumerate() {
+                if e == FIXED {
+                    self.st.u[d] = self.st.prescribed[d];
+                }
+            }
+        }
+    }
+
+    /// K u = F (2.28) with the cached Cholesky factor of K.
+    fn static_solve_at(&mut self, t: f64) -> Result<(), FemError> {
+        if self.k_factor.is_none() {
+            self.k_factor = Some(Factor::new(&self.pattern, &self.k, &mut self.symbolic)?);
+        }
+        let mut rhs = self.free_rhs(t);
+        self.k_factor
+            .as_ref()
+            .expect("set")
+            .solve_in_place(&mut rhs);
+        check_finite(&rhs, "static displacement")?;
+        self.set_free(0, &rhs);
+        self.st.v.fill(0.0);
+        self.st.a.fill(0.0);
+        self.st.accel_ready = false;
+        Ok(())
+    }
+
+    fn mass_mul(&self, x: &[f64], y: &mut [f64]) {
+        match &self.m_consistent {
+            Some(m) => self.pattern.mul(m, x, y),
+            None => {
+                let ml = self.dofs.gather(&self.m_lumped);
+                for i in 0..x.len() {
+                    y[i] = ml[i] * x[i];
+                }
+            }
+        }
+    }
+
+    fn rayleigh(&self) -> (f64, f64) {
+        match self.analysis {
+            Analysis::Dynamic {
+                rayleigh_a,
+                rayleigh_b,
+                ..
+            }
+            | Analysis::Explicit {
+                rayleigh_a,
+                rayleigh_b,
+                ..
+            } => (rayleigh_a, rayleigh_b),
+            Analysis::Static => (0.0, 0.0),
+        }
+    }
+
+    /// M a₀ = F(t₀) − K u₀ − C v₀ at the start of dynamic stepping.
+    fn initial_acceleration(&mut self) -> Result<(), FemError> {
+        let (ra, rb) = self.rayleigh();
+        let u = self.dofs.gather(&self.st.u);
+        let v = self.dofs.gather(&self.st.v);
+        let mut rhs = self.free_rhs(self.st.time);
+        let mut tmp = vec![0.0; u.len()];
+        // K (u + b v)
+        let w: Vec<f64> = u.iter().zip(&v).map(|(a, b)| a + rb * b).collect();
+        self.pattern.mul(&self.k, &w, &mut tmp);
+        for (r, t) in rhs.iter_mut().zip(&tmp) {
+            *r -= t;
+        }
+        self.mass_mul(&v, &mut tmp);
+        for (r, t) in rhs.iter_mut().zip(&tmp) {
+            *r -= ra * t;
+        }
+        if let Some(m) = &self.m_consistent {
+            if self.m_factor.is_none() {
+                self.m_factor = Some(Factor::new(&self.pattern, m, &mut self.symbolic)?);
+            }
+            self.m_factor
+                .as_ref()
+                .expect("set")
+                .solve_in_place(&mut rhs);
+        } else {
+            let ml = self.dofs.gather(&self.m_lumped);
+            for (r, m) in rhs.iter_mut().zip(ml) {
+                *r /= m;
+            }
+        }
+        self.set_free(2, &rhs);
+        self.st.accel_ready = true;
+        Ok(())
+    }
+
+    /// One step of the Wood–Bossak–Zienkiewicz scheme (REFERENCE A6; the update rules are
+    /// (2.85)–(2.86), the balance is the corrected (2.87)):
+    /// M[(1−α_B) a_{n+1} + α_B a_n] + C v_{n+1} + K u_{n+1} = F_{n+1},
+    /// γ = ½ − α_B, β = (1 − α_B)²/4, C = a M + b K (2.84).
+    fn bossak_step(&mut self, dt: f64) -> Result<(), FemError> {
+        let Analysis::Dynamic { alpha_b, .. } = self.analysis else {
+            unreachable!()
+        };
+        let (ra, rb) = self.rayleigh();
+        let gamma = 0.5 - alpha_b;
+        let beta = 0.25 * (1.0 - alpha_b).powi(2);
+        if !self.st.accel_ready {
+            self.initial_acceleration()?;
+        }
+        // Effective matrix [(1−α_B) M + γΔt C + βΔt² K], factorised once per Δt.
+        let cm = (1.0 - alpha_b) + gamma * dt * ra;
+        let ck = gamma * dt * rb + beta * dt * dt;
+        if self.eff_factor.as_ref().map(|(bits, _)| *bits) != Some(dt.to_bits()) {
+            let mut vals: Vec<f64> = self.k.iter().map(|k| ck * k).collect();
+            match &self.m_consistent {
+                Some(m) => {
+                    for (v, mm) in vals.iter_mut().zip(m) {
+                        *v += cm * mm;
+                    }
+                }
+                None => {
+                    let ml = self.dofs.gather(&self.m_lumped);
+                    for (j, &p) in self.diag_pos.iter().enumerate() {
+                        vals[p] += cm * ml[j];
+                    }
+                }
+            }
+            self.eff_factor = None;
+            let f = Factor::new(&self.pattern, &vals, &mut self.symbolic)?;
+            self.eff_factor = Some((dt.to_bits(), f));
+        }
+        let u = self.dofs.gather(&self.st.u);
+        let v = self.dofs.gather(&self.st.v);
+        let a = self.dofs.gather(&self.st.a);
+        let n = u.len();
+        // predictors (2.85), (2.86) without the a_{n+1} terms
+        let mut ut = vec![0.0; n];
+        let mut vt = vec![0.0; n];
+        for i in 0..n {
+            ut[i] = u[i] + dt * v[i] + dt * dt * (0.5 - beta) * a[i];
+            vt[i] = v[i] + dt * (1.0 - gamma) * a[i];
+        }
+        let t1 = self.st.time + dt;
+        let mut rhs = self.free_rhs(t1);
+        let mut tmp = vec![0.0; n];
+        let w: Vec<f64> = (0..n).map(|i| alpha_b * a[i] + ra * vt[i]).collect();
+        self.mass_mul(&w, &mut tmp);
+        for i in 0..n {
+            rhs[i] -= tmp[i];
+        }
+        let w: Vec<f64> = (0..n).map(|i| rb * vt[i] + ut[i]).collect();
+        self.pattern.mul(&self.k, &w, &mut tmp);
+        for i in 0..n {
+            rhs[i] -= tmp[i];
+        }
+        self.eff_factor
+            .as_ref()
+            .expect("set")
+            .1
+            .solve_in_place(&mut rhs);
+        check_finite(&rhs, "Bossak acceleration")?;
+        let a1 = rhs;
+        for i in 0..n {
+            ut[i] += beta * dt * dt * a1[i];
+            vt[i] += gamma * dt * a1[i];
+        }
+        self.set_free(0, &ut);
+        self.set_free(1, &vt);
+        self.set_free(2, &a1);
+        self.st.time = t1;
+        Ok(())
+    }
+
+    /// `n` central-difference steps of size h with the lumped mass (velocity-Verlet form):
+    /// v_{n+½} = v_n + h/2 a_n, u_{n+1} = u_n + h v_{n+½}, a_{n+1} = M_L⁻¹(F − K u_{n+1} − C v_{n+½}).
+    fn explicit_steps(&mut self, h: f64, n: u64) -> Result<(), FemError> {
+        let (ra, rb) = self.rayleigh();
+        let ml = self.dofs.gather(&self.m_lumped);
+        if !self.st.accel_ready {
+            let mut u = self.dofs.gather(&self.st.u);
+            let v = self.dofs.gather(&self.st.v);
+            let mut r = self.free_rhs(self.st.time);
+            let mut tmp = vec![0.0; u.len()];
+            for i in 0..u.len() {
+                u[i] += rb * v[i];
+            }
+            self.pattern.mul(&self.k, &u, &mut tmp);
+            for i in 0..r.len() {
+                r[i] = (r[i] - tmp[i] - ra * ml[i] * v[i]) / ml[i];
+            }
+            self.set_free(2, &r);
+            self.st.accel_ready = true;
+        }
+        let mut u = self.dofs.gather(&self.st.u);
+        let mut v = self.dofs.gather(&self.st.v);
+        let mut a = self.dofs.gather(&self.st.a);
+        let m = u.len();
+        let mut tmp = vec![0.0; m];
+        let mut w = vec![0.0; m];
+        // loads: constant part of the rhs (−K_fg g) computed once
+        let has_hist = !self.loads.is_empty();
+        let kg = self.prescribed_load();
+        let mut f_const = if has_hist {
+            Vec::new()
+        } else {
+            self.free_rhs_with(self.st.time, kg.as_deref())
+        };
+        let mut t = self.st.time;
+        for _ in 0..n {
+            for i in 0..m {
+                v[i] += 0.5 * h * a[i];
+                u[i] += h * v[i];
+            }
+            t += h;
+            if has_hist {
+                f_const = self.free_rhs_with(t, kg.as_deref());
+            }
+            for i in 0..m {
+                w[i] = u[i] + rb * v[i];
+            }
+            self.pattern.mul(&self.k, &w, &mut tmp);
+            for i in 0..m {
+                a[i] = (f_const[i] - tmp[i] - ra * ml[i] * v[i]) / ml[i];
+                v[i] += 0.5 * h * a[i];
+            }
+        }
+        self.set_free(0, &u);
+        self.set_free(1, &v);
+        self.set_free(2, &a);
+        self.st.time = t;
+        Ok(())
+    }
+
+    /// Largest eigenvalue of M_L⁻¹ K by Lanczos on the symmetric M_L^{-½} K M_L^{-½}.
+    fn max_eigenvalue(&self) -> Option<f64> {
+        let n = self.dofs.n_eq;
+        if n == 0 {
+            return None;
+        }
+        let s: Vec<f64> = self
+            .dofs
+            .gather(&self.m_lumped)
+            .iter()
+            .map(|m| 1.0 / m.sqrt())
+            .collect();
+        // deterministic pseudo-random start vector
+        let mut seed = 0x9E37_79B9_7F4A_7C15u64;
+        let mut q: Vec<f64> = (0..n)
+            .map(|_| {
+                seed ^= seed << 13;
+                seed ^= seed >> 7;
+                seed ^= seed << 17;
+                (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+            })
+            .collect();
+        let nq = norm(&q);
+        q.iter_mut().for_each(|x| *x /= nq);
+        let mut q_prev = vec![0.0; n];
+        let mut beta = 0.0;
+        let (mut alphas, mut betas) = (Vec::new(), Vec::new());
+        let mut tmp = vec![0.0; n];
+        let mut w = vec![0.0; n];
+        let mut last = 0.0;
+        let max_it = n.min(300);
+        for it in 0..max_it {
+            for i in 0..n {
+                tmp[i] = s[i] * q[i];
+            }
+            self.pattern.mul(&self.k, &tmp, &mut w);
+            for i in 0..n {
+                w[i] = s[i] * w[i] - beta * q_prev[i];
+            }
+            let alpha = dot(&w, &q);
+            for i in 0..n {
+                w[i] -= alpha * q[i];
+            }
+            alphas.push(alpha);
+            let b = norm(&w);
+            let done = b <= 1e-13 * alpha.abs();
+            if (it + 1) % 10 == 0 || done || it + 1 == max_it {
+                let top = tridiagonal_max_eigenvalue(&alphas, &betas);
+                if done || (top - last).abs() <= 1e-10 * top {
+                    return Some(top);
+                }
+                last = top;
+            }
+            if done {
+                break;
+            }
+            betas.push(b);
+            std::mem::swap(&mut q_prev, &mut q);
+            for i in 0..n {
+                q[i] = w[i] / b;
+            }
+            beta = b;
+        }
+        Some(tridiagonal_max_eigenvalue(&alphas, &betas))
+    }
+
+    /// Σ_e K_e u_e over all dofs, parallel in element batches with an ordered scatter.
+    fn element_forces(&self, u: &[f64]) -> Vec<f64> {
+        let ne = self.mesh.num_elements();
+        let mut out = vec![0.0; self.num_dofs()];
+        const BATCH: usize = 4096;
+        let mut start = 0;
+        while start < ne {
+            let end = (start + BATCH).min(ne);
+            let fe: Vec<Vec<f64>> = (start..end)
+                .into_par_iter()
+                .map_init(
+                    || (Vec::new(), Vec::new()),
+                    |(x, ke), e| {
+                        self.mesh.element_coords(e, x);
+                        let kind = self.mesh.kinds[e];
+                        let nodes = self.mesh.element_nodes(e);
+                        let nd = 3 * nodes.len();
+                        if element::stiffness(kind, x, self.mat, ke).is_err() {
+                            return vec![f64::NAN; nd];
+                        }
+                        let ue: Vec<f64> = nodes
+                            .iter()
+                            .flat_map(|&n| (0..3).map(move |c| u[3 * n as usize + c]))
+                            .collect();
+                        (0..nd)
+                            .map(|i| (0..nd).map(|j| ke[i * nd + j] * ue[j]).sum())
+                            .collect()
+                    },
+                )
+                .collect();
+            for (e, f) in (start..end).zip(fe) {
+                for (a, &n) in self.mesh.element_nodes(e).iter().enumerate() {
+                    for c in 0..3 {
+                        out[3 * n as usize + c] += f[3 * a + c];
+                    }
+                }
+            }
+            start = end;
+        }
+        out
+    }
+}
+
+fn gravity_loads(mesh: &Mesh, rho: f64, g: [f64; 3], f: &mut [f64]) -> Result<(), FemError> {
+    // f_a = ρ g ∫ N_a dV, the body-force term (v, f) of (2.45)
+    for e in 0..mesh.num_elements() {
+        let mut x = Vec::new();
+        mesh.element_coords(e, &mut x);
+        let kind = mesh.kinds[e];
+        let nn = kind.num_nodes();
+        let mut m = Vec::new();
+        element::mass(kind, &x, 1.0, &mut m).map_err(|b| FemError::Mesh {
+            file: mesh.source.clone(),
+            line: mesh.elem_lines[e],
+            message: format!("element {} has det J = {:.3e}", mesh.elem_ids[e], b.det_j),
+        })?;
+        // Σ_b ∫ N_a N_b dV = ∫ N_a dV (partition of unity)
+        for (a, &n) in mesh.element_nodes(e).iter().enumerate() {
+            let w: f64 = (0..nn).map(|b| m[a * nn + b]).sum();
+            for c in 0..3 {
+                f[3 * n as usize + c] += rho * g[c] * w;
+            }
+        }
+    }
+    Ok(())
+}
+
+fn tridiagonal_max_eigenvalue(alphas: &[f64], betas: &[f64]) -> f64 {
+    let k = alphas.len();
+    let t = nalgebra::DMatrix::from_fn(k, k, |i, j| {
+        if i == j {
+            alphas[i]
+        } else if i + 1 == j || j + 1 == i {
+            betas[i.min(j)]
+        } else {
+            0.0
+        }
+    });
+    t.symmetric_eigenvalues()
+        .iter()
+        .copied()
+        .fold(f64::NEG_INFINITY, f64::max)
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+fn norm(a: &[f64]) -> f64 {
+    dot(a, a).sqrt()
+}
+
+fn check_finite(v: &[f64], what: &str) -> Result<(), FemError> {
+    if v.iter().all(|x| x.is_finite()) {
+        Ok(())
+    } else {
+        Err(FemError::NonFinite(what.into()))
+    }
+}
