@@ -1,0 +1,240 @@
+//! `dem-node`: the DEM engine as a node of a co-simulation run. A thin adapter: it speaks
+//! `proto` over zenoh and calls the `dem` engine; all physics is in the library.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use clap::Parser;
+use dem::{Engine, MotionRule};
+use proto::cli::NodeArgs;
+use proto::node::{main_with, NodeError, Solver, WindowReport};
+use proto::participant::Participant;
+use proto::{AdvanceWindow, ErrorCode, Hello, Init, InterfaceForces, Role, PROTOCOL_VERSION};
+
+#[derive(Parser)]
+#[command(
+    name = "dem-node",
+    version,
+    about = "DEM solver node of a cosim run (started by `cosim run`)"
+)]
+struct Args {
+    #[command(flatten)]
+    node: NodeArgs,
+}
+
+/// A coupled interface: the FEM mesh as the DEM sees it.
+struct Coupled {
+    name: String,
+    mesh: usize,
+    nodes: usize,
+}
+
+struct DemNode {
+    engine: Option<Engine>,
+    coupled: Vec<Coupled>,
+    out_dir: PathBuf,
+    data_timeout: std::time::Duration,
+    averaged: bool,
+    substeps: u32,
+}
+
+fn scene_error(e: impl std::fmt::Display) -> NodeError {
+    NodeError::new(ErrorCode::Scene, e.to_string())
+}
+
+impl DemNode {
+    fn engine(&mut self) -> Result<&mut Engine, NodeError> {
+        self.engine.as_mut().ok_or_else(|| {
+            NodeError::new(ErrorCode::Protocol, "a window command came before `init`")
+        })
+    }
+
+    async fn write_forces(&mut self, p: &mut Participant, window: u64) -> Result<(), NodeError> {
+        let averaged = self.averaged;
+        let substeps = self.substeps;
+        let engine = self.engine()?;
+        let time = engine.time();
+        let msgs: Vec<InterfaceForces> = self
+            .coupled
+            .iter()
+            .map(|c| InterfaceForces {
+                version: PROTOCOL_VERSION,
+                run_id: p.run_id().to_string(),
+                interface: c.name.clone(),
+                window,
+                time,
+                forces: engine.interface_forces(c.mesh, averaged).into(),
+                averaged,
+                substeps,
+            })
+            .collect();
+        for m in &msgs {
+            p.write_forces(m).await?;
+        }
+        Ok(())
+    }
+}
+
+impl Solver for DemNode {
+    async fn init(
+        &mut self,
+        p: &mut Participant,
+        init: &Init,
+    ) -> Result<(BTreeMap<String, f64>, Vec<String>), NodeError> {
+        let cfg = dem::parse_scene_section(&init.scene_toml)
+            .map_err(|e| scene_error(format!("{}: {e}", init.scene_path)))?
+            .ok_or_else(|| {
+                scene_error(format!("{}: the scene has no [dem] table", init.scene_path))
+            })?;
+        let base = Path::new(&init.scene_path)
+            .parent()
+            .unwrap_or(Path::new("."));
+        let mut engine = Engine::from_config(&cfg, base)
+            .map_err(|e| scene_error(format!("{}: {e}", init.scene_path)))?;
+        self.out_dir = PathBuf::from(&init.out_dir).join("dem");
+        std::fs::create_dir_all(&self.out_dir).map_err(|e| {
+            NodeError::new(
+                ErrorCode::Io,
+                format!("creating {}: {e}", self.out_dir.display()),
+            )
+        })?;
+        p.open_interfaces(Role::Dem, &init.interfaces).await?;
+        for name in &init.interfaces {
+            let mesh = p.read_mesh(name, self.data_timeout).await?;
+            let id = engine
+                .add_coupled_mesh(name, mesh.positions.as_slice(), &mesh.triangles)
+                .map_err(|e| scene_error(format!("interface `{name}`: {e}")))?;
+            self.coupled.push(Coupled {
+                name: name.clone(),
+                mesh: id,
+                nodes: mesh.num_nodes(),
+            });
+        }
+        p.wait_for_peers(self.data_timeout).await?;
+        let limits = BTreeMap::from([
+            ("time_step".to_string(), engine.time_step()),
+            (
+                "rayleigh_time_step".to_string(),
+                engine.rayleigh_time_step(),
+            ),
+            ("particles".to_string(), engine.num_particles() as f64),
+        ]);
+        self.engine = Some(engine);
+        Ok((limits, Vec::new()))
+    }
+
+    async fn advance(
+        &mut self,
+        p: &mut Participant,
+        w: &AdvanceWindow,
+    ) -> Result<WindowReport, NodeError> {
+        self.averaged = w.force_averaging;
+        self.substeps = w.substeps;
+        let t_wait = Instant::now();
+        let rule = match w.motion {
+            proto::MotionRule::Quadratic => MotionRule::Quadratic,
+            proto::MotionRule::Linear | proto::MotionRule::Fixed => MotionRule::Linear,
+        };
+        // Ullrich ch. 3.3: the mesh follows the FEM kinematics of this window; without new
+        // kinematics it stays where it is (which also restarts the force average).
+        let mut kinematics = Vec::new();
+        for c in &self.coupled {
+            kinematics.push(match w.input_window {
+                Some(k) => {
+                    let m = p
+                        .read_kinematics(&c.name, k, c.nodes, self.data_timeout)
+                        .await?;
+                    (m.positions.0, m.velocities.0, m.accelerations.0)
+                }
+                None => {
+                    let pos = self
+                        .engine
+                        .as_ref()
+                        .map(|e| e.mesh_positions(c.mesh))
+                        .unwrap_or_default();
+                    let zeros = vec![0.0; pos.len()];
+                    (pos, zeros.clone(), zeros)
+                }
+            });
+        }
+        let wait_s = t_wait.elapsed().as_secs_f64();
+        let meshes: Vec<usize> = self.coupled.iter().map(|c| c.mesh).collect();
+        let out_dir = self.out_dir.clone();
+        let engine = self.engine()?;
+        for (mesh, (pos, vel, acc)) in meshes.iter().zip(&kinematics) {
+            engine
+                .set_mesh_kinematics(*mesh, pos, vel, acc, rule)
+                .map_err(|e| NodeError::new(ErrorCode::Protocol, e.to_string()))?;
+        }
+        engine.advance(w.substeps as usize).map_err(|e| {
+            NodeError::new(ErrorCode::Unstable, format!("window {}: {e}", w.window))
+        })?;
+        engine
+            .write_outputs(&out_dir)
+            .map_err(|e| NodeError::new(ErrorCode::Io, e.to_string()))?;
+        let t_end = engine.time();
+        let monitor = BTreeMap::from([("kinetic_energy".to_string(), engine.kinetic_energy())]);
+        if let Some(k) = w.output_window {
+            self.write_forces(p, k).await?;
+        }
+        Ok(WindowReport {
+            wait_s,
+            t_end,
+            monitor,
+        })
+    }
+
+    async fn publish(&mut self, p: &mut Participant, window: u64) -> Result<(), NodeError> {
+        self.write_forces(p, window).await
+    }
+
+    fn snapshot(&self) -> Result<Vec<u8>, NodeError> {
+        self.engine
+            .as_ref()
+            .map(|e| e.snapshot())
+            .ok_or_else(|| NodeError::new(ErrorCode::Protocol, "snapshot before `init`"))
+    }
+
+    fn restore(&mut self, bytes: &[u8]) -> Result<(), NodeError> {
+        self.engine()?
+            .restore(bytes)
+            .map_err(|e| NodeError::new(ErrorCode::Io, format!("restoring the DEM state: {e}")))
+    }
+
+    fn finish(&mut self) -> Result<BTreeMap<String, f64>, NodeError> {
+        let out_dir = self.out_dir.clone();
+        match self.engine.as_mut() {
+            Some(e) => {
+                e.write_outputs(&out_dir)
+                    .map_err(|e| NodeError::new(ErrorCode::Io, e.to_string()))?;
+                Ok(e.results().into_iter().collect())
+            }
+            None => Ok(BTreeMap::new()),
+        }
+    }
+}
+
+fn main() -> std::process::ExitCode {
+    let args = Args::parse();
+    tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .init();
+    let hello = Hello {
+        software: format!("dem-node {}", env!("CARGO_PKG_VERSION")),
+        role: Role::Dem,
+        capabilities: vec!["snapshot".into(), "force_averaging".into()],
+        pid: std::process::id(),
+    };
+    let data_timeout = args.node.data_timeout();
+    let node = DemNode {
+        engine: None,
+        coupled: Vec::new(),
+        out_dir: PathBuf::new(),
+        data_timeout,
+        averaged: false,
+        substeps: 0,
+    };
+    main_with(args.node, hello, node)
+}

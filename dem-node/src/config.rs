@@ -1,0 +1,647 @@
+//! The `[dem]` table of a scene file (see `DEM.md` for the format with an example).
+//!
+//! All quantities are SI (m, s, kg, Pa). Parsing rejects unknown fields
+//! (`deny_unknown_fields`); [`parse_scene_section`](crate::parse_scene_section) reports the line
+//! and column of the offending key or value, and value checks name the full field path, e.g.
+//! `dem.materials.wheat.poisson_ratio`.
+
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::fmt;
+
+/// Default safety fraction of the Rayleigh time step (Ullrich eq. 2.27). LIGGGHTS and EDEM
+/// guides recommend 20–40 % of Δt_R for dense packings; 0.3 lets the REFERENCE D dense bed
+/// (Δt = 1e-5 s, Δt_R = 3.86e-5 s, fraction 0.26) run without the override.
+pub const DEFAULT_RAYLEIGH_FRACTION: f64 = 0.3;
+
+/// A scene-file error with a 1-based position in the whole scene text.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SceneError {
+    pub line: usize,
+    pub column: usize,
+    pub message: String,
+}
+
+impl fmt::Display for SceneError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "line {}, column {}: {}",
+            self.line, self.column, self.message
+        )
+    }
+}
+
+impl std::error::Error for SceneError {}
+
+/// The `[dem]` table.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct DemConfig {
+    /// DEM time step Δt^D in s.
+    pub time_step: f64,
+    /// Gravitational acceleration in m/s², default `[0, 0, -9.81]`.
+    #[serde(default = "default_gravity")]
+    pub gravity: [f64; 3],
+    /// Named materials, `[dem.materials.<name>]`.
+    pub materials: BTreeMap<String, MaterialConfig>,
+    /// Per material pair overrides of friction / restitution / rolling friction.
+    #[serde(default)]
+    pub interactions: Vec<InteractionConfig>,
+    /// Particle sources, `[[dem.particles]]`.
+    #[serde(default)]
+    pub particles: Vec<ParticleSource>,
+    /// Static walls, `[[dem.walls]]`.
+    #[serde(default)]
+    pub walls: Vec<WallConfig>,
+    /// Material of coupled (FEM interface) meshes; required when a coupled mesh is added.
+    #[serde(default)]
+    pub interface_material: Option<String>,
+    /// Output settings, `[dem.output]`.
+    #[serde(default)]
+    pub output: OutputConfig,
+    /// Worker threads for this engine (rayon pool); default: rayon's global pool.
+    #[serde(default)]
+    pub threads: Option<usize>,
+    /// Run even if `time_step` exceeds `rayleigh_fraction` × Δt_R.
+    #[serde(default)]
+    pub allow_large_time_step: bool,
+    /// Safety fraction of the Rayleigh time step (eq. 2.27), default 0.3.
+    #[serde(default = "default_rayleigh_fraction")]
+    pub rayleigh_fraction: f64,
+    /// Verlet skin d_V in m; default 0.25 × mean radius (Wellmann B4).
+    #[serde(default)]
+    pub skin: Option<f64>,
+    /// Integrate rotations (default true). `false` locks every particle's rotation.
+    #[serde(default = "default_true")]
+    pub rotation: bool,
+}
+
+fn default_gravity() -> [f64; 3] {
+    [0.0, 0.0, -9.81]
+}
+fn default_rayleigh_fraction() -> f64 {
+    DEFAULT_RAYLEIGH_FRACTION
+}
+fn default_true() -> bool {
+    true
+}
+fn default_one() -> f64 {
+    1.0
+}
+
+/// `[dem.materials.<name>]`.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct MaterialConfig {
+    /// Young's modulus E in Pa (> 0).
+    pub youngs_modulus: f64,
+    /// Poisson's ratio ν, 0 ≤ ν < 0.5.
+    pub poisson_ratio: f64,
+    /// Density ρ in kg/m³ (> 0).
+    pub density: f64,
+    /// Coefficient of restitution e, 0 < e ≤ 1 (pair default: mean of the two materials).
+    pub restitution: f64,
+    /// Coulomb friction coefficient μ ≥ 0 (pair default: mean of the two materials).
+    pub friction: f64,
+    /// Rolling resistance coefficient μ_r ≥ 0 (constant directional torque), default 0.
+    #[serde(default)]
+    pub rolling_friction: f64,
+}
+
+/// `[[dem.interactions]]`: overrides for one material pair.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct InteractionConfig {
+    /// The two material names (order irrelevant; may be equal).
+    pub materials: [String; 2],
+    #[serde(default)]
+    pub friction: Option<f64>,
+    #[serde(default)]
+    pub restitution: Option<f64>,
+    #[serde(default)]
+    pub rolling_friction: Option<f64>,
+}
+
+/// One explicitly listed sphere.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SphereConfig {
+    /// Centre in m.
+    pub position: [f64; 3],
+    /// Radius in m (> 0).
+    pub radius: f64,
+    /// Velocity in m/s, default 0.
+    #[serde(default)]
+    pub velocity: [f64; 3],
+    /// Angular velocity in rad/s, default 0.
+    #[serde(default)]
+    pub angular_velocity: [f64; 3],
+}
+
+/// Radius distribution of a region fill.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum SizeDistribution {
+    /// Every radius equal.
+    Constant { radius: f64 },
+    /// Radius uniform in [min, max].
+    Uniform { min: f64, max: f64 },
+    /// Normal(mean, std_dev) truncated to [min, max] (rejection sampling).
+    Normal {
+        mean: f64,
+        std_dev: f64,
+        min: f64,
+        max: f64,
+    },
+    /// Piecewise-linear cumulative distribution by number: `cumulative[k]` is the fraction of
+    /// particles with radius ≤ `radius[k]`; radius increasing, cumulative from 0 to 1.
+    Table {
+        radius: Vec<f64>,
+        cumulative: Vec<f64>,
+    },
+}
+
+/// `[[dem.particles]]`: a particle source.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum ParticleSource {
+    /// Explicit spheres.
+    List {
+        material: String,
+        spheres: Vec<SphereConfig>,
+    },
+    /// Simple-cubic lattice: centres `first + (i,j,k)·spacing`, `count = [nx, ny, nz]`.
+    Lattice {
+        material: String,
+        radius: f64,
+        first: [f64; 3],
+        spacing: f64,
+        count: [usize; 3],
+        #[serde(default)]
+        velocity: [f64; 3],
+    },
+    /// Random non-overlapping spheres inside the box [min, max] (whole spheres inside), until
+    /// `count` particles or `mass` kg are placed (exactly one of them).
+    Fill {
+        material: String,
+        min: [f64; 3],
+        max: [f64; 3],
+        #[serde(default)]
+        count: Option<usize>,
+        #[serde(default)]
+        mass: Option<f64>,
+        distribution: SizeDistribution,
+        /// Seed of the deterministic generator, default 1.
+        #[serde(default = "default_seed")]
+        seed: u64,
+        #[serde(default)]
+        velocity: [f64; 3],
+    },
+}
+
+fn default_seed() -> u64 {
+    1
+}
+
+/// `[[dem.walls]]`: a static wall.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum WallConfig {
+    /// Infinite plane through `point`; particles live on the side `normal` points to.
+    Plane {
+        material: String,
+        point: [f64; 3],
+        normal: [f64; 3],
+    },
+    /// Axis-aligned box [min, max] as a triangle mesh with inward normals; `open` lists the
+    /// faces left out: any of "-x", "+x", "-y", "+y", "-z", "+z".
+    Box {
+        material: String,
+        min: [f64; 3],
+        max: [f64; 3],
+        #[serde(default)]
+        open: Vec<String>,
+    },
+    /// Triangle mesh from an ASCII or binary STL file; `path` is relative to the scene file.
+    /// Vertices are transformed as `scale · x + offset`.
+    Stl {
+        material: String,
+        path: String,
+        #[serde(default = "default_one")]
+        scale: f64,
+        #[serde(default)]
+        offset: [f64; 3],
+    },
+}
+
+/// `[dem.output]`.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct OutputConfig {
+    /// Write VTK files every this many steps (0 = never), checked in `write_outputs`.
+    #[serde(default)]
+    pub vtk_every: u64,
+    /// Append a row to `dem_timeseries.csv` at every `write_outputs` call.
+    #[serde(default = "default_true")]
+    pub csv: bool,
+}
+
+impl Default for OutputConfig {
+    fn default() -> Self {
+        OutputConfig {
+            vtk_every: 0,
+            csv: true,
+        }
+    }
+}
+
+/// A path into the TOML document: keys and array indices.
+#[derive(Debug, Clone)]
+pub(crate) enum Seg {
+    Key(String),
+    Index(usize),
+}
+
+#[derive(Debug, Clone)]
+pub(crate) struct ValueError {
+    pub path: Vec<Seg>,
+    pub message: String,
+}
+
+pub(crate) fn path_string(path: &[Seg]) -> String {
+    let mut s = String::new();
+    for seg in path {
+        match seg {
+            Seg::Key(k) => {
+                if !s.is_empty() {
+                    s.push('.');
+                }
+                s.push_str(k);
+            }
+            Seg::Index(i) => s.push_str(&format!("[{i}]")),
+        }
+    }
+    s
+}
+
+struct Check {
+    errors: Vec<ValueError>,
+}
+
+impl Check {
+    fn fail(&mut self, path: Vec<Seg>, message: String) {
+        let message = format!("{}: {}", path_string(&path), message);
+        self.errors.push(ValueError { path, message });
+    }
+    fn positive(&mut self, path: Vec<Seg>, v: f64) {
+        if !(v.is_finite() && v > 0.0) {
+            self.fail(path, format!("must be a finite number > 0, got {v}"));
+        }
+    }
+    fn non_negative(&mut self, path: Vec<Seg>, v: f64) {
+        if !(v.is_finite() && v >= 0.0) {
+            self.fail(path, format!("must be a finite number >= 0, got {v}"));
+        }
+    }
+    fn finite3(&mut self, path: Vec<Seg>, v: &[f64; 3]) {
+        if v.iter().any(|x| !x.is_finite()) {
+            self.fail(path, format!("must be finite, got {v:?}"));
+        }
+    }
+    fn restitution(&mut self, path: Vec<Seg>, v: f64) {
+        if !(v > 0.0 && v <= 1.0) {
+            self.fail(path, format!("must satisfy 0 < e <= 1, got {v}"));
+        }
+    }
+    fn material(&mut self, path: Vec<Seg>, name: &str, cfg: &DemConfig) {
+        if !cfg.materials.contains_key(name) {
+            let known: Vec<&str> = cfg.materials.keys().map(|s| s.as_str()).collect();
+            self.fail(path, format!("unknown material `{name}`, known: {known:?}"));
+        }
+    }
+}
+
+fn p(parts: &[&str]) -> Vec<Seg> {
+    parts.iter().map(|s| Seg::Key(s.to_string())).collect()
+}
+
+fn pi(parts: &[&str], index: usize, rest: &[&str]) -> Vec<Seg> {
+    let mut v = p(parts);
+    v.push(Seg::Index(index));
+    v.extend(rest.iter().map(|s| Seg::Key(s.to_string())));
+    v
+}
+
+impl DemConfig {
+    /// Checks value ranges; errors name the field path (`dem.materials.wheat.poisson_ratio`).
+    pub(crate) fn validate_values(&self) -> Vec<ValueError> {
+        let mut c = Check { errors: Vec::new() };
+        c.positive(p(&["dem", "time_step"]), self.time_step);
+        c.finite3(p(&["dem", "gravity"]), &self.gravity);
+        if !(self.rayleigh_fraction > 0.0 && self.rayleigh_fraction.is_finite()) {
+            c.fail(
+                p(&["dem", "rayleigh_fraction"]),
+                format!("must be > 0, got {}", self.rayleigh_fraction),
+            );
+        }
+        if let Some(s) = self.skin {
+            c.positive(p(&["dem", "skin"]), s);
+        }
+        if self.threads == Some(0) {
+            c.fail(p(&["dem", "threads"]), "must be >= 1".into());
+        }
+        if self.materials.is_empty() {
+            c.fail(
+                p(&["dem", "materials"]),
+                "at least one material is required".into(),
+            );
+        }
+        for (name, m) in &self.materials {
+            let f = |field: &str| p(&["dem", "materials", name, field]);
+            c.positive(f("youngs_modulus"), m.youngs_modulus);
+            if !(m.poisson_ratio >= 0.0 && m.poisson_ratio < 0.5) {
+                c.fail(
+                    f("poisson_ratio"),
+                    format!("must satisfy 0 <= nu < 0.5, got {}", m.poisson_ratio),
+                );
+            }
+            c.positive(f("density"), m.density);
+            c.restitution(f("restitution"), m.restitution);
+            c.non_negative(f("friction"), m.friction);
+            c.non_negative(f("rolling_friction"), m.rolling_friction);
+        }
+        for (k, ia) in self.interactions.iter().enumerate() {
+            for name in &ia.materials {
+                c.material(pi(&["dem", "interactions"], k, &["materials"]), name, self);
+            }
+            if let Some(v) = ia.friction {
+                c.non_negative(pi(&["dem", "interactions"], k, &["friction"]), v);
+            }
+            if let Some(v) = ia.restitution {
+                c.restitution(pi(&["dem", "interactions"], k, &["restitution"]), v);
+            }
+            if let Some(v) = ia.rolling_friction {
+                c.non_negative(pi(&["dem", "interactions"], k, &["rolling_friction"]), v);
+            }
+        }
+        if let Some(m) = &self.interface_material {
+            c.material(p(&["dem", "interface_material"]), m, self);
+        }
+        for (k, src) in self.particles.iter().enumerate() {
+            let f = |field: &str| pi(&["dem", "particles"], k, &[field]);
+            match src {
+                ParticleSource::List { material, spheres } => {
+                    c.material(f("material"), material, self);
+                    for (s, sp) in spheres.iter().enumerate() {
+                        let g = |field: &str| {
+                            let mut v = f("spheres");
+                            v.push(Seg::Index(s));
+                            v.push(Seg::Key(field.into()));
+                            v
+                        };
+                        c.positive(g("radius"), sp.radius);
+                        c.finite3(g("position"), &sp.position);
+                        c.finite3(g("velocity"), &sp.velocity);
+                        c.finite3(g("angular_velocity"), &sp.angular_velocity);
+                    }
+                }
+                ParticleSource::Lattice {
+                    material,
+                    radius,
+                    first,
+                    spacing,
+                    count,
+                    velocity,
+                } => {
+                    c.material(f("material"), material, self);
+                    c.positive(f("radius"), *radius);
+                    c.finite3(f("first"), first);
+                    c.finite3(f("velocity"), velocity);
+                    if !(spacing.is_finite() && *spacing >= 2.0 * radius) {
+                        c.fail(
+                            f("spacing"),
+                            format!("must be >= 2 * radius = {}, got {spacing}", 2.0 * radius),
+                        );
+                    }
+                    if count.iter().any(|&n| n == 0) {
+                        c.fail(
+                            f("count"),
+                            format!("all counts must be >= 1, got {count:?}"),
+                        );
+                    }
+                }
+                ParticleSource::Fill {
+                    material,
+                    min,
+                    max,
+                    count,
+                    mass,
+                    distribution,
+                    velocity,
+                    ..
+                } => {
+                    c.material(f("material"), material, self);
+                    c.finite3(f("min"), min);
+                    c.finite3(f("max"), max);
+                    c.finite3(f("velocity"), velocity);
+                    if (0..3).any(|a| max[a] <= min[a]) {
+                        c.fail(
+                            f("max"),
+                            format!("must exceed min {min:?} on every axis, got {max:?}"),
+                        );
+                    }
+                    match (count, mass) {
+                        (Some(_), None) => {}
+                        (None, Some(m)) => c.positive(f("mass"), *m),
+                        _ => c.fail(f("count"), "give exactly one of `count` and `mass`".into()),
+                    }
+                    let d = |field: &str| {
+                        let mut v = f("distribution");
+                        v.push(Seg::Key(field.into()));
+                        v
+                    };
+                    match distribution {
+                        SizeDistribution::Constant { radius } => c.positive(d("radius"), *radius),
+                        SizeDistribution::Uniform { min, max } => {
+                            c.positive(d("min"), *min);
+                            if !(max >= min && max.is_finite()) {
+                                c.fail(d("max"), format!("must be >= min = {min}, got {max}"));
+                            }
+                        }
+                        SizeDistribution::Normal {
+                            mean,
+                            std_dev,
+                            min,
+                            max,
+                        } => {
+                            c.positive(d("mean"), *mean);
+                            c.non_negative(d("std_dev"), *std_dev);
+                            c.positive(d("min"), *min);
+                            if !(max >= min && max.is_finite()) {
+                                c.fail(d("max"), format!("must be >= min = {min}, got {max}"));
+                            }
+                        }
+                        SizeDistribution::Table { radius, cumulative } => {
+                            if radius.len() < 2 || radius.len() != cumulative.len() {
+                                c.fail(
+                                    d("cumulative"),
+                                    "needs >= 2 entries and as many as `radius`".into(),
+                                );
+                            } else {
+                                if radius[0] <= 0.0 || radius.windows(2).any(|w| w[1] < w[0]) {
+                                    c.fail(d("radius"), "must be > 0 and non-decreasing".into());
+                                }
+                                if cumulative[0] != 0.0
+                                    || *cumulative.last().unwrap() != 1.0
+                                    || cumulative.windows(2).any(|w| w[1] < w[0])
+                                {
+                                    c.fail(
+                                        d("cumulative"),
+                                        "must rise from 0 to 1 (non-decreasing)".into(),
+                                    );
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        for (k, w) in self.walls.iter().enumerate() {
+            let f = |field: &str| pi(&["dem", "walls"], k, &[field]);
+            match w {
+                WallConfig::Plane {
+                    material,
+                    point,
+                    normal,
+                } => {
+                    c.material(f("material"), material, self);
+                    c.finite3(f("point"), point);
+                    let n2: f64 = normal.iter().map(|x| x * x).sum();
+                    if !(n2.is_finite() && n2 > 0.0) {
+                        c.fail(
+                            f("normal"),
+                            format!("must be a non-zero vector, got {normal:?}"),
+                        );
+                    }
+                }
+                WallConfig::Box {
+                    material,
+                    min,
+                    max,
+                    open,
+                } => {
+                    c.material(f("material"), material, self);
+                    if (0..3).any(|a| !(max[a] > min[a])) {
+                        c.fail(
+                            f("max"),
+                            format!("must exceed min {min:?} on every axis, got {max:?}"),
+                        );
+                    }
+                    for o in open {
+                        if !["-x", "+x", "-y", "+y", "-z", "+z"].contains(&o.as_str()) {
+                            c.fail(
+                                f("open"),
+                                format!("unknown face `{o}`, expected one of -x +x -y +y -z +z"),
+                            );
+                        }
+                    }
+                }
+                WallConfig::Stl {
+                    material,
+                    scale,
+                    offset,
+                    ..
+                } => {
+                    c.material(f("material"), material, self);
+                    c.positive(f("scale"), *scale);
+                    c.finite3(f("offset"), offset);
+                }
+            }
+        }
+        c.errors
+    }
+}
+
+#[derive(Deserialize)]
+struct SceneDoc {
+    #[serde(default)]
+    dem: Option<DemConfig>,
+}
+
+/// 1-based (line, column) of a byte offset.
+pub(crate) fn line_column(text: &str, offset: usize) -> (usize, usize) {
+    let offset = offset.min(text.len());
+    let before = &text[..offset];
+    let line = before.matches('\n').count() + 1;
+    let line_start = before.rfind('\n').map(|i| i + 1).unwrap_or(0);
+    let column = text[line_start..offset].chars().count() + 1;
+    (line, column)
+}
+
+/// Span of the value at `path` in the TOML text (falls back to the deepest existing prefix).
+fn locate(text: &str, path: &[Seg]) -> Option<std::ops::Range<usize>> {
+    use toml::de::{DeTable, DeValue};
+    let doc = DeTable::parse(text).ok()?;
+    let mut best = doc.span();
+    let mut cur: Option<&toml::Spanned<DeValue>> = None;
+    let root = doc.get_ref();
+    for (depth, seg) in path.iter().enumerate() {
+        let next = match (seg, cur) {
+            (Seg::Key(k), None) if depth == 0 => root
+                .iter()
+                .find(|(key, _)| key.get_ref().as_ref() == k.as_str())
+                .map(|(key, v)| {
+                    best = key.span();
+                    v
+                }),
+            (Seg::Key(k), Some(v)) => v.get_ref().as_table().and_then(|t| {
+                t.iter()
+                    .find(|(key, _)| key.get_ref().as_ref() == k.as_str())
+                    .map(|(key, v)| {
+                        best = key.span();
+                        v
+                    })
+            }),
+            (Seg::Index(i), Some(v)) => v.get_ref().as_array().and_then(|a| {
+                a.iter().nth(*i).inspect(|v| {
+                    best = v.span();
+                })
+            }),
+            _ => None,
+        };
+        match next {
+            Some(v) => cur = Some(v),
+            None => break,
+        }
+    }
+    Some(best)
+}
+
+/// Parses the `[dem]` table of a whole scene file; other top-level tables are ignored.
+pub fn parse_scene_section(text: &str) -> Result<Option<DemConfig>, SceneError> {
+    let doc: SceneDoc = toml::from_str(text).map_err(|e| {
+        let (line, column) = e
+            .span()
+            .map(|s| line_column(text, s.start))
+            .unwrap_or((1, 1));
+        // toml's message names the offending key, e.g. "unknown field `radiuss`, expected ...".
+        SceneError {
+            line,
+            column,
+            message: e.message().trim().to_string(),
+        }
+    })?;
+    let Some(cfg) = doc.dem else { return Ok(None) };
+    if let Some(err) = cfg.validate_values().into_iter().next() {
+        let (line, column) = locate(text, &err.path)
+            .map(|s| line_column(text, s.start))
+            .unwrap_or((1, 1));
+        return Err(SceneError {
+            line,
+            column,
+            message: err.message,
+        });
+    }
+    Ok(Some(cfg))
+}

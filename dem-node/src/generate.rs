@@ -1,0 +1,164 @@
+//! Particle generation: explicit lists, simple-cubic lattices and random non-overlapping fills
+//! of a box with a size distribution (deterministic, seeded). Settling is running the engine.
+
+use crate::config::SizeDistribution;
+use crate::hertz_mindlin::V3;
+use std::collections::HashMap;
+
+/// SplitMix64 (Steele, Lea, Flood 2014): tiny, fast, good enough for particle placement.
+#[derive(Debug, Clone)]
+pub struct SplitMix64(u64);
+
+impl SplitMix64 {
+    pub fn new(seed: u64) -> Self {
+        SplitMix64(seed)
+    }
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    /// Uniform in [0, 1).
+    pub fn uniform(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+    }
+    /// Standard normal (Box–Muller).
+    pub fn normal(&mut self) -> f64 {
+        let u1 = 1.0 - self.uniform(); // (0, 1]
+        let u2 = self.uniform();
+        (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
+    }
+}
+
+/// Draws one radius from the distribution.
+pub fn sample_radius(d: &SizeDistribution, rng: &mut SplitMix64) -> f64 {
+    match d {
+        SizeDistribution::Constant { radius } => *radius,
+        SizeDistribution::Uniform { min, max } => min + (max - min) * rng.uniform(),
+        SizeDistribution::Normal {
+            mean,
+            std_dev,
+            min,
+            max,
+        } => {
+            if *std_dev == 0.0 {
+                return mean.clamp(*min, *max);
+            }
+            for _ in 0..10_000 {
+                let r = mean + std_dev * rng.normal();
+                if r >= *min && r <= *max {
+                    return r;
+                }
+            }
+            // truncation window far in a tail: fall back to uniform in the window
+            min + (max - min) * rng.uniform()
+        }
+        SizeDistribution::Table { radius, cumulative } => {
+            let u = rng.uniform();
+            let k = cumulative
+                .partition_point(|&c| c <= u)
+                .clamp(1, radius.len() - 1);
+            let (c0, c1) = (cumulative[k - 1], cumulative[k]);
+            let s = if c1 > c0 { (u - c0) / (c1 - c0) } else { 0.0 };
+            radius[k - 1] + s * (radius[k] - radius[k - 1])
+        }
+    }
+}
+
+/// Simple-cubic lattice centres `first + (i, j, k)·spacing`.
+pub fn lattice(first: V3, spacing: f64, count: [usize; 3]) -> Vec<V3> {
+    let mut out = Vec::with_capacity(count[0] * count[1] * count[2]);
+    for k in 0..count[2] {
+        for j in 0..count[1] {
+            for i in 0..count[0] {
+                out.push(first + V3::new(i as f64, j as f64, k as f64) * spacing);
+            }
+        }
+    }
+    out
+}
+
+/// Random sequential addition of non-overlapping spheres inside [min, max] (whole spheres),
+/// largest first, avoiding `existing` spheres too. Returns (centre, radius) or a message.
+pub fn fill_box(
+    min: V3,
+    max: V3,
+    radii: &mut [f64],
+    seed: u64,
+    existing: &[(V3, f64)],
+) -> Result<Vec<(V3, f64)>, String> {
+    radii.sort_by(|a, b| b.total_cmp(a));
+    let r_max = radii
+        .first()
+        .copied()
+        .unwrap_or(0.0)
+        .max(existing.iter().map(|e| e.1).fold(0.0, f64::max));
+    if radii.is_empty() {
+        return Ok(Vec::new());
+    }
+    let h = 2.0 * r_max;
+    let key = |x: &V3| -> (i64, i64, i64) {
+        (
+            (x.x / h).floor() as i64,
+            (x.y / h).floor() as i64,
+            (x.z / h).floor() as i64,
+        )
+    };
+    let mut grid: HashMap<(i64, i64, i64), Vec<(V3, f64)>> = HashMap::new();
+    for e in existing {
+        grid.entry(key(&e.0)).or_default().push(*e);
+    }
+    let mut rng = SplitMix64::new(seed);
+    let mut out = Vec::with_capacity(radii.len());
+    const ATTEMPTS: usize = 20_000;
+    for (k, &r) in radii.iter().enumerate() {
+        let lo = min + V3::repeat(r);
+        let hi = max - V3::repeat(r);
+        if (0..3).any(|a| hi[a] < lo[a]) {
+            return Err(format!(
+                "a sphere of radius {r} m does not fit into the region"
+            ));
+        }
+        let mut placed = false;
+        for _ in 0..ATTEMPTS {
+            let x = V3::new(
+                lo.x + (hi.x - lo.x) * rng.uniform(),
+                lo.y + (hi.y - lo.y) * rng.uniform(),
+                lo.z + (hi.z - lo.z) * rng.uniform(),
+            );
+            let c = key(&x);
+            let mut free = true;
+            'search: for dz in -1..=1 {
+                for dy in -1..=1 {
+                    for dx in -1..=1 {
+                        if let Some(list) = grid.get(&(c.0 + dx, c.1 + dy, c.2 + dz)) {
+                            for (y, ry) in list {
+                                if (x - y).norm_squared() < (r + ry) * (r + ry) {
+                                    free = false;
+                                    break 'search;
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+            if free {
+                grid.entry(c).or_default().push((x, r));
+                out.push((x, r));
+                placed = true;
+                break;
+            }
+        }
+        if !placed {
+            return Err(format!(
+                "placed {k} of {} spheres, then {ATTEMPTS} random positions for the next \
+                 (radius {r} m) all overlapped: the region is too small or too dense \
+                 (random sequential addition jams near a solid fraction of ~0.35)",
+                radii.len()
+            ));
+        }
+    }
+    Ok(out)
+}

@@ -1,0 +1,816 @@
+//! `dem`: the discrete element engine of the DEM–FEM co-simulation (no transport).
+//!
+//! Spheres with Hertz–Mindlin–Deresiewicz contacts (Ullrich ch. 2.1, eqs. 2.6–2.19), a cell
+//! grid with Verlet skin, velocity Verlet, static and coupled triangle-mesh walls with
+//! face/edge/vertex contact without force jumps (Wellmann ch. 4), rayon parallelism with
+//! bitwise-identical results for any thread count, snapshot/restore and VTK/CSV output.
+//!
+//! [`Engine::step`] reads like Ullrich's Algorithm 1: detect contacts → resolve forces →
+//! update particle states, each stage in its own module.
+
+pub mod broad_phase;
+pub mod config;
+pub mod contact_detection;
+pub mod generate;
+pub mod hertz_mindlin;
+pub mod integrate;
+pub mod materials;
+pub mod output;
+pub mod particles;
+pub mod resolve_forces;
+pub mod snapshot;
+pub mod stl;
+pub mod triangle_contact;
+pub mod walls;
+
+use config::{DemConfig, ParticleSource, WallConfig};
+use hertz_mindlin::V3;
+use materials::MaterialTable;
+use particles::Particles;
+use resolve_forces::{ForceContext, WallState};
+use snapshot::EngineState;
+use std::path::Path;
+use walls::{Mesh, Plane};
+
+pub use config::{parse_scene_section, SceneError};
+pub use walls::MotionRule;
+
+/// Errors of the DEM engine; messages name the file, field, mesh or particle concerned.
+#[derive(Debug, thiserror::Error)]
+pub enum DemError {
+    #[error("{field}: {message}")]
+    Config { field: String, message: String },
+    #[error("STL file {file}, {location}: {message}")]
+    Stl {
+        file: String,
+        location: String,
+        message: String,
+    },
+    #[error(
+        "time step {time_step:e} s exceeds {fraction} x the Rayleigh time step {rayleigh:e} s \
+         (Ullrich eq. 2.27, smallest for particle {particle}); reduce dem.time_step below \
+         {limit:e} s or set dem.allow_large_time_step = true"
+    )]
+    TimeStepTooLarge {
+        time_step: f64,
+        rayleigh: f64,
+        fraction: f64,
+        limit: f64,
+        particle: u32,
+    },
+    #[error("dem.particles[{source_index}]: {message}")]
+    Generation {
+        source_index: usize,
+        message: String,
+    },
+    #[error("mesh `{mesh}`: {message}")]
+    Mesh { mesh: String, message: String },
+    #[error("no coupled mesh with index {0}")]
+    UnknownMesh(usize),
+    #[error(
+        "instability at t = {time:e} s (step {step}): particle {particle} has a non-finite \
+         {quantity}; reduce dem.time_step (Rayleigh step {rayleigh:e} s)"
+    )]
+    Unstable {
+        time: f64,
+        step: u64,
+        particle: u32,
+        quantity: &'static str,
+        rayleigh: f64,
+    },
+    #[error("snapshot: {0}")]
+    Snapshot(String),
+    #[error("output {path}: {message}")]
+    Output { path: String, message: String },
+}
+
+/// Rayleigh time step of one particle, Ullrich eq. (2.27).
+pub fn rayleigh_time_step_of(
+    radius: f64,
+    poisson_ratio: f64,
+    density: f64,
+    shear_modulus: f64,
+) -> f64 {
+    std::f64::consts::PI * radius / (0.1631 * poisson_ratio + 0.8766)
+        * (density / shear_modulus).sqrt()
+}
+
+struct OutputState {
+    last_vtk_step: Option<u64>,
+    vtk_files: u64,
+}
+
+/// The DEM engine.
+pub struct Engine {
+    cfg: DemConfig,
+    dt: f64,
+    gravity: V3,
+    materials: MaterialTable,
+    planes: Vec<Plane>,
+    state: EngineState,
+    pool: Option<rayon::ThreadPool>,
+    output: OutputState,
+    /// Footprint of the first box wall (for the packing fraction).
+    box_region: Option<(V3, V3)>,
+}
+
+fn v3(a: &[f64; 3]) -> V3 {
+    V3::new(a[0], a[1], a[2])
+}
+
+impl Engine {
+    /// Builds the engine: materials, walls (paths relative to `base_dir`), particles; checks
+    /// the time step against the Rayleigh step and evaluates the initial forces.
+    pub fn from_config(cfg: &DemConfig, base_dir: &Path) -> Result<Engine, DemError> {
+        if let Some(e) = cfg.validate_values().into_iter().next() {
+            return Err(DemError::Config {
+                field: config::path_string(&e.path),
+                message: e.message,
+            });
+        }
+        let materials = MaterialTable::from_config(cfg);
+        let mat = |name: &str, field: String| {
+            materials.index(name).ok_or_else(|| DemError::Config {
+                field,
+                message: format!("unknown material `{name}`"),
+            })
+        };
+        let mut planes = Vec::new();
+        let mut meshes = Vec::new();
+        let mut box_region = None;
+        for (k, w) in cfg.walls.iter().enumerate() {
+            let field = format!("dem.walls[{k}].material");
+            match w {
+                WallConfig::Plane {
+                    material,
+                    point,
+                    normal,
+                } => planes.push(Plane {
+                    point: v3(point),
+                    normal: v3(normal).normalize(),
+                    material: mat(material, field)?,
+                }),
+                WallConfig::Box {
+                    material,
+                    min,
+                    max,
+                    open,
+                } => {
+                    let (pos, tris) = walls::box_mesh(v3(min), v3(max), open);
+                    if box_region.is_none() {
+                        box_region = Some((v3(min), v3(max)));
+                    }
+                    meshes.push(Mesh::new(
+                        &format!("box{k}"),
+                        mat(material, field)?,
+                        false,
+                        pos,
+                        tris,
+                    ));
+                }
+                WallConfig::Stl {
+                    material,
+                    path,
+                    scale,
+                    offset,
+                } => {
+                    let full = base_dir.join(path);
+                    let mut tm = stl::read_stl(&full)?;
+                    for x in tm.positions.iter_mut() {
+                        *x = *x * *scale + v3(offset);
+                    }
+                    meshes.push(Mesh::new(
+                        path,
+                        mat(material, field)?,
+                        false,
+                        tm.positions,
+                        tm.triangles,
+                    ));
+                }
+            }
+        }
+        let mut particles = Particles::default();
+        for (k, src) in cfg.particles.iter().enumerate() {
+            let field = format!("dem.particles[{k}].material");
+            match src {
+                ParticleSource::List { material, spheres } => {
+                    let m = mat(material, field)?;
+                    let rho = materials.materials[m as usize].density;
+                    for s in spheres {
+                        particles.push(
+                            v3(&s.position),
+                            v3(&s.velocity),
+                            v3(&s.angular_velocity),
+                            s.radius,
+                            rho,
+                            m,
+                        );
+                    }
+                }
+                ParticleSource::Lattice {
+                    material,
+                    radius,
+                    first,
+                    spacing,
+                    count,
+                    velocity,
+                } => {
+                    let m = mat(material, field)?;
+                    let rho = materials.materials[m as usize].density;
+                    for x in generate::lattice(v3(first), *spacing, *count) {
+                        particles.push(x, v3(velocity), V3::zeros(), *radius, rho, m);
+                    }
+                }
+                ParticleSource::Fill {
+                    material,
+                    min,
+                    max,
+                    count,
+                    mass,
+                    distribution,
+                    seed,
+                    velocity,
+                } => {
+                    let m = mat(material, field)?;
+                    let rho = materials.materials[m as usize].density;
+                    let mut rng = generate::SplitMix64::new(
+                        seed.wrapping_mul(0x2545_F491_4F6C_DD1D) ^ 0xA5A5,
+                    );
+                    let mut radii = Vec::new();
+                    match (count, mass) {
+                        (Some(n), _) => {
+                            for _ in 0..*n {
+                                radii.push(generate::sample_radius(distribution, &mut rng));
+                            }
+                        }
+                        (None, Some(target)) => {
+                            let mut total = 0.0;
+                            while total < *target {
+                                let r = generate::sample_radius(distribution, &mut rng);
+                                total += rho * 4.0 / 3.0 * std::f64::consts::PI * r.powi(3);
+                                radii.push(r);
+                                if radii.len() > 50_000_000 {
+                                    return Err(DemError::Generation {
+                                        source_index: k,
+                                        message: "mass target needs more than 5e7 particles".into(),
+                                    });
+                                }
+                            }
+                        }
+                        (None, None) => unreachable!("validated: count or mass"),
+                    }
+                    let existing: Vec<(V3, f64)> = particles
+                        .position
+                        .iter()
+                        .cloned()
+                        .zip(particles.radius.iter().cloned())
+                        .collect();
+                    let placed = generate::fill_box(v3(min), v3(max), &mut radii, *seed, &existing)
+                        .map_err(|message| DemError::Generation {
+                            source_index: k,
+                            message,
+                        })?;
+                    for (x, r) in placed {
+                        particles.push(x, v3(velocity), V3::zeros(), r, rho, m);
+                    }
+                }
+            }
+        }
+        let skin = cfg.skin.unwrap_or_else(|| {
+            // Wellmann B4: d_V = 0.25 r̄
+            if particles.is_empty() {
+                1e-3
+            } else {
+                0.25 * particles.radius.iter().sum::<f64>() / particles.len() as f64
+            }
+        });
+        let pool = match cfg.threads {
+            Some(n) => Some(
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(n)
+                    .build()
+                    .map_err(|e| DemError::Config {
+                        field: "dem.threads".into(),
+                        message: e.to_string(),
+                    })?,
+            ),
+            None => None,
+        };
+        let n = particles.len();
+        let mut engine = Engine {
+            cfg: cfg.clone(),
+            dt: cfg.time_step,
+            gravity: v3(&cfg.gravity),
+            materials,
+            planes,
+            state: EngineState {
+                version: snapshot::SNAPSHOT_VERSION,
+                time: 0.0,
+                steps: 0,
+                particles,
+                lists: broad_phase::NeighbourLists {
+                    skin,
+                    ..Default::default()
+                },
+                wall_state: vec![WallState::default(); n],
+                records: Vec::new(),
+                meshes,
+            },
+            pool,
+            output: OutputState {
+                last_vtk_step: None,
+                vtk_files: 0,
+            },
+            box_region,
+        };
+        engine.check_time_step()?;
+        engine.run(|e| {
+            e.detect_contacts();
+            e.resolve_forces(0.0);
+        });
+        Ok(engine)
+    }
+
+    fn check_time_step(&self) -> Result<(), DemError> {
+        let (rayleigh, particle) = self.rayleigh_with_particle();
+        let limit = self.cfg.rayleigh_fraction * rayleigh;
+        if self.dt > limit && !self.cfg.allow_large_time_step {
+            return Err(DemError::TimeStepTooLarge {
+                time_step: self.dt,
+                rayleigh,
+                fraction: self.cfg.rayleigh_fraction,
+                limit,
+                particle,
+            });
+        }
+        Ok(())
+    }
+
+    fn run<R: Send>(&mut self, f: impl FnOnce(&mut Engine) -> R + Send) -> R {
+        match self.pool.take() {
+            Some(pool) => {
+                let r = pool.install(|| f(self));
+                self.pool = Some(pool);
+                r
+            }
+            None => f(self),
+        }
+    }
+
+    pub fn time(&self) -> f64 {
+        self.state.time
+    }
+
+    pub fn time_step(&self) -> f64 {
+        self.dt
+    }
+
+    /// Smallest Rayleigh time step over all particles (eq. 2.27); +∞ without particles.
+    pub fn rayleigh_time_step(&self) -> f64 {
+        self.rayleigh_with_particle().0
+    }
+
+    fn rayleigh_with_particle(&self) -> (f64, u32) {
+        let p = &self.state.particles;
+        let mut best = (f64::INFINITY, 0u32);
+        for k in 0..p.len() {
+            let m = &self.materials.materials[p.material[k] as usize];
+            let t =
+                rayleigh_time_step_of(p.radius[k], m.poisson_ratio, m.density, m.shear_modulus());
+            if t < best.0 {
+                best = (t, p.id[k]);
+            }
+        }
+        best
+    }
+
+    pub fn num_particles(&self) -> usize {
+        self.state.particles.len()
+    }
+
+    /// Read access to the particles (storage order is the broad phase's cell order; use `id`).
+    pub fn particles(&self) -> &Particles {
+        &self.state.particles
+    }
+
+    /// Mutable access to the particles for setting up tests and scenes; the neighbour lists
+    /// are rebuilt and the forces re-evaluated at the next step.
+    pub fn particles_mut(&mut self) -> &mut Particles {
+        self.state.lists.valid = false;
+        &mut self.state.particles
+    }
+
+    pub fn meshes(&self) -> &[Mesh] {
+        &self.state.meshes
+    }
+
+    /// Number of particle–particle contacts (overlap > 0).
+    pub fn num_contacts(&self) -> usize {
+        self.state
+            .lists
+            .pairs
+            .iter()
+            .filter(|p| p.overlap > 0.0)
+            .count()
+    }
+
+    /// Number of particle–wall contacts.
+    pub fn num_wall_contacts(&self) -> usize {
+        self.state.wall_state.iter().map(|w| w.count as usize).sum()
+    }
+
+    /// Largest overlap of any contact (pair or wall), m.
+    pub fn max_overlap(&self) -> f64 {
+        let a = self
+            .state
+            .lists
+            .pairs
+            .iter()
+            .map(|p| p.overlap)
+            .fold(0.0, f64::max);
+        let b = self
+            .state
+            .wall_state
+            .iter()
+            .flat_map(|w| w.slots[..w.count as usize].iter().map(|s| s.overlap))
+            .fold(0.0, f64::max);
+        a.max(b)
+    }
+
+    /// Number of neighbour-list builds so far.
+    pub fn neighbour_list_builds(&self) -> u64 {
+        self.state.lists.builds
+    }
+
+    /// Adds a coupled mesh (FEM interface) with the `interface_material`; returns its index.
+    pub fn add_coupled_mesh(
+        &mut self,
+        name: &str,
+        positions: &[f64],
+        triangles: &[u32],
+    ) -> Result<usize, DemError> {
+        let merr = |message: String| DemError::Mesh {
+            mesh: name.to_string(),
+            message,
+        };
+        let Some(mat_name) = &self.cfg.interface_material else {
+            return Err(merr("a coupled mesh needs dem.interface_material".into()));
+        };
+        let material = self
+            .materials
+            .index(mat_name)
+            .ok_or_else(|| merr(format!("unknown interface material `{mat_name}`")))?;
+        if positions.len() % 3 != 0 || positions.is_empty() {
+            return Err(merr(format!(
+                "positions length {} is not a positive multiple of 3",
+                positions.len()
+            )));
+        }
+        if let Some(k) = positions.iter().position(|x| !x.is_finite()) {
+            return Err(merr(format!("non-finite coordinate at positions[{k}]")));
+        }
+        if triangles.len() % 3 != 0 || triangles.is_empty() {
+            return Err(merr(format!(
+                "triangles length {} is not a positive multiple of 3",
+                triangles.len()
+            )));
+        }
+        let nn = positions.len() / 3;
+        if let Some(k) = triangles.iter().position(|&t| t as usize >= nn) {
+            return Err(merr(format!(
+                "triangles[{k}] = {} but there are only {nn} nodes",
+                triangles[k]
+            )));
+        }
+        let pos: Vec<V3> = positions
+            .chunks(3)
+            .map(|c| V3::new(c[0], c[1], c[2]))
+            .collect();
+        let tris: Vec<[u32; 3]> = triangles.chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+        for (t, tri) in tris.iter().enumerate() {
+            let [a, b, c] = tri.map(|k| pos[k as usize]);
+            if (b - a).cross(&(c - a)).norm() == 0.0 {
+                return Err(merr(format!(
+                    "triangle {t} {tri:?} is degenerate (zero area)"
+                )));
+            }
+        }
+        self.state
+            .meshes
+            .push(Mesh::new(name, material, true, pos, tris));
+        self.state.lists.valid = false;
+        Ok(self.state.meshes.len() - 1)
+    }
+
+    fn coupled_mesh(&self, mesh: usize) -> Option<&Mesh> {
+        self.state.meshes.get(mesh).filter(|m| m.coupled)
+    }
+
+    /// Sets the window kinematics P, V, A of a coupled mesh (flat node-major xyz) and its
+    /// motion rule; resets the window clock τ = 0 and the force-averaging accumulator.
+    pub fn set_mesh_kinematics(
+        &mut self,
+        mesh: usize,
+        positions: &[f64],
+        velocities: &[f64],
+        accelerations: &[f64],
+        rule: MotionRule,
+    ) -> Result<(), DemError> {
+        let Some(m) = self.state.meshes.get_mut(mesh).filter(|m| m.coupled) else {
+            return Err(DemError::UnknownMesh(mesh));
+        };
+        let n3 = 3 * m.positions.len();
+        for (what, a) in [
+            ("positions", positions),
+            ("velocities", velocities),
+            ("accelerations", accelerations),
+        ] {
+            if a.len() != n3 {
+                return Err(DemError::Mesh {
+                    mesh: m.name.clone(),
+                    message: format!("{what} has {} values, expected {n3} (3 per node)", a.len()),
+                });
+            }
+            if let Some(k) = a.iter().position(|x| !x.is_finite()) {
+                return Err(DemError::Mesh {
+                    mesh: m.name.clone(),
+                    message: format!("non-finite {what}[{k}]"),
+                });
+            }
+        }
+        let to_v = |a: &[f64]| {
+            a.chunks(3)
+                .map(|c| V3::new(c[0], c[1], c[2]))
+                .collect::<Vec<V3>>()
+        };
+        m.window_p = to_v(positions);
+        m.window_v = to_v(velocities);
+        m.window_a = to_v(accelerations);
+        m.rule = rule;
+        m.tau = 0.0;
+        m.move_to(0.0);
+        m.nodal_force_sum.iter_mut().for_each(|f| *f = V3::zeros());
+        m.window_substeps = 0;
+        m.patch = walls::compute_patches(&m.positions, &m.triangles);
+        // new patch ids must reach the candidate lists
+        self.state.lists.valid = false;
+        Ok(())
+    }
+
+    /// Runs `substeps` DEM steps of `time_step`.
+    pub fn advance(&mut self, substeps: usize) -> Result<(), DemError> {
+        self.run(|e| {
+            for _ in 0..substeps {
+                e.step()?;
+            }
+            Ok(())
+        })
+    }
+
+    /// One DEM step, Ullrich's Algorithm 1 in velocity-Verlet form: the first half kick and
+    /// drift move the particles (and coupled meshes by their motion rule) to t + Δt, then
+    /// contacts are detected, forces resolved, and the state update completed.
+    pub fn step(&mut self) -> Result<(), DemError> {
+        let dt = self.dt;
+        let rotation = self.cfg.rotation;
+        integrate::kick_drift(&mut self.state.particles, dt, rotation);
+        self.state.time += dt;
+        self.state.steps += 1;
+        for m in self.state.meshes.iter_mut().filter(|m| m.coupled) {
+            m.tau += dt;
+            m.move_to(m.tau);
+        }
+        self.detect_contacts();
+        self.resolve_forces(dt);
+        integrate::kick(&mut self.state.particles, dt, rotation);
+        self.check_finite()
+    }
+
+    /// Algorithm 1, line 3.
+    fn detect_contacts(&mut self) {
+        let s = &mut self.state;
+        contact_detection::detect(
+            &mut s.lists,
+            &mut s.particles,
+            &mut s.meshes,
+            &mut s.wall_state,
+            &mut s.records,
+        );
+    }
+
+    /// Algorithm 1, line 4.
+    fn resolve_forces(&mut self, dt: f64) {
+        let s = &mut self.state;
+        let ctx = ForceContext {
+            materials: &self.materials,
+            planes: &self.planes,
+            meshes: &s.meshes,
+            gravity: self.gravity,
+            dt,
+        };
+        resolve_forces::pair_forces(&mut s.lists, &s.particles, &ctx);
+        resolve_forces::gather_and_walls(
+            &s.lists,
+            &mut s.particles,
+            &mut s.wall_state,
+            &mut s.records,
+            &ctx,
+        );
+        if !s.records.is_empty() {
+            resolve_forces::accumulate_nodal_forces(&mut s.meshes, &s.records, dt > 0.0);
+        }
+    }
+
+    fn check_finite(&self) -> Result<(), DemError> {
+        use rayon::prelude::*;
+        let p = &self.state.particles;
+        let bad = |v: &V3| !(v.x.is_finite() && v.y.is_finite() && v.z.is_finite());
+        let any_bad = p.position.par_iter().with_min_len(4096).any(bad)
+            || p.velocity.par_iter().with_min_len(4096).any(bad)
+            || p.angular_velocity.par_iter().with_min_len(4096).any(bad);
+        if !any_bad {
+            return Ok(());
+        }
+        for k in 0..p.len() {
+            for (quantity, v) in [
+                ("position", &p.position[k]),
+                ("velocity", &p.velocity[k]),
+                ("angular velocity", &p.angular_velocity[k]),
+            ] {
+                if bad(v) {
+                    return Err(DemError::Unstable {
+                        time: self.state.time,
+                        step: self.state.steps,
+                        particle: p.id[k],
+                        quantity,
+                        rayleigh: self.rayleigh_time_step(),
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Nodal forces exerted by the particles on a coupled mesh (flat xyz): the last substep's,
+    /// or with `averaged` the mean over the window's substeps (Ullrich eq. 3.8). Empty for an
+    /// unknown mesh index.
+    pub fn interface_forces(&self, mesh: usize, averaged: bool) -> Vec<f64> {
+        let Some(m) = self.coupled_mesh(mesh) else {
+            return Vec::new();
+        };
+        let flat = |f: &[V3], scale: f64| {
+            f.iter()
+                .flat_map(|v| [v.x * scale, v.y * scale, v.z * scale])
+                .collect()
+        };
+        if averaged {
+            if m.window_substeps == 0 {
+                return vec![0.0; 3 * m.positions.len()];
+            }
+            flat(&m.nodal_force_sum, 1.0 / m.window_substeps as f64)
+        } else {
+            flat(&m.nodal_force_last, 1.0)
+        }
+    }
+
+    /// Current node positions of a coupled mesh (flat xyz); empty for an unknown index.
+    pub fn mesh_positions(&self, mesh: usize) -> Vec<f64> {
+        self.coupled_mesh(mesh)
+            .map(|m| m.positions.iter().flat_map(|v| [v.x, v.y, v.z]).collect())
+            .unwrap_or_default()
+    }
+
+    /// Translational plus rotational kinetic energy, J.
+    pub fn kinetic_energy(&self) -> f64 {
+        self.state.particles.kinetic_energy()
+    }
+
+    /// The full mutable state as bytes (MessagePack).
+    pub fn snapshot(&self) -> Vec<u8> {
+        snapshot::encode(&self.state)
+    }
+
+    /// Restores a snapshot of an engine built from the same configuration.
+    pub fn restore(&mut self, bytes: &[u8]) -> Result<(), DemError> {
+        let s = snapshot::decode(bytes).map_err(DemError::Snapshot)?;
+        if s.meshes.len() < self.state.meshes.iter().filter(|m| !m.coupled).count() {
+            return Err(DemError::Snapshot(format!(
+                "snapshot has {} meshes, this engine's scene defines more static walls",
+                s.meshes.len()
+            )));
+        }
+        let n = s.particles.len();
+        if s.wall_state.len() != n
+            || s.particles
+                .material
+                .iter()
+                .any(|&m| m as usize >= self.materials.materials.len())
+        {
+            return Err(DemError::Snapshot(
+                "snapshot does not match this scene's materials/particles".into(),
+            ));
+        }
+        self.state = s;
+        Ok(())
+    }
+
+    /// Writes outputs after a window: a CSV row every call (if enabled) and VTK files when
+    /// `vtk_every` steps have passed since the last VTK output.
+    pub fn write_outputs(&mut self, out_dir: &Path) -> Result<(), DemError> {
+        std::fs::create_dir_all(out_dir).map_err(|e| DemError::Output {
+            path: out_dir.display().to_string(),
+            message: e.to_string(),
+        })?;
+        if self.cfg.output.csv {
+            let mut row = vec![
+                ("time".to_string(), self.time()),
+                ("step".to_string(), self.state.steps as f64),
+            ];
+            row.extend(self.results());
+            output::append_csv(&out_dir.join("dem_timeseries.csv"), &row)?;
+        }
+        let every = self.cfg.output.vtk_every;
+        let due = every > 0
+            && self
+                .output
+                .last_vtk_step
+                .is_none_or(|last| self.state.steps >= last + every);
+        if due {
+            let step = self.state.steps;
+            output::write_particles_vtk(
+                &out_dir.join(format!("particles_{step:09}.vtk")),
+                &self.state.particles,
+                self.time(),
+            )?;
+            for (k, m) in self.state.meshes.iter().enumerate() {
+                if m.coupled || step == 0 || self.output.vtk_files == 0 {
+                    let safe: String = m
+                        .name
+                        .chars()
+                        .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+                        .collect();
+                    output::write_mesh_vtk(
+                        &out_dir.join(format!("mesh{k}_{safe}_{step:09}.vtk")),
+                        m,
+                    )?;
+                }
+            }
+            self.output.last_vtk_step = Some(step);
+            self.output.vtk_files += 1;
+        }
+        Ok(())
+    }
+
+    /// Packing fraction inside the first box wall: particle volume over the box footprint
+    /// times the bed height (floor to the highest particle top), when a box wall exists.
+    pub fn packing_fraction(&self) -> Option<f64> {
+        let (lo, hi) = self.box_region?;
+        let p = &self.state.particles;
+        if p.is_empty() {
+            return None;
+        }
+        // "up" is against gravity; fall back to +z without gravity
+        let g = self.gravity;
+        let axis = if g.norm() > 0.0 { g.iamax() } else { 2 };
+        let (a, b) = ((axis + 1) % 3, (axis + 2) % 3);
+        let area = (hi[a] - lo[a]) * (hi[b] - lo[b]);
+        let up = g[axis] <= 0.0;
+        let height = if up {
+            (0..p.len())
+                .map(|k| p.position[k][axis] + p.radius[k])
+                .fold(f64::MIN, f64::max)
+                - lo[axis]
+        } else {
+            hi[axis]
+                - (0..p.len())
+                    .map(|k| p.position[k][axis] - p.radius[k])
+                    .fold(f64::MAX, f64::min)
+        };
+        let vol: f64 = p
+            .radius
+            .iter()
+            .map(|r| 4.0 / 3.0 * std::f64::consts::PI * r.powi(3))
+            .sum();
+        Some(vol / (area * height))
+    }
+
+    /// Scene result quantities for summary.json.
+    pub fn results(&self) -> Vec<(String, f64)> {
+        let mut r = vec![
+            ("particles".to_string(), self.num_particles() as f64),
+            ("kinetic_energy".to_string(), self.kinetic_energy()),
+            ("contacts".to_string(), self.num_contacts() as f64),
+            ("wall_contacts".to_string(), self.num_wall_contacts() as f64),
+            ("max_overlap".to_string(), self.max_overlap()),
+            ("rayleigh_time_step".to_string(), self.rayleigh_time_step()),
+            (
+                "neighbour_list_builds".to_string(),
+                self.state.lists.builds as f64,
+            ),
+        ];
+        if let Some(phi) = self.packing_fraction() {
+            r.push(("packing_fraction".to_string(), phi));
+        }
+        r
+    }
+}

@@ -1,0 +1,106 @@
+//! Materials and per-pair contact parameters (Ullrich eqs. 2.7, 2.17; REFERENCE A1).
+
+use crate::config::DemConfig;
+use serde::{Deserialize, Serialize};
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Material {
+    pub name: String,
+    pub youngs_modulus: f64,
+    pub poisson_ratio: f64,
+    pub density: f64,
+    pub restitution: f64,
+    pub friction: f64,
+    pub rolling_friction: f64,
+}
+
+impl Material {
+    pub fn shear_modulus(&self) -> f64 {
+        self.youngs_modulus / (2.0 * (1.0 + self.poisson_ratio))
+    }
+}
+
+/// Contact parameters of one (ordered-insensitive) material pair.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+pub struct PairParams {
+    /// Effective modulus, eq. (2.7): 1/E* = (1−ν_i²)/E_i + (1−ν_j²)/E_j.
+    pub e_star: f64,
+    /// Effective shear modulus. Erratum to eq. (2.17): Mindlin's form is
+    /// 1/G* = (2−ν_i)/G_i + (2−ν_j)/G_j (as in LIGGGHTS); the printed (1−ν²)/G is not.
+    pub g_star: f64,
+    pub friction: f64,
+    pub restitution: f64,
+    pub rolling_friction: f64,
+    /// Damping factor β (≤ 0) of F_d = −2√(5/6) β √(S m*) v, calibrated so that the Hertz
+    /// contact with this damping rebounds with exactly `restitution` (see `hertz_mindlin`).
+    pub beta: f64,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct MaterialTable {
+    pub materials: Vec<Material>,
+    /// Row-major n×n table.
+    pub pairs: Vec<PairParams>,
+}
+
+impl MaterialTable {
+    pub fn from_config(cfg: &DemConfig) -> MaterialTable {
+        let materials: Vec<Material> = cfg
+            .materials
+            .iter()
+            .map(|(name, m)| Material {
+                name: name.clone(),
+                youngs_modulus: m.youngs_modulus,
+                poisson_ratio: m.poisson_ratio,
+                density: m.density,
+                restitution: m.restitution,
+                friction: m.friction,
+                rolling_friction: m.rolling_friction,
+            })
+            .collect();
+        let n = materials.len();
+        let mut pairs = Vec::with_capacity(n * n);
+        for a in &materials {
+            for b in &materials {
+                let mut friction = 0.5 * (a.friction + b.friction);
+                let mut restitution = 0.5 * (a.restitution + b.restitution);
+                let mut rolling_friction = 0.5 * (a.rolling_friction + b.rolling_friction);
+                for ia in &cfg.interactions {
+                    let [x, y] = &ia.materials;
+                    if (x == &a.name && y == &b.name) || (x == &b.name && y == &a.name) {
+                        friction = ia.friction.unwrap_or(friction);
+                        restitution = ia.restitution.unwrap_or(restitution);
+                        rolling_friction = ia.rolling_friction.unwrap_or(rolling_friction);
+                    }
+                }
+                let e_star = 1.0
+                    / ((1.0 - a.poisson_ratio.powi(2)) / a.youngs_modulus
+                        + (1.0 - b.poisson_ratio.powi(2)) / b.youngs_modulus);
+                let g_star = 1.0
+                    / ((2.0 - a.poisson_ratio) / a.shear_modulus()
+                        + (2.0 - b.poisson_ratio) / b.shear_modulus());
+                pairs.push(PairParams {
+                    e_star,
+                    g_star,
+                    friction,
+                    restitution,
+                    rolling_friction,
+                    beta: crate::hertz_mindlin::damping_beta(restitution),
+                });
+            }
+        }
+        MaterialTable { materials, pairs }
+    }
+
+    pub fn index(&self, name: &str) -> Option<u16> {
+        self.materials
+            .iter()
+            .position(|m| m.name == name)
+            .map(|i| i as u16)
+    }
+
+    #[inline]
+    pub fn pair(&self, a: u16, b: u16) -> &PairParams {
+        &self.pairs[a as usize * self.materials.len() + b as usize]
+    }
+}

@@ -1,0 +1,40 @@
+//! Snapshot/restore of the full mutable engine state (MessagePack via rmp-serde). Restoring
+//! a snapshot continues bitwise identically: the neighbour lists, contact histories, last
+//! forces, particle order and mesh window state are all part of it.
+
+use crate::broad_phase::NeighbourLists;
+use crate::particles::Particles;
+use crate::resolve_forces::{MeshRecords, WallState};
+use crate::walls::Mesh;
+use serde::{Deserialize, Serialize};
+
+pub const SNAPSHOT_VERSION: u32 = 1;
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct EngineState {
+    pub version: u32,
+    pub time: f64,
+    pub steps: u64,
+    pub particles: Particles,
+    pub lists: NeighbourLists,
+    pub wall_state: Vec<WallState>,
+    pub records: Vec<MeshRecords>,
+    pub meshes: Vec<Mesh>,
+}
+
+pub fn encode(state: &EngineState) -> Vec<u8> {
+    // serialising plain data into a Vec cannot fail
+    rmp_serde::to_vec(state).expect("engine state serialises")
+}
+
+pub fn decode(bytes: &[u8]) -> Result<EngineState, String> {
+    let s: EngineState =
+        rmp_serde::from_slice(bytes).map_err(|e| format!("cannot decode snapshot: {e}"))?;
+    if s.version != SNAPSHOT_VERSION {
+        return Err(format!(
+            "snapshot version {} is not {}",
+            s.version, SNAPSHOT_VERSION
+        ));
+    }
+    Ok(s)
+}

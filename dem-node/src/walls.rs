@@ -1,0 +1,235 @@
+//! Walls: infinite planes and triangle meshes (static from STL/box primitives, or coupled
+//! meshes driven by FEM kinematics with a motion rule, Ullrich ch. 3.2–3.3).
+
+use crate::hertz_mindlin::V3;
+use serde::{Deserialize, Serialize};
+
+/// How a coupled mesh moves during the substeps of a coupling window (τ from window start).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum MotionRule {
+    /// Just-in-time coupling: x = P + Vτ + ½Aτ² (Ullrich Algorithm 3, line 8).
+    Quadratic,
+    /// Predictive coupling: x = P + Vτ with V the predictive velocity (eqs. 3.4–3.7).
+    Linear,
+}
+
+/// Infinite plane; particles live on the side `normal` points to.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Plane {
+    pub point: V3,
+    pub normal: V3,
+    pub material: u16,
+}
+
+/// Angle below which two triangles sharing an edge are treated as one smooth face even when
+/// the edge is slightly concave (1°): a deformed flat FEM surface stays one contact patch.
+pub const NEARLY_COPLANAR_RAD: f64 = 1.0 * std::f64::consts::PI / 180.0;
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Mesh {
+    pub name: String,
+    pub material: u16,
+    pub coupled: bool,
+    pub triangles: Vec<[u32; 3]>,
+    /// Current node positions and velocities.
+    pub positions: Vec<V3>,
+    pub velocities: Vec<V3>,
+    /// Window kinematics P, V, A and rule.
+    pub window_p: Vec<V3>,
+    pub window_v: Vec<V3>,
+    pub window_a: Vec<V3>,
+    pub rule: MotionRule,
+    /// Time τ since the window kinematics were set.
+    pub tau: f64,
+    /// Contact patch of each triangle (see `triangle_contact`).
+    pub patch: Vec<u32>,
+    /// Nodal forces exerted by particles on the nodes: current step, last completed step,
+    /// and the sum over the substeps of the current window (Ullrich eq. 3.8).
+    pub nodal_force_step: Vec<V3>,
+    pub nodal_force_last: Vec<V3>,
+    pub nodal_force_sum: Vec<V3>,
+    pub window_substeps: u64,
+    /// Node positions at the last neighbour-list build (Wellmann eq. 4.10).
+    pub positions_at_build: Vec<V3>,
+}
+
+impl Mesh {
+    pub fn new(
+        name: &str,
+        material: u16,
+        coupled: bool,
+        positions: Vec<V3>,
+        triangles: Vec<[u32; 3]>,
+    ) -> Mesh {
+        let n = positions.len();
+        let patch = compute_patches(&positions, &triangles);
+        Mesh {
+            name: name.to_string(),
+            material,
+            coupled,
+            triangles,
+            velocities: vec![V3::zeros(); n],
+            window_p: positions.clone(),
+            window_v: vec![V3::zeros(); n],
+            window_a: vec![V3::zeros(); n],
+            rule: MotionRule::Linear,
+            tau: 0.0,
+            patch,
+            nodal_force_step: vec![V3::zeros(); n],
+            nodal_force_last: vec![V3::zeros(); n],
+            nodal_force_sum: vec![V3::zeros(); n],
+            window_substeps: 0,
+            positions_at_build: positions.clone(),
+            positions,
+        }
+    }
+
+    /// Node positions and velocities at window time τ by the window's motion rule.
+    pub fn move_to(&mut self, tau: f64) {
+        match self.rule {
+            MotionRule::Quadratic => {
+                for k in 0..self.positions.len() {
+                    self.positions[k] = self.window_p[k]
+                        + self.window_v[k] * tau
+                        + self.window_a[k] * (0.5 * tau * tau);
+                    self.velocities[k] = self.window_v[k] + self.window_a[k] * tau;
+                }
+            }
+            MotionRule::Linear => {
+                for k in 0..self.positions.len() {
+                    self.positions[k] = self.window_p[k] + self.window_v[k] * tau;
+                    self.velocities[k] = self.window_v[k];
+                }
+            }
+        }
+    }
+
+    pub fn corners(&self, t: usize) -> [V3; 3] {
+        let [a, b, c] = self.triangles[t];
+        [
+            self.positions[a as usize],
+            self.positions[b as usize],
+            self.positions[c as usize],
+        ]
+    }
+
+    /// Largest node displacement since the last neighbour-list build.
+    pub fn max_displacement_since_build(&self) -> f64 {
+        let mut m = 0.0f64;
+        for (x, x0) in self.positions.iter().zip(&self.positions_at_build) {
+            m = m.max((x - x0).norm());
+        }
+        m
+    }
+}
+
+fn find(parent: &mut [u32], mut x: u32) -> u32 {
+    while parent[x as usize] != x {
+        parent[x as usize] = parent[parent[x as usize] as usize];
+        x = parent[x as usize];
+    }
+    x
+}
+
+/// Groups triangles into contact patches: neighbours across an edge join when the edge is
+/// convex seen from the front (normal) side, or nearly coplanar (< 1°, either way). One
+/// particle makes at most one contact per patch, at the closest point of the patch; across a
+/// convex or coplanar edge that closest point moves continuously, so the force neither jumps
+/// nor double-counts (see `triangle_contact`). Concave edges separate patches, so a sphere in
+/// a corner touches both faces. Patch id = smallest triangle index of the group.
+pub fn compute_patches(positions: &[V3], triangles: &[[u32; 3]]) -> Vec<u32> {
+    let nt = triangles.len();
+    let mut edges: Vec<(u32, u32, u32)> = Vec::with_capacity(3 * nt);
+    for (t, tri) in triangles.iter().enumerate() {
+        for e in 0..3 {
+            let (a, b) = (tri[e], tri[(e + 1) % 3]);
+            edges.push((a.min(b), a.max(b), t as u32));
+        }
+    }
+    edges.sort_unstable();
+    let normal = |t: usize| -> V3 {
+        let [a, b, c] = triangles[t];
+        let (pa, pb, pc) = (
+            positions[a as usize],
+            positions[b as usize],
+            positions[c as usize],
+        );
+        (pb - pa)
+            .cross(&(pc - pa))
+            .try_normalize(0.0)
+            .unwrap_or_else(V3::zeros)
+    };
+    let mut parent: Vec<u32> = (0..nt as u32).collect();
+    let cos_flat = NEARLY_COPLANAR_RAD.cos();
+    let mut k = 0;
+    while k < edges.len() {
+        let mut m = k + 1;
+        while m < edges.len() && edges[m].0 == edges[k].0 && edges[m].1 == edges[k].1 {
+            m += 1;
+        }
+        if m - k == 2 {
+            let (ta, tb) = (edges[k].2 as usize, edges[k + 1].2 as usize);
+            let (na, nb) = (normal(ta), normal(tb));
+            // consistent orientation: the shared edge is traversed in opposite directions
+            let dir = |t: usize| {
+                let tri = triangles[t];
+                (0..3)
+                    .find(|&e| {
+                        let (a, b) = (tri[e], tri[(e + 1) % 3]);
+                        a.min(b) == edges[k].0 && a.max(b) == edges[k].1
+                    })
+                    .map(|e| tri[e] == edges[k].0)
+                    .unwrap_or(true)
+            };
+            let consistent = dir(ta) != dir(tb);
+            let opposite_b = triangles[tb]
+                .iter()
+                .copied()
+                .find(|&v| v != edges[k].0 && v != edges[k].1)
+                .unwrap_or(edges[k].0);
+            let w = (positions[opposite_b as usize] - positions[edges[k].0 as usize]).dot(&na);
+            let nearly_flat = na.dot(&nb) >= cos_flat;
+            let convex = w < 0.0;
+            if consistent && (nearly_flat || convex) {
+                let (ra, rb) = (find(&mut parent, ta as u32), find(&mut parent, tb as u32));
+                if ra != rb {
+                    // keep the smaller index as root so patch ids are the group minimum
+                    let (lo, hi) = (ra.min(rb), ra.max(rb));
+                    parent[hi as usize] = lo;
+                }
+            }
+        }
+        k = m;
+    }
+    (0..nt as u32).map(|t| find(&mut parent, t)).collect()
+}
+
+/// Axis-aligned box [min, max] as 12 triangles with inward normals, leaving out `open` faces.
+pub fn box_mesh(min: V3, max: V3, open: &[String]) -> (Vec<V3>, Vec<[u32; 3]>) {
+    let corner = |i: u32| -> V3 {
+        V3::new(
+            if i & 1 != 0 { max.x } else { min.x },
+            if i & 2 != 0 { max.y } else { min.y },
+            if i & 4 != 0 { max.z } else { min.z },
+        )
+    };
+    let positions: Vec<V3> = (0..8).map(corner).collect();
+    // each face as a quad (a, b, c, d) ordered so that (b−a)×(d−a) points into the box
+    let faces: [(&str, [u32; 4]); 6] = [
+        ("-x", [0, 2, 6, 4]),
+        ("+x", [1, 5, 7, 3]),
+        ("-y", [0, 4, 5, 1]),
+        ("+y", [2, 3, 7, 6]),
+        ("-z", [0, 1, 3, 2]),
+        ("+z", [4, 6, 7, 5]),
+    ];
+    let mut tris = Vec::new();
+    for (name, [a, b, c, d]) in faces {
+        if open.iter().any(|o| o == name) {
+            continue;
+        }
+        tris.push([a, b, c]);
+        tris.push([a, c, d]);
+    }
+    (positions, tris)
+}
