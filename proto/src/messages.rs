@@ -93,7 +93,7 @@ impl<'de> Deserialize<'de> for F64Array {
 }
 
 /// What a node is in the coupling.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Role {
     Dem,

@@ -1,0 +1,130 @@
+//! `cosim`: the user's command line.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+use coordinator::run::{run_scene, schedule_name, RunOptions};
+use coordinator::scene::Scene;
+
+#[derive(Parser)]
+#[command(
+    name = "cosim",
+    version,
+    about = "DEM–FEM co-simulation over zenoh: run, check and study scenes"
+)]
+struct Cli {
+    /// Log level (error, warn, info, debug, trace) or a tracing filter.
+    #[arg(long, global = true, default_value = "info", env = "COSIM_LOG")]
+    log: String,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run a scene: start the nodes it needs, couple them, write out/<scene>/summary.json.
+    Run {
+        scene: PathBuf,
+        /// Output folder (default: the scene's `output.dir`, else out/<scene name>).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// zenoh configuration of the coordinator (e.g. deploy/coordinator.json5): client of
+        /// a router; the nodes are then started on their machines (see deploy/README.md).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Run id (default: scene name and a random suffix).
+        #[arg(long)]
+        run_id: Option<String>,
+        /// No progress bar.
+        #[arg(long)]
+        no_progress: bool,
+    },
+    /// Validate a scene without running it: the file, then each node's own table and limits.
+    Check {
+        scene: PathBuf,
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_new(&cli.log).unwrap_or_else(|_| "info".into()),
+        )
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .init();
+    let rt = match tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+    {
+        Ok(rt) => rt,
+        Err(e) => {
+            eprintln!("error: cannot start the async runtime: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    let result = rt.block_on(async {
+        match cli.command {
+            Command::Run { scene, out, config, run_id, no_progress } => {
+                let scene = Scene::load(&scene)?;
+                let opts = RunOptions {
+                    out_dir: out,
+                    zenoh_config: config,
+                    run_id,
+                    progress: !no_progress,
+                    ..Default::default()
+                };
+                let s = run_scene(&scene, &opts).await?;
+                let out_dir = opts.out_dir.clone().unwrap_or(scene.out_dir.clone());
+                println!(
+                    "{}: {} windows of {} s ({}), {:.3} s simulated in {:.2} s wall (DEM {:.2} s, FEM {:.2} s, coupling {:.2} s = {:.1} %)",
+                    s.scene,
+                    s.windows_done,
+                    s.coupling_window_s,
+                    schedule_name(scene.schedule),
+                    s.simulated_time_s,
+                    s.timing.total_wall_s,
+                    s.timing.dem_compute_s,
+                    s.timing.fem_compute_s,
+                    s.timing.coupling_overhead_s,
+                    100.0 * s.timing.coupling_overhead_fraction
+                );
+                for (k, v) in &s.results {
+                    println!("  {k} = {v:.6e}");
+                }
+                println!("summary: {}", out_dir.join("summary.json").display());
+                anyhow::Ok(())
+            }
+            Command::Check { scene, out } => {
+                let scene = Scene::load(&scene)?;
+                let dir = out.unwrap_or_else(|| std::env::temp_dir().join(format!("cosim-check-{}", std::process::id())));
+                let opts = RunOptions { check_only: true, out_dir: Some(dir.clone()), progress: false, ..Default::default() };
+                let s = run_scene(&scene, &opts).await;
+                let _ = std::fs::remove_dir_all(&dir);
+                let s = s?;
+                println!("{}: ok ({}, {} windows of {} s)", scene.path.display(), schedule_name(scene.schedule), scene.windows, scene.window);
+                for (node, n) in &s.nodes {
+                    for (k, v) in &n.limits {
+                        println!("  {node}.{k} = {v:.6e}");
+                    }
+                    for w in &n.warnings {
+                        println!("  warning ({node}): {w}");
+                    }
+                }
+                Ok(())
+            }
+        }
+    });
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

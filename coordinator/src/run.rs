@@ -1,0 +1,618 @@
+//! A run: start the nodes, initialise them, drive the schedule window by window over zenoh,
+//! watch stability and liveliness, stop cleanly and write `summary.json` (Ullrich Algorithm 3).
+
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::{anyhow, bail, Context};
+use proto::participant::{CoordinatorLink, Event, Monitor};
+use proto::{CommandBody, Init, LinkConfig, LinkMode, Role, StatusBody};
+use serde::Serialize;
+
+use crate::launch::NodeProcess;
+use crate::scene::{Scene, ScheduleKind};
+use crate::schedule::{substeps, Action, Scheduler, SchedulerConfig};
+use crate::stability::StabilityMonitor;
+
+/// How to run.
+#[derive(Debug, Clone)]
+pub struct RunOptions {
+    /// Validate only: start the nodes, let them read their tables, report limits, stop.
+    pub check_only: bool,
+    /// A zenoh configuration file for the coordinator (client to a router, TLS, ...). Nodes
+    /// are then expected to be started with a matching configuration (or are external).
+    pub zenoh_config: Option<PathBuf>,
+    /// Override the output folder.
+    pub out_dir: Option<PathBuf>,
+    /// Longest wait for nodes to say hello and to initialise.
+    pub startup_timeout: Duration,
+    /// Show a progress bar.
+    pub progress: bool,
+    /// Override the run id (default: scene name + a random suffix).
+    pub run_id: Option<String>,
+}
+
+impl Default for RunOptions {
+    fn default() -> Self {
+        RunOptions {
+            check_only: false,
+            zenoh_config: None,
+            out_dir: None,
+            startup_timeout: Duration::from_secs(120),
+            progress: true,
+            run_id: None,
+        }
+    }
+}
+
+/// Per-node figures in the summary.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct NodeSummary {
+    pub limits: BTreeMap<String, f64>,
+    pub warnings: Vec<String>,
+    pub results: BTreeMap<String, f64>,
+    pub compute_s: f64,
+    pub wait_s: f64,
+    pub software: String,
+}
+
+/// Wall time split like Ullrich's tables 5.3/6.2.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Timing {
+    pub total_wall_s: f64,
+    pub startup_s: f64,
+    pub windows_wall_s: f64,
+    pub shutdown_s: f64,
+    pub dem_compute_s: f64,
+    pub fem_compute_s: f64,
+    /// Windows wall time − DEM compute − FEM compute: transport, waiting, coordinator.
+    pub coupling_overhead_s: f64,
+    pub coupling_overhead_fraction: f64,
+}
+
+/// `summary.json`.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Summary {
+    pub scene: String,
+    pub scene_file: String,
+    pub run_id: String,
+    /// `completed`, `checked`, `unstable` or `failed`.
+    pub status: String,
+    pub error: Option<String>,
+    pub schedule: String,
+    pub coupling_window_s: f64,
+    pub dem_substeps: u32,
+    pub windows_planned: u64,
+    pub windows_done: u64,
+    pub simulated_time_s: f64,
+    pub timing: Timing,
+    pub nodes: BTreeMap<String, NodeSummary>,
+    /// The scene's result quantities, `<node>.<name>`.
+    pub results: BTreeMap<String, f64>,
+    pub warnings: Vec<String>,
+}
+
+fn make_run_id(name: &str) -> String {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.subsec_nanos())
+        .unwrap_or(0);
+    let tag = (nanos ^ (std::process::id() << 8)) & 0xff_ffff;
+    let base: String = name.chars().take(40).collect();
+    format!("{base}-{tag:06x}")
+}
+
+fn role_of(node: &str) -> Option<Role> {
+    match node {
+        "dem" => Some(Role::Dem),
+        "fem" => Some(Role::Fem),
+        _ => None,
+    }
+}
+
+struct Run<'a> {
+    scene: &'a Scene,
+    link: CoordinatorLink,
+    nodes: Vec<NodeProcess>,
+    summary: Summary,
+    out_dir: PathBuf,
+}
+
+impl Run<'_> {
+    fn node_mut(&mut self, name: &str) -> Option<&mut NodeProcess> {
+        self.nodes.iter_mut().find(|n| n.name == name)
+    }
+
+    /// Next event; dead processes and departed nodes are errors naming the node.
+    async fn next(
+        &mut self,
+        deadline: Instant,
+        what: &str,
+        window: Option<u64>,
+    ) -> anyhow::Result<Event> {
+        loop {
+            for n in &mut self.nodes {
+                if let Some(msg) = n.exited() {
+                    bail!(
+                        "{msg}{}",
+                        window
+                            .map(|w| format!(" (at window {w})"))
+                            .unwrap_or_default()
+                    );
+                }
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                bail!("timed out waiting for {what}");
+            }
+            match self
+                .link
+                .next_event(left.min(Duration::from_millis(250)), what)
+                .await
+            {
+                Ok(Event::Left(node)) if self.nodes.iter().any(|n| n.name == node) => {
+                    // Give a crashing process a moment so its exit status and log are named.
+                    tokio::time::sleep(Duration::from_millis(100)).await;
+                    let detail = self
+                        .node_mut(&node)
+                        .and_then(|n| n.exited())
+                        .unwrap_or_default();
+                    bail!(
+                        "node `{node}` left the run{} while the coordinator waited for {what}{}",
+                        window
+                            .map(|w| format!(" at window {w}"))
+                            .unwrap_or_default(),
+                        if detail.is_empty() {
+                            String::new()
+                        } else {
+                            format!(": {detail}")
+                        }
+                    );
+                }
+                Ok(Event::Status(st)) => {
+                    if let StatusBody::Error {
+                        code,
+                        message,
+                        window: w,
+                    } = &st.body
+                    {
+                        let at = w
+                            .or(window)
+                            .map(|w| format!(" at window {w}"))
+                            .unwrap_or_default();
+                        bail!(
+                            "node `{}` reported a {code:?} error{at}: {message}",
+                            st.node
+                        );
+                    }
+                    return Ok(Event::Status(st));
+                }
+                Ok(Event::Rejected { key, error }) => {
+                    tracing::warn!("refused a message on `{key}`: {error}");
+                }
+                Ok(ev) => return Ok(ev),
+                Err(proto::ProtoError::Timeout { .. }) => continue,
+                Err(e) => return Err(e.into()),
+            }
+        }
+    }
+
+    async fn broadcast(&mut self, body: CommandBody) -> anyhow::Result<()> {
+        let names: Vec<String> = self.nodes.iter().map(|n| n.name.clone()).collect();
+        for n in names {
+            self.link.send(&n, body.clone()).await?;
+        }
+        Ok(())
+    }
+
+    /// Hello from every node, then `init`, then `ready` (or the node's scene error).
+    async fn start(&mut self, check_only: bool, timeout: Duration) -> anyhow::Result<()> {
+        let deadline = Instant::now() + timeout;
+        let mut waiting: Vec<String> = self.nodes.iter().map(|n| n.name.clone()).collect();
+        while !waiting.is_empty() {
+            let what = format!("hello from {}", waiting.join(", "));
+            if let Event::Status(st) = self.next(deadline, &what, None).await? {
+                if let StatusBody::Hello(h) = &st.body {
+                    let expected = role_of(&st.node);
+                    if expected != Some(h.role) {
+                        bail!("node `{}` says it is a {} node", st.node, h.role);
+                    }
+                    tracing::info!(node = %st.node, "hello from {} (pid {})", h.software, h.pid);
+                    self.summary
+                        .nodes
+                        .entry(st.node.clone())
+                        .or_default()
+                        .software = h.software.clone();
+                    waiting.retain(|n| n != &st.node);
+                }
+            }
+        }
+        let init = Init {
+            scene_path: self.scene.path.display().to_string(),
+            scene_toml: self.scene.text.clone(),
+            out_dir: self.out_dir.display().to_string(),
+            interfaces: self.scene.interfaces.clone(),
+            check_only,
+        };
+        self.broadcast(CommandBody::Init(init)).await?;
+        let mut waiting: Vec<String> = self.nodes.iter().map(|n| n.name.clone()).collect();
+        while !waiting.is_empty() {
+            let what = format!("`ready` from {}", waiting.join(", "));
+            if let Event::Status(st) = self.next(deadline, &what, None).await? {
+                if let StatusBody::Ready { limits, warnings } = st.body {
+                    for w in &warnings {
+                        tracing::warn!(node = %st.node, "{w}");
+                        self.summary.warnings.push(format!("{}: {w}", st.node));
+                    }
+                    let s = self.summary.nodes.entry(st.node.clone()).or_default();
+                    s.limits = limits;
+                    s.warnings = warnings;
+                    waiting.retain(|n| n != &st.node);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn limit(&self, node: &str, key: &str) -> Option<f64> {
+        self.summary
+            .nodes
+            .get(node)
+            .and_then(|n| n.limits.get(key))
+            .copied()
+    }
+
+    async fn windows(&mut self, monitor: &Monitor, progress: bool) -> anyhow::Result<()> {
+        let scene = self.scene;
+        let n_sub = if scene.has_dem {
+            let dt = self
+                .limit("dem", "time_step")
+                .ok_or_else(|| anyhow!("the DEM node did not report its `time_step` in `ready`"))?;
+            substeps(scene.window, dt)
+                .map_err(|e| anyhow!("{}: coupling.window: {e}", scene.path.display()))?
+        } else {
+            1
+        };
+        self.summary.dem_substeps = n_sub;
+        let mut scheduler = Scheduler::new(SchedulerConfig {
+            kind: scene.schedule,
+            window: scene.window,
+            windows: scene.windows,
+            substeps: n_sub,
+            force_averaging: scene.force_averaging,
+            has_dem: scene.has_dem,
+            has_fem: scene.has_fem,
+            steady_kinetic_energy: scene.steady_kinetic_energy,
+        })
+        .map_err(|e| anyhow!(e))?;
+        let mut stability = StabilityMonitor::new(scene.max_force_growth);
+        let timeout = Duration::from_secs_f64(scene.window_timeout);
+        let bar = progress_bar(progress, scene.windows);
+        let csv_path = self.out_dir.join("windows.csv");
+        let mut csv = std::io::BufWriter::new(
+            std::fs::File::create(&csv_path)
+                .with_context(|| format!("creating {}", csv_path.display()))?,
+        );
+        writeln!(
+            csv,
+            "window,t_end_s,wall_s,dem_compute_s,fem_compute_s,overhead_s,dem_kinetic_energy_j"
+        )?;
+        let mut actions = scheduler.start();
+        let mut window_start = Instant::now();
+        let mut row: BTreeMap<&'static str, f64> = BTreeMap::new();
+        loop {
+            for a in std::mem::take(&mut actions) {
+                match a {
+                    Action::Send(role, body) => self.link.send(&role.to_string(), body).await?,
+                    Action::Finish { reason } => {
+                        tracing::info!("{reason}");
+                        bar.finish_and_clear();
+                        csv.flush()?;
+                        return Ok(());
+                    }
+                }
+            }
+            let k = scheduler.window();
+            let what = format!(
+                "window {k} from {}",
+                scheduler
+                    .pending()
+                    .map(|r| r.to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+            let ev = self.next(Instant::now() + timeout, &what, Some(k)).await?;
+            for d in monitor.drain() {
+                match d {
+                    Ok(d) => {
+                        if let Some(bad) = stability.observe(&d) {
+                            self.summary.status = "unstable".into();
+                            bail!("{bad}");
+                        }
+                    }
+                    Err((key, e)) => bail!("invalid interface data on `{key}` at window {k}: {e}"),
+                }
+            }
+            let Event::Status(st) = ev else { continue };
+            let StatusBody::WindowDone {
+                window,
+                t_end,
+                compute_s,
+                wait_s,
+                monitor: values,
+            } = st.body
+            else {
+                tracing::debug!(node = %st.node, "ignoring {:?}", st.body);
+                continue;
+            };
+            let role = role_of(&st.node).ok_or_else(|| anyhow!("unknown node `{}`", st.node))?;
+            if let Some((name, v)) = values.iter().find(|(_, v)| !v.is_finite()) {
+                self.summary.status = "unstable".into();
+                bail!("unstable at window {window} (t = {t_end:.6e} s): the {role} node reports {name} = {v}");
+            }
+            let ns = self.summary.nodes.entry(st.node.clone()).or_default();
+            ns.compute_s += compute_s;
+            ns.wait_s += wait_s;
+            row.insert(if role == Role::Dem { "dem" } else { "fem" }, compute_s);
+            if let Some(e) = values.get("kinetic_energy") {
+                row.insert("ke", *e);
+            }
+            let ke = (role == Role::Dem)
+                .then(|| values.get("kinetic_energy").copied())
+                .flatten();
+            actions = scheduler
+                .on_window_done(role, window, ke)
+                .map_err(|e| anyhow!(e))?;
+            if scheduler.window() != window
+                || scheduler.is_done()
+                || actions.iter().any(|a| matches!(a, Action::Finish { .. }))
+            {
+                // the window is complete
+                let wall = window_start.elapsed().as_secs_f64();
+                let dem = row.remove("dem").unwrap_or(0.0);
+                let fem = row.remove("fem").unwrap_or(0.0);
+                writeln!(
+                    csv,
+                    "{window},{t_end:.9e},{wall:.6e},{dem:.6e},{fem:.6e},{:.6e},{}",
+                    (wall - dem - fem).max(0.0),
+                    row.remove("ke")
+                        .map(|e| format!("{e:.6e}"))
+                        .unwrap_or_default()
+                )?;
+                self.summary.windows_done = window + 1;
+                self.summary.simulated_time_s = t_end;
+                bar.set_position(window + 1);
+                bar.set_message(format!("t = {t_end:.4e} s"));
+                window_start = Instant::now();
+            }
+        }
+    }
+
+    /// `stop` to every node, collect results, wait for the processes.
+    async fn stop(&mut self, reason: &str, collect: bool) -> anyhow::Result<()> {
+        self.broadcast(CommandBody::Stop {
+            reason: reason.to_string(),
+        })
+        .await?;
+        if collect {
+            let deadline = Instant::now() + Duration::from_secs(60);
+            let mut waiting: Vec<String> = self.nodes.iter().map(|n| n.name.clone()).collect();
+            while !waiting.is_empty() {
+                let what = format!("`stopped` from {}", waiting.join(", "));
+                if let Event::Status(st) = self.next(deadline, &what, None).await? {
+                    if let StatusBody::Stopped { results, .. } = st.body {
+                        for (k, v) in &results {
+                            self.summary.results.insert(format!("{}.{k}", st.node), *v);
+                        }
+                        self.summary
+                            .nodes
+                            .entry(st.node.clone())
+                            .or_default()
+                            .results = results;
+                        waiting.retain(|n| n != &st.node);
+                    }
+                }
+            }
+        }
+        let mut clean = true;
+        for n in &mut self.nodes {
+            clean &= n.reap(Duration::from_secs(10)).await;
+        }
+        if !clean && collect {
+            bail!("a node did not exit cleanly after `stop`");
+        }
+        Ok(())
+    }
+}
+
+fn progress_bar(show: bool, windows: u64) -> indicatif::ProgressBar {
+    if !show {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = indicatif::ProgressBar::new(windows);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{elapsed_precise} [{bar:40}] window {pos}/{len} {msg} (ETA {eta})",
+        )
+        .expect("valid template")
+        .progress_chars("=> "),
+    );
+    bar
+}
+
+fn write_summary(out_dir: &Path, summary: &Summary) -> anyhow::Result<PathBuf> {
+    let path = out_dir.join("summary.json");
+    let tmp = out_dir.join(".summary.json.tmp");
+    let text = serde_json::to_string_pretty(summary)?;
+    std::fs::write(&tmp, text + "\n").with_context(|| format!("writing {}", tmp.display()))?;
+    std::fs::rename(&tmp, &path).with_context(|| format!("writing {}", path.display()))?;
+    Ok(path)
+}
+
+/// Runs (or checks) a scene. The summary is written in every case; the error, if any, is
+/// both in the summary and returned.
+pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summary> {
+    let t0 = Instant::now();
+    let out_dir = opts
+        .out_dir
+        .clone()
+        .unwrap_or_else(|| scene.out_dir.clone());
+    std::fs::create_dir_all(&out_dir)
+        .with_context(|| format!("creating the output folder {}", out_dir.display()))?;
+    let run_id = opts
+        .run_id
+        .clone()
+        .unwrap_or_else(|| make_run_id(&scene.name));
+    proto::keys::validate_name("run id", &run_id)?;
+
+    // Local peers: every process listens on its own loopback port and connects explicitly
+    // to those started before it (a full mesh without any scouting).
+    let (coord_link, ports) = match &opts.zenoh_config {
+        Some(cfg) => (
+            LinkConfig {
+                mode: LinkMode::Client,
+                zenoh_config: Some(cfg.clone()),
+                ..Default::default()
+            },
+            None,
+        ),
+        None => {
+            let p0 = proto::link::free_loopback_port()?;
+            (LinkConfig::loopback_peer(Some(p0), &[]), Some(p0))
+        }
+    };
+    let link = CoordinatorLink::open(&coord_link, &run_id)
+        .await
+        .context("opening the coordinator's zenoh session")?;
+    let mut summary = Summary {
+        scene: scene.name.clone(),
+        scene_file: scene.path.display().to_string(),
+        run_id: run_id.clone(),
+        status: "failed".into(),
+        schedule: serde_json::to_value(scene.schedule)?
+            .as_str()
+            .unwrap_or("")
+            .to_string(),
+        coupling_window_s: scene.window,
+        windows_planned: scene.windows,
+        ..Default::default()
+    };
+    let mut nodes = Vec::new();
+    let scene_dir = scene
+        .path
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_default();
+    let mut started: Vec<String> = ports.iter().map(|p| format!("tcp/127.0.0.1:{p}")).collect();
+    for (role, present, launch) in [
+        (Role::Dem, scene.has_dem, scene.nodes.dem.as_ref()),
+        (Role::Fem, scene.has_fem, scene.nodes.fem.as_ref()),
+    ] {
+        if !present {
+            continue;
+        }
+        let (listen, connect) = if ports.is_some() {
+            let p = proto::link::free_loopback_port()?;
+            (vec![format!("tcp/127.0.0.1:{p}")], started.clone())
+        } else {
+            (Vec::new(), Vec::new())
+        };
+        let node = match NodeProcess::spawn(
+            role,
+            launch,
+            &run_id,
+            listen.clone(),
+            connect,
+            &out_dir.join("logs"),
+            &scene_dir,
+        ) {
+            Ok(n) => n,
+            Err(e) => {
+                summary.error = Some(format!("{e:#}"));
+                write_summary(&out_dir, &summary)?;
+                return Err(e);
+            }
+        };
+        if node.child.is_none() {
+            eprintln!(
+                "waiting for the external {role} node: start it with --run-id {run_id} --node {role}{}",
+                node.connect.iter().map(|c| format!(" --connect {c}")).collect::<String>()
+            );
+        }
+        started.extend(listen);
+        nodes.push(node);
+    }
+    let mut run = Run {
+        scene,
+        link,
+        nodes,
+        summary,
+        out_dir: out_dir.clone(),
+    };
+    let result: anyhow::Result<()> = async {
+        run.start(opts.check_only, opts.startup_timeout).await?;
+        run.summary.timing.startup_s = t0.elapsed().as_secs_f64();
+        if opts.check_only {
+            if scene.has_dem {
+                let dt = run
+                    .limit("dem", "time_step")
+                    .ok_or_else(|| anyhow!("the DEM node did not report `time_step`"))?;
+                substeps(scene.window, dt)
+                    .map_err(|e| anyhow!("{}: coupling.window: {e}", scene.path.display()))?;
+            }
+            run.stop("check done", true).await?;
+            run.summary.status = "checked".into();
+            return Ok(());
+        }
+        let monitor = run.link.monitor().await?;
+        let tw = Instant::now();
+        run.windows(&monitor, opts.progress).await?;
+        run.summary.timing.windows_wall_s = tw.elapsed().as_secs_f64();
+        let ts = Instant::now();
+        run.stop("end of the schedule", true).await?;
+        run.summary.timing.shutdown_s = ts.elapsed().as_secs_f64();
+        run.summary.status = "completed".into();
+        Ok(())
+    }
+    .await;
+    if let Err(e) = &result {
+        if run.summary.status != "unstable" {
+            run.summary.status = "failed".into();
+        }
+        run.summary.error = Some(format!("{e:#}"));
+        // Best effort: tell the others to stop, then make sure no process is left behind.
+        let _ =
+            tokio::time::timeout(Duration::from_secs(5), run.stop("the run failed", false)).await;
+        for n in &mut run.nodes {
+            if let Some(c) = n.child.as_mut() {
+                let _ = c.kill().await;
+            }
+        }
+    }
+    let mut summary = run.summary;
+    let dem = summary.nodes.get("dem").map(|n| n.compute_s).unwrap_or(0.0);
+    let fem = summary.nodes.get("fem").map(|n| n.compute_s).unwrap_or(0.0);
+    let t = &mut summary.timing;
+    t.total_wall_s = t0.elapsed().as_secs_f64();
+    t.dem_compute_s = dem;
+    t.fem_compute_s = fem;
+    t.coupling_overhead_s = (t.windows_wall_s - dem - fem).max(0.0);
+    t.coupling_overhead_fraction = if t.windows_wall_s > 0.0 {
+        t.coupling_overhead_s / t.windows_wall_s
+    } else {
+        0.0
+    };
+    let _ = run.link.close().await;
+    write_summary(&out_dir, &summary)?;
+    result.map(|_| summary)
+}
+
+/// The schedule's name as written in scene files.
+pub fn schedule_name(k: ScheduleKind) -> String {
+    serde_json::to_value(k)
+        .ok()
+        .and_then(|v| v.as_str().map(String::from))
+        .unwrap_or_default()
+}

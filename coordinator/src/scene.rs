@@ -1,0 +1,408 @@
+//! Scene files (TOML): what exists in a run. The coordinator reads `[scene]`, `[coupling]`,
+//! `[output]` and `[nodes]`; the `[dem]` and `[fem]` tables belong to the nodes, which parse
+//! and validate them (they get the whole file in their `init` command and report errors with
+//! line numbers of this file). Every error names the file, line and field.
+
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+use toml::Spanned;
+
+use crate::units::{Joules, Seconds};
+
+/// A scene error with its place in the file.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{file}:{line}:{column}: {field}{sep}{message}", sep = if field.is_empty() { "" } else { ": " })]
+pub struct SceneError {
+    pub file: String,
+    pub line: usize,
+    pub column: usize,
+    /// Dotted path of the field, e.g. `coupling.window` (empty when unknown).
+    pub field: String,
+    pub message: String,
+}
+
+/// 1-based line and column of a byte offset.
+pub fn line_col(text: &str, offset: usize) -> (usize, usize) {
+    let offset = offset.min(text.len());
+    let before = &text[..offset];
+    let line = before.matches('\n').count() + 1;
+    let column = before.rfind('\n').map(|i| offset - i).unwrap_or(offset + 1);
+    (line, column)
+}
+
+/// The coupling schedule (Ullrich ch. 3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ScheduleKind {
+    /// A single solver, no coupling.
+    None,
+    /// DEM to a steady state, then a static FEM solve with its interface forces.
+    OneWay,
+    /// Just-in-time: DEM first with the last FEM kinematics, then FEM.
+    Jit,
+    /// Predictive: FEM first with the last DEM forces, DEM follows the predicted motion.
+    Predictive,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneSection {
+    /// Name of the scene (default: the file name without extension).
+    pub name: Option<Spanned<String>>,
+    pub description: Option<String>,
+    /// Simulated time (s). For one-way coupling: the longest the DEM may take to settle.
+    pub end_time: Spanned<Seconds>,
+}
+
+fn default_interfaces() -> Vec<String> {
+    vec!["interface".to_string()]
+}
+
+fn default_timeout() -> Seconds {
+    Seconds(60.0)
+}
+
+fn default_growth() -> f64 {
+    1e3
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CouplingSection {
+    /// `none` (one solver), `one-way`, `jit`, `predictive`.
+    pub schedule: Option<Spanned<ScheduleKind>>,
+    /// Coupling window Δt^C = Δt^F (s). For a single solver: the reporting interval.
+    pub window: Option<Spanned<Seconds>>,
+    /// FEM gets the mean of the DEM forces over the window's substeps (Ullrich (3.8)).
+    #[serde(default)]
+    pub force_averaging: bool,
+    /// Names of the coupled interfaces (default `["interface"]`).
+    #[serde(default)]
+    pub interfaces: Vec<Spanned<String>>,
+    /// Longest wait for one window's messages before the run is stopped (s).
+    #[serde(default = "default_timeout")]
+    pub window_timeout: Seconds,
+    /// One-way: the DEM is steady when its kinetic energy falls below this (J).
+    pub steady_kinetic_energy: Option<Spanned<Joules>>,
+    /// Stability monitor: stop when the interface force grows by more than this factor
+    /// between consecutive windows while exceeding 10 × its running maximum.
+    #[serde(default = "default_growth")]
+    pub max_force_growth: f64,
+}
+
+impl Default for CouplingSection {
+    fn default() -> Self {
+        CouplingSection {
+            schedule: None,
+            window: None,
+            force_averaging: false,
+            interfaces: Vec::new(),
+            window_timeout: default_timeout(),
+            steady_kinetic_energy: None,
+            max_force_growth: default_growth(),
+        }
+    }
+}
+
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OutputSection {
+    /// Output folder (default `out/<scene name>`), relative to the working directory.
+    pub dir: Option<String>,
+}
+
+/// How a node is started.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NodeLaunch {
+    /// Command line that starts the node instead of the built-in binary; the coordinator
+    /// appends `--run-id`, `--node`, `--listen`, `--connect`.
+    pub command: Option<Vec<String>>,
+    /// The node is started by someone else (another machine): the coordinator waits for it.
+    #[serde(default)]
+    pub external: bool,
+}
+
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NodesSection {
+    pub dem: Option<NodeLaunch>,
+    pub fem: Option<NodeLaunch>,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SceneFile {
+    scene: SceneSection,
+    #[serde(default)]
+    coupling: CouplingSection,
+    #[serde(default)]
+    output: OutputSection,
+    #[serde(default)]
+    nodes: NodesSection,
+    dem: Option<toml::Table>,
+    fem: Option<toml::Table>,
+}
+
+/// A validated scene, as far as the coordinator is concerned.
+#[derive(Debug, Clone)]
+pub struct Scene {
+    pub path: PathBuf,
+    /// The whole file, sent to the nodes.
+    pub text: String,
+    pub name: String,
+    pub description: Option<String>,
+    pub end_time: f64,
+    pub schedule: ScheduleKind,
+    /// Δt^C (s).
+    pub window: f64,
+    pub windows: u64,
+    pub force_averaging: bool,
+    pub interfaces: Vec<String>,
+    pub window_timeout: f64,
+    pub steady_kinetic_energy: Option<f64>,
+    pub max_force_growth: f64,
+    pub out_dir: PathBuf,
+    pub has_dem: bool,
+    pub has_fem: bool,
+    pub nodes: NodesSection,
+}
+
+impl Scene {
+    /// Reads and validates a scene file.
+    pub fn load(path: &Path) -> Result<Scene, SceneError> {
+        let text = std::fs::read_to_string(path).map_err(|e| SceneError {
+            file: path.display().to_string(),
+            line: 0,
+            column: 0,
+            field: String::new(),
+            message: format!("cannot read the scene file: {e}"),
+        })?;
+        Scene::parse(path, text)
+    }
+
+    /// Validates scene text that came from `path`.
+    pub fn parse(path: &Path, text: String) -> Result<Scene, SceneError> {
+        let file = path.display().to_string();
+        let err_at = |offset: usize, field: &str, message: String| {
+            let (line, column) = line_col(&text, offset);
+            SceneError {
+                file: file.clone(),
+                line,
+                column,
+                field: field.to_string(),
+                message,
+            }
+        };
+        let raw: SceneFile = toml::from_str(&text).map_err(|e| {
+            let offset = e.span().map(|s| s.start).unwrap_or(0);
+            err_at(offset, "", e.message().trim().to_string())
+        })?;
+        let has_dem = raw.dem.is_some();
+        let has_fem = raw.fem.is_some();
+        if !has_dem && !has_fem {
+            return Err(err_at(
+                0,
+                "",
+                "the scene has neither a [dem] nor a [fem] table: nothing to run".into(),
+            ));
+        }
+        let name = match &raw.scene.name {
+            Some(n) => {
+                proto::keys::validate_name("scene name", n.get_ref())
+                    .map_err(|e| err_at(n.span().start, "scene.name", e.to_string()))?;
+                n.get_ref().clone()
+            }
+            None => {
+                let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("scene");
+                stem.chars()
+                    .map(|c| {
+                        if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                            c
+                        } else {
+                            '_'
+                        }
+                    })
+                    .take(48)
+                    .collect()
+            }
+        };
+        let end_time = raw.scene.end_time.get_ref().0;
+        if end_time <= 0.0 {
+            return Err(err_at(
+                raw.scene.end_time.span().start,
+                "scene.end_time",
+                format!("must be positive, got {end_time} s"),
+            ));
+        }
+        let c = &raw.coupling;
+        let both = has_dem && has_fem;
+        let schedule = match &c.schedule {
+            Some(s) => {
+                let k = *s.get_ref();
+                if both && k == ScheduleKind::None {
+                    return Err(err_at(s.span().start, "coupling.schedule", "the scene has both [dem] and [fem]: choose `one-way`, `jit` or `predictive`".into()));
+                }
+                if !both && k != ScheduleKind::None {
+                    return Err(err_at(
+                        s.span().start,
+                        "coupling.schedule",
+                        format!(
+                            "`{}` couples two solvers, but the scene has only a [{}] table",
+                            serde_json::to_value(k)
+                                .ok()
+                                .and_then(|v| v.as_str().map(String::from))
+                                .unwrap_or_default(),
+                            if has_dem { "dem" } else { "fem" }
+                        ),
+                    ));
+                }
+                k
+            }
+            None if both => {
+                return Err(err_at(text.find("[coupling]").unwrap_or(0), "coupling.schedule", "the scene couples [dem] and [fem]: set `schedule` to `one-way`, `jit` or `predictive`".into()));
+            }
+            None => ScheduleKind::None,
+        };
+        let window = match &c.window {
+            Some(w) => {
+                let v = w.get_ref().0;
+                if v <= 0.0 || v > end_time * (1.0 + 1e-12) {
+                    return Err(err_at(
+                        w.span().start,
+                        "coupling.window",
+                        format!("must lie in (0, end_time = {end_time} s], got {v} s"),
+                    ));
+                }
+                v
+            }
+            None => {
+                return Err(err_at(text.find("[coupling]").unwrap_or(0), "coupling.window", "missing: the coupling window Δt^C in s (for a single solver: the reporting interval)".into()));
+            }
+        };
+        let ratio = end_time / window;
+        let windows = ratio.round();
+        if (ratio - windows).abs() > 1e-9 * ratio.max(1.0) {
+            let w = c.window.as_ref().expect("checked above");
+            return Err(err_at(w.span().start, "coupling.window", format!(
+                "end_time / window = {end_time} / {window} = {ratio} is not a whole number of windows"
+            )));
+        }
+        let mut interfaces = Vec::new();
+        for i in c.interfaces.clone() {
+            proto::keys::validate_name("interface", i.get_ref())
+                .map_err(|e| err_at(i.span().start, "coupling.interfaces", e.to_string()))?;
+            interfaces.push(i.into_inner());
+        }
+        if interfaces.is_empty() {
+            interfaces = default_interfaces();
+        }
+        if !both {
+            interfaces.clear();
+        }
+        let steady = match &c.steady_kinetic_energy {
+            Some(s) if s.get_ref().0 <= 0.0 => {
+                return Err(err_at(
+                    s.span().start,
+                    "coupling.steady_kinetic_energy",
+                    "must be positive (J)".into(),
+                ));
+            }
+            Some(s) => Some(s.get_ref().0),
+            None => None,
+        };
+        if c.window_timeout.0 <= 0.0 {
+            return Err(err_at(
+                text.find("window_timeout").unwrap_or(0),
+                "coupling.window_timeout",
+                "must be positive (s)".into(),
+            ));
+        }
+        let out_dir = raw
+            .output
+            .dir
+            .clone()
+            .map(PathBuf::from)
+            .unwrap_or_else(|| PathBuf::from("out").join(&name));
+        Ok(Scene {
+            path: path.to_path_buf(),
+            name,
+            description: raw.scene.description.clone(),
+            end_time,
+            schedule,
+            window,
+            windows: windows as u64,
+            force_averaging: c.force_averaging,
+            interfaces,
+            window_timeout: c.window_timeout.0,
+            steady_kinetic_energy: steady,
+            max_force_growth: c.max_force_growth,
+            out_dir,
+            has_dem,
+            has_fem,
+            nodes: raw.nodes,
+            text,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<Scene, SceneError> {
+        Scene::parse(Path::new("s.toml"), text.to_string())
+    }
+
+    const OK: &str =
+        "[scene]\nend_time = \"1 ms\"\n[coupling]\nwindow = 1e-4\n[dem]\ntime_step = 1e-6\n";
+
+    #[test]
+    fn a_minimal_dem_scene_is_valid() {
+        let s = parse(OK).unwrap();
+        assert_eq!(s.schedule, ScheduleKind::None);
+        assert_eq!(s.windows, 10);
+        assert_eq!(s.name, "s");
+        assert!(s.has_dem && !s.has_fem);
+    }
+
+    #[test]
+    fn unknown_key_names_line_and_field() {
+        let e = parse("[scene]\nend_time = 1\n[coupling]\nwindow = 0.1\nwindoww = 3\n[dem]\n")
+            .unwrap_err();
+        assert_eq!((e.line, e.file.as_str()), (5, "s.toml"));
+        assert!(e.message.contains("unknown field `windoww`"), "{e}");
+        assert!(e.to_string().starts_with("s.toml:5:"), "{e}");
+    }
+
+    #[test]
+    fn wrong_unit_names_line_and_field() {
+        let e = parse("[scene]\nend_time = 1\n[coupling]\nwindow = \"3 kg\"\n[dem]\n").unwrap_err();
+        assert_eq!(e.line, 4);
+        assert!(e.message.contains("expected a time"), "{e}");
+    }
+
+    #[test]
+    fn coupled_scene_needs_a_schedule_and_whole_windows() {
+        let e =
+            parse("[scene]\nend_time = 1\n[coupling]\nwindow = 0.1\n[dem]\n[fem]\n").unwrap_err();
+        assert_eq!(e.field, "coupling.schedule");
+        let e = parse(
+            "[scene]\nend_time = 1\n[coupling]\nschedule = \"jit\"\nwindow = 0.3\n[dem]\n[fem]\n",
+        )
+        .unwrap_err();
+        assert_eq!((e.field.as_str(), e.line), ("coupling.window", 5));
+        assert!(e.message.contains("not a whole number"), "{e}");
+        let e =
+            parse("[scene]\nend_time = 1\n[coupling]\nschedule = \"jit\"\nwindow = 0.1\n[dem]\n")
+                .unwrap_err();
+        assert!(e.message.contains("only a [dem]"), "{e}");
+    }
+
+    #[test]
+    fn nothing_to_run_is_an_error() {
+        let e = parse("[scene]\nend_time = 1\n[coupling]\nwindow = 0.1\n").unwrap_err();
+        assert!(e.message.contains("neither"), "{e}");
+    }
+}
