@@ -692,6 +692,34 @@ impl Model {
         self.st.steps += 1;
         Ok(())
     }
+    /// Dense K and M on the free equations (row-major n×n), M being the analysis' mass matrix
+    /// (consistent for dynamic analyses unless lumped, else lumped). For small models only
+    /// (tests, modal checks).
+    pub fn dense_free_matrices(&self) -> (usize, Vec<f64>, Vec<f64>) {
+        let n = self.dofs.n_eq;
+        let mut k = vec![0.0; n * n];
+        let mut m = vec![0.0; n * n];
+        let ml = self.dofs.gather(&self.m_lumped);
+        for j in 0..n {
+            for p in self.pattern.col_ptr[j] as usize..self.pattern.col_ptr[j + 1] as usize {
+                let i = self.pattern.row_idx[p] as usize;
+                k[i * n + j] = self.k[p];
+                if let Some(mc) = &self.m_consistent {
+                    m[i * n + j] = mc[p];
+                }
+            }
+            if self.m_consistent.is_none() {
+                m[j * n + j] = ml[j];
+            }
+        }
+        (n, k, m)
+    }
+    /// Scatters a free-equation vector to a full dof vector (supported dofs zero).
+    pub fn free_to_full(&self, free: &[f64]) -> Vec<f64> {
+        let mut full = vec![0.0; self.num_dofs()];
+        self.dofs.scatter(free, &mut full);
+        full
+    }
     /// Total mass from the lumped mass [kg].
     pub fn total_mass(&self) -> f64 {
         self.m_lumped.iter().step_by(3).sum()
