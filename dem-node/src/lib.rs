@@ -548,6 +548,7 @@ impl Engine {
         m.window_a = to_v(accelerations);
         m.rule = rule;
         m.tau = 0.0;
+        m.window_steps = 0;
         m.move_to(0.0);
         m.nodal_force_sum.iter_mut().for_each(|f| *f = V3::zeros());
         m.window_substeps = 0;
@@ -555,6 +556,16 @@ impl Engine {
         // new patch ids must reach the candidate lists
         self.state.lists.valid = false;
         Ok(())
+    }
+
+    /// Re-evaluates the contact forces of the current state without advancing time and without
+    /// tangential-history increments, e.g. after adding meshes or editing particles at set-up
+    /// (otherwise the first half kick uses the forces of the previous configuration).
+    pub fn refresh_forces(&mut self) {
+        self.run(|e| {
+            e.detect_contacts();
+            e.resolve_forces(0.0);
+        });
     }
 
     /// Runs `substeps` DEM steps of `time_step`.
@@ -577,7 +588,8 @@ impl Engine {
         self.state.time += dt;
         self.state.steps += 1;
         for m in self.state.meshes.iter_mut().filter(|m| m.coupled) {
-            m.tau += dt;
+            m.window_steps += 1;
+            m.tau = m.window_steps as f64 * dt;
             m.move_to(m.tau);
         }
         self.detect_contacts();

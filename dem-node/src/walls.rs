@@ -39,8 +39,10 @@ pub struct Mesh {
     pub window_v: Vec<V3>,
     pub window_a: Vec<V3>,
     pub rule: MotionRule,
-    /// Time τ since the window kinematics were set.
+    /// Time τ since the window kinematics were set, = `window_steps` × Δt (not a running sum,
+    /// so the motion rule is evaluated at exactly kΔt).
     pub tau: f64,
+    pub window_steps: u64,
     /// Contact patch of each triangle (see `triangle_contact`).
     pub patch: Vec<u32>,
     /// Nodal forces exerted by particles on the nodes: current step, last completed step,
@@ -74,6 +76,7 @@ impl Mesh {
             window_a: vec![V3::zeros(); n],
             rule: MotionRule::Linear,
             tau: 0.0,
+            window_steps: 0,
             patch,
             nodal_force_step: vec![V3::zeros(); n],
             nodal_force_last: vec![V3::zeros(); n],

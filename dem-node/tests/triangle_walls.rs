@@ -51,6 +51,7 @@ fn add_static(e: &mut dem::Engine, name: &str, pos: &[f64], tris: &[u32]) -> usi
     let zeros = vec![0.0; pos.len()];
     e.set_mesh_kinematics(m, pos, &zeros, &zeros, MotionRule::Linear)
         .unwrap();
+    e.refresh_forces();
     m
 }
 

@@ -53,7 +53,10 @@ impl DemNode {
     async fn write_forces(&mut self, p: &mut Participant, window: u64) -> Result<(), NodeError> {
         let averaged = self.averaged;
         let substeps = self.substeps;
-        let engine = self.engine()?;
+        let engine = self
+            .engine
+            .as_ref()
+            .ok_or_else(|| NodeError::new(ErrorCode::Protocol, "`publish` before `init`"))?;
         let time = engine.time();
         let msgs: Vec<InterfaceForces> = self
             .coupled
