@@ -770,46 +770,49 @@ mod spans {
         }
     }
 
-    /// Dotted path of the innermost key whose value contains `offset`.
+    /// Dotted path of the innermost key whose key or value span contains `offset` (the whole
+    /// tree is searched: tables opened by separate headers do not nest by span).
     pub fn path_at(text: &str, offset: usize) -> Option<String> {
         let root = DeTable::parse(text).ok()?;
-        let mut path = String::new();
-        walk_table(root.get_ref(), offset, &mut path);
-        if path.is_empty() {
-            None
-        } else {
-            Some(path)
-        }
+        let mut best: Option<(usize, String)> = None;
+        walk_table(root.get_ref(), offset, "", 0, &mut best);
+        best.map(|(_, p)| p)
     }
 
-    fn walk_table(t: &DeTable, offset: usize, path: &mut String) -> bool {
+    fn walk_table(
+        t: &DeTable,
+        offset: usize,
+        prefix: &str,
+        depth: usize,
+        best: &mut Option<(usize, String)>,
+    ) {
         for (k, v) in t.iter() {
-            let ks = k.span();
-            let vs = v.span();
-            if ks.contains(&offset) || vs.contains(&offset) {
-                if !path.is_empty() {
-                    path.push('.');
+            let path = if prefix.is_empty() {
+                k.get_ref().to_string()
+            } else {
+                format!("{prefix}.{}", k.get_ref())
+            };
+            if k.span().contains(&offset) || v.span().contains(&offset) {
+                if best.as_ref().is_none_or(|(d, _)| depth >= *d) {
+                    *best = Some((depth, path.clone()));
                 }
-                path.push_str(k.get_ref());
-                walk_value(v, offset, path);
-                return true;
             }
+            walk_value(v, offset, &path, depth + 1, best);
         }
-        false
     }
 
-    fn walk_value(v: &Spanned<DeValue>, offset: usize, path: &mut String) {
+    fn walk_value(
+        v: &Spanned<DeValue>,
+        offset: usize,
+        path: &str,
+        depth: usize,
+        best: &mut Option<(usize, String)>,
+    ) {
         match v.get_ref() {
-            DeValue::Table(t) => {
-                walk_table(t, offset, path);
-            }
+            DeValue::Table(t) => walk_table(t, offset, path, depth, best),
             DeValue::Array(a) => {
                 for (i, e) in a.iter().enumerate() {
-                    if e.span().contains(&offset) {
-                        path.push_str(&format!("[{i}]"));
-                        walk_value(e, offset, path);
-                        return;
-                    }
+                    walk_value(e, offset, &format!("{path}[{i}]"), depth, best);
                 }
             }
             _ => {}
