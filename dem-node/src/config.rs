@@ -618,13 +618,53 @@ fn locate(text: &str, path: &[Seg]) -> Option<std::ops::Range<usize>> {
     Some(best)
 }
 
+/// Byte offset of a line `name = ...` after `from` and before the next table header.
+fn find_key_in_table(text: &str, from: usize, name: &str) -> Option<usize> {
+    let mut offset = text[..from.min(text.len())]
+        .rfind('\n')
+        .map(|i| i + 1)
+        .unwrap_or(0);
+    let mut first = true;
+    for line in text[offset..].split_inclusive('\n') {
+        let trimmed = line.trim_start();
+        if !first && trimmed.starts_with('[') {
+            return None;
+        }
+        first = false;
+        let indent = line.len() - trimmed.len();
+        if let Some(rest) = trimmed.strip_prefix(name) {
+            if rest.trim_start().starts_with('=') {
+                return Some(offset + indent);
+            }
+        }
+        // inline tables: `{ ..., name = ... }`
+        if let Some(pos) = line
+            .find(&format!(" {name} ="))
+            .or_else(|| line.find(&format!("{{{name} =")))
+        {
+            return Some(offset + pos + 1);
+        }
+        offset += line.len();
+    }
+    None
+}
+
 /// Parses the `[dem]` table of a whole scene file; other top-level tables are ignored.
 pub fn parse_scene_section(text: &str) -> Result<Option<DemConfig>, SceneError> {
     let doc: SceneDoc = toml::from_str(text).map_err(|e| {
-        let (line, column) = e
-            .span()
-            .map(|s| line_column(text, s.start))
-            .unwrap_or((1, 1));
+        let mut start = e.span().map(|s| s.start).unwrap_or(0);
+        // Internally tagged tables (`kind = ...`) report the span of the whole table; point at
+        // the unknown key itself when it is found inside that table.
+        if let Some(name) = e
+            .message()
+            .strip_prefix("unknown field `")
+            .and_then(|m| m.split('`').next())
+        {
+            if let Some(off) = find_key_in_table(text, start, name) {
+                start = off;
+            }
+        }
+        let (line, column) = line_column(text, start);
         // toml's message names the offending key, e.g. "unknown field `radiuss`, expected ...".
         SceneError {
             line,

@@ -220,10 +220,7 @@ impl Solver for DemNode {
 
 fn main() -> std::process::ExitCode {
     let args = Args::parse();
-    tracing_subscriber::fmt()
-        .with_writer(std::io::stderr)
-        .with_target(false)
-        .init();
+    proto::node::init_logging();
     let hello = Hello {
         software: format!("dem-node {}", env!("CARGO_PKG_VERSION")),
         role: Role::Dem,
