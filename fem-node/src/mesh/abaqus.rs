@@ -13,6 +13,11 @@ enum Block {
         kind: ElementKind,
         elset: Option<String>,
     },
+    /// Surface/line elements (CPS8, S4, T3D2, ...): not part of the model, but their ELSETs
+    /// become node sets (e.g. the faces Gmsh exports for physical surfaces).
+    AuxElement {
+        elset: Option<String>,
+    },
     Nset {
         name: String,
         generate: bool,
@@ -22,6 +27,16 @@ enum Block {
         generate: bool,
     },
     Skip,
+}
+
+/// Lower-dimensional element families that may appear in a deck next to the solid mesh.
+fn is_auxiliary_type(ty: &str) -> bool {
+    [
+        "CPS", "CPE", "CAX", "CGAX", "S3", "S4", "S6", "S8", "STRI", "M3D", "SFM3D", "T3D", "B31",
+        "B32", "R3D",
+    ]
+    .iter()
+    .any(|p| ty.starts_with(p))
 }
 
 fn element_kind(ty: &str) -> Option<ElementKind> {
@@ -52,6 +67,8 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
     let mut elset_raw: Vec<(String, usize, String, bool)> = Vec::new();
     let mut nset_gen: Vec<(String, usize, Vec<i64>)> = Vec::new();
     let mut block = Block::None;
+    let mut aux_elems: HashMap<u64, Vec<u32>> = HashMap::new();
+    let mut aux_sets: std::collections::BTreeMap<String, Vec<u32>> = Default::default();
     // Element data may continue over several lines (trailing comma).
     let mut pending: Vec<u64> = Vec::new();
     let mut pending_line = 0usize;
@@ -88,12 +105,15 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
                         .get("TYPE")
                         .ok_or_else(|| err(ln, "*ELEMENT without TYPE=".into()))?
                         .to_ascii_uppercase();
-                    let kind = element_kind(&ty).ok_or_else(|| {
-                        err(ln, format!("unknown element type '{ty}' (supported: C3D4, C3D10, C3D8, C3D8I, C3D20, C3D20R)"))
-                    })?;
-                    Block::Element {
-                        kind,
-                        elset: params.get("ELSET").cloned(),
+                    match element_kind(&ty) {
+                        Some(kind) => Block::Element { kind, elset: params.get("ELSET").cloned() },
+                        None if is_auxiliary_type(&ty) => Block::AuxElement { elset: params.get("ELSET").cloned() },
+                        None => {
+                            return Err(err(
+                                ln,
+                                format!("unknown element type '{ty}' (supported: C3D4, C3D10, C3D8, C3D8I, C3D20, C3D20R)"),
+                            ))
+                        }
                     }
                 }
                 "NSET" => Block::Nset {
@@ -212,6 +232,38 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
                     ));
                 }
             }
+            Block::AuxElement { elset } => {
+                if pending.is_empty() {
+                    pending_line = ln;
+                }
+                for f in fields.iter().filter(|s| !s.is_empty()) {
+                    pending.push(
+                        f.parse()
+                            .map_err(|_| err(ln, format!("bad integer '{f}' in element data")))?,
+                    );
+                }
+                if !line.ends_with(',') {
+                    let id = pending[0];
+                    let mut nodes = Vec::new();
+                    for nid in &pending[1..] {
+                        let (ix, _) = node_index.get(nid).ok_or_else(|| {
+                            err(
+                                pending_line,
+                                format!("element {id} references missing node {nid}"),
+                            )
+                        })?;
+                        nodes.push(*ix);
+                    }
+                    if let Some(s) = elset {
+                        aux_sets
+                            .entry(s.clone())
+                            .or_default()
+                            .extend_from_slice(&nodes);
+                    }
+                    aux_elems.insert(id, nodes);
+                    pending.clear();
+                }
+            }
             Block::Nset { name, generate } => {
                 if *generate {
                     let v: Result<Vec<i64>, _> = fields
@@ -294,6 +346,10 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
             }
             gen_lines.entry(key).or_default().push(v);
         } else if let Ok(id) = tok.parse::<u64>() {
+            if let Some(nodes) = aux_elems.get(&id) {
+                aux_sets.entry(name).or_default().extend_from_slice(nodes);
+                continue;
+            }
             let (ix, _) = elem_index
                 .get(&id)
                 .ok_or_else(|| err(ln, format!("*ELSET {name} references missing element {id}")))?;
@@ -311,6 +367,13 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
     for key in order {
         let v = &gen_lines[&key];
         for id in generate(&key.0, key.1, v)? {
+            if let Some(nodes) = aux_elems.get(&id) {
+                aux_sets
+                    .entry(key.0.clone())
+                    .or_default()
+                    .extend_from_slice(nodes);
+                continue;
+            }
             let (ix, _) = elem_index.get(&id).ok_or_else(|| {
                 err(
                     key.1,
@@ -319,6 +382,20 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
             })?;
             mesh.elem_sets.entry(key.0.clone()).or_default().push(*ix);
         }
+    }
+    // Element sets of solid elements also define node sets (all their nodes), as do sets of
+    // surface elements; explicit *NSETs of the same name take precedence.
+    for (name, elems) in &mesh.elem_sets {
+        if !mesh.node_sets.contains_key(name) && !aux_sets.contains_key(name) {
+            let nodes: Vec<u32> = elems
+                .iter()
+                .flat_map(|&e| mesh.element_nodes(e as usize).to_vec())
+                .collect();
+            aux_sets.insert(name.clone(), nodes);
+        }
+    }
+    for (name, nodes) in aux_sets {
+        mesh.node_sets.entry(name).or_insert(nodes);
     }
     for v in mesh.node_sets.values_mut() {
         *v = sort_dedup(std::mem::take(v));

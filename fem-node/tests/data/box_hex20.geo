@@ -1,0 +1,13 @@
+SetFactory("OpenCASCADE");
+Box(1) = {0, 0, 0, 0.2, 0.1, 0.05};
+Transfinite Curve{:} = 3;
+Transfinite Surface{:};
+Recombine Surface{:};
+Transfinite Volume{1};
+Physical Volume("body") = {1};
+l() = Surface In BoundingBox{-1e-6, -1e-6, -1e-6, 1e-6, 1, 1};
+Physical Surface("left") = {l()};
+r() = Surface In BoundingBox{0.2-1e-6, -1e-6, -1e-6, 0.2+1e-6, 1, 1};
+Physical Surface("right") = {r()};
+Mesh.ElementOrder = 2;
+Mesh.SecondOrderIncomplete = 1;

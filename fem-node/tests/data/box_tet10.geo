@@ -1,0 +1,12 @@
+SetFactory("OpenCASCADE");
+Box(1) = {0, 0, 0, 0.2, 0.1, 0.05};
+Physical Volume("body") = {1};
+s() = Surface In BoundingBox{-1e-6, -1e-6, -1e-6, 1, 1, 1e-6};
+Physical Surface("bottom") = {s()};
+t() = Surface In BoundingBox{-1e-6, -1e-6, 0.05-1e-6, 1, 1, 0.05+1e-6};
+Physical Surface("top") = {t()};
+l() = Surface In BoundingBox{-1e-6, -1e-6, -1e-6, 1e-6, 1, 1};
+Physical Surface("left") = {l()};
+Mesh.CharacteristicLengthMax = 0.06;
+Mesh.ElementOrder = 2;
+Mesh.MshFileVersion = 4.1;
