@@ -15,7 +15,7 @@ use coordinator::scene::Scene;
 )]
 struct Cli {
     /// Log level (error, warn, info, debug, trace) or a tracing filter.
-    #[arg(long, global = true, default_value = "info", env = "COSIM_LOG")]
+    #[arg(long, global = true, default_value = "info,zenoh=warn", env = "COSIM_LOG")]
     log: String,
     #[command(subcommand)]
     command: Command,
@@ -56,6 +56,7 @@ fn main() -> ExitCode {
         )
         .with_writer(std::io::stderr)
         .with_target(false)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .init();
     let rt = match tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)

@@ -124,8 +124,6 @@ impl LinkConfig {
         // Nothing may leave the machine unless configured: no multicast scouting, ever.
         set(&mut config, "scouting/multicast/enabled", "false".into())?;
         if self.zenoh_config.is_none() {
-            // Peers learn each other only from explicit endpoints.
-            set(&mut config, "scouting/gossip/enabled", "false".into())?;
             set(
                 &mut config,
                 "transport/link/tx/lease",

@@ -216,3 +216,14 @@ pub fn main_with<S: Solver>(args: NodeArgs, hello: Hello, solver: S) -> std::pro
         }
     }
 }
+
+/// Logging for node binaries: to stderr, filter from `COSIM_LOG` (default `info,zenoh=warn`).
+pub fn init_logging() {
+    let filter = std::env::var("COSIM_LOG").unwrap_or_else(|_| "info,zenoh=warn".into());
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::try_new(filter).unwrap_or_else(|_| "info".into()))
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .with_ansi(false)
+        .try_init();
+}

@@ -140,6 +140,7 @@ impl Solver for FemNode {
             _ => None,
         };
         let wait_s = t_wait.elapsed().as_secs_f64();
+        let out_dir = self.out_dir.clone();
         let model = self.model()?;
         if let Some(f) = forces {
             model
@@ -156,7 +157,6 @@ impl Solver for FemNode {
                 .advance(w.dt)
                 .map_err(|e| fem_error(ErrorCode::Unstable, format!("window {}: {e}", w.window)))?;
         }
-        let out_dir = self.out_dir.clone();
         model
             .write_outputs(&out_dir)
             .map_err(|e| fem_error(ErrorCode::Io, e))?;
@@ -232,10 +232,7 @@ impl Solver for FemNode {
 
 fn main() -> std::process::ExitCode {
     let args = Args::parse();
-    tracing_subscriber::fmt()
-        .with_writer(std::io::stderr)
-        .with_target(false)
-        .init();
+    proto::node::init_logging();
     let hello = Hello {
         software: format!("fem-node {}", env!("CARGO_PKG_VERSION")),
         role: Role::Fem,
