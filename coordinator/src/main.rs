@@ -15,7 +15,12 @@ use coordinator::scene::Scene;
 )]
 struct Cli {
     /// Log level (error, warn, info, debug, trace) or a tracing filter.
-    #[arg(long, global = true, default_value = "info,zenoh=warn", env = "COSIM_LOG")]
+    #[arg(
+        long,
+        global = true,
+        default_value = "info,zenoh=warn",
+        env = "COSIM_LOG"
+    )]
     log: String,
     #[command(subcommand)]
     command: Command,

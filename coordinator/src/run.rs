@@ -381,6 +381,7 @@ impl Run<'_> {
                         .map(|e| format!("{e:.6e}"))
                         .unwrap_or_default()
                 )?;
+                csv.flush()?;
                 self.summary.windows_done = window + 1;
                 self.summary.simulated_time_s = t_end;
                 bar.set_position(window + 1);

@@ -8,7 +8,10 @@ use std::process::{Command, Output};
 pub fn bin_dir() -> PathBuf {
     // the test executable is target/<profile>/deps/<name>-<hash>
     let exe = std::env::current_exe().expect("test executable path");
-    exe.parent().and_then(Path::parent).expect("target/<profile>").to_path_buf()
+    exe.parent()
+        .and_then(Path::parent)
+        .expect("target/<profile>")
+        .to_path_buf()
 }
 
 /// Path of a workspace binary; fails with the command to build it if it is missing.
@@ -24,7 +27,10 @@ pub fn bin(name: &str) -> PathBuf {
 
 /// The workspace root.
 pub fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("workspace root").to_path_buf()
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("workspace root")
+        .to_path_buf()
 }
 
 /// A `cosim` command running in the workspace root.

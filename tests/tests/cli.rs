@@ -7,7 +7,8 @@ use cosim_tests::{cosim, root, run, summary, write_scene};
 fn cosim_run_minimal_scene_launches_the_dem_node_and_writes_a_summary() {
     let out = tempfile::tempdir().unwrap();
     let mut c = cosim();
-    c.args(["run", "scenes/minimal.toml", "--no-progress", "--out"]).arg(out.path());
+    c.args(["run", "scenes/minimal.toml", "--no-progress", "--out"])
+        .arg(out.path());
     let o = run(c);
     assert!(o.status.success());
     let s = summary(out.path());
@@ -17,7 +18,10 @@ fn cosim_run_minimal_scene_launches_the_dem_node_and_writes_a_summary() {
     assert_eq!(s["results"]["dem.particles"], 27.0);
     assert!((s["simulated_time_s"].as_f64().unwrap() - 0.2).abs() < 1e-9);
     // the beads have landed and settle on the floor
-    assert!(s["results"]["dem.wall_contacts"].as_f64().unwrap() >= 9.0, "{s}");
+    assert!(
+        s["results"]["dem.wall_contacts"].as_f64().unwrap() >= 9.0,
+        "{s}"
+    );
     let csv = std::fs::read_to_string(out.path().join("windows.csv")).unwrap();
     assert_eq!(csv.lines().count(), 21, "header + one row per window");
     assert!(out.path().join("logs/dem.log").exists());
@@ -52,7 +56,11 @@ fn cosim_check_names_line_and_field_of_an_error_in_the_dem_table() {
     let o = run(c);
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
-    let line = text.lines().position(|l| l.starts_with("poisson_ratio")).unwrap() + 1;
+    let line = text
+        .lines()
+        .position(|l| l.starts_with("poisson_ratio"))
+        .unwrap()
+        + 1;
     assert!(err.contains("bad-dem.toml"), "{err}");
     assert!(err.contains(&format!("line {line}")), "{err}");
     assert!(err.contains("poisson_ratio"), "{err}");

@@ -1,0 +1,107 @@
+//! Faults during a run: a node that dies must end the run quickly, with its name and window.
+
+use std::io::Read;
+use std::process::Stdio;
+use std::time::{Duration, Instant};
+
+use cosim_tests::{cosim, root, summary, write_scene};
+
+/// Pid of the process whose command line contains all of `needles`.
+fn find_process(needles: &[&str]) -> Option<i32> {
+    for entry in std::fs::read_dir("/proc").ok()?.flatten() {
+        let Ok(pid) = entry.file_name().to_string_lossy().parse::<i32>() else {
+            continue;
+        };
+        let Ok(cmd) = std::fs::read(entry.path().join("cmdline")) else {
+            continue;
+        };
+        let cmd = String::from_utf8_lossy(&cmd).replace('\0', " ");
+        if needles.iter().all(|n| cmd.contains(n)) {
+            return Some(pid);
+        }
+    }
+    None
+}
+
+#[test]
+fn killing_the_dem_node_mid_run_ends_the_run_within_5_s_naming_the_node_and_window() {
+    let dir = tempfile::tempdir().unwrap();
+    // the minimal scene, made long enough to be killed in the middle
+    let text = std::fs::read_to_string(root().join("scenes/minimal.toml"))
+        .unwrap()
+        .replace("end_time = \"0.2 s\"", "end_time = \"1000 s\"");
+    let scene = write_scene(dir.path(), "long.toml", &text);
+    let out = dir.path().join("out");
+    let run_id = format!("kill-{}", std::process::id());
+    let mut c = cosim();
+    c.arg("run")
+        .arg(&scene)
+        .args(["--no-progress", "--run-id", &run_id, "--out"])
+        .arg(&out);
+    let mut child = c
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+
+    // wait until windows are being computed
+    let csv = out.join("windows.csv");
+    let t0 = Instant::now();
+    while std::fs::read_to_string(&csv)
+        .map(|s| s.lines().count())
+        .unwrap_or(0)
+        < 5
+    {
+        assert!(
+            t0.elapsed() < Duration::from_secs(60),
+            "the run did not start"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let pid = find_process(&["dem-node", &run_id]).expect("the dem-node process");
+    let killed = Instant::now();
+    assert_eq!(unsafe_kill(pid), 0);
+
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        assert!(
+            killed.elapsed() < Duration::from_secs(5),
+            "cosim still running 5 s after the DEM node was killed"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let elapsed = killed.elapsed();
+    let mut err = String::new();
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut err)
+        .unwrap();
+    eprintln!(
+        "cosim exited {status} {:.2} s after the kill:\n{err}",
+        elapsed.as_secs_f64()
+    );
+    assert!(!status.success());
+    assert!(err.contains("dem"), "{err}");
+    assert!(err.contains("window"), "{err}");
+    let s = summary(&out);
+    assert_eq!(s["status"], "failed");
+    assert!(s["error"].as_str().unwrap().contains("dem"), "{s}");
+    // what was written so far is intact: the window table parses row by row
+    let rows = std::fs::read_to_string(&csv).unwrap();
+    for row in rows.lines().skip(1) {
+        assert_eq!(row.split(',').count(), 7, "{row}");
+    }
+}
+
+/// SIGKILL without pulling in a libc crate for one call.
+fn unsafe_kill(pid: i32) -> i32 {
+    std::process::Command::new("kill")
+        .args(["-KILL", &pid.to_string()])
+        .status()
+        .map(|s| if s.success() { 0 } else { 1 })
+        .unwrap_or(1)
+}
