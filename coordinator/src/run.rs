@@ -118,6 +118,10 @@ struct Run<'a> {
     nodes: Vec<NodeProcess>,
     summary: Summary,
     out_dir: PathBuf,
+    /// Nodes that have left or whose process exited, with when and how.
+    gone: BTreeMap<String, (Instant, String)>,
+    /// Nodes that reported `stopped` (they may leave).
+    stopped: std::collections::BTreeSet<String>,
 }
 
 impl Run<'_> {
@@ -125,23 +129,48 @@ impl Run<'_> {
         self.nodes.iter_mut().find(|n| n.name == name)
     }
 
-    /// Next event; dead processes and departed nodes are errors naming the node.
+    /// Next event; dead processes and departed nodes are errors naming the node (after a
+    /// short grace, so that a node's own `error` or `stopped` message sent just before it
+    /// left is read first).
     async fn next(
         &mut self,
         deadline: Instant,
         what: &str,
         window: Option<u64>,
     ) -> anyhow::Result<Event> {
+        const GRACE: Duration = Duration::from_millis(300);
         loop {
             for n in &mut self.nodes {
-                if let Some(msg) = n.exited() {
-                    bail!(
-                        "{msg}{}",
-                        window
-                            .map(|w| format!(" (at window {w})"))
-                            .unwrap_or_default()
-                    );
+                if !self.stopped.contains(&n.name) && !self.gone.contains_key(&n.name) {
+                    if let Some(msg) = n.exited() {
+                        self.gone.insert(n.name.clone(), (Instant::now(), msg));
+                    }
                 }
+            }
+            let overdue = self
+                .gone
+                .iter()
+                .find(|(node, (t, _))| !self.stopped.contains(*node) && t.elapsed() > GRACE)
+                .map(|(node, (_, msg))| (node.clone(), msg.clone()));
+            if let Some((node, msg)) = overdue {
+                let detail = if msg.is_empty() {
+                    self.node_mut(&node)
+                        .and_then(|n| n.exited())
+                        .unwrap_or_default()
+                } else {
+                    msg
+                };
+                bail!(
+                    "node `{node}` left the run{} while the coordinator waited for {what}{}",
+                    window
+                        .map(|w| format!(" at window {w}"))
+                        .unwrap_or_default(),
+                    if detail.is_empty() {
+                        String::new()
+                    } else {
+                        format!(": {detail}")
+                    }
+                );
             }
             let left = deadline.saturating_duration_since(Instant::now());
             if left.is_zero() {
@@ -149,27 +178,19 @@ impl Run<'_> {
             }
             match self
                 .link
-                .next_event(left.min(Duration::from_millis(250)), what)
+                .next_event(left.min(Duration::from_millis(100)), what)
                 .await
             {
                 Ok(Event::Left(node)) if self.nodes.iter().any(|n| n.name == node) => {
-                    // Give a crashing process a moment so its exit status and log are named.
-                    tokio::time::sleep(Duration::from_millis(100)).await;
-                    let detail = self
-                        .node_mut(&node)
-                        .and_then(|n| n.exited())
-                        .unwrap_or_default();
-                    bail!(
-                        "node `{node}` left the run{} while the coordinator waited for {what}{}",
-                        window
-                            .map(|w| format!(" at window {w}"))
-                            .unwrap_or_default(),
-                        if detail.is_empty() {
-                            String::new()
-                        } else {
-                            format!(": {detail}")
-                        }
-                    );
+                    if !self.stopped.contains(&node) {
+                        self.gone
+                            .entry(node)
+                            .or_insert((Instant::now(), String::new()));
+                    }
+                }
+                Ok(Event::Status(st)) if matches!(st.body, StatusBody::Stopped { .. }) => {
+                    self.stopped.insert(st.node.clone());
+                    return Ok(Event::Status(st));
                 }
                 Ok(Event::Status(st)) => {
                     if let StatusBody::Error {
@@ -235,6 +256,7 @@ impl Run<'_> {
             out_dir: self.out_dir.display().to_string(),
             interfaces: self.scene.interfaces.clone(),
             check_only,
+            trace: self.scene.trace_interfaces,
         };
         self.broadcast(CommandBody::Init(init)).await?;
         let mut waiting: Vec<String> = self.nodes.iter().map(|n| n.name.clone()).collect();
@@ -285,6 +307,7 @@ impl Run<'_> {
             has_dem: scene.has_dem,
             has_fem: scene.has_fem,
             steady_kinetic_energy: scene.steady_kinetic_energy,
+            steady_windows: scene.steady_windows,
         })
         .map_err(|e| anyhow!(e))?;
         let mut stability = StabilityMonitor::new(scene.max_force_growth);
@@ -356,6 +379,9 @@ impl Run<'_> {
             ns.compute_s += compute_s;
             ns.wait_s += wait_s;
             row.insert(if role == Role::Dem { "dem" } else { "fem" }, compute_s);
+            // a static solve does not advance the FEM clock: the window ends at the latest time
+            let t_end = row.get("t_end").copied().unwrap_or(t_end).max(t_end);
+            row.insert("t_end", t_end);
             if let Some(e) = values.get("kinetic_energy") {
                 row.insert("ke", *e);
             }
@@ -373,6 +399,7 @@ impl Run<'_> {
                 let wall = window_start.elapsed().as_secs_f64();
                 let dem = row.remove("dem").unwrap_or(0.0);
                 let fem = row.remove("fem").unwrap_or(0.0);
+                row.remove("t_end");
                 writeln!(
                     csv,
                     "{window},{t_end:.9e},{wall:.6e},{dem:.6e},{fem:.6e},{:.6e},{}",
@@ -551,6 +578,8 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
         nodes,
         summary,
         out_dir: out_dir.clone(),
+        gone: BTreeMap::new(),
+        stopped: Default::default(),
     };
     let result: anyhow::Result<()> = async {
         run.start(opts.check_only, opts.startup_timeout).await?;

@@ -63,6 +63,10 @@ fn default_timeout() -> Seconds {
     Seconds(60.0)
 }
 
+fn default_steady_windows() -> u32 {
+    5
+}
+
 fn default_growth() -> f64 {
     1e3
 }
@@ -85,6 +89,9 @@ pub struct CouplingSection {
     pub window_timeout: Seconds,
     /// One-way: the DEM is steady when its kinetic energy falls below this (J).
     pub steady_kinetic_energy: Option<Spanned<Joules>>,
+    /// One-way: ... for this many consecutive windows.
+    #[serde(default = "default_steady_windows")]
+    pub steady_windows: u32,
     /// Stability monitor: stop when the interface force grows by more than this factor
     /// between consecutive windows while exceeding 10 × its running maximum.
     #[serde(default = "default_growth")]
@@ -100,6 +107,7 @@ impl Default for CouplingSection {
             interfaces: Vec::new(),
             window_timeout: default_timeout(),
             steady_kinetic_energy: None,
+            steady_windows: default_steady_windows(),
             max_force_growth: default_growth(),
         }
     }
@@ -110,6 +118,9 @@ impl Default for CouplingSection {
 pub struct OutputSection {
     /// Output folder (default `out/<scene name>`), relative to the working directory.
     pub dir: Option<String>,
+    /// Nodes write per-window interface traces (verification; large for big interfaces).
+    #[serde(default)]
+    pub trace_interfaces: bool,
 }
 
 /// How a node is started.
@@ -162,8 +173,10 @@ pub struct Scene {
     pub interfaces: Vec<String>,
     pub window_timeout: f64,
     pub steady_kinetic_energy: Option<f64>,
+    pub steady_windows: u32,
     pub max_force_growth: f64,
     pub out_dir: PathBuf,
+    pub trace_interfaces: bool,
     pub has_dem: bool,
     pub has_fem: bool,
     pub nodes: NodesSection,
@@ -337,8 +350,10 @@ impl Scene {
             interfaces,
             window_timeout: c.window_timeout.0,
             steady_kinetic_energy: steady,
+            steady_windows: c.steady_windows.max(1),
             max_force_growth: c.max_force_growth,
             out_dir,
+            trace_interfaces: raw.output.trace_interfaces,
             has_dem,
             has_fem,
             nodes: raw.nodes,

@@ -63,8 +63,10 @@ pub struct SchedulerConfig {
     pub force_averaging: bool,
     pub has_dem: bool,
     pub has_fem: bool,
-    /// One-way: kinetic energy (J) below which the DEM is steady.
+    /// One-way: kinetic energy (J) below which the DEM is steady ...
     pub steady_kinetic_energy: Option<f64>,
+    /// ... for this many consecutive windows.
+    pub steady_windows: u32,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -82,6 +84,8 @@ pub struct Scheduler {
     phase: Phase,
     window: u64,
     pending: BTreeSet<Role>,
+    /// Consecutive windows with the DEM below the steady kinetic energy.
+    calm_windows: u32,
 }
 
 impl Scheduler {
@@ -108,6 +112,7 @@ impl Scheduler {
             phase: Phase::Idle,
             window: 0,
             pending: BTreeSet::new(),
+            calm_windows: 0,
         })
     }
 
@@ -242,10 +247,12 @@ impl Scheduler {
         }
         let last = window + 1 == self.cfg.windows;
         if self.cfg.kind == ScheduleKind::OneWay {
-            let steady = match (kinetic_energy, self.cfg.steady_kinetic_energy) {
+            let calm = match (kinetic_energy, self.cfg.steady_kinetic_energy) {
                 (Some(e), Some(limit)) => e < limit,
                 _ => false,
             };
+            self.calm_windows = if calm { self.calm_windows + 1 } else { 0 };
+            let steady = self.calm_windows >= self.cfg.steady_windows;
             if steady || last {
                 // Ullrich ch. 4: the settled DEM forces load a static FEM solve.
                 self.phase = Phase::OneWaySolve;
@@ -281,6 +288,7 @@ mod tests {
             has_dem: true,
             has_fem: kind != ScheduleKind::None,
             steady_kinetic_energy: Some(1e-6),
+            steady_windows: 2,
         }
     }
 

@@ -102,6 +102,7 @@ mod tests {
                 out_dir: "out/beam".into(),
                 interfaces: vec!["top".into()],
                 check_only: false,
+                trace: true,
             }),
             CommandBody::Publish { window: 0 },
             CommandBody::AdvanceWindow(AdvanceWindow {

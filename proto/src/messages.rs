@@ -144,6 +144,10 @@ pub struct Init {
     pub interfaces: Vec<String>,
     /// Validate and report limits, then wait for `stop`: no stepping (`cosim check`).
     pub check_only: bool,
+    /// Write per-window interface traces (CSV) for verification: the DEM its per-substep
+    /// force totals and its mesh at window ends, the FEM the force totals it received and
+    /// its interface positions at window ends.
+    pub trace: bool,
 }
 
 /// Advance one coupling window.

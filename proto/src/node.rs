@@ -2,7 +2,7 @@
 //! calls [`serve`]; commands, status, errors, snapshots and shutdown are handled here.
 
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::cli::NodeArgs;
@@ -221,9 +221,64 @@ pub fn main_with<S: Solver>(args: NodeArgs, hello: Hello, solver: S) -> std::pro
 pub fn init_logging() {
     let filter = std::env::var("COSIM_LOG").unwrap_or_else(|_| "info,zenoh=warn".into());
     let _ = tracing_subscriber::fmt()
-        .with_env_filter(tracing_subscriber::EnvFilter::try_new(filter).unwrap_or_else(|_| "info".into()))
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_new(filter).unwrap_or_else(|_| "info".into()),
+        )
         .with_writer(std::io::stderr)
         .with_target(false)
         .with_ansi(false)
         .try_init();
+}
+
+/// Per-window interface traces (`Init::trace`): CSV files of full-precision numbers, one row
+/// per record, flushed at once so a reader sees every completed row.
+#[derive(Debug, Default)]
+pub struct Trace {
+    files: std::collections::HashMap<PathBuf, std::io::BufWriter<std::fs::File>>,
+}
+
+impl Trace {
+    /// Appends `prefix` then `values` as one row of `path` (created with `header` if new).
+    pub fn row(
+        &mut self,
+        path: &Path,
+        header: &str,
+        prefix: &[String],
+        values: &[f64],
+    ) -> Result<(), NodeError> {
+        use std::io::Write;
+        let io = |e: std::io::Error| {
+            NodeError::new(
+                ErrorCode::Io,
+                format!("writing trace {}: {e}", path.display()),
+            )
+        };
+        if !self.files.contains_key(path) {
+            let mut f = std::io::BufWriter::new(std::fs::File::create(path).map_err(io)?);
+            writeln!(f, "{header}").map_err(io)?;
+            self.files.insert(path.to_path_buf(), f);
+        }
+        let f = self.files.get_mut(path).expect("inserted above");
+        let mut line = prefix.join(",");
+        for v in values {
+            if !line.is_empty() {
+                line.push(',');
+            }
+            // Display of f64 is the shortest text that reads back to the same bits
+            line.push_str(&v.to_string());
+        }
+        writeln!(f, "{line}").map_err(io)?;
+        f.flush().map_err(io)
+    }
+}
+
+/// Sum of a flat xyz array.
+pub fn total(xyz: &[f64]) -> [f64; 3] {
+    let mut t = [0.0; 3];
+    for v in xyz.chunks_exact(3) {
+        for i in 0..3 {
+            t[i] += v[i];
+        }
+    }
+    t
 }

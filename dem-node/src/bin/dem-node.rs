@@ -8,7 +8,7 @@ use std::time::Instant;
 use clap::Parser;
 use dem::{Engine, MotionRule};
 use proto::cli::NodeArgs;
-use proto::node::{main_with, NodeError, Solver, WindowReport};
+use proto::node::{main_with, total, NodeError, Solver, Trace, WindowReport};
 use proto::participant::Participant;
 use proto::{AdvanceWindow, ErrorCode, Hello, Init, InterfaceForces, Role, PROTOCOL_VERSION};
 
@@ -37,6 +37,7 @@ struct DemNode {
     data_timeout: std::time::Duration,
     averaged: bool,
     substeps: u32,
+    trace: Option<Trace>,
 }
 
 fn scene_error(e: impl std::fmt::Display) -> NodeError {
@@ -96,6 +97,7 @@ impl Solver for DemNode {
         let mut engine = Engine::from_config(&cfg, base)
             .map_err(|e| scene_error(format!("{}: {e}", init.scene_path)))?;
         self.out_dir = PathBuf::from(&init.out_dir).join("dem");
+        self.trace = init.trace.then(Trace::default);
         std::fs::create_dir_all(&self.out_dir).map_err(|e| {
             NodeError::new(
                 ErrorCode::Io,
@@ -164,15 +166,36 @@ impl Solver for DemNode {
         let wait_s = t_wait.elapsed().as_secs_f64();
         let meshes: Vec<usize> = self.coupled.iter().map(|c| c.mesh).collect();
         let out_dir = self.out_dir.clone();
-        let engine = self.engine()?;
+        let engine = self
+            .engine
+            .as_mut()
+            .ok_or_else(|| NodeError::new(ErrorCode::Protocol, "a window command came before `init`"))?;
         for (mesh, (pos, vel, acc)) in meshes.iter().zip(&kinematics) {
             engine
                 .set_mesh_kinematics(*mesh, pos, vel, acc, rule)
                 .map_err(|e| NodeError::new(ErrorCode::Protocol, e.to_string()))?;
         }
-        engine.advance(w.substeps as usize).map_err(|e| {
-            NodeError::new(ErrorCode::Unstable, format!("window {}: {e}", w.window))
-        })?;
+        let unstable = |e: dem::DemError| NodeError::new(ErrorCode::Unstable, format!("window {}: {e}", w.window));
+        if let Some(trace) = self.trace.as_mut() {
+            // Substep by substep, recording the total force on each coupled mesh, so that
+            // force averaging (Ullrich (3.8)) can be checked against what the FEM received.
+            for s in 0..w.substeps {
+                engine.advance(1).map_err(unstable)?;
+                for c in &self.coupled {
+                    let f = total(&engine.interface_forces(c.mesh, false));
+                    let path = out_dir.join(format!("trace_{}_substep_forces.csv", c.name));
+                    trace.row(&path, "window,substep,fx,fy,fz", &[w.window.to_string(), s.to_string()], &f)?;
+                }
+            }
+            for c in &self.coupled {
+                let path = out_dir.join(format!("trace_{}_mesh.csv", c.name));
+                let mut row = vec![engine.time()];
+                row.extend(engine.mesh_positions(c.mesh));
+                trace.row(&path, "window,t_end,positions...", &[w.window.to_string()], &row)?;
+            }
+        } else {
+            engine.advance(w.substeps as usize).map_err(unstable)?;
+        }
         engine
             .write_outputs(&out_dir)
             .map_err(|e| NodeError::new(ErrorCode::Io, e.to_string()))?;
@@ -235,6 +258,7 @@ fn main() -> std::process::ExitCode {
         data_timeout,
         averaged: false,
         substeps: 0,
+        trace: None,
     };
     main_with(args.node, hello, node)
 }

@@ -8,7 +8,7 @@ use std::time::Instant;
 use clap::Parser;
 use fem::Model;
 use proto::cli::NodeArgs;
-use proto::node::{main_with, NodeError, Solver, WindowReport};
+use proto::node::{main_with, total, NodeError, Solver, Trace, WindowReport};
 use proto::participant::Participant;
 use proto::{
     AdvanceWindow, ErrorCode, Hello, Init, InterfaceKinematics, InterfaceMesh, MotionRule, Role,
@@ -32,6 +32,7 @@ struct FemNode {
     interface: Option<(String, usize)>,
     out_dir: PathBuf,
     data_timeout: std::time::Duration,
+    trace: Option<Trace>,
 }
 
 fn scene_error(e: impl std::fmt::Display) -> NodeError {
@@ -91,6 +92,7 @@ impl Solver for FemNode {
         let model = Model::from_config(&cfg, base)
             .map_err(|e| scene_error(format!("{}: {e}", init.scene_path)))?;
         self.out_dir = PathBuf::from(&init.out_dir).join("fem");
+        self.trace = init.trace.then(Trace::default);
         std::fs::create_dir_all(&self.out_dir).map_err(|e| {
             NodeError::new(
                 ErrorCode::Io,
@@ -141,7 +143,15 @@ impl Solver for FemNode {
         };
         let wait_s = t_wait.elapsed().as_secs_f64();
         let out_dir = self.out_dir.clone();
-        let model = self.model()?;
+        if let (Some(f), Some(trace)) = (&forces, self.trace.as_mut()) {
+            let path = out_dir.join(format!("trace_{}_received_forces.csv", f.interface));
+            let prefix = [f.window.to_string(), f.averaged.to_string()];
+            trace.row(&path, "window,averaged,fx,fy,fz", &prefix, &total(f.forces.as_slice()))?;
+        }
+        let model = self
+            .model
+            .as_mut()
+            .ok_or_else(|| NodeError::new(ErrorCode::Protocol, "a window command came before `init`"))?;
         if let Some(f) = forces {
             model
                 .set_interface_forces(f.forces.as_slice())
@@ -162,6 +172,12 @@ impl Solver for FemNode {
             .map_err(|e| fem_error(ErrorCode::Io, e))?;
         let t_end = model.time();
         let (pos, vel, acc) = model.interface_kinematics();
+        if let (Some(trace), Some((name, _))) = (self.trace.as_mut(), &self.interface) {
+            let path = out_dir.join(format!("trace_{name}_mesh.csv"));
+            let mut row = vec![t_end];
+            row.extend(&pos);
+            trace.row(&path, "window,t_end,positions...", &[w.window.to_string()], &row)?;
+        }
         let monitor = BTreeMap::from([(
             "max_interface_speed".to_string(),
             vel.chunks_exact(3)
@@ -245,6 +261,7 @@ fn main() -> std::process::ExitCode {
         interface: None,
         out_dir: PathBuf::new(),
         data_timeout,
+        trace: None,
     };
     main_with(args.node, hello, node)
 }
