@@ -379,20 +379,25 @@ mod tests {
         let a = s.on_window_done(Role::Dem, 0, Some(1.0)).unwrap();
         assert_eq!(advance(&a[0]).1.window, 1);
         let a = s.on_window_done(Role::Dem, 1, Some(1e-7)).unwrap();
+        assert_eq!(advance(&a[0]).1.window, 2, "calm for one window only");
+        let a = s.on_window_done(Role::Dem, 2, Some(1e-5)).unwrap();
+        assert_eq!(advance(&a[0]).1.window, 3, "a kick resets the count");
+        s.on_window_done(Role::Dem, 3, Some(1e-7)).unwrap();
+        let a = s.on_window_done(Role::Dem, 4, Some(1e-7)).unwrap();
         assert_eq!(
             a[0],
-            Action::Send(Role::Dem, CommandBody::Publish { window: 1 })
+            Action::Send(Role::Dem, CommandBody::Publish { window: 4 })
         );
         let (r, f) = advance(&a[1]);
         assert_eq!(
             (r, f.static_solve, f.input_window),
-            (Role::Fem, true, Some(1))
+            (Role::Fem, true, Some(4))
         );
         assert!(
-            s.on_window_done(Role::Dem, 1, None).is_err(),
+            s.on_window_done(Role::Dem, 4, None).is_err(),
             "the DEM is not pending any more"
         );
-        let a = s.on_window_done(Role::Fem, 1, None).unwrap();
+        let a = s.on_window_done(Role::Fem, 4, None).unwrap();
         assert!(matches!(a[0], Action::Finish { .. }));
     }
 
