@@ -174,7 +174,13 @@ pub fn rebuild(
         .filter(|p| p.shear != V3::zeros() && (p.i as usize) < n && (p.j as usize) < n)
         .map(|p| {
             let (a, b) = (inverse[p.i as usize], inverse[p.j as usize]);
-            (a.min(b), a.max(b), p.shear)
+            // ξ is the displacement of the first particle relative to the second: it changes
+            // sign when the reordering swaps the pair
+            if a < b {
+                (a, b, p.shear)
+            } else {
+                (b, a, -p.shear)
+            }
         })
         .collect();
     old.sort_unstable_by_key(|&(a, b, _)| (a, b));

@@ -80,14 +80,29 @@ pub fn contact_force(
     }
 }
 
-/// Rolling resistance, constant directional torque: M_r = −μ_r R* F_n ω_rel/|ω_rel| (on i).
+/// Rolling resistance, constant directional torque: M_r = −μ_r R* F_n ω_rel/|ω_rel| (on i),
+/// limited to the torque that stops the relative rolling within one step, |M_r| ≤ I* |ω_rel|/Δt
+/// (I* the effective moment of inertia). Without that limit the constant torque overshoots
+/// and reverses ω_rel every step near rest, which feeds a permanent jitter through the
+/// tangential springs; the limit is what the elastic part of EPSD models achieves.
 #[inline]
-pub fn rolling_torque(mu_r: f64, r_eff: f64, normal: f64, omega_rel: &V3) -> V3 {
+pub fn rolling_torque(
+    mu_r: f64,
+    r_eff: f64,
+    normal: f64,
+    omega_rel: &V3,
+    inertia_eff: f64,
+    dt: f64,
+) -> V3 {
     let w = omega_rel.norm();
     if mu_r <= 0.0 || w < 1e-12 {
         return V3::zeros();
     }
-    omega_rel * (-mu_r * r_eff * normal / w)
+    let mut m = mu_r * r_eff * normal;
+    if dt > 0.0 {
+        m = m.min(inertia_eff * w / dt);
+    }
+    omega_rel * (-m / w)
 }
 
 /// Rebound coefficient of the dimensionless Hertz impact y'' = −y^{3/2} − b y^{1/4} y'

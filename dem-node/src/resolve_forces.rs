@@ -89,7 +89,15 @@ pub fn pair_forces(lists: &mut NeighbourLists, p: &Particles, ctx: &ForceContext
             let v_c = p.velocity[i] - p.velocity[j] - (wi * ai + wj * aj).cross(&n);
             let cf = contact_force(params, delta, r_eff, m_eff, &n, &v_c, &mut pair.shear, dt);
             let nxt = n.cross(&cf.tangential);
-            let roll = rolling_torque(params.rolling_friction, r_eff, cf.normal, &(wi - wj));
+            let i_eff = p.inertia[i] * p.inertia[j] / (p.inertia[i] + p.inertia[j]);
+            let roll = rolling_torque(
+                params.rolling_friction,
+                r_eff,
+                cf.normal,
+                &(wi - wj),
+                i_eff,
+                dt,
+            );
             pair.force = cf.force;
             pair.torque_i = nxt * (-ai) + roll;
             pair.torque_j = nxt * (-aj) - roll;
@@ -117,13 +125,14 @@ pub fn gather_and_walls(
     ctx: &ForceContext,
 ) {
     let pairs = &lists.pairs;
-    let (pos, vel, omega, rad, mass, mat) = (
+    let (pos, vel, omega, rad, mass, mat, inertia) = (
         &p.position,
         &p.velocity,
         &p.angular_velocity,
         &p.radius,
         &p.mass,
         &p.material,
+        &p.inertia,
     );
     let with_records = !records.is_empty();
     let n_planes = ctx.planes.len() as u64;
@@ -245,7 +254,14 @@ pub fn gather_and_walls(
             );
             f += cf.force;
             t += geo.n.cross(&cf.tangential) * (-geo.lever)
-                + rolling_torque(params.rolling_friction, r, cf.normal, &w);
+                + rolling_torque(
+                    params.rolling_friction,
+                    r,
+                    cf.normal,
+                    &w,
+                    inertia[i],
+                    ctx.dt,
+                );
             if (new_state.count as usize) < WALL_SLOTS {
                 new_state.slots[new_state.count as usize] = WallSlot {
                     key: geo.key,

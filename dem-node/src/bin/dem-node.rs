@@ -166,16 +166,17 @@ impl Solver for DemNode {
         let wait_s = t_wait.elapsed().as_secs_f64();
         let meshes: Vec<usize> = self.coupled.iter().map(|c| c.mesh).collect();
         let out_dir = self.out_dir.clone();
-        let engine = self
-            .engine
-            .as_mut()
-            .ok_or_else(|| NodeError::new(ErrorCode::Protocol, "a window command came before `init`"))?;
+        let engine = self.engine.as_mut().ok_or_else(|| {
+            NodeError::new(ErrorCode::Protocol, "a window command came before `init`")
+        })?;
         for (mesh, (pos, vel, acc)) in meshes.iter().zip(&kinematics) {
             engine
                 .set_mesh_kinematics(*mesh, pos, vel, acc, rule)
                 .map_err(|e| NodeError::new(ErrorCode::Protocol, e.to_string()))?;
         }
-        let unstable = |e: dem::DemError| NodeError::new(ErrorCode::Unstable, format!("window {}: {e}", w.window));
+        let unstable = |e: dem::DemError| {
+            NodeError::new(ErrorCode::Unstable, format!("window {}: {e}", w.window))
+        };
         if let Some(trace) = self.trace.as_mut() {
             // Substep by substep, recording the total force on each coupled mesh, so that
             // force averaging (Ullrich (3.8)) can be checked against what the FEM received.
@@ -184,14 +185,24 @@ impl Solver for DemNode {
                 for c in &self.coupled {
                     let f = total(&engine.interface_forces(c.mesh, false));
                     let path = out_dir.join(format!("trace_{}_substep_forces.csv", c.name));
-                    trace.row(&path, "window,substep,fx,fy,fz", &[w.window.to_string(), s.to_string()], &f)?;
+                    trace.row(
+                        &path,
+                        "window,substep,fx,fy,fz",
+                        &[w.window.to_string(), s.to_string()],
+                        &f,
+                    )?;
                 }
             }
             for c in &self.coupled {
                 let path = out_dir.join(format!("trace_{}_mesh.csv", c.name));
                 let mut row = vec![engine.time()];
                 row.extend(engine.mesh_positions(c.mesh));
-                trace.row(&path, "window,t_end,positions...", &[w.window.to_string()], &row)?;
+                trace.row(
+                    &path,
+                    "window,t_end,positions...",
+                    &[w.window.to_string()],
+                    &row,
+                )?;
             }
         } else {
             engine.advance(w.substeps as usize).map_err(unstable)?;

@@ -1,0 +1,118 @@
+//! REFERENCE D dense bed: 24,696 spheres d = 4 mm on a simple-cubic lattice (spacing 4.5 mm)
+//! in a 0.1 × 0.1 × 0.26 m box open at the top, wheat material (A4), settled, then timed steps
+//! of Δt = 1e-5 s. Prints particle-steps per second and bytes per particle, then a scaling run
+//! at 1e3, 1e4, 1e5 particles.
+//!
+//! Environment: DENSE_BED_STEPS (default 10000), DENSE_BED_SETTLE (settling steps, default
+//! 40000 = 0.4 s), DENSE_BED_SCALING_STEPS (default 1000), DENSE_BED_THREADS (default: all).
+
+use dem::{parse_scene_section, Engine};
+use std::time::Instant;
+
+fn env(name: &str, default: usize) -> usize {
+    std::env::var(name)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
+}
+
+fn scene(n: [usize; 3]) -> String {
+    let s = 0.0045;
+    let (lx, ly, lz) = (
+        0.1f64.max(n[0] as f64 * s + 0.0055),
+        0.1f64.max(n[1] as f64 * s + 0.0055),
+        0.26f64.max(n[2] as f64 * s + 0.01),
+    );
+    format!(
+        r#"
+[dem]
+time_step = 1e-5
+gravity = [0.0, 0.0, -9.81]
+[dem.materials.wheat]
+youngs_modulus = 1e8
+poisson_ratio = 0.3
+density = 1242.0
+restitution = 0.4
+friction = 1.0
+[[dem.walls]]
+kind = "box"
+material = "wheat"
+min = [0.0, 0.0, 0.0]
+max = [{lx}, {ly}, {lz}]
+open = ["+z"]
+[[dem.particles]]
+kind = "lattice"
+material = "wheat"
+radius = 0.002
+first = [0.00425, 0.00425, 0.00425]
+spacing = 0.0045
+count = [{}, {}, {}]
+"#,
+        n[0], n[1], n[2]
+    )
+}
+
+fn build(n: [usize; 3]) -> Engine {
+    let cfg = parse_scene_section(&scene(n))
+        .expect("scene")
+        .expect("dem table");
+    Engine::from_config(&cfg, std::path::Path::new(".")).expect("engine")
+}
+
+fn timed(e: &mut Engine, steps: usize) -> f64 {
+    let t = Instant::now();
+    e.advance(steps).expect("advance");
+    t.elapsed().as_secs_f64()
+}
+
+fn main() {
+    let threads = env("DENSE_BED_THREADS", 0);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .expect("pool");
+    pool.install(|| {
+        let steps = env("DENSE_BED_STEPS", 10_000);
+        let settle = env("DENSE_BED_SETTLE", 40_000);
+        let mut e = build([21, 21, 56]);
+        let n = e.num_particles();
+        println!("dense bed: {n} particles, {} threads, dt = {} s (Rayleigh {:.3e} s)", rayon::current_num_threads(), e.time_step(), e.rayleigh_time_step());
+        let ts = timed(&mut e, settle);
+        println!("settling {settle} steps ({:.2} s simulated): {ts:.2} s wall, KE = {:.3e} J", settle as f64 * 1e-5, e.kinetic_energy());
+        let builds0 = e.neighbour_list_builds();
+        let t = timed(&mut e, steps);
+        let snap = e.snapshot().len();
+        println!(
+            "timed {steps} steps: {t:.3} s wall, {:.3e} particle-steps/s, {:.1} ns per particle-step; \
+             contacts {}, wall contacts {}, list builds {}, KE {:.3e} J",
+            (n * steps) as f64 / t,
+            t * 1e9 / (n * steps) as f64,
+            e.num_contacts(),
+            e.num_wall_contacts(),
+            e.neighbour_list_builds() - builds0,
+            e.kinetic_energy()
+        );
+        println!(
+            "extrapolated to 10,000 steps: {:.2} s; full state {:.0} bytes/particle (snapshot incl. neighbour lists and histories), core SoA {} bytes/particle",
+            t * 10_000.0 / steps as f64,
+            snap as f64 / n as f64,
+            dem::particles::Particles::bytes_per_particle()
+        );
+        for (k, r) in e.results() {
+            println!("  {k} = {r:.6e}");
+        }
+
+        let scaling_steps = env("DENSE_BED_SCALING_STEPS", 1000);
+        for dims in [[10, 10, 10], [21, 21, 23], [46, 46, 48]] {
+            let mut e = build(dims);
+            // let the lattice touch down briefly so that contacts exist
+            e.advance(200).expect("advance");
+            let n = e.num_particles();
+            let t = timed(&mut e, scaling_steps);
+            println!(
+                "scaling: {n:>7} particles, {scaling_steps} steps: {t:.3} s, {:.3e} particle-steps/s",
+                (n * scaling_steps) as f64 / t
+            );
+        }
+    });
+}
