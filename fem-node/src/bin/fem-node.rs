@@ -175,8 +175,8 @@ impl Solver for FemNode {
         if let (Some(trace), Some((name, _))) = (self.trace.as_mut(), &self.interface) {
             let path = out_dir.join(format!("trace_{name}_mesh.csv"));
             let mut row = vec![t_end];
-            row.extend(&pos);
-            trace.row(&path, "window,t_end,positions...", &[w.window.to_string()], &row)?;
+            row.extend(pos.iter().chain(&vel).chain(&acc));
+            trace.row(&path, "window,t_end,positions...,velocities...,accelerations...", &[w.window.to_string()], &row)?;
         }
         let monitor = BTreeMap::from([(
             "max_interface_speed".to_string(),

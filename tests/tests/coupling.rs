@@ -1,0 +1,243 @@
+//! The coupling schedules end to end: coordinator + dem-node + fem-node as real processes over
+//! zenoh on loopback (Ullrich ch. 3–4, REFERENCE A3).
+
+use std::path::Path;
+
+use cosim_tests::{cosim, root, run, summary, write_scene};
+
+fn run_scene(dir: &Path, name: &str, text: &str) -> serde_json::Value {
+    let scene = write_scene(dir, name, text);
+    let out = dir.join(format!("out-{name}"));
+    let mut c = cosim();
+    c.arg("run")
+        .arg(&scene)
+        .arg("--no-progress")
+        .arg("--out")
+        .arg(&out);
+    let o = run(c);
+    assert!(o.status.success(), "{name} failed");
+    summary(&out)
+}
+
+fn scene_text(name: &str) -> String {
+    std::fs::read_to_string(root().join("scenes").join(name)).unwrap()
+}
+
+fn f(s: &serde_json::Value, key: &str) -> f64 {
+    s["results"][key]
+        .as_f64()
+        .unwrap_or_else(|| panic!("{key} missing in {s}"))
+}
+
+/// The beam scene with `mass` kg of spheres, then a pure-FEM solve of the same beam under the
+/// coupled run's total interface load as a uniform pressure on the top face.
+fn beam_coupled_vs_pure_fem(mass: f64) -> (f64, f64) {
+    let dir = tempfile::tempdir().unwrap();
+    // one layer of 640 spheres r = 6.25 mm: density for the requested total mass
+    let volume = 640.0 * 4.0 / 3.0 * std::f64::consts::PI * 0.00625f64.powi(3);
+    let text = scene_text("beam.toml")
+        .replace("density = 77921.0", &format!("density = {}", mass / volume));
+    let coupled = run_scene(dir.path(), "beam.toml", &text);
+    assert_eq!(coupled["status"], "completed");
+    let fz = f(&coupled, "fem.interface_force.z");
+    assert!(
+        (fz + mass * 9.81).abs() < 1e-3 * mass * 9.81,
+        "the settled spheres weigh {fz} N"
+    );
+    let uz = f(&coupled, "fem.probe.midspan.uz");
+
+    // pure FEM: the [fem] table alone, with the same total load as pressure on the top face
+    let fem_table = &text[text.find("[fem]").unwrap()..];
+    let pure = format!(
+        "[scene]\nname = \"beam-fem\"\nend_time = 1.0\n[coupling]\nwindow = 1.0\n{fem_table}\n\
+         [[fem.loads]]\ntype = \"pressure\"\non = {{ plane = {{ axis = \"z\", value = 0.1 }} }}\nvalue = {}\n",
+        -fz / (1.0 * 0.1)
+    );
+    let pure = run_scene(dir.path(), "beam-fem.toml", &pure);
+    (uz, f(&pure, "fem.probe.midspan.uz"))
+}
+
+#[test]
+fn beam_51_kg_coupled_within_1_percent_of_pure_fem() {
+    let (coupled, pure) = beam_coupled_vs_pure_fem(51.0);
+    let rel = (coupled - pure).abs() / pure.abs();
+    eprintln!(
+        "51 kg: coupled {coupled:.6e} m, pure FEM {pure:.6e} m, difference {:.3} % (seed 0.38 %)",
+        100.0 * rel
+    );
+    // REFERENCE A3: seed's pure FEM at 50 mm: −7.06e-7 m; full-integration hex8: −7.05e-7 m
+    assert!((pure + 7.05e-7).abs() < 0.005 * 7.05e-7, "pure FEM {pure}");
+    assert!(rel < 0.01, "{rel}");
+}
+
+#[test]
+fn beam_72_kg_coupled_within_1_percent_of_pure_fem() {
+    let (coupled, pure) = beam_coupled_vs_pure_fem(72.0);
+    let rel = (coupled - pure).abs() / pure.abs();
+    eprintln!(
+        "72 kg: coupled {coupled:.6e} m, pure FEM {pure:.6e} m, difference {:.3} % (seed 0.85 %)",
+        100.0 * rel
+    );
+    // linear elasticity: the deflection scales with the load (seed −9.97e-7 m at 72 kg)
+    assert!(
+        (pure + 7.05e-7 * 72.0 / 51.0).abs() < 0.005 * 9.95e-7,
+        "pure FEM {pure}"
+    );
+    assert!(rel < 0.01, "{rel}");
+}
+
+/// Rows of a trace CSV: window index → values.
+fn trace(path: &Path) -> Vec<(u64, Vec<f64>)> {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    text.lines()
+        .skip(1)
+        .map(|l| {
+            let mut it = l.split(',');
+            let w = it.next().unwrap().parse().unwrap();
+            (w, it.filter_map(|v| v.parse().ok()).collect())
+        })
+        .collect()
+}
+
+fn plate(schedule: &str, averaging: bool) -> (tempfile::TempDir, serde_json::Value) {
+    let dir = tempfile::tempdir().unwrap();
+    let text = scene_text("plate.toml")
+        .replace(
+            "schedule = \"predictive\"",
+            &format!("schedule = \"{schedule}\"\nforce_averaging = {averaging}"),
+        )
+        .replace(
+            "end_time = \"30 ms\"",
+            "end_time = \"10 ms\"\n[output]\ntrace_interfaces = true",
+        );
+    let s = run_scene(dir.path(), "plate.toml", &text);
+    assert_eq!(s["status"], "completed");
+    assert_eq!(s["windows_done"], 100);
+    (dir, s)
+}
+
+#[test]
+fn predictive_mesh_lands_on_fem_position_at_every_window_end() {
+    let (dir, _) = plate("predictive", false);
+    let out = dir.path().join("out-plate.toml");
+    let dem = trace(&out.join("dem/trace_top_mesh.csv"));
+    let fem = trace(&out.join("fem/trace_top_mesh.csv"));
+    assert_eq!(dem.len(), 100);
+    assert_eq!(fem.len(), 100);
+    let n3 = dem[0].1.len() - 1;
+    let mut worst: f64 = 0.0;
+    let mut moved: f64 = 0.0;
+    for ((wd, d), (wf, f)) in dem.iter().zip(&fem) {
+        assert_eq!(wd, wf);
+        // DEM row [t_end, x…]; FEM row [t_end, x…, v…, a…]
+        assert!(
+            (d[0] - f[0]).abs() < 1e-12,
+            "window {wd}: DEM at t = {}, FEM at t = {}",
+            d[0],
+            f[0]
+        );
+        for (a, b) in d[1..].iter().zip(&f[1..1 + n3]) {
+            worst = worst.max((a - b).abs());
+        }
+        let first = &fem[0].1[1..1 + n3];
+        moved = moved.max(
+            f[1..1 + n3]
+                .iter()
+                .zip(first)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max),
+        );
+    }
+    eprintln!("predictive: largest DEM–FEM mesh gap at window ends {worst:.3e} m; the mesh moved up to {moved:.3e} m");
+    assert!(
+        moved > 1e-8,
+        "the plate must move for this test to mean anything"
+    );
+    assert!(worst <= 1e-12, "{worst}");
+}
+
+#[test]
+fn jit_moves_the_dem_mesh_by_the_last_fem_kinematics() {
+    let (dir, s) = plate("jit", false);
+    let out = dir.path().join("out-plate.toml");
+    let dem = trace(&out.join("dem/trace_top_mesh.csv"));
+    let fem = trace(&out.join("fem/trace_top_mesh.csv"));
+    let n3 = dem[0].1.len() - 1;
+    let dt = 1e-4;
+    // Ullrich ch. 3.3: in window k the DEM mesh moves x = P + Vτ + ½Aτ² with the FEM state at
+    // the end of window k − 1; at τ = Δt^C it must be exactly there.
+    let (mut worst, mut gap_to_fem): (f64, f64) = (0.0, 0.0);
+    for k in 1..dem.len() {
+        let prev = &fem[k - 1].1;
+        let (p, v, a) = (
+            &prev[1..1 + n3],
+            &prev[1 + n3..1 + 2 * n3],
+            &prev[1 + 2 * n3..1 + 3 * n3],
+        );
+        for i in 0..n3 {
+            let expected = p[i] + v[i] * dt + 0.5 * a[i] * dt * dt;
+            worst = worst.max((dem[k].1[1 + i] - expected).abs());
+            gap_to_fem = gap_to_fem.max((dem[k].1[1 + i] - fem[k].1[1 + i]).abs());
+        }
+    }
+    eprintln!("jit: DEM mesh vs P + VΔt + ½AΔt²: {worst:.3e} m; vs the FEM's own end position: {gap_to_fem:.3e} m");
+    assert!(worst <= 1e-12, "{worst}");
+    // the beads did load the plate
+    let received = trace(&out.join("fem/trace_top_received_forces.csv"));
+    let peak = received.iter().map(|(_, r)| -r[2]).fold(0.0, f64::max);
+    assert!(peak > 0.1, "largest downward load {peak} N");
+    assert_eq!(s["status"], "completed");
+}
+
+#[test]
+fn force_averaging_gives_fem_the_mean_of_the_substep_forces() {
+    let (dir, _) = plate("jit", true);
+    let out = dir.path().join("out-plate.toml");
+    let substeps = trace(&out.join("dem/trace_top_substep_forces.csv"));
+    let received = trace(&out.join("fem/trace_top_received_forces.csv"));
+    assert_eq!(received.len(), 100);
+    let mut loaded = 0;
+    for (w, r) in &received {
+        let rows: Vec<&Vec<f64>> = substeps
+            .iter()
+            .filter(|(k, _)| k == w)
+            .map(|(_, v)| v)
+            .collect();
+        assert_eq!(rows.len(), 10, "window {w}");
+        // received row: [fx, fy, fz] (the `averaged` column does not parse as a number)
+        for axis in 0..3 {
+            // substep rows: [substep, fx, fy, fz]
+            let mean = rows.iter().map(|v| v[1 + axis]).sum::<f64>() / rows.len() as f64;
+            let last = rows.last().unwrap()[1 + axis];
+            let got = r[axis];
+            assert!(
+                (got - mean).abs() <= 1e-12 * mean.abs().max(1e-9),
+                "window {w} axis {axis}: FEM got {got}, mean {mean}"
+            );
+            if (mean - last).abs() > 1e-6 * mean.abs() {
+                loaded += 1;
+            }
+        }
+    }
+    assert!(
+        loaded > 0,
+        "the mean must differ from the last substep somewhere for this test to mean anything"
+    );
+}
+
+#[test]
+fn a_coupling_window_that_is_not_a_whole_number_of_dem_steps_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = scene_text("plate.toml").replace("time_step = 1e-5", "time_step = 3e-5");
+    let scene = write_scene(dir.path(), "plate.toml", &text);
+    let mut c = cosim();
+    c.arg("check").arg(&scene);
+    let o = run(c);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("not a whole multiple"), "{err}");
+    assert!(
+        err.contains("0.0001 s") && err.contains("0.00003 s"),
+        "{err}"
+    );
+}
