@@ -186,3 +186,42 @@ fn stl_ascii_and_binary_read_and_errors_name_file_and_line() {
         "{err}"
     );
 }
+
+#[test]
+fn dense_bed_example_scene_builds_24696_particles() {
+    let text = include_str!("data/dense_bed.toml");
+    let cfg = parse_scene_section(text).unwrap().unwrap();
+    let e = Engine::from_config(&cfg, std::path::Path::new(".")).unwrap();
+    assert_eq!(e.num_particles(), 24_696);
+    assert!(e.time_step() <= 0.3 * e.rayleigh_time_step());
+}
+
+#[test]
+fn write_outputs_writes_csv_rows_and_vtk_files() {
+    let text = include_str!("data/dense_bed.toml")
+        .replace("count = [21, 21, 56]", "count = [3, 3, 3]")
+        .replace("vtk_every = 10000", "vtk_every = 10");
+    let cfg = parse_scene_section(&text).unwrap().unwrap();
+    let mut e = Engine::from_config(&cfg, std::path::Path::new(".")).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    for _ in 0..3 {
+        e.advance(10).unwrap();
+        e.write_outputs(dir.path()).unwrap();
+    }
+    let csv = std::fs::read_to_string(dir.path().join("dem_timeseries.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 4, "header + 3 rows");
+    assert!(csv
+        .lines()
+        .next()
+        .unwrap()
+        .starts_with("time,step,particles,kinetic_energy,contacts"));
+    let vtk: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .filter_map(|f| f.ok())
+        .map(|f| f.file_name().into_string().unwrap())
+        .filter(|n| n.starts_with("particles_"))
+        .collect();
+    assert_eq!(vtk.len(), 3);
+    let body = std::fs::read_to_string(dir.path().join("particles_000000010.vtk")).unwrap();
+    assert!(body.contains("POINTS 27 double") && body.contains("SCALARS radius double 1"));
+}

@@ -222,7 +222,13 @@ impl Solver for DemNode {
         })
     }
 
-    async fn publish(&mut self, p: &mut Participant, window: u64) -> Result<(), NodeError> {
+    async fn publish(
+        &mut self,
+        p: &mut Participant,
+        window: u64,
+        force_averaging: bool,
+    ) -> Result<(), NodeError> {
+        self.averaged = force_averaging;
         self.write_forces(p, window).await
     }
 
