@@ -1,0 +1,407 @@
+#!/usr/bin/env python3
+"""An FEM node of a cosim run written in Python from proto/PROTOCOL.md alone: eclipse-zenoh for
+the transport, msgpack for the encoding, scikit-fem for the mechanics (plate_model.py).
+
+Started by the coordinator as `fem_node.py --run-id R --node fem --listen tcp/127.0.0.1:P
+--connect tcp/127.0.0.1:Q ...` (PROTOCOL.md §7), or by hand with the arguments `cosim run`
+prints for an `external = true` node.
+"""
+
+import argparse
+import json
+import logging
+import os
+import pickle
+import queue
+import sys
+import time
+from collections import deque
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+
+import numpy as np  # noqa: E402
+import zenoh  # noqa: E402
+
+import wire  # noqa: E402
+from plate_model import PlateModel, SceneError, UnstableError, parse_fem_table  # noqa: E402
+from wire import ProtocolError  # noqa: E402
+
+SOFTWARE = "python-fem-node 0.1 (scikit-fem, eclipse-zenoh)"
+COORDINATOR = "coordinator"
+log = logging.getLogger("fem_node")
+logging.getLogger("skfem").setLevel(logging.WARNING)
+
+
+class NodeError(Exception):
+    """An error reported to the coordinator as `status` `error` with `code`."""
+
+    def __init__(self, code, message):
+        super().__init__(message)
+        self.code = code
+
+
+class Stopped(Exception):
+    """`stop` arrived while the node waited for interface data."""
+
+    def __init__(self, reason):
+        super().__init__(reason)
+        self.reason = reason
+
+
+def zenoh_config(args):
+    """PROTOCOL.md §1: a peer on exactly the given endpoints, multicast and gossip scouting off,
+    3 s lease; or a client of a router configured by `--zenoh-config`."""
+    if args.zenoh_config:
+        config = zenoh.Config.from_file(args.zenoh_config)
+    else:
+        config = zenoh.Config()
+    if not args.zenoh_config or args.mode == "client":
+        config.insert_json5("mode", json.dumps(args.mode))
+    if not args.zenoh_config or args.listen:
+        # exactly these endpoints: an empty list means "listen nowhere", never zenoh's default
+        # of every interface
+        config.insert_json5("listen/endpoints", json.dumps(args.listen))
+    if not args.zenoh_config or args.connect:
+        config.insert_json5("connect/endpoints", json.dumps(args.connect))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    if not args.zenoh_config:
+        config.insert_json5("scouting/gossip/enabled", "false")
+        config.insert_json5("transport/link/tx/lease", "3000")
+        config.insert_json5("transport/link/tx/keep_alive", "4")
+    return config
+
+
+class Participant:
+    """The node's end of the wire. zenoh callbacks only put events on one queue; the main
+    thread takes them in order, so commands, interface data and the coordinator's liveliness
+    are handled without locks."""
+
+    def __init__(self, args):
+        self.keys = wire.Keys(args.run_id)
+        self.node = wire.check_name("node", args.node)
+        if self.node == COORDINATOR:
+            raise ProtocolError("node name `coordinator` is reserved")
+        self.run_id = args.run_id
+        self.events = queue.Queue()
+        self.forces_queue = deque()  # forces that arrived before the node asked for them
+        self.next_seq = 0
+        self.publishers = {}
+        self.entities = []
+        self.session = zenoh.open(zenoh_config(args))
+        # PROTOCOL.md §5.2: command subscriber, coordinator's liveliness, own token, hello
+        self.entities.append(self.session.declare_subscriber(
+            self.keys.command(self.node),
+            lambda s: self.events.put(("cmd", s.payload.to_bytes()))))
+        self.entities.append(self.session.liveliness().declare_subscriber(
+            self.keys.alive(COORDINATOR), lambda s: self.events.put(("coordinator", s.kind))))
+        self.token = self.session.liveliness().declare_token(self.keys.alive(self.node))
+        self.status = self.session.declare_publisher(
+            self.keys.status(self.node), congestion_control=zenoh.CongestionControl.BLOCK,
+            reliability=zenoh.Reliability.RELIABLE)
+
+    def report(self, body):
+        self.status.put(wire.status(self.run_id, self.node, body))
+
+    def _accept_command(self, payload):
+        seq, body = wire.decode_command(payload, self.run_id)
+        if seq != self.next_seq:
+            raise ProtocolError(f"command: sequence number {seq} where {self.next_seq} was expected")
+        self.next_seq += 1
+        return body
+
+    def _event(self, timeout, what):
+        try:
+            kind, value = self.events.get(timeout=timeout)
+        except queue.Empty:
+            raise NodeError("timeout", f"waited {timeout:.0f} s for {what}") from None
+        if kind == "coordinator" and value == zenoh.SampleKind.DELETE:
+            raise NodeError("protocol", f"the coordinator left (its liveliness token is gone) "
+                                        f"while node `{self.node}` waited for {what}")
+        return kind, value
+
+    def next_command(self):
+        while True:
+            kind, value = self._event(None, "its next command")
+            if kind == "cmd":
+                return self._accept_command(value)
+            if kind == "forces":
+                self.forces_queue.append(value)
+
+    def open_interface(self, name, mesh_bytes):
+        """FEM side of §5.3: subscribe to `forces`, declare the `kinematics` publisher (reliable,
+        congestion control Block), serve `mesh`."""
+        self.entities.append(self.session.declare_subscriber(
+            self.keys.forces(name), lambda s: self.events.put(("forces", s.payload.to_bytes()))))
+        self.publishers[name] = self.session.declare_publisher(
+            self.keys.kinematics(name), congestion_control=zenoh.CongestionControl.BLOCK,
+            reliability=zenoh.Reliability.RELIABLE)
+        key = self.keys.mesh(name)
+
+        def reply(query):
+            try:
+                query.reply(key, mesh_bytes)
+            except Exception as e:  # a vanished querier must not kill the node
+                log.warning("could not reply with the interface mesh: %s", e)
+        self.entities.append(self.session.declare_queryable(key, reply))
+
+    def wait_for_peers(self, timeout):
+        """Until every data publisher has a matching subscriber (the DEM listens)."""
+        start = time.monotonic()
+        for name, publisher in self.publishers.items():
+            while not publisher.matching_status:
+                if time.monotonic() - start > timeout:
+                    raise NodeError("timeout", f"no subscriber of `{self.keys.kinematics(name)}` "
+                                               f"(the other solver) after {timeout:.0f} s")
+                time.sleep(0.005)
+
+    def write_kinematics(self, name, payload):
+        self.publishers[name].put(payload)
+
+    def read_forces(self, name, window, nodes, timeout):
+        """The forces of `window`; watches commands meanwhile (`stop` ends the wait)."""
+        what = f"interface forces of window {window} on `{self.keys.forces(name)}`"
+        deadline = time.monotonic() + timeout
+        while not self.forces_queue:
+            kind, value = self._event(max(0.0, deadline - time.monotonic()), what)
+            if kind == "forces":
+                self.forces_queue.append(value)
+            elif kind == "cmd":
+                body = self._accept_command(value)
+                if body["type"] == "stop":
+                    raise Stopped(body["reason"])
+                raise ProtocolError(f"received {body['type']} while waiting for {what}")
+        return wire.decode_forces(self.forces_queue.popleft(), self.run_id, name, window, nodes)
+
+    def finish(self):
+        """Withdraws the liveliness token and closes the session."""
+        try:
+            self.token.undeclare()
+        finally:
+            self.session.close()
+
+
+def write_atomically(path, data):
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    tmp = os.path.splitext(path)[0] + ".tmp"
+    with open(tmp, "wb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+class Trace:
+    """Per-window interface traces (`init.trace`), in fem-node's CSV format."""
+
+    def __init__(self):
+        self.files = {}
+
+    def row(self, path, header, prefix, values):
+        if path not in self.files:
+            self.files[path] = open(path, "w")
+            self.files[path].write(header + "\n")
+        f = self.files[path]
+        f.write(",".join(list(prefix) + [repr(float(v)) for v in values]) + "\n")
+        f.flush()
+
+
+class FemNode:
+    def __init__(self, participant, data_timeout):
+        self.p = participant
+        self.data_timeout = data_timeout
+        self.model = None
+        self.interface = None  # (name, nodes)
+        self.out_dir = None
+        self.trace = None
+        self.compute_s = 0.0
+        self.wait_s = 0.0
+        self.window = None
+
+    def init(self, c):
+        cfg = parse_fem_table(c["scene_toml"], c["scene_path"])
+        if len(c["interfaces"]) > 1:
+            raise SceneError(f"coupling.interfaces lists {len(c['interfaces'])} interfaces; "
+                             "the FEM node couples one surface")
+        model = PlateModel(cfg)
+        self.out_dir = os.path.join(c["out_dir"], "fem")
+        try:
+            os.makedirs(self.out_dir, exist_ok=True)
+        except OSError as e:
+            raise NodeError("io", f"creating {self.out_dir}: {e}") from None
+        self.trace = Trace() if c["trace"] else None
+        if c["interfaces"]:
+            name = c["interfaces"][0]
+            mesh = wire.interface_mesh(self.p.run_id, name, model.node_ids(),
+                                       model.interface_positions(), model.triangles)
+            self.interface = (name, len(model.iface_nodes))
+            self.p.open_interface(name, mesh)
+            self.p.wait_for_peers(self.data_timeout)
+        limits = {"dofs": model.n_dofs}
+        crit = model.critical_time_step()
+        if crit is not None:
+            limits["critical_time_step"] = crit
+        self.model = model
+        log.info("model: %d dofs, %d interface nodes, %d triangles, critical time step %s",
+                 model.n_dofs, len(model.iface_nodes), len(model.triangles) // 3, crit)
+        return {"type": "ready", "limits": wire.floats(limits), "warnings": model.warnings}
+
+    def _model(self):
+        if self.model is None:
+            raise ProtocolError("a window command came before `init`")
+        return self.model
+
+    def _publish(self, window, time_, kin):
+        if self.interface is None:
+            return
+        name = self.interface[0]
+        self.p.write_kinematics(name, wire.interface_kinematics(
+            self.p.run_id, name, window, time_, *kin))
+
+    def advance(self, w):
+        model = self._model()
+        t0 = time.monotonic()
+        forces = None
+        if w["input_window"] is not None and self.interface is not None:
+            name, nodes = self.interface
+            forces = self.p.read_forces(name, w["input_window"], nodes, self.data_timeout)
+        wait_s = time.monotonic() - t0
+        if forces is not None:
+            if self.trace is not None:
+                path = os.path.join(self.out_dir, f"trace_{forces['interface']}_received_forces.csv")
+                self.trace.row(path, "window,averaged,fx,fy,fz",
+                               [str(forces["window"]), str(forces["averaged"]).lower()],
+                               forces["forces"].reshape(-1, 3).sum(axis=0))
+            model.set_interface_forces(forces["forces"])
+        start_positions = model.interface_kinematics()[0]
+        if w["static_solve"]:
+            model.solve_static()
+        else:
+            model.advance(w["dt"])
+        model.write_outputs(self.out_dir)
+        t_end = model.time
+        pos, vel, acc = model.interface_kinematics()
+        if self.trace is not None and self.interface is not None:
+            path = os.path.join(self.out_dir, f"trace_{self.interface[0]}_mesh.csv")
+            self.trace.row(path, "window,t_end,positions...,velocities...,accelerations...",
+                           [str(w["window"])], np.concatenate([[t_end], pos, vel, acc]))
+        speed = float(np.linalg.norm(vel.reshape(-1, 3), axis=1).max()) if vel.size else 0.0
+        if w["output_window"] is not None:
+            if w["motion"] == "linear":
+                # Ullrich (3.4)–(3.7): predictive velocity V = (P_{i+1} − P_i)/Δt^F, A = 0, at the
+                # window start, so that the DEM mesh, moving x = P_i + Vτ, lands on P_{i+1}
+                kin = (start_positions, (pos - start_positions) / w["dt"], np.zeros_like(pos))
+                self._publish(w["output_window"], w["t_start"], kin)
+            else:
+                self._publish(w["output_window"], t_end, (pos, vel, acc))
+        return wait_s, t_end, {"max_interface_speed": speed}
+
+    def serve(self):
+        """Commands until `stop` (PROTOCOL.md §4)."""
+        while True:
+            c = self.p.next_command()
+            kind = c["type"]
+            if kind == "init":
+                self.p.report(self.init(c))
+            elif kind == "advance_window":
+                self.window = c["window"]
+                t = time.monotonic()
+                try:
+                    wait_s, t_end, monitor = self.advance(c)
+                except Stopped as s:
+                    log.info("stop while waiting for interface data: %s", s.reason)
+                    self.p.report(self.stopped())
+                    return
+                compute = max(0.0, time.monotonic() - t - wait_s)
+                self.compute_s += compute
+                self.wait_s += wait_s
+                self.p.report({"type": "window_done", "window": c["window"], "t_end": float(t_end),
+                               "compute_s": compute, "wait_s": wait_s,
+                               "monitor": wire.floats(monitor)})
+            elif kind == "publish":
+                model = self._model()
+                self._publish(c["window"], model.time, model.interface_kinematics())
+            elif kind == "snapshot":
+                state = pickle.dumps(self._model().snapshot(), protocol=pickle.HIGHEST_PROTOCOL)
+                try:
+                    write_atomically(c["path"], state)
+                except OSError as e:
+                    raise NodeError("io", f"writing snapshot {c['path']}: {e}") from None
+                self.p.report({"type": "snapshot_done", "window": c["window"], "path": c["path"]})
+            elif kind == "restore":
+                model = self._model()
+                try:
+                    with open(c["path"], "rb") as f:
+                        state = pickle.load(f)
+                    model.restore(state)
+                except (OSError, pickle.UnpicklingError, ValueError, EOFError) as e:
+                    raise NodeError("io", f"restoring the FEM state from {c['path']}: {e}") from None
+                self.p.report({"type": "restored", "window": c["window"]})
+            elif kind == "stop":
+                log.info("stop: %s", c["reason"])
+                self.p.report(self.stopped())
+                return
+
+    def stopped(self):
+        results = self.model.results() if self.model is not None else {}
+        return {"type": "stopped", "results": wire.floats(results),
+                "compute_s": self.compute_s, "wait_s": self.wait_s}
+
+
+def error_code(e):
+    if isinstance(e, NodeError):
+        return e.code
+    if isinstance(e, SceneError):
+        return "scene"
+    if isinstance(e, ProtocolError):
+        return "protocol"
+    if isinstance(e, UnstableError):
+        return "unstable"
+    if isinstance(e, OSError):
+        return "io"
+    return "internal"
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description="FEM solver node of a cosim run (Python, scikit-fem)")
+    ap.add_argument("--run-id", required=True, help="run to join (the coordinator prints it)")
+    ap.add_argument("--node", required=True, help="name of this node in the run (fem)")
+    ap.add_argument("--listen", action="append", default=[], help="endpoint to listen on (repeatable)")
+    ap.add_argument("--connect", action="append", default=[], help="endpoint to connect to (repeatable)")
+    ap.add_argument("--zenoh-config", help="zenoh configuration file (client of a router): see deploy/")
+    ap.add_argument("--mode", default="peer", choices=["peer", "client"])
+    ap.add_argument("--data-timeout", type=float, default=600.0,
+                    help="longest wait for the other solver's interface data in one window (s)")
+    args = ap.parse_args(argv)
+    logging.basicConfig(level=os.environ.get("COSIM_PY_LOG", "INFO"), stream=sys.stderr,
+                        format="%(asctime)s %(levelname)s %(message)s")
+    try:
+        p = Participant(args)
+    except Exception as e:
+        print(f"error: node `{args.node}` in run `{args.run_id}`: cannot join: {e}", file=sys.stderr)
+        return 1
+    node = FemNode(p, max(args.data_timeout, 0.001))
+    try:
+        p.report({"type": "hello", "software": SOFTWARE, "role": "fem",
+                  "capabilities": ["snapshot", "static", "dynamic"], "pid": os.getpid()})
+        node.serve()
+    except Exception as e:
+        code = error_code(e)
+        message = str(e) if code != "internal" else f"{type(e).__name__}: {e}"
+        log.error("%s: %s", code, message, exc_info=code == "internal")
+        try:
+            p.report({"type": "error", "code": code, "message": message, "window": node.window})
+            time.sleep(0.1)  # let the error reach the coordinator before the token goes
+        except Exception as e2:
+            log.error("could not report the error: %s", e2)
+        try:
+            p.finish()
+        except Exception:
+            pass
+        return 1
+    p.finish()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
