@@ -4,6 +4,7 @@
 //! The coordinator never links an engine: physics limits come from the nodes' `ready`
 //! messages, so an external node takes part in checks like a built-in one.
 
+pub mod checkpoint;
 pub mod launch;
 pub mod run;
 pub mod scene;

@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+use anyhow::Context;
 use clap::{Parser, Subcommand};
 use coordinator::run::{run_scene, schedule_name, RunOptions};
 use coordinator::scene::Scene;
@@ -45,12 +46,39 @@ enum Command {
         #[arg(long)]
         no_progress: bool,
     },
+    /// Continue a run from its newest checkpoint (after a node or the coordinator died).
+    Resume {
+        /// The run's output folder (holds run.json, scene.toml and checkpoints/).
+        out_dir: PathBuf,
+        #[arg(long)]
+        no_progress: bool,
+    },
     /// Validate a scene without running it: the file, then each node's own table and limits.
     Check {
         scene: PathBuf,
         #[arg(long)]
         out: Option<PathBuf>,
     },
+}
+
+fn report(scene: &Scene, s: &coordinator::run::Summary, out_dir: &std::path::Path) {
+    println!(
+        "{}: {} windows of {} s ({}), {:.3} s simulated in {:.2} s wall (DEM {:.2} s, FEM {:.2} s, coupling {:.2} s = {:.1} %)",
+        s.scene,
+        s.windows_done,
+        s.coupling_window_s,
+        schedule_name(scene.schedule),
+        s.simulated_time_s,
+        s.timing.total_wall_s,
+        s.timing.dem_compute_s,
+        s.timing.fem_compute_s,
+        s.timing.coupling_overhead_s,
+        100.0 * s.timing.coupling_overhead_fraction
+    );
+    for (k, v) in &s.results {
+        println!("  {k} = {v:.6e}");
+    }
+    println!("summary: {}", out_dir.join("summary.json").display());
 }
 
 fn main() -> ExitCode {
@@ -76,7 +104,13 @@ fn main() -> ExitCode {
     };
     let result = rt.block_on(async {
         match cli.command {
-            Command::Run { scene, out, config, run_id, no_progress } => {
+            Command::Run {
+                scene,
+                out,
+                config,
+                run_id,
+                no_progress,
+            } => {
                 let scene = Scene::load(&scene)?;
                 let opts = RunOptions {
                     out_dir: out,
@@ -86,34 +120,62 @@ fn main() -> ExitCode {
                     ..Default::default()
                 };
                 let s = run_scene(&scene, &opts).await?;
-                let out_dir = opts.out_dir.clone().unwrap_or(scene.out_dir.clone());
-                println!(
-                    "{}: {} windows of {} s ({}), {:.3} s simulated in {:.2} s wall (DEM {:.2} s, FEM {:.2} s, coupling {:.2} s = {:.1} %)",
-                    s.scene,
-                    s.windows_done,
-                    s.coupling_window_s,
-                    schedule_name(scene.schedule),
-                    s.simulated_time_s,
-                    s.timing.total_wall_s,
-                    s.timing.dem_compute_s,
-                    s.timing.fem_compute_s,
-                    s.timing.coupling_overhead_s,
-                    100.0 * s.timing.coupling_overhead_fraction
+                report(
+                    &scene,
+                    &s,
+                    &opts.out_dir.clone().unwrap_or(scene.out_dir.clone()),
                 );
-                for (k, v) in &s.results {
-                    println!("  {k} = {v:.6e}");
-                }
-                println!("summary: {}", out_dir.join("summary.json").display());
                 anyhow::Ok(())
+            }
+            Command::Resume {
+                out_dir,
+                no_progress,
+            } => {
+                let record = coordinator::checkpoint::read_record(&out_dir)?;
+                let text_path = out_dir.join("scene.toml");
+                let text = std::fs::read_to_string(&text_path)
+                    .with_context(|| format!("reading {}", text_path.display()))?;
+                // the scene as it was (its own path resolves the files it names)
+                let scene = Scene::parse(&record.scene_file, text)?;
+                let (dir, state) = coordinator::checkpoint::latest(&out_dir)?;
+                eprintln!(
+                    "resuming {} after window {} from {}",
+                    scene.name,
+                    state.window,
+                    dir.display()
+                );
+                let opts = RunOptions {
+                    out_dir: Some(out_dir.clone()),
+                    zenoh_config: record.zenoh_config,
+                    progress: !no_progress,
+                    resume: Some((dir, state)),
+                    ..Default::default()
+                };
+                let s = run_scene(&scene, &opts).await?;
+                report(&scene, &s, &out_dir);
+                Ok(())
             }
             Command::Check { scene, out } => {
                 let scene = Scene::load(&scene)?;
-                let dir = out.unwrap_or_else(|| std::env::temp_dir().join(format!("cosim-check-{}", std::process::id())));
-                let opts = RunOptions { check_only: true, out_dir: Some(dir.clone()), progress: false, ..Default::default() };
+                let dir = out.unwrap_or_else(|| {
+                    std::env::temp_dir().join(format!("cosim-check-{}", std::process::id()))
+                });
+                let opts = RunOptions {
+                    check_only: true,
+                    out_dir: Some(dir.clone()),
+                    progress: false,
+                    ..Default::default()
+                };
                 let s = run_scene(&scene, &opts).await;
                 let _ = std::fs::remove_dir_all(&dir);
                 let s = s?;
-                println!("{}: ok ({}, {} windows of {} s)", scene.path.display(), schedule_name(scene.schedule), scene.windows, scene.window);
+                println!(
+                    "{}: ok ({}, {} windows of {} s)",
+                    scene.path.display(),
+                    schedule_name(scene.schedule),
+                    scene.windows,
+                    scene.window
+                );
                 for (node, n) in &s.nodes {
                     for (k, v) in &n.limits {
                         println!("  {node}.{k} = {v:.6e}");

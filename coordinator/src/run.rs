@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 use anyhow::{anyhow, bail, Context};
 use proto::participant::{CoordinatorLink, Event, Monitor};
 use proto::{CommandBody, Init, LinkConfig, LinkMode, Role, StatusBody};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::launch::NodeProcess;
 use crate::scene::{Scene, ScheduleKind};
@@ -32,6 +32,8 @@ pub struct RunOptions {
     pub progress: bool,
     /// Override the run id (default: scene name + a random suffix).
     pub run_id: Option<String>,
+    /// Continue from this checkpoint (its folder and the coordinator's state there).
+    pub resume: Option<(PathBuf, crate::checkpoint::CheckpointState)>,
 }
 
 impl Default for RunOptions {
@@ -43,12 +45,13 @@ impl Default for RunOptions {
             startup_timeout: Duration::from_secs(120),
             progress: true,
             run_id: None,
+            resume: None,
         }
     }
 }
 
 /// Per-node figures in the summary.
-#[derive(Debug, Clone, Default, Serialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct NodeSummary {
     pub limits: BTreeMap<String, f64>,
     pub warnings: Vec<String>,
@@ -59,7 +62,7 @@ pub struct NodeSummary {
 }
 
 /// Wall time split like Ullrich's tables 5.3/6.2.
-#[derive(Debug, Clone, Default, Serialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct Timing {
     pub total_wall_s: f64,
     pub startup_s: f64,
@@ -73,7 +76,7 @@ pub struct Timing {
 }
 
 /// `summary.json`.
-#[derive(Debug, Clone, Default, Serialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct Summary {
     pub scene: String,
     pub scene_file: String,
@@ -92,6 +95,8 @@ pub struct Summary {
     /// The scene's result quantities, `<node>.<name>`.
     pub results: BTreeMap<String, f64>,
     pub warnings: Vec<String>,
+    /// The run continued from the checkpoint after this window (`cosim resume`).
+    pub resumed_after_window: Option<u64>,
 }
 
 fn make_run_id(name: &str) -> String {
@@ -122,6 +127,10 @@ struct Run<'a> {
     gone: BTreeMap<String, (Instant, String)>,
     /// Nodes that reported `stopped` (they may leave).
     stopped: std::collections::BTreeSet<String>,
+    /// When the windows (of this process) began, and the windows' wall time of the run
+    /// before a resume.
+    windows_started: Instant,
+    windows_wall_base: f64,
 }
 
 impl Run<'_> {
@@ -278,6 +287,10 @@ impl Run<'_> {
         Ok(())
     }
 
+    fn windows_wall(&self) -> f64 {
+        self.windows_wall_base + self.windows_started.elapsed().as_secs_f64()
+    }
+
     fn limit(&self, node: &str, key: &str) -> Option<f64> {
         self.summary
             .nodes
@@ -286,7 +299,12 @@ impl Run<'_> {
             .copied()
     }
 
-    async fn windows(&mut self, monitor: &Monitor, progress: bool) -> anyhow::Result<()> {
+    async fn windows(
+        &mut self,
+        monitor: &Monitor,
+        progress: bool,
+        resume: Option<(PathBuf, crate::checkpoint::CheckpointState)>,
+    ) -> anyhow::Result<()> {
         let scene = self.scene;
         let n_sub = if scene.has_dem {
             let dt = self
@@ -298,7 +316,7 @@ impl Run<'_> {
             1
         };
         self.summary.dem_substeps = n_sub;
-        let mut scheduler = Scheduler::new(SchedulerConfig {
+        let scheduler = Scheduler::new(SchedulerConfig {
             kind: scene.schedule,
             window: scene.window,
             windows: scene.windows,
@@ -310,19 +328,66 @@ impl Run<'_> {
             steady_windows: scene.steady_windows,
         })
         .map_err(|e| anyhow!(e))?;
-        let mut stability = StabilityMonitor::new(scene.max_force_growth);
         let timeout = Duration::from_secs_f64(scene.window_timeout);
-        let bar = progress_bar(progress, scene.windows);
         let csv_path = self.out_dir.join("windows.csv");
+        let header =
+            "window,t_end_s,wall_s,dem_compute_s,fem_compute_s,overhead_s,dem_kinetic_energy_j";
+        let (mut scheduler, mut stability, mut actions, done_rows) = match resume {
+            None => {
+                let mut scheduler = scheduler;
+                let actions = scheduler.start();
+                (
+                    scheduler,
+                    StabilityMonitor::new(scene.max_force_growth),
+                    actions,
+                    String::new(),
+                )
+            }
+            Some((dir, state)) => {
+                // every node takes its state from the checkpoint ...
+                let names: Vec<String> = self.nodes.iter().map(|n| n.name.clone()).collect();
+                for n in &names {
+                    let path = crate::checkpoint::node_state_path(&dir, n);
+                    self.link
+                        .send(
+                            n,
+                            CommandBody::Restore {
+                                window: state.window,
+                                path: path.display().to_string(),
+                            },
+                        )
+                        .await?;
+                }
+                self.await_all("`restored`", timeout, |b| {
+                    matches!(b, StatusBody::Restored { .. })
+                })
+                .await?;
+                // ... the coordinator too; the data that was in flight is published again
+                let mut scheduler = state.scheduler;
+                let actions = scheduler.replay_actions().map_err(|e| anyhow!(e))?;
+                let kept: String = std::fs::read_to_string(&csv_path)
+                    .unwrap_or_default()
+                    .lines()
+                    .skip(1)
+                    .filter(|l| {
+                        l.split(',')
+                            .next()
+                            .and_then(|w| w.parse::<u64>().ok())
+                            .is_some_and(|w| w <= state.window)
+                    })
+                    .map(|l| format!("{l}\n"))
+                    .collect();
+                (scheduler, state.stability, actions, kept)
+            }
+        };
+        let bar = progress_bar(progress, scene.windows);
+        bar.set_position(self.summary.windows_done);
         let mut csv = std::io::BufWriter::new(
             std::fs::File::create(&csv_path)
                 .with_context(|| format!("creating {}", csv_path.display()))?,
         );
-        writeln!(
-            csv,
-            "window,t_end_s,wall_s,dem_compute_s,fem_compute_s,overhead_s,dem_kinetic_energy_j"
-        )?;
-        let mut actions = scheduler.start();
+        write!(csv, "{header}\n{done_rows}")?;
+        csv.flush()?;
         let mut window_start = Instant::now();
         let mut row: BTreeMap<&'static str, f64> = BTreeMap::new();
         loop {
@@ -413,9 +478,79 @@ impl Run<'_> {
                 self.summary.simulated_time_s = t_end;
                 bar.set_position(window + 1);
                 bar.set_message(format!("t = {t_end:.4e} s"));
+                let due = scene.checkpoint_every > 0 && (window + 1) % scene.checkpoint_every == 0;
+                if due && !actions.iter().any(|a| matches!(a, Action::Finish { .. })) {
+                    self.checkpoint(window, &scheduler, &stability, timeout)
+                        .await?;
+                }
                 window_start = Instant::now();
             }
         }
+    }
+
+    /// Every node writes its state into `dir`; waits until all have.
+    async fn snapshot_all(
+        &mut self,
+        window: u64,
+        dir: &Path,
+        timeout: Duration,
+    ) -> anyhow::Result<()> {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        let names: Vec<String> = self.nodes.iter().map(|n| n.name.clone()).collect();
+        for n in &names {
+            let path = crate::checkpoint::node_state_path(dir, n)
+                .display()
+                .to_string();
+            self.link
+                .send(n, CommandBody::Snapshot { window, path })
+                .await?;
+        }
+        self.await_all("`snapshot_done`", timeout, |b| {
+            matches!(b, StatusBody::SnapshotDone { .. })
+        })
+        .await
+    }
+
+    /// A consistent checkpoint after `window`: the nodes' states, then the coordinator's.
+    async fn checkpoint(
+        &mut self,
+        window: u64,
+        scheduler: &Scheduler,
+        stability: &StabilityMonitor,
+        timeout: Duration,
+    ) -> anyhow::Result<()> {
+        let dir = crate::checkpoint::checkpoint_dir(&self.out_dir, window);
+        self.snapshot_all(window, &dir, timeout).await?;
+        self.summary.timing.windows_wall_s = self.windows_wall();
+        let state = crate::checkpoint::CheckpointState {
+            window,
+            scheduler: scheduler.clone(),
+            stability: stability.clone(),
+            summary: self.summary.clone(),
+        };
+        crate::checkpoint::commit(&self.out_dir, &state)?;
+        tracing::debug!("checkpoint after window {window}");
+        Ok(())
+    }
+
+    /// Waits until every node has sent a status matching `is`.
+    async fn await_all(
+        &mut self,
+        what: &str,
+        timeout: Duration,
+        is: impl Fn(&StatusBody) -> bool,
+    ) -> anyhow::Result<()> {
+        let deadline = Instant::now() + timeout;
+        let mut waiting: Vec<String> = self.nodes.iter().map(|n| n.name.clone()).collect();
+        while !waiting.is_empty() {
+            let w = format!("{what} from {}", waiting.join(", "));
+            if let Event::Status(st) = self.next(deadline, &w, None).await? {
+                if is(&st.body) {
+                    waiting.retain(|n| n != &st.node);
+                }
+            }
+        }
+        Ok(())
     }
 
     /// `stop` to every node, collect results, wait for the processes.
@@ -580,7 +715,33 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
         out_dir: out_dir.clone(),
         gone: BTreeMap::new(),
         stopped: Default::default(),
+        windows_started: Instant::now(),
+        windows_wall_base: 0.0,
     };
+    if let Some((_, state)) = &opts.resume {
+        // the run continues: its summary so far comes from the checkpoint
+        let mut restored = state.summary.clone();
+        restored.run_id = run_id.clone();
+        restored.status = "failed".into();
+        restored.resumed_after_window = Some(state.window);
+        run.windows_wall_base = restored.timing.windows_wall_s;
+        for (name, n) in &run.summary.nodes {
+            restored.nodes.entry(name.clone()).or_default().software = n.software.clone();
+        }
+        run.summary = restored;
+    } else if !opts.check_only {
+        // what `cosim resume` needs
+        std::fs::write(out_dir.join("scene.toml"), &scene.text)
+            .with_context(|| format!("writing {}", out_dir.join("scene.toml").display()))?;
+        crate::checkpoint::write_json(
+            &out_dir.join("run.json"),
+            &crate::checkpoint::RunRecord {
+                scene_file: scene.path.clone(),
+                run_id: run_id.clone(),
+                zenoh_config: opts.zenoh_config.clone(),
+            },
+        )?;
+    }
     let result: anyhow::Result<()> = async {
         run.start(opts.check_only, opts.startup_timeout).await?;
         run.summary.timing.startup_s = t0.elapsed().as_secs_f64();
@@ -597,9 +758,16 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
             return Ok(());
         }
         let monitor = run.link.monitor().await?;
-        let tw = Instant::now();
-        run.windows(&monitor, opts.progress).await?;
-        run.summary.timing.windows_wall_s = tw.elapsed().as_secs_f64();
+        run.windows_started = Instant::now();
+        run.windows(&monitor, opts.progress, opts.resume.clone())
+            .await?;
+        run.summary.timing.windows_wall_s = run.windows_wall();
+        if scene.final_state {
+            let last = run.summary.windows_done.saturating_sub(1);
+            let dir = run.out_dir.join("final");
+            run.snapshot_all(last, &dir, Duration::from_secs_f64(scene.window_timeout))
+                .await?;
+        }
         let ts = Instant::now();
         run.stop("end of the schedule", true).await?;
         run.summary.timing.shutdown_s = ts.elapsed().as_secs_f64();

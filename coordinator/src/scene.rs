@@ -121,6 +121,13 @@ pub struct OutputSection {
     /// Nodes write per-window interface traces (verification; large for big interfaces).
     #[serde(default)]
     pub trace_interfaces: bool,
+    /// Checkpoint every this many windows (0: never); `cosim resume <out>` continues a run
+    /// from the newest checkpoint.
+    #[serde(default)]
+    pub checkpoint_every: u64,
+    /// At the end, every node writes its full final state to `<out>/final/<node>.state`.
+    #[serde(default)]
+    pub final_state: bool,
 }
 
 /// How a node is started.
@@ -177,6 +184,8 @@ pub struct Scene {
     pub max_force_growth: f64,
     pub out_dir: PathBuf,
     pub trace_interfaces: bool,
+    pub checkpoint_every: u64,
+    pub final_state: bool,
     pub has_dem: bool,
     pub has_fem: bool,
     pub nodes: NodesSection,
@@ -354,6 +363,8 @@ impl Scene {
             max_force_growth: c.max_force_growth,
             out_dir,
             trace_interfaces: raw.output.trace_interfaces,
+            checkpoint_every: raw.output.checkpoint_every,
+            final_state: raw.output.final_state,
             has_dem,
             has_fem,
             nodes: raw.nodes,

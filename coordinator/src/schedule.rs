@@ -53,7 +53,7 @@ pub enum Action {
     },
 }
 
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct SchedulerConfig {
     pub kind: ScheduleKind,
     pub window: f64,
@@ -69,7 +69,7 @@ pub struct SchedulerConfig {
     pub steady_windows: u32,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 enum Phase {
     Idle,
     Window,
@@ -77,8 +77,8 @@ enum Phase {
     Done,
 }
 
-/// The state machine of one run.
-#[derive(Debug, Clone)]
+/// The state machine of one run (serialisable: checkpoints store it).
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Scheduler {
     cfg: SchedulerConfig,
     phase: Phase,
@@ -213,10 +213,51 @@ impl Scheduler {
         let mut out = Vec::new();
         if self.cfg.kind == ScheduleKind::Jit {
             // The DEM's first window needs the FEM's initial kinematics.
-            out.push(Action::Send(Role::Fem, CommandBody::Publish { window: 0 }));
+            out.push(Action::Send(
+                Role::Fem,
+                CommandBody::Publish {
+                    window: 0,
+                    force_averaging: false,
+                },
+            ));
         }
         out.extend(self.window_actions(0));
         out
+    }
+
+    /// After a restore from a checkpoint taken between window k − 1 and window k (this
+    /// scheduler's state at that moment): the interface data that was in flight at the
+    /// checkpoint, published again from the restored states, then window k's commands.
+    pub fn replay_actions(&mut self) -> Result<Vec<Action>, String> {
+        if self.phase != Phase::Window || self.window == 0 {
+            return Err(format!(
+                "cannot resume a schedule in phase {:?} at window {}",
+                self.phase, self.window
+            ));
+        }
+        let k = self.window;
+        let mut out = Vec::new();
+        match self.cfg.kind {
+            // the FEM's state at the end of window k − 1 is kinematics k
+            ScheduleKind::Jit => out.push(Action::Send(
+                Role::Fem,
+                CommandBody::Publish {
+                    window: k,
+                    force_averaging: false,
+                },
+            )),
+            // the DEM's forces of window k − 1 load the FEM in window k
+            ScheduleKind::Predictive => out.push(Action::Send(
+                Role::Dem,
+                CommandBody::Publish {
+                    window: k - 1,
+                    force_averaging: self.cfg.force_averaging,
+                },
+            )),
+            ScheduleKind::OneWay | ScheduleKind::None => {}
+        }
+        out.extend(self.window_actions(k));
+        Ok(out)
     }
 
     /// A node finished window `window`; `kinetic_energy` is the DEM's, if it reported one.
@@ -259,7 +300,13 @@ impl Scheduler {
                 self.pending = [Role::Fem].into();
                 let solve = self.advance(window, MotionRule::Fixed, Some(window), None, true);
                 return Ok(vec![
-                    Action::Send(Role::Dem, CommandBody::Publish { window }),
+                    Action::Send(
+                        Role::Dem,
+                        CommandBody::Publish {
+                            window,
+                            force_averaging: self.cfg.force_averaging,
+                        },
+                    ),
                     Action::Send(Role::Fem, CommandBody::AdvanceWindow(solve)),
                 ]);
             }
@@ -317,7 +364,13 @@ mod tests {
         let a = s.start();
         assert_eq!(
             a[0],
-            Action::Send(Role::Fem, CommandBody::Publish { window: 0 })
+            Action::Send(
+                Role::Fem,
+                CommandBody::Publish {
+                    window: 0,
+                    force_averaging: false
+                }
+            )
         );
         let (r, d) = advance(&a[1]);
         assert_eq!(
@@ -386,7 +439,13 @@ mod tests {
         let a = s.on_window_done(Role::Dem, 4, Some(1e-7)).unwrap();
         assert_eq!(
             a[0],
-            Action::Send(Role::Dem, CommandBody::Publish { window: 4 })
+            Action::Send(
+                Role::Dem,
+                CommandBody::Publish {
+                    window: 4,
+                    force_averaging: false
+                }
+            )
         );
         let (r, f) = advance(&a[1]);
         assert_eq!(
@@ -399,6 +458,37 @@ mod tests {
         );
         let a = s.on_window_done(Role::Fem, 4, None).unwrap();
         assert!(matches!(a[0], Action::Finish { .. }));
+    }
+
+    #[test]
+    fn a_restored_scheduler_republishes_the_data_in_flight_then_continues() {
+        for (kind, role, window) in [
+            (ScheduleKind::Jit, Role::Fem, 2),
+            (ScheduleKind::Predictive, Role::Dem, 1),
+        ] {
+            let mut s = Scheduler::new(cfg(kind, 5)).unwrap();
+            s.start();
+            s.on_window_done(Role::Dem, 0, None).unwrap();
+            s.on_window_done(Role::Fem, 0, None).unwrap();
+            s.on_window_done(Role::Dem, 1, None).unwrap();
+            let expected = s.on_window_done(Role::Fem, 1, None).unwrap();
+            // a checkpoint here, then a restore from its JSON
+            let mut restored: Scheduler =
+                serde_json::from_str(&serde_json::to_string(&s).unwrap()).unwrap();
+            let a = restored.replay_actions().unwrap();
+            assert_eq!(
+                a[0],
+                Action::Send(
+                    role,
+                    CommandBody::Publish {
+                        window,
+                        force_averaging: false
+                    }
+                ),
+                "{kind:?}"
+            );
+            assert_eq!(&a[1..], &expected[..], "{kind:?}");
+        }
     }
 
     #[test]

@@ -4,7 +4,7 @@
 
 use proto::participant::Digest;
 
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct StabilityMonitor {
     max_growth: f64,
     /// Largest force norm seen so far, per interface.

@@ -104,7 +104,10 @@ mod tests {
                 check_only: false,
                 trace: true,
             }),
-            CommandBody::Publish { window: 0 },
+            CommandBody::Publish {
+                window: 0,
+                force_averaging: false,
+            },
             CommandBody::AdvanceWindow(AdvanceWindow {
                 window: 3,
                 t_start: 3e-4,

@@ -185,6 +185,8 @@ pub enum CommandBody {
     /// e.g. the settled forces of one-way coupling).
     Publish {
         window: u64,
+        /// DEM: publish the mean of the last window's substep forces (Ullrich (3.8)).
+        force_averaging: bool,
     },
     AdvanceWindow(AdvanceWindow),
     /// Write the full state to `path` (atomically), reply `snapshot_done`.

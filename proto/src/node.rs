@@ -76,8 +76,14 @@ pub trait Solver {
         p: &mut Participant,
         w: &AdvanceWindow,
     ) -> Result<WindowReport, NodeError>;
-    /// Publishes the current interface output labelled `window`, without stepping.
-    async fn publish(&mut self, p: &mut Participant, window: u64) -> Result<(), NodeError>;
+    /// Publishes the current interface output labelled `window`, without stepping (DEM:
+    /// the mean of the last window's substep forces when `force_averaging`).
+    async fn publish(
+        &mut self,
+        p: &mut Participant,
+        window: u64,
+        force_averaging: bool,
+    ) -> Result<(), NodeError>;
     fn snapshot(&self) -> Result<Vec<u8>, NodeError>;
     fn restore(&mut self, bytes: &[u8]) -> Result<(), NodeError>;
     /// Final outputs; the scene's result quantities for `summary.json`.
@@ -136,7 +142,10 @@ pub async fn serve<S: Solver>(
                     })
                     .await?;
                 }
-                CommandBody::Publish { window: k } => solver.publish(&mut p, k).await?,
+                CommandBody::Publish {
+                    window: k,
+                    force_averaging,
+                } => solver.publish(&mut p, k, force_averaging).await?,
                 CommandBody::Snapshot { window: k, path } => {
                     let bytes = solver.snapshot()?;
                     write_atomically(Path::new(&path), &bytes).map_err(|e| {

@@ -213,7 +213,7 @@ impl Solver for FemNode {
         })
     }
 
-    async fn publish(&mut self, p: &mut Participant, window: u64) -> Result<(), NodeError> {
+    async fn publish(&mut self, p: &mut Participant, window: u64, _force_averaging: bool) -> Result<(), NodeError> {
         let model = self.model()?;
         let time = model.time();
         let kin = model.interface_kinematics();

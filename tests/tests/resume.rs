@@ -1,0 +1,174 @@
+//! Checkpoint and resume: a run killed in the middle and resumed ends in the same final state,
+//! bit for bit, as a run that was never interrupted.
+
+use std::path::Path;
+use std::process::Stdio;
+use std::time::{Duration, Instant};
+
+use cosim_tests::{cosim, root, run, summary, write_scene};
+
+fn plate_scene(dir: &Path, schedule: &str) -> std::path::PathBuf {
+    let text = std::fs::read_to_string(root().join("scenes/plate.toml"))
+        .unwrap()
+        .replace(
+            "schedule = \"predictive\"",
+            &format!("schedule = \"{schedule}\"\nforce_averaging = true"),
+        )
+        .replace(
+            "end_time = \"30 ms\"",
+            "end_time = \"12 ms\"\n[output]\ncheckpoint_every = 10\nfinal_state = true",
+        );
+    write_scene(dir, "plate.toml", &text)
+}
+
+fn read(p: &Path) -> Vec<u8> {
+    std::fs::read(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+}
+
+fn kill(pid: u32) {
+    assert!(std::process::Command::new("kill")
+        .args(["-KILL", &pid.to_string()])
+        .status()
+        .unwrap()
+        .success());
+}
+
+fn pid_of(needles: &[&str]) -> Option<u32> {
+    for entry in std::fs::read_dir("/proc").ok()?.flatten() {
+        let Ok(pid) = entry.file_name().to_string_lossy().parse::<u32>() else {
+            continue;
+        };
+        let Ok(cmd) = std::fs::read(entry.path().join("cmdline")) else {
+            continue;
+        };
+        let cmd = String::from_utf8_lossy(&cmd).replace('\0', " ");
+        if needles.iter().all(|n| cmd.contains(n)) {
+            return Some(pid);
+        }
+    }
+    None
+}
+
+/// Runs the scene, kills `victim` (`dem`, `fem` or `cosim`) once the checkpoint after window
+/// 49 exists, resumes, and compares the final states with an uninterrupted run.
+fn killed_and_resumed_equals_uninterrupted(schedule: &str, victim: &str) {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = plate_scene(dir.path(), schedule);
+
+    let whole = dir.path().join("whole");
+    let mut c = cosim();
+    c.arg("run")
+        .arg(&scene)
+        .arg("--no-progress")
+        .arg("--out")
+        .arg(&whole);
+    assert!(run(c).status.success());
+
+    let broken = dir.path().join("broken");
+    let run_id = format!("resume-{victim}-{}", std::process::id());
+    let mut c = cosim();
+    c.arg("run")
+        .arg(&scene)
+        .args(["--no-progress", "--run-id", &run_id, "--out"])
+        .arg(&broken);
+    let mut child = c
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let t0 = Instant::now();
+    while !broken.join("checkpoints/w000000049/state.json").exists() {
+        assert!(
+            t0.elapsed() < Duration::from_secs(60),
+            "no checkpoint after window 49"
+        );
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the run ended before it could be killed"
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let pid = match victim {
+        "cosim" => child.id(),
+        node => pid_of(&[&format!("{node}-node"), &run_id]).expect("node process"),
+    };
+    kill(pid);
+    let status = child.wait().unwrap();
+    assert!(!status.success(), "the interrupted run must fail");
+    if victim == "cosim" {
+        // the nodes notice that the coordinator is gone and leave by themselves
+        let t = Instant::now();
+        while pid_of(&["-node", &run_id]).is_some() {
+            assert!(
+                t.elapsed() < Duration::from_secs(10),
+                "nodes still running without a coordinator"
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+    assert!(!broken.join("final").exists());
+
+    let mut c = cosim();
+    c.arg("resume").arg(&broken).arg("--no-progress");
+    let o = run(c);
+    assert!(o.status.success());
+    let s = summary(&broken);
+    assert_eq!(s["status"], "completed");
+    assert_eq!(s["windows_done"], 120);
+    let resumed_after = s["resumed_after_window"].as_u64().unwrap();
+    assert!(resumed_after >= 49, "{s}");
+    for node in ["dem", "fem"] {
+        let a = read(&whole.join(format!("final/{node}.state")));
+        let b = read(&broken.join(format!("final/{node}.state")));
+        assert!(
+            a == b,
+            "{node}: the resumed final state differs from the uninterrupted run ({} vs {} bytes)",
+            a.len(),
+            b.len()
+        );
+    }
+    let csv = std::fs::read_to_string(broken.join("windows.csv")).unwrap();
+    let windows: Vec<u64> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').next().unwrap().parse().unwrap())
+        .collect();
+    assert_eq!(
+        windows,
+        (0..120).collect::<Vec<_>>(),
+        "one row per window, none twice"
+    );
+    assert_eq!(
+        summary(&whole)["results"]["fem.probe.centre.uz"],
+        s["results"]["fem.probe.centre.uz"]
+    );
+}
+
+#[test]
+fn predictive_run_with_dem_killed_resumes_bitwise_equal() {
+    killed_and_resumed_equals_uninterrupted("predictive", "dem");
+}
+
+#[test]
+fn jit_run_with_fem_killed_resumes_bitwise_equal() {
+    killed_and_resumed_equals_uninterrupted("jit", "fem");
+}
+
+#[test]
+fn run_with_the_coordinator_killed_resumes_bitwise_equal() {
+    killed_and_resumed_equals_uninterrupted("predictive", "cosim");
+}
+
+#[test]
+fn resume_without_a_checkpoint_says_how_to_get_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut c = cosim();
+    c.args(["run", "scenes/minimal.toml", "--no-progress", "--out"])
+        .arg(dir.path());
+    assert!(run(c).status.success());
+    let mut c = cosim();
+    c.arg("resume").arg(dir.path());
+    let o = run(c);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("checkpoint_every"));
+}
