@@ -9,7 +9,6 @@ use crate::mesh::{box_mesh, Mesh};
 use crate::output;
 use crate::surface::{self, Boundary, Interface};
 use crate::{FemError, InterfaceMesh};
-use faer::sparse::linalg::solvers::SymbolicLlt;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -56,7 +55,7 @@ pub struct Model {
     m_consistent: Option<Vec<f64>>,
     m_lumped: Vec<f64>,
     diag_pos: Vec<usize>,
-    symbolic: Option<SymbolicLlt<u32>>,
+    symbolic: Option<assembly::Symbolic>,
     k_factor: Option<Factor>,
     eff_factor: Option<(u64, Factor)>,
     m_factor: Option<Factor>,
@@ -118,7 +117,15 @@ impl Model {
         {
             mesh.set_hex8_incompatible(true);
         }
+        let timing = tracing::enabled!(tracing::Level::DEBUG);
+        let t0 = std::time::Instant::now();
+        let lap = |what: &str| {
+            if timing {
+                tracing::debug!("  {what}: {:?}", t0.elapsed());
+            }
+        };
         mesh.check_elements()?;
+        lap("check_elements");
         let mat = Lame::from_young_poisson(cfg.material.youngs_modulus, cfg.material.poisson_ratio);
         let rho = cfg.material.density;
         let nd = 3 * mesh.num_nodes();
@@ -134,9 +141,13 @@ impl Model {
             }
         }
         let dofs = DofMap::new(&fixed, &mesh.used_nodes());
+        lap("supports");
         let pattern = Pattern::build(&mesh, &dofs)?;
+        lap("pattern");
         let k = assembly::assemble(&mesh, &dofs, &pattern, Operator::Stiffness, mat, rho)?;
+        lap("stiffness");
         let m_lumped = assembly::lumped_mass(&mesh, rho)?;
+        lap("lumped mass");
         let diag_pos: Vec<usize> = (0..pattern.n)
             .map(|j| {
                 let (a, b) = (pattern.col_ptr[j] as usize, pattern.col_ptr[j + 1] as usize);
@@ -160,6 +171,7 @@ impl Model {
         };
 
         let boundary = Boundary::extract(&mesh);
+        lap("boundary");
         let mut loads = Vec::new();
         for (i, l) in cfg.loads.iter().enumerate() {
             let what = format!("fem.loads[{i}].on");
@@ -225,6 +237,7 @@ impl Model {
             }
         };
 
+        lap("loads, interface");
         let used = mesh.used_nodes();
         let mut probes = Vec::new();
         for (i, p) in cfg.probes.iter().enumerate() {
