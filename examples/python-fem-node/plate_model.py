@@ -252,6 +252,12 @@ def _face_triangles(corners, mids, centre):
     return tris
 
 
+def _sci(v):
+    """`{:.9e}` as Rust writes it (fem-node's CSV): 1.234567890e-5, 0.000000000e0."""
+    mantissa, exponent = f"{v:.9e}".split("e")
+    return f"{mantissa}e{int(exponent)}"
+
+
 class PlateModel:
     """Linear elastic box: K, M on the free dofs, Bossak–Newmark or static stepping."""
 
@@ -555,8 +561,8 @@ class PlateModel:
         if not self.st["csv_started"]:
             lines.append("time" + "".join(
                 f",probe.{n}.{c}" for n, _ in self.probes for c in ("ux", "uy", "uz")))
-        row = f"{self.st['time']:.9e}" + "".join(
-            f",{self.st['u'][3 * node + c]:.9e}" for _, node in self.probes for c in range(3))
+        row = _sci(self.st["time"]) + "".join(
+            "," + _sci(self.st["u"][3 * node + c]) for _, node in self.probes for c in range(3))
         lines.append(row)
         mode = "a" if self.st["csv_started"] else "w"
         with open(f"{out_dir}/fem_probes.csv", mode) as f:
