@@ -42,9 +42,22 @@ enum Command {
         /// Run id (default: scene name and a random suffix).
         #[arg(long)]
         run_id: Option<String>,
+        /// Local runs: the coordinator's endpoint (default tcp/127.0.0.1:<free port>).
+        #[arg(long)]
+        listen: Option<String>,
+        /// A node (`dem` or `fem`) that is started elsewhere; the coordinator waits for it
+        /// (repeatable).
+        #[arg(long, value_parser = ["dem", "fem"])]
+        external: Vec<String>,
         /// No progress bar.
         #[arg(long)]
         no_progress: bool,
+    },
+    /// Serve as the zenoh router of runs over several machines (a zenohd with this
+    /// project's defaults): `cosim router --config deploy/router.json5`.
+    Router {
+        #[arg(long)]
+        config: PathBuf,
     },
     /// Continue a run from its newest checkpoint (after a node or the coordinator died).
     Resume {
@@ -109,6 +122,8 @@ fn main() -> ExitCode {
                 out,
                 config,
                 run_id,
+                listen,
+                external,
                 no_progress,
             } => {
                 let scene = Scene::load(&scene)?;
@@ -116,6 +131,8 @@ fn main() -> ExitCode {
                     out_dir: out,
                     zenoh_config: config,
                     run_id,
+                    listen,
+                    external,
                     progress: !no_progress,
                     ..Default::default()
                 };
@@ -126,6 +143,24 @@ fn main() -> ExitCode {
                     &opts.out_dir.clone().unwrap_or(scene.out_dir.clone()),
                 );
                 anyhow::Ok(())
+            }
+            Command::Router { config } => {
+                let link = proto::LinkConfig {
+                    zenoh_config: Some(config.clone()),
+                    ..Default::default()
+                };
+                let session = link
+                    .open()
+                    .await
+                    .with_context(|| format!("starting the router from {}", config.display()))?;
+                eprintln!(
+                    "router {} running from {} (Ctrl-C to stop)",
+                    session.zid(),
+                    config.display()
+                );
+                tokio::signal::ctrl_c().await?;
+                session.close().await.map_err(|e| anyhow::anyhow!("{e}"))?;
+                Ok(())
             }
             Command::Resume {
                 out_dir,

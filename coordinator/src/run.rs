@@ -32,6 +32,10 @@ pub struct RunOptions {
     pub progress: bool,
     /// Override the run id (default: scene name + a random suffix).
     pub run_id: Option<String>,
+    /// Local runs: the coordinator's own endpoint (default: a free loopback port).
+    pub listen: Option<String>,
+    /// Nodes started by someone else (other machines, your own solver): not launched.
+    pub external: Vec<String>,
     /// Continue from this checkpoint (its folder and the coordinator's state there).
     pub resume: Option<(PathBuf, crate::checkpoint::CheckpointState)>,
 }
@@ -45,6 +49,8 @@ impl Default for RunOptions {
             startup_timeout: Duration::from_secs(120),
             progress: true,
             run_id: None,
+            listen: None,
+            external: Vec::new(),
             resume: None,
         }
     }
@@ -632,18 +638,32 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
 
     // Local peers: every process listens on its own loopback port and connects explicitly
     // to those started before it (a full mesh without any scouting).
-    let (coord_link, ports) = match &opts.zenoh_config {
-        Some(cfg) => (
+    let (coord_link, ports) = match (&opts.zenoh_config, &opts.listen) {
+        // the file decides the mode (client of a router, or a router itself)
+        (Some(cfg), _) => (
             LinkConfig {
-                mode: LinkMode::Client,
+                mode: LinkMode::Peer,
                 zenoh_config: Some(cfg.clone()),
                 ..Default::default()
             },
             None,
         ),
-        None => {
+        (None, Some(endpoint)) => {
+            proto::link::validate_endpoint(endpoint)?;
+            (
+                LinkConfig {
+                    listen: vec![endpoint.clone()],
+                    ..Default::default()
+                },
+                Some(endpoint.clone()),
+            )
+        }
+        (None, None) => {
             let p0 = proto::link::free_loopback_port()?;
-            (LinkConfig::loopback_peer(Some(p0), &[]), Some(p0))
+            (
+                LinkConfig::loopback_peer(Some(p0), &[]),
+                Some(format!("tcp/127.0.0.1:{p0}")),
+            )
         }
     };
     let link = CoordinatorLink::open(&coord_link, &run_id)
@@ -668,7 +688,7 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
         .parent()
         .map(Path::to_path_buf)
         .unwrap_or_default();
-    let mut started: Vec<String> = ports.iter().map(|p| format!("tcp/127.0.0.1:{p}")).collect();
+    let mut started: Vec<String> = ports.iter().cloned().collect();
     for (role, present, launch) in [
         (Role::Dem, scene.has_dem, scene.nodes.dem.as_ref()),
         (Role::Fem, scene.has_fem, scene.nodes.fem.as_ref()),
@@ -681,6 +701,15 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
             (vec![format!("tcp/127.0.0.1:{p}")], started.clone())
         } else {
             (Vec::new(), Vec::new())
+        };
+        let external = crate::scene::NodeLaunch {
+            command: None,
+            external: true,
+        };
+        let launch = if opts.external.iter().any(|n| n == &role.to_string()) {
+            Some(&external)
+        } else {
+            launch
         };
         let node = match NodeProcess::spawn(
             role,
