@@ -162,16 +162,20 @@ class Participant:
         """The forces of `window`; watches commands meanwhile (`stop` ends the wait)."""
         what = f"interface forces of window {window} on `{self.keys.forces(name)}`"
         deadline = time.monotonic() + timeout
-        while not self.forces_queue:
-            kind, value = self._event(max(0.0, deadline - time.monotonic()), what)
-            if kind == "forces":
-                self.forces_queue.append(value)
-            elif kind == "cmd":
-                body = self._accept_command(value)
-                if body["type"] == "stop":
-                    raise Stopped(body["reason"])
-                raise ProtocolError(f"received {body['type']} while waiting for {what}")
-        return wire.decode_forces(self.forces_queue.popleft(), self.run_id, name, window, nodes)
+        while True:
+            while not self.forces_queue:
+                kind, value = self._event(max(0.0, deadline - time.monotonic()), what)
+                if kind == "forces":
+                    self.forces_queue.append(value)
+                elif kind == "cmd":
+                    body = self._accept_command(value)
+                    if body["type"] == "stop":
+                        raise Stopped(body["reason"])
+                    raise ProtocolError(f"received {body['type']} while waiting for {what}")
+            try:
+                return wire.decode_forces(self.forces_queue.popleft(), self.run_id, name, window, nodes)
+            except wire.WrongRun as e:
+                log.warning("ignored: %s", e)  # PROTOCOL.md §8: another run's data is not an error
 
     def finish(self):
         """Withdraws the liveliness token and closes the session."""

@@ -18,6 +18,10 @@ class ProtocolError(Exception):
     """A message could not be decoded or failed validation (error code `protocol`)."""
 
 
+class WrongRun(ProtocolError):
+    """A message of another run: interface data of that kind is logged and ignored."""
+
+
 def check_name(what, name):
     """Run ids, node and interface names: 1-64 characters of A-Z a-z 0-9 _ - (PROTOCOL.md §2)."""
     if not isinstance(name, str) or not NAME.match(name):
@@ -109,7 +113,7 @@ COMMAND_FIELDS = {
     "advance_window": {"window": int, "t_start": float, "dt": float, "substeps": int,
                        "motion": str, "force_averaging": bool, "input_window": (int, None),
                        "output_window": (int, None), "static_solve": bool},
-    "publish": {"window": int},
+    "publish": {"window": int, "force_averaging": bool},
     "snapshot": {"window": int, "path": str},
     "restore": {"window": int, "path": str},
     "stop": {"reason": str},
@@ -153,7 +157,7 @@ def decode(payload, what, run_id, fields):
         if kind is not None:
             msg[field] = _check_type(what, field, msg[field], kind)
     if msg["run_id"] != run_id:
-        raise ProtocolError(f"{what}: belongs to run `{msg['run_id']}`, this is run `{run_id}`")
+        raise WrongRun(f"{what}: belongs to run `{msg['run_id']}`, this is run `{run_id}`")
     return msg
 
 

@@ -236,3 +236,19 @@ fn python_fem_node_matches_rust_fem_node_on_the_predictive_plate() {
     assert!(rel(p.peak_force_z, r.peak_force_z) < 0.03);
     assert!(rel(p.first_swing_uz, r.first_swing_uz) < 0.03);
 }
+
+/// What a coupled run does not reach, checked by `protocol_check.py` playing coordinator and
+/// DEM: snapshot/restore continue bitwise, `publish`, another run's data ignored, another
+/// protocol version refused with an `error` naming both and a non-zero exit.
+#[test]
+fn python_fem_node_snapshot_restore_and_refusals() {
+    if python_with_requirements().is_none() {
+        return;
+    }
+    let mut c = Command::new("python3");
+    c.arg(root().join("examples/python-fem-node/protocol_check.py"))
+        .arg(root().join("scenes/plate.toml"));
+    let o = run(c);
+    assert!(o.status.success(), "protocol_check.py failed (see above)");
+    assert!(String::from_utf8_lossy(&o.stdout).contains("protocol check passed"));
+}
