@@ -426,6 +426,10 @@ impl Run<'_> {
                             bail!("{bad}");
                         }
                     }
+                    // not this run's: refused and logged (PROTOCOL.md §8)
+                    Err((key, e @ proto::ProtoError::WrongRun { .. })) => {
+                        tracing::warn!("refused a message on `{key}`: {e}")
+                    }
                     Err((key, e)) => bail!("invalid interface data on `{key}` at window {k}: {e}"),
                 }
             }

@@ -380,6 +380,16 @@ mod tests {
     }
 
     proptest! {
+        // the fuzz campaign of the decoders: 10^5 random inputs, zero panics
+        #![proptest_config(ProptestConfig::with_cases(100_000))]
+
+        #[test]
+        fn every_decoder_survives_100k_random_inputs(bytes in proptest::collection::vec(any::<u8>(), 0..256)) {
+            decode_all(&bytes);
+        }
+    }
+
+    proptest! {
         #![proptest_config(ProptestConfig::with_cases(4000))]
 
         #[test]

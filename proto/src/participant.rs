@@ -350,7 +350,12 @@ impl Participant {
             tokio::select! {
                 s = sub.recv_async() => {
                     let sample = s.map_err(|_| ProtoError::Closed)?;
-                    return decode::<M>(&payload(&sample), self.keys.run_id());
+                    match decode::<M>(&payload(&sample), self.keys.run_id()) {
+                        // not addressed to this run (a misconfigured or hostile publisher):
+                        // refused and logged; the real message is still awaited
+                        Err(e @ ProtoError::WrongRun { .. }) => tracing::warn!("refused on `{key}`: {e}"),
+                        other => return other,
+                    }
                 }
                 c = self.commands.recv_async() => {
                     let sample = c.map_err(|_| ProtoError::Closed)?;
