@@ -170,22 +170,19 @@ async fn nan_forces_stop_the_run_cleanly_naming_the_field() {
     let s = rogue(port, &run_id).await;
     let keys = proto::Keys::new(&run_id).unwrap();
     let t0 = Instant::now();
-    for w in 0..200 {
-        s.put(
-            keys.forces("top"),
-            encode(&forces(&run_id, w, f64::NAN)).unwrap(),
-        )
-        .await
-        .unwrap();
+    let mut child = child;
+    // keep injecting until the run reacts (the rogue's links may take a moment to form)
+    let mut w = 0;
+    while child.try_wait().unwrap().is_none() {
+        assert!(t0.elapsed() < Duration::from_secs(20), "the run ignored NaN interface data");
+        s.put(keys.forces("top"), encode(&forces(&run_id, w, f64::NAN)).unwrap()).await.unwrap();
+        w += 1;
+        tokio::time::sleep(Duration::from_millis(20)).await;
     }
     let out = child.wait_with_output().unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
-    eprintln!(
-        "stopped {:.2} s after the injection:\n{err}",
-        t0.elapsed().as_secs_f64()
-    );
+    eprintln!("stopped {:.2} s after the injection began:\n{err}", t0.elapsed().as_secs_f64());
     assert!(!out.status.success());
-    assert!(t0.elapsed() < Duration::from_secs(10));
     let sum = summary(&dir.path().join("out"));
     let e = sum["error"].as_str().unwrap();
     // whoever sees it first (the coordinator's monitor or the FEM node) names the field
