@@ -115,7 +115,9 @@ impl LinkConfig {
         for e in self.listen.iter().chain(&self.connect) {
             validate_endpoint(e)?;
         }
-        if !self.listen.is_empty() {
+        if !self.listen.is_empty() || self.zenoh_config.is_none() {
+            // without a file and without --listen: listen nowhere (zenoh's own peer default
+            // would be every interface)
             set(&mut config, "listen/endpoints", json_list(&self.listen))?;
         }
         if !self.connect.is_empty() {
@@ -167,6 +169,13 @@ mod tests {
             v["connect"]["endpoints"],
             serde_json::json!(["tcp/127.0.0.1:7001"])
         );
+    }
+
+    #[test]
+    fn without_listen_endpoints_a_peer_listens_nowhere() {
+        let c = LinkConfig::loopback_peer(None, &[7001]).to_zenoh_config().unwrap();
+        let v: serde_json::Value = serde_json::from_str(&format!("{c}")).unwrap();
+        assert_eq!(v["listen"]["endpoints"], serde_json::json!([]));
     }
 
     #[test]
