@@ -45,6 +45,13 @@ fn beam_coupled_vs_pure_fem(mass: f64) -> (f64, f64) {
         "the settled spheres weigh {fz} N"
     );
     let uz = f(&coupled, "fem.probe.midspan.uz");
+    // the summary's own comparison (the FEM node's pure-FEM solve under the same total load)
+    let own = f(&coupled, "fem.pressure_equivalent.probe.midspan.uz");
+    let rel = f(&coupled, "fem.coupled_vs_pressure.probe.midspan.uz");
+    assert!(
+        (rel - (uz - own) / own.abs()).abs() < 1e-12 && rel.abs() < 0.01,
+        "{rel}"
+    );
 
     // pure FEM: the [fem] table alone, with the same total load as pressure on the top face
     let fem_table = &text[text.find("[fem]").unwrap()..];

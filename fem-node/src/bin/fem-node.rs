@@ -33,6 +33,97 @@ struct FemNode {
     out_dir: PathBuf,
     data_timeout: std::time::Duration,
     trace: Option<Trace>,
+    /// The scene's table and folder, for the pure-FEM reference of a one-way solve.
+    config: Option<(fem::config::FemConfig, PathBuf)>,
+    /// Results of that reference, reported with the model's own.
+    reference: BTreeMap<String, f64>,
+}
+
+/// Ullrich ch. 4 / REFERENCE A3: the pure-FEM solution under the same total interface load
+/// applied as a uniform pressure on the interface surface. Returns the reference model's
+/// results (`pressure_equivalent.*`) and the coupled/pure relative differences of the probes.
+fn pressure_equivalent(
+    cfg: &fem::config::FemConfig,
+    base: &Path,
+    coupled: &Model,
+) -> Result<BTreeMap<String, f64>, NodeError> {
+    let Some(iface) = cfg.interface.as_ref() else {
+        return Ok(BTreeMap::new());
+    };
+    let mesh = coupled.interface_mesh();
+    let results: BTreeMap<String, f64> = coupled.results().into_iter().collect();
+    let total = [
+        results.get("interface_force.x").copied().unwrap_or(0.0),
+        results.get("interface_force.y").copied().unwrap_or(0.0),
+        results.get("interface_force.z").copied().unwrap_or(0.0),
+    ];
+    // area and area-weighted outward normal of the interface triangles
+    let (mut area, mut normal) = (0.0, [0.0; 3]);
+    let p = &mesh.positions;
+    for t in mesh.triangles.chunks_exact(3) {
+        let v = |i: u32| {
+            [
+                p[3 * i as usize],
+                p[3 * i as usize + 1],
+                p[3 * i as usize + 2],
+            ]
+        };
+        let (a, b, c) = (v(t[0]), v(t[1]), v(t[2]));
+        let (e1, e2) = (
+            [b[0] - a[0], b[1] - a[1], b[2] - a[2]],
+            [c[0] - a[0], c[1] - a[1], c[2] - a[2]],
+        );
+        let n = [
+            e1[1] * e2[2] - e1[2] * e2[1],
+            e1[2] * e2[0] - e1[0] * e2[2],
+            e1[0] * e2[1] - e1[1] * e2[0],
+        ];
+        area += 0.5 * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        for i in 0..3 {
+            normal[i] += 0.5 * n[i];
+        }
+    }
+    if area <= 0.0 {
+        return Ok(BTreeMap::new());
+    }
+    // pressure pushes into the body: minus the load's component along the outward normal
+    let n_len = (normal[0] * normal[0] + normal[1] * normal[1] + normal[2] * normal[2])
+        .sqrt()
+        .max(f64::MIN_POSITIVE);
+    let pressure =
+        -(total[0] * normal[0] + total[1] * normal[1] + total[2] * normal[2]) / n_len / area;
+    let mut reference_cfg = cfg.clone();
+    reference_cfg.interface = None;
+    reference_cfg.loads.push(fem::config::Load::Pressure {
+        on: iface.on.clone(),
+        value: pressure,
+        history: None,
+    });
+    let mut reference =
+        Model::from_config(&reference_cfg, base).map_err(|e| fem_error(ErrorCode::Internal, e))?;
+    reference
+        .solve_static()
+        .map_err(|e| fem_error(ErrorCode::Internal, e))?;
+    let mut out = BTreeMap::from([("pressure_equivalent.pressure".to_string(), pressure)]);
+    let reference_results = reference.results();
+    // components below a millionth of the largest displacement are round-off, not results
+    let scale = reference_results
+        .iter()
+        .find(|(k, _)| k == "max_displacement")
+        .map(|(_, v)| *v)
+        .unwrap_or(0.0);
+    for (k, v) in reference_results {
+        if let Some(coupled_value) = results.get(&k).filter(|_| k.starts_with("probe.")) {
+            if v.abs() > 1e-6 * scale {
+                out.insert(
+                    format!("coupled_vs_pressure.{k}"),
+                    (coupled_value - v) / v.abs(),
+                );
+            }
+        }
+        out.insert(format!("pressure_equivalent.{k}"), v);
+    }
+    Ok(out)
 }
 
 fn scene_error(e: impl std::fmt::Display) -> NodeError {
@@ -91,6 +182,7 @@ impl Solver for FemNode {
             .unwrap_or(Path::new("."));
         let model = Model::from_config(&cfg, base)
             .map_err(|e| scene_error(format!("{}: {e}", init.scene_path)))?;
+        self.config = Some((cfg.clone(), base.to_path_buf()));
         self.out_dir = PathBuf::from(&init.out_dir).join("fem");
         self.trace = init.trace.then(Trace::default);
         std::fs::create_dir_all(&self.out_dir).map_err(|e| {
@@ -146,12 +238,16 @@ impl Solver for FemNode {
         if let (Some(f), Some(trace)) = (&forces, self.trace.as_mut()) {
             let path = out_dir.join(format!("trace_{}_received_forces.csv", f.interface));
             let prefix = [f.window.to_string(), f.averaged.to_string()];
-            trace.row(&path, "window,averaged,fx,fy,fz", &prefix, &total(f.forces.as_slice()))?;
+            trace.row(
+                &path,
+                "window,averaged,fx,fy,fz",
+                &prefix,
+                &total(f.forces.as_slice()),
+            )?;
         }
-        let model = self
-            .model
-            .as_mut()
-            .ok_or_else(|| NodeError::new(ErrorCode::Protocol, "a window command came before `init`"))?;
+        let model = self.model.as_mut().ok_or_else(|| {
+            NodeError::new(ErrorCode::Protocol, "a window command came before `init`")
+        })?;
         if let Some(f) = forces {
             model
                 .set_interface_forces(f.forces.as_slice())
@@ -162,6 +258,10 @@ impl Solver for FemNode {
             model
                 .solve_static()
                 .map_err(|e| fem_error(ErrorCode::Unstable, format!("window {}: {e}", w.window)))?;
+            // one-way coupling: compare with the pure-FEM solve under the same total load
+            if let Some((cfg, base)) = &self.config {
+                self.reference = pressure_equivalent(cfg, base, model)?;
+            }
         } else {
             model
                 .advance(w.dt)
@@ -176,7 +276,12 @@ impl Solver for FemNode {
             let path = out_dir.join(format!("trace_{name}_mesh.csv"));
             let mut row = vec![t_end];
             row.extend(pos.iter().chain(&vel).chain(&acc));
-            trace.row(&path, "window,t_end,positions...,velocities...,accelerations...", &[w.window.to_string()], &row)?;
+            trace.row(
+                &path,
+                "window,t_end,positions...,velocities...,accelerations...",
+                &[w.window.to_string()],
+                &row,
+            )?;
         }
         let monitor = BTreeMap::from([(
             "max_interface_speed".to_string(),
@@ -213,7 +318,12 @@ impl Solver for FemNode {
         })
     }
 
-    async fn publish(&mut self, p: &mut Participant, window: u64, _force_averaging: bool) -> Result<(), NodeError> {
+    async fn publish(
+        &mut self,
+        p: &mut Participant,
+        window: u64,
+        _force_averaging: bool,
+    ) -> Result<(), NodeError> {
         let model = self.model()?;
         let time = model.time();
         let kin = model.interface_kinematics();
@@ -239,7 +349,9 @@ impl Solver for FemNode {
             Some(m) => {
                 m.write_outputs(&out_dir)
                     .map_err(|e| fem_error(ErrorCode::Io, e))?;
-                Ok(m.results().into_iter().collect())
+                let mut results: BTreeMap<String, f64> = m.results().into_iter().collect();
+                results.extend(std::mem::take(&mut self.reference));
+                Ok(results)
             }
             None => Ok(BTreeMap::new()),
         }
@@ -262,6 +374,8 @@ fn main() -> std::process::ExitCode {
         out_dir: PathBuf::new(),
         data_timeout,
         trace: None,
+        config: None,
+        reference: BTreeMap::new(),
     };
     main_with(args.node, hello, node)
 }
