@@ -4,7 +4,10 @@
 //! at 1e3, 1e4, 1e5 particles.
 //!
 //! Environment: DENSE_BED_STEPS (default 10000), DENSE_BED_SETTLE (settling steps, default
-//! 40000 = 0.4 s), DENSE_BED_SCALING_STEPS (default 1000), DENSE_BED_THREADS (default: all).
+//! 40000 = 0.4 s), DENSE_BED_SCALING_STEPS (default 1000), DENSE_BED_THREADS (default: all),
+//! DENSE_BED_CACHE (file: the settled state is restored from it when it holds a snapshot of
+//! this engine version, else written there after settling), DENSE_BED_SCALING_MAX (largest
+//! scaling size exponent: 5 (default) runs 1e3, 1e4, 1e5; 6 adds 1e6; 0 skips the scaling).
 
 use dem::{parse_scene_section, Engine};
 use std::time::Instant;
@@ -77,8 +80,20 @@ fn main() {
         let mut e = build([21, 21, 56]);
         let n = e.num_particles();
         println!("dense bed: {n} particles, {} threads, dt = {} s (Rayleigh {:.3e} s)", rayon::current_num_threads(), e.time_step(), e.rayleigh_time_step());
-        let ts = timed(&mut e, settle);
-        println!("settling {settle} steps ({:.2} s simulated): {ts:.2} s wall, KE = {:.3e} J", settle as f64 * 1e-5, e.kinetic_energy());
+        let cache = std::env::var("DENSE_BED_CACHE").ok();
+        let cached = cache
+            .as_ref()
+            .and_then(|path| std::fs::read(path).ok())
+            .is_some_and(|bytes| e.restore(&bytes).is_ok());
+        if cached {
+            println!("settled state restored from {}", cache.as_deref().unwrap_or(""));
+        } else {
+            let ts = timed(&mut e, settle);
+            println!("settling {settle} steps ({:.2} s simulated): {ts:.2} s wall, KE = {:.3e} J", settle as f64 * 1e-5, e.kinetic_energy());
+            if let Some(path) = &cache {
+                std::fs::write(path, e.snapshot()).expect("write the settled-state cache");
+            }
+        }
         let builds0 = e.neighbour_list_builds();
         let t = timed(&mut e, steps);
         let snap = e.snapshot().len();
@@ -93,8 +108,10 @@ fn main() {
             e.kinetic_energy()
         );
         println!(
-            "extrapolated to 10,000 steps: {:.2} s; full state {:.0} bytes/particle (snapshot incl. neighbour lists and histories), core SoA {} bytes/particle",
+            "extrapolated to 10,000 steps: {:.2} s; state in memory {:.0} bytes/particle (particles, \
+             neighbour lists, histories), snapshot {:.0} bytes/particle, core SoA {} bytes/particle",
             t * 10_000.0 / steps as f64,
+            e.memory_bytes() as f64 / n as f64,
             snap as f64 / n as f64,
             dem::particles::Particles::bytes_per_particle()
         );
@@ -103,15 +120,25 @@ fn main() {
         }
 
         let scaling_steps = env("DENSE_BED_SCALING_STEPS", 1000);
-        for dims in [[10, 10, 10], [21, 21, 23], [46, 46, 48]] {
+        let sizes: &[[usize; 3]] = match env("DENSE_BED_SCALING_MAX", 5) {
+            0 => &[],
+            6 => &[[10, 10, 10], [21, 21, 23], [46, 46, 48], [100, 100, 100]],
+            _ => &[[10, 10, 10], [21, 21, 23], [46, 46, 48]],
+        };
+        for &dims in sizes {
             let mut e = build(dims);
             // let the lattice touch down briefly so that contacts exist
             e.advance(200).expect("advance");
             let n = e.num_particles();
             let t = timed(&mut e, scaling_steps);
             println!(
-                "scaling: {n:>7} particles, {scaling_steps} steps: {t:.3} s, {:.3e} particle-steps/s",
-                (n * scaling_steps) as f64 / t
+                "scaling: {n:>7} particles, {scaling_steps} steps: {t:.3} s, {:.3e} particle-steps/s, \
+                 {:.1} ns per particle-step, {} contacts, {} wall contacts, {:.0} bytes/particle",
+                (n * scaling_steps) as f64 / t,
+                t * 1e9 / (n * scaling_steps) as f64,
+                e.num_contacts(),
+                e.num_wall_contacts(),
+                e.memory_bytes() as f64 / n as f64
             );
         }
     });

@@ -437,6 +437,36 @@ impl Engine {
         a.max(b)
     }
 
+    /// Heap bytes of the mutable state (particles, neighbour lists, contact histories, wall
+    /// states, mesh records; not the meshes), by allocated capacity.
+    pub fn memory_bytes(&self) -> usize {
+        fn b<T>(v: &Vec<T>) -> usize {
+            v.capacity() * std::mem::size_of::<T>()
+        }
+        let p = &self.state.particles;
+        let l = &self.state.lists;
+        b(&p.id)
+            + b(&p.position)
+            + b(&p.velocity)
+            + b(&p.orientation)
+            + b(&p.angular_velocity)
+            + b(&p.radius)
+            + b(&p.mass)
+            + b(&p.inertia)
+            + b(&p.material)
+            + b(&p.force)
+            + b(&p.torque)
+            + b(&l.pairs)
+            + b(&l.first_pair)
+            + b(&l.as_j_start)
+            + b(&l.as_j)
+            + b(&l.tri_start)
+            + b(&l.tri)
+            + b(&l.position_at_build)
+            + b(&self.state.wall_state)
+            + b(&self.state.records)
+    }
+
     /// Number of neighbour-list builds so far.
     pub fn neighbour_list_builds(&self) -> u64 {
         self.state.lists.builds
