@@ -56,6 +56,10 @@ pub enum ProtoError {
     Zenoh(String),
     #[error("link configuration: {0}")]
     Config(String),
+    #[error(
+        "run `{run}` is already under way with another `{node}` node (the first command this one received is number {seq}): refusing to join"
+    )]
+    LateJoin { run: String, node: String, seq: u64 },
     #[error("stopped by the coordinator: {reason}")]
     Stopped { reason: String },
     #[error("the session is closed")]

@@ -173,7 +173,9 @@ mod tests {
 
     #[test]
     fn without_listen_endpoints_a_peer_listens_nowhere() {
-        let c = LinkConfig::loopback_peer(None, &[7001]).to_zenoh_config().unwrap();
+        let c = LinkConfig::loopback_peer(None, &[7001])
+            .to_zenoh_config()
+            .unwrap();
         let v: serde_json::Value = serde_json::from_str(&format!("{c}")).unwrap();
         assert_eq!(v["listen"]["endpoints"], serde_json::json!([]));
     }

@@ -17,6 +17,9 @@ pub struct NodeError {
     pub message: String,
     /// The coordinator said `stop` while the node waited: not an error to report back.
     pub stopped: bool,
+    /// The node arrived in a run already under way: it leaves without a word on the run's
+    /// status key (that belongs to the node already in the run).
+    pub late: bool,
 }
 
 impl NodeError {
@@ -25,6 +28,7 @@ impl NodeError {
             code,
             message: message.into(),
             stopped: false,
+            late: false,
         }
     }
 }
@@ -42,8 +46,10 @@ impl From<ProtoError> for NodeError {
             _ => ErrorCode::Protocol,
         };
         let stopped = matches!(e, ProtoError::Stopped { .. });
+        let late = matches!(e, ProtoError::LateJoin { .. });
         NodeError {
             stopped,
+            late,
             ..NodeError::new(code, e.to_string())
         }
     }
@@ -182,6 +188,10 @@ pub async fn serve<S: Solver>(
             Ok(())
         }
         Err(e) => {
+            if e.late {
+                let _ = p.finish().await;
+                return Err(e);
+            }
             if e.stopped {
                 tracing::info!("{}", e.message);
                 let _ = p.finish().await;

@@ -66,7 +66,9 @@ pub struct Participant {
     session: zenoh::Session,
     keys: Keys,
     node: String,
-    _token: LivelinessToken,
+    /// Declared once the node is in the run (its first command, `init`, accepted), so that a
+    /// node that arrives in a run already under way never shows up as one of its nodes.
+    token: Option<LivelinessToken>,
     commands: Subscriber<FifoChannelHandler<Sample>>,
     coordinator_alive: Subscriber<FifoChannelHandler<Sample>>,
     status: Publisher<'static>,
@@ -78,7 +80,7 @@ pub struct Participant {
 
 impl Participant {
     /// Joins run `run_id` as `node`: opens the session, listens for commands, declares the
-    /// node's liveliness token and sends `hello`.
+    /// node's liveliness token (once its first command arrives) and sends `hello`.
     pub async fn connect(
         link: &LinkConfig,
         run_id: &str,
@@ -104,11 +106,6 @@ impl Participant {
             .congestion_control(CongestionControl::Block)
             .await
             .map_err(ProtoError::zenoh)?;
-        let token = session
-            .liveliness()
-            .declare_token(keys.alive(node))
-            .await
-            .map_err(ProtoError::zenoh)?;
         let coordinator_alive = session
             .liveliness()
             .declare_subscriber(keys.alive(COORDINATOR))
@@ -119,7 +116,7 @@ impl Participant {
             session,
             keys,
             node: node.to_string(),
-            _token: token,
+            token: None,
             commands,
             coordinator_alive,
             status,
@@ -176,6 +173,22 @@ impl Participant {
 
     fn accept_command(&mut self, sample: &Sample) -> Result<CommandBody, ProtoError> {
         let cmd: Command = decode(&payload(sample), self.keys.run_id())?;
+        if self.next_seq == 0 && cmd.seq != 0 {
+            return Err(ProtoError::LateJoin {
+                run: self.keys.run_id().to_string(),
+                node: self.node.clone(),
+                seq: cmd.seq,
+            });
+        }
+        if self.token.is_none() {
+            let token = self
+                .session
+                .liveliness()
+                .declare_token(self.keys.alive(&self.node))
+                .wait()
+                .map_err(ProtoError::zenoh)?;
+            self.token = Some(token);
+        }
         if cmd.seq != self.next_seq {
             return Err(ProtoError::Invalid {
                 what: "command",
@@ -382,11 +395,10 @@ impl Participant {
 
     /// Leaves the run: withdraws the liveliness token and closes the session.
     pub async fn finish(self) -> Result<(), ProtoError> {
-        let Participant {
-            session, _token, ..
-        } = self;
-        _token.undeclare().await.map_err(ProtoError::zenoh)?;
-        session.close().await.map_err(ProtoError::zenoh)
+        if let Some(token) = self.token {
+            token.undeclare().await.map_err(ProtoError::zenoh)?;
+        }
+        self.session.close().await.map_err(ProtoError::zenoh)
     }
 }
 
