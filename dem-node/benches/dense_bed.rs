@@ -7,7 +7,8 @@
 //! 40000 = 0.4 s), DENSE_BED_SCALING_STEPS (default 1000), DENSE_BED_THREADS (default: all),
 //! DENSE_BED_CACHE (file: the settled state is restored from it when it holds a snapshot of
 //! this engine version, else written there after settling), DENSE_BED_SCALING_MAX (largest
-//! scaling size exponent: 5 (default) runs 1e3, 1e4, 1e5; 6 adds 1e6; 0 skips the scaling).
+//! scaling size exponent: 5 (default) runs 1e3, 1e4, 1e5; 6 adds 1e6; 0 skips the scaling),
+//! DENSE_BED_SCALING_SPACING (lattice spacing of the scaling runs, default 0.004 m: resting).
 
 use dem::{parse_scene_section, Engine};
 use std::time::Instant;
@@ -19,8 +20,10 @@ fn env(name: &str, default: usize) -> usize {
         .unwrap_or(default)
 }
 
-fn scene(n: [usize; 3]) -> String {
-    let s = 0.0045;
+/// Lattice of `n` spheres (r = 2 mm) with `spacing`, the first centre at 4.25 mm from the
+/// walls and at `z0` above the floor, in a box of at least 0.1 × 0.1 × 0.26 m.
+fn scene(n: [usize; 3], spacing: f64, z0: f64) -> String {
+    let s = spacing;
     let (lx, ly, lz) = (
         0.1f64.max(n[0] as f64 * s + 0.0055),
         0.1f64.max(n[1] as f64 * s + 0.0055),
@@ -47,16 +50,16 @@ open = ["+z"]
 kind = "lattice"
 material = "wheat"
 radius = 0.002
-first = [0.00425, 0.00425, 0.00425]
-spacing = 0.0045
+first = [0.00425, 0.00425, {z0}]
+spacing = {s}
 count = [{}, {}, {}]
 "#,
         n[0], n[1], n[2]
     )
 }
 
-fn build(n: [usize; 3]) -> Engine {
-    let cfg = parse_scene_section(&scene(n))
+fn build(n: [usize; 3], spacing: f64, z0: f64) -> Engine {
+    let cfg = parse_scene_section(&scene(n, spacing, z0))
         .expect("scene")
         .expect("dem table");
     Engine::from_config(&cfg, std::path::Path::new(".")).expect("engine")
@@ -68,6 +71,20 @@ fn timed(e: &mut Engine, steps: usize) -> f64 {
     t.elapsed().as_secs_f64()
 }
 
+/// CPU time (user + system) of this process so far, s, from /proc/self/stat (Linux; 0 where
+/// unavailable). On a shared machine the CPU time per particle-step is steadier than wall time.
+fn cpu_seconds() -> f64 {
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
+        return 0.0;
+    };
+    // fields after the parenthesised command name; utime and stime are fields 14 and 15
+    let rest = stat.rsplit_once(')').map_or("", |(_, r)| r);
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks: f64 = f.get(11).and_then(|v| v.parse().ok()).unwrap_or(0.0)
+        + f.get(12).and_then(|v| v.parse().ok()).unwrap_or(0.0);
+    ticks / 100.0
+}
+
 fn main() {
     let threads = env("DENSE_BED_THREADS", 0);
     let pool = rayon::ThreadPoolBuilder::new()
@@ -77,7 +94,7 @@ fn main() {
     pool.install(|| {
         let steps = env("DENSE_BED_STEPS", 10_000);
         let settle = env("DENSE_BED_SETTLE", 40_000);
-        let mut e = build([21, 21, 56]);
+        let mut e = build([21, 21, 56], 0.0045, 0.00425);
         let n = e.num_particles();
         println!("dense bed: {n} particles, {} threads, dt = {} s (Rayleigh {:.3e} s)", rayon::current_num_threads(), e.time_step(), e.rayleigh_time_step());
         let cache = std::env::var("DENSE_BED_CACHE").ok();
@@ -95,13 +112,16 @@ fn main() {
             }
         }
         let builds0 = e.neighbour_list_builds();
+        let cpu0 = cpu_seconds();
         let t = timed(&mut e, steps);
+        let cpu = cpu_seconds() - cpu0;
         let snap = e.snapshot().len();
         println!(
-            "timed {steps} steps: {t:.3} s wall, {:.3e} particle-steps/s, {:.1} ns per particle-step; \
-             contacts {}, wall contacts {}, list builds {}, KE {:.3e} J",
+            "timed {steps} steps: {t:.3} s wall, {:.3e} particle-steps/s, {:.1} ns per particle-step \
+             ({:.1} CPU-ns); contacts {}, wall contacts {}, list builds {}, KE {:.3e} J",
             (n * steps) as f64 / t,
             t * 1e9 / (n * steps) as f64,
+            cpu * 1e9 / (n * steps) as f64,
             e.num_contacts(),
             e.num_wall_contacts(),
             e.neighbour_list_builds() - builds0,
@@ -125,17 +145,28 @@ fn main() {
             6 => &[[10, 10, 10], [21, 21, 23], [46, 46, 48], [100, 100, 100]],
             _ => &[[10, 10, 10], [21, 21, 23], [46, 46, 48]],
         };
+        // default: a resting lattice (touching neighbours, bottom layer on the floor), which
+        // gravity compresses into about one contact per particle, like the dense bed; 0.0045
+        // gives the dense bed's lattice, which is still falling (no contacts, frequent rebuilds)
+        let spacing: f64 = std::env::var("DENSE_BED_SCALING_SPACING")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(0.004);
+        let z0 = if spacing <= 0.004 { 0.002 } else { 0.00425 };
         for &dims in sizes {
-            let mut e = build(dims);
-            // let the lattice touch down briefly so that contacts exist
+            let mut e = build(dims, spacing, z0);
             e.advance(200).expect("advance");
             let n = e.num_particles();
+            let cpu0 = cpu_seconds();
             let t = timed(&mut e, scaling_steps);
+            let cpu = cpu_seconds() - cpu0;
             println!(
                 "scaling: {n:>7} particles, {scaling_steps} steps: {t:.3} s, {:.3e} particle-steps/s, \
-                 {:.1} ns per particle-step, {} contacts, {} wall contacts, {:.0} bytes/particle",
+                 {:.1} ns per particle-step ({:.1} CPU-ns), {} contacts, {} wall contacts, \
+                 {:.0} bytes/particle",
                 (n * scaling_steps) as f64 / t,
                 t * 1e9 / (n * scaling_steps) as f64,
+                cpu * 1e9 / (n * scaling_steps) as f64,
                 e.num_contacts(),
                 e.num_wall_contacts(),
                 e.memory_bytes() as f64 / n as f64

@@ -1,57 +1,190 @@
 //! Broad phase: cell grid + Verlet skin (Wellmann ch. 3.4.1, REFERENCE B4).
 //!
-//! Each build sorts the particles by grid cell (better locality, and the band structure of the
-//! pair list Wellmann exploits in ch. 3.4.3), then lists every particle pair (i < j) closer than
-//! r_i + r_j + d_V (eq. 3.47) and every particle–triangle pair closer than r + d_V (eq. 4.9).
-//! The lists stay valid until a particle or mesh node has moved d_V/2 (eq. 4.10). Lists are in
-//! a stable order (sorted by index), so results do not depend on the thread count.
+//! Each build sorts the particles along a Morton (Z-order) curve of their grid cells, so that
+//! particles close in space are close in memory at every scale (the neighbours of a particle
+//! are mostly in cache from 1e3 to 1e6 particles, and a force block of [`BLOCK`] consecutive
+//! particles is a compact piece of space, see `resolve_forces`). It then lists every particle
+//! pair (i < j) closer than r_i + r_j + d_V (eq. 3.47) and every particle–wall candidate closer
+//! than r + d_V (eq. 4.9). The lists stay valid until a particle or mesh node has moved d_V/2
+//! (eq. 4.10). Lists are in a stable order (sorted by index) and the build is deterministic,
+//! so results do not depend on the thread count.
+//!
+//! Storage (data-oriented, Wellmann ch. 3.4.3): the pair list is a CSR of partner indices with
+//! one tangential history ξ per pair (24 bytes; zero when not touching); wall candidates are a
+//! CSR per particle with one history per (wall, patch) group. Nothing per step is allocated.
 
 use crate::hertz_mindlin::V3;
 use crate::particles::Particles;
 use crate::triangle_contact::distance_squared;
-use crate::walls::Mesh;
+use crate::walls::{Mesh, Plane};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-/// One neighbour pair with its tangential history and the forces of the last evaluation.
-#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
-pub struct Pair {
-    pub i: u32,
-    pub j: u32,
+/// Particles per force block. Blocks are the parallel work units of the force stage; their
+/// size is fixed (not derived from the thread count), so the summation order of every force,
+/// and hence every bit of the result, is the same for any number of threads.
+pub const BLOCK: usize = 1024;
+
+/// A particle–wall candidate: a plane (`wall` < number of planes; `patch` = `triangle` = 0) or
+/// a triangle of mesh `wall − number of planes` in contact patch `patch`.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq, PartialOrd, Ord)]
+pub struct WallCandidate {
+    pub wall: u32,
+    pub patch: u32,
+    pub triangle: u32,
+}
+
+/// State of the contact of a particle with one (wall, patch) group, stored at the group's
+/// first candidate (unused at the others).
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
+pub struct WallContact {
     /// Tangential spring displacement ξ (zero when not in contact).
     pub shear: V3,
-    /// Force on i (j receives −force), torques on i and j.
-    pub force: V3,
-    pub torque_i: V3,
-    pub torque_j: V3,
-    /// Overlap δ (≤ 0 when not touching).
+    /// Overlap δ ≥ 0 of the last force evaluation, negative when not in contact.
     pub overlap: f64,
 }
 
-/// A particle–triangle candidate.
-#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq, PartialOrd, Ord)]
-pub struct TriangleCandidate {
-    pub mesh: u32,
-    pub patch: u32,
-    pub triangle: u32,
+impl WallContact {
+    pub const NONE: WallContact = WallContact {
+        shear: V3::new(0.0, 0.0, 0.0),
+        overlap: -1.0,
+    };
+
+    pub fn touching(&self) -> bool {
+        self.overlap >= 0.0
+    }
 }
 
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct NeighbourLists {
     pub skin: f64,
-    /// Pairs sorted by (i, j), i < j.
-    pub pairs: Vec<Pair>,
-    /// Pairs with first index i are `pairs[first_pair[i]..first_pair[i+1]]`.
+    /// Pairs with first index i are `first_pair[i]..first_pair[i+1]`, second index
+    /// `partner[k]` > i, ascending.
     pub first_pair: Vec<u32>,
-    /// CSR of the pairs in which a particle is the second index.
-    pub as_j_start: Vec<u32>,
-    pub as_j: Vec<u32>,
-    /// CSR of triangle candidates per particle, sorted by (mesh, patch, triangle).
-    pub tri_start: Vec<u32>,
-    pub tri: Vec<TriangleCandidate>,
+    pub partner: Vec<u32>,
+    /// Tangential spring displacement ξ of each pair (zero when not touching).
+    pub shear: Vec<V3>,
+    /// Wall candidates of particle k are `walls[wall_start[k]..wall_start[k+1]]`, sorted by
+    /// (wall, patch, triangle); planes come first.
+    pub wall_start: Vec<u32>,
+    pub walls: Vec<WallCandidate>,
+    pub wall_contacts: Vec<WallContact>,
     pub position_at_build: Vec<V3>,
     pub builds: u64,
     pub valid: bool,
+    /// Pairs whose partner lies in a later block ("cross pairs"), derived from the pair list
+    /// by [`NeighbourLists::index_blocks`] (not part of snapshots).
+    #[serde(skip)]
+    pub cross: CrossPairs,
+}
+
+/// Cross-block pairs: the force block of i writes the reaction on j into `force` (numbered by
+/// cross pairs in pair order), and the block of j gathers it afterwards in a fixed order.
+#[derive(Debug, Clone, Default)]
+pub struct CrossPairs {
+    /// First cross-pair number of each block (len blocks + 1).
+    pub block_start: Vec<u32>,
+    /// Particles receiving cross-pair reactions, ascending; those of block b are
+    /// `receivers[block_receivers[b]..block_receivers[b+1]]`.
+    pub receivers: Vec<u32>,
+    pub block_receivers: Vec<u32>,
+    /// Receiver r gathers the cross pairs `incoming[receiver_start[r]..receiver_start[r+1]]`
+    /// (ascending, i.e. by first particle).
+    pub receiver_start: Vec<u32>,
+    pub incoming: Vec<u32>,
+    /// Reaction force and torque on the second particle of each cross pair (scratch, rewritten
+    /// every force evaluation).
+    pub force: Vec<[V3; 2]>,
+}
+
+impl NeighbourLists {
+    /// Derives the cross-block pair index from the pair list (after a build or a restore).
+    pub fn index_blocks(&mut self) {
+        let n = self.first_pair.len().saturating_sub(1);
+        let blocks = n.div_ceil(BLOCK);
+        let c = &mut self.cross;
+        c.block_start.clear();
+        c.block_start.reserve(blocks + 1);
+        let mut count = vec![0u32; n + 1];
+        let mut total = 0u32;
+        for b in 0..blocks {
+            c.block_start.push(total);
+            let end = ((b + 1) * BLOCK).min(n) as u32;
+            let pairs = self.first_pair[b * BLOCK] as usize..self.first_pair[end as usize] as usize;
+            for &j in &self.partner[pairs] {
+                if j >= end {
+                    count[j as usize] += 1;
+                    total += 1;
+                }
+            }
+        }
+        c.block_start.push(total);
+        c.receivers.clear();
+        c.receiver_start.clear();
+        c.block_receivers.clear();
+        c.receiver_start.push(0);
+        let mut fill = Vec::new();
+        for (j, &m) in count.iter().enumerate().take(n) {
+            if j % BLOCK == 0 {
+                c.block_receivers.push(c.receivers.len() as u32);
+            }
+            if m > 0 {
+                c.receivers.push(j as u32);
+                fill.push(*c.receiver_start.last().unwrap_or(&0));
+                c.receiver_start
+                    .push(c.receiver_start.last().unwrap_or(&0) + m);
+            }
+        }
+        c.block_receivers.push(c.receivers.len() as u32);
+        // receiver number of each particle (only read for receivers)
+        let mut slot_of = count;
+        for (r, &j) in c.receivers.iter().enumerate() {
+            slot_of[j as usize] = r as u32;
+        }
+        c.incoming.clear();
+        c.incoming.resize(total as usize, 0);
+        let mut ordinal = 0u32;
+        for b in 0..blocks {
+            let (lo, end) = (b * BLOCK, ((b + 1) * BLOCK).min(n));
+            for i in lo..end {
+                for &j in
+                    &self.partner[self.first_pair[i] as usize..self.first_pair[i + 1] as usize]
+                {
+                    if j as usize >= end {
+                        let r = slot_of[j as usize] as usize;
+                        c.incoming[fill[r] as usize] = ordinal;
+                        fill[r] += 1;
+                        ordinal += 1;
+                    }
+                }
+            }
+        }
+        c.force.clear();
+        c.force.resize(total as usize, [V3::zeros(); 2]);
+    }
+
+    /// True if the stored lists index `n` particles consistently (checked on restore).
+    pub fn consistent(&self, n: usize) -> bool {
+        if !self.valid {
+            return true;
+        }
+        let csr = |start: &[u32], len: usize| {
+            start.len() == n + 1
+                && start[0] == 0
+                && start.windows(2).all(|w| w[0] <= w[1])
+                && start[n] as usize == len
+        };
+        csr(&self.first_pair, self.partner.len())
+            && self.shear.len() == self.partner.len()
+            && (0..n).all(|i| {
+                self.partner[self.first_pair[i] as usize..self.first_pair[i + 1] as usize]
+                    .iter()
+                    .all(|&j| j as usize > i && (j as usize) < n)
+            })
+            && csr(&self.wall_start, self.walls.len())
+            && self.wall_contacts.len() == self.walls.len()
+            && self.position_at_build.len() == n
+    }
 }
 
 struct Grid {
@@ -93,8 +226,9 @@ impl Grid {
 
     #[inline]
     fn coord(&self, x: &V3) -> [usize; 3] {
+        // `as usize` truncates, which is the floor for the non-negative values it sees
         [0, 1, 2].map(|a| {
-            let c = ((x[a] - self.origin[a]) / self.h).floor();
+            let c = (x[a] - self.origin[a]) / self.h;
             (c.max(0.0) as usize).min(self.dims[a] - 1)
         })
     }
@@ -107,166 +241,226 @@ impl Grid {
     fn num_cells(&self) -> usize {
         self.dims[0] * self.dims[1] * self.dims[2]
     }
+
+    /// Sort key of a cell: its Morton code, or the row-major index for grids too long for
+    /// 21 bits per axis.
+    #[inline]
+    fn order_key(&self, c: [usize; 3]) -> u64 {
+        if self.dims.iter().all(|&d| d <= 1 << 21) {
+            spread_bits(c[0] as u64) | spread_bits(c[1] as u64) << 1 | spread_bits(c[2] as u64) << 2
+        } else {
+            self.index(c) as u64
+        }
+    }
 }
 
-/// True when some particle moved more than d_V/2 since the last build (Wellmann, B4).
+/// Spreads the low 21 bits of x to every third bit (Morton encoding).
+#[inline]
+fn spread_bits(x: u64) -> u64 {
+    let mut x = x & 0x1f_ffff;
+    x = (x | x << 32) & 0x001f_0000_0000_ffff;
+    x = (x | x << 16) & 0x001f_0000_ff00_00ff;
+    x = (x | x << 8) & 0x100f_00f0_0f00_f00f;
+    x = (x | x << 4) & 0x10c3_0c30_c30c_30c3;
+    x = (x | x << 2) & 0x1249_2492_4924_9249;
+    x
+}
+
+/// True when the lists must be rebuilt: invalid, another particle count, or a coupled-mesh
+/// node moved more than d_V/2 since the last build (4.10). Particle displacements are checked
+/// by the drift (`integrate::kick_drift`), see [`particles_moved`] otherwise.
 pub fn needs_rebuild(lists: &NeighbourLists, particles: &Particles, meshes: &[Mesh]) -> bool {
-    if !lists.valid || lists.position_at_build.len() != particles.len() {
-        return true;
-    }
-    let half2 = (0.5 * lists.skin).powi(2);
-    let moved = particles
-        .position
-        .par_iter()
-        .with_min_len(4096)
-        .zip(lists.position_at_build.par_iter())
-        .any(|(x, x0)| (x - x0).norm_squared() > half2);
-    // (4.10): the triangles' motion is bounded by their nodes' motion
-    moved
+    !lists.valid
+        || lists.position_at_build.len() != particles.len()
         || meshes
             .iter()
             .any(|m| m.coupled && m.max_displacement_since_build() > 0.5 * lists.skin)
 }
 
-/// Rebuilds the lists. Sorts the particles by cell first and returns the permutation applied
-/// (new index k holds old particle perm[k]) so the caller can move per-particle state along;
-/// pair histories are carried over here.
+/// True when some particle moved more than d_V/2 since the last build (Wellmann, B4).
+pub fn particles_moved(lists: &NeighbourLists, particles: &Particles) -> bool {
+    if lists.position_at_build.len() != particles.len() {
+        return true;
+    }
+    let half2 = (0.5 * lists.skin).powi(2);
+    particles
+        .position
+        .par_iter()
+        .with_min_len(4096)
+        .zip(lists.position_at_build.par_iter())
+        .any(|(x, x0)| (x - x0).norm_squared() > half2)
+}
+
+/// Rebuilds the lists. Sorts the particles along the Morton curve of their cells first
+/// (`particles` are permuted: new index k holds old particle perm[k]); tangential histories of
+/// pairs and wall contacts are carried over.
 pub fn rebuild(
     lists: &mut NeighbourLists,
     particles: &mut Particles,
+    planes: &[Plane],
     meshes: &mut [Mesh],
-) -> Vec<u32> {
+) {
     let n = particles.len();
     let r_max = particles.radius.iter().cloned().fold(0.0, f64::max);
     let cutoff = 2.0 * r_max + lists.skin;
     let grid = Grid::new(&particles.position, cutoff);
 
-    // counting sort by cell (stable: ties keep their current order)
-    let cell_of: Vec<u32> = particles
+    // Morton order of the cells; ties (same cell) keep their current order
+    let mut keys: Vec<(u64, u32)> = particles
         .position
-        .iter()
-        .map(|x| grid.index(grid.coord(x)) as u32)
+        .par_iter()
+        .enumerate()
+        .map(|(k, x)| (grid.order_key(grid.coord(x)), k as u32))
         .collect();
-    let nc = grid.num_cells();
-    let mut cell_start = vec![0u32; nc + 1];
-    for &c in &cell_of {
-        cell_start[c as usize + 1] += 1;
-    }
-    for c in 0..nc {
-        cell_start[c + 1] += cell_start[c];
-    }
-    let mut fill = cell_start.clone();
-    let mut perm = vec![0u32; n];
-    for (k, &c) in cell_of.iter().enumerate() {
-        perm[fill[c as usize] as usize] = k as u32;
-        fill[c as usize] += 1;
-    }
+    keys.par_sort_unstable();
+    let perm: Vec<u32> = keys.iter().map(|&(_, k)| k).collect();
+    drop(keys);
     let mut inverse = vec![0u32; n];
     for (new, &old) in perm.iter().enumerate() {
         inverse[old as usize] = new as u32;
     }
     particles.permute(&perm);
 
-    // old histories in new numbering, sorted for the merge below
-    let mut old: Vec<(u32, u32, V3)> = lists
-        .pairs
-        .iter()
-        .filter(|p| p.shear != V3::zeros() && (p.i as usize) < n && (p.j as usize) < n)
-        .map(|p| {
-            let (a, b) = (inverse[p.i as usize], inverse[p.j as usize]);
-            // ξ is the displacement of the first particle relative to the second: it changes
-            // sign when the reordering swaps the pair
-            if a < b {
-                (a, b, p.shear)
-            } else {
-                (b, a, -p.shear)
-            }
-        })
-        .collect();
-    old.sort_unstable_by_key(|&(a, b, _)| (a, b));
+    // cell table: particles of a cell are contiguous after the sort
+    let nc = grid.num_cells();
+    let mut cell_start = vec![0u32; nc];
+    let mut cell_end = vec![0u32; nc];
+    for (k, x) in particles.position.iter().enumerate() {
+        let c = grid.index(grid.coord(x));
+        if cell_end[c] != k as u32 || cell_start[c] == cell_end[c] {
+            cell_start[c] = k as u32;
+        }
+        cell_end[c] = k as u32 + 1;
+    }
 
+    // old histories in new numbering, sorted for the merges below
+    let mut old_pairs: Vec<(u32, u32, V3)> = Vec::new();
+    if lists.first_pair.len() >= 2 {
+        let n_old = lists.first_pair.len() - 1;
+        for i in 0..n_old {
+            for k in lists.first_pair[i] as usize..lists.first_pair[i + 1] as usize {
+                let (j, s) = (lists.partner[k] as usize, lists.shear[k]);
+                if s == V3::zeros() || i >= n || j >= n {
+                    continue;
+                }
+                let (a, b) = (inverse[i], inverse[j]);
+                // ξ is the displacement of the first particle relative to the second: it
+                // changes sign when the reordering swaps the pair
+                old_pairs.push(if a < b { (a, b, s) } else { (b, a, -s) });
+            }
+        }
+    }
+    old_pairs.sort_unstable_by_key(|&(a, b, _)| (a, b));
+    let mut old_walls: Vec<(u32, u32, u32, V3)> = Vec::new();
+    if lists.wall_start.len() >= 2 {
+        let n_old = lists.wall_start.len() - 1;
+        for i in 0..n_old.min(n) {
+            for k in lists.wall_start[i] as usize..lists.wall_start[i + 1] as usize {
+                let c = &lists.wall_contacts[k];
+                if c.touching() {
+                    let w = &lists.walls[k];
+                    old_walls.push((inverse[i], w.wall, w.patch, c.shear));
+                }
+            }
+        }
+    }
+    old_walls.sort_unstable_by_key(|&(a, w, p, _)| (a, w, p));
+
+    // pairs, in fixed chunks (deterministic for any thread count)
     let pos = &particles.position;
     let rad = &particles.radius;
     let skin = lists.skin;
-    let neighbours: Vec<Vec<u32>> = (0..n)
+    let chunks: Vec<(Vec<u32>, Vec<u32>)> = (0..n.div_ceil(BLOCK))
         .into_par_iter()
-        .with_min_len(256)
-        .map(|i| {
-            let xi = pos[i];
-            let c = grid.coord(&xi);
+        .map(|b| {
+            let range = b * BLOCK..((b + 1) * BLOCK).min(n);
+            let mut counts = Vec::with_capacity(range.len());
             let mut out = Vec::new();
-            for dz in -1i64..=1 {
-                for dy in -1i64..=1 {
-                    for dx in -1i64..=1 {
-                        let cc = [c[0] as i64 + dx, c[1] as i64 + dy, c[2] as i64 + dz];
-                        if (0..3).any(|a| cc[a] < 0 || cc[a] >= grid.dims[a] as i64) {
-                            continue;
-                        }
-                        let ci = grid.index([cc[0] as usize, cc[1] as usize, cc[2] as usize]);
-                        for j in cell_start[ci]..cell_start[ci + 1] {
-                            let j = j as usize;
-                            if j <= i {
+            for i in range {
+                let xi = pos[i];
+                let c = grid.coord(&xi);
+                let start = out.len();
+                for dz in -1i64..=1 {
+                    for dy in -1i64..=1 {
+                        for dx in -1i64..=1 {
+                            let cc = [c[0] as i64 + dx, c[1] as i64 + dy, c[2] as i64 + dz];
+                            if (0..3).any(|a| cc[a] < 0 || cc[a] >= grid.dims[a] as i64) {
                                 continue;
                             }
-                            let reach = rad[i] + rad[j] + skin;
-                            if (pos[j] - xi).norm_squared() < reach * reach {
-                                out.push(j as u32);
+                            let ci = grid.index([cc[0] as usize, cc[1] as usize, cc[2] as usize]);
+                            for j in cell_start[ci]..cell_end[ci] {
+                                let j = j as usize;
+                                if j <= i {
+                                    continue;
+                                }
+                                let reach = rad[i] + rad[j] + skin;
+                                if (pos[j] - xi).norm_squared() < reach * reach {
+                                    out.push(j as u32);
+                                }
                             }
                         }
                     }
                 }
+                out[start..].sort_unstable();
+                counts.push((out.len() - start) as u32);
             }
-            out.sort_unstable();
-            out
+            (counts, out)
         })
         .collect();
-
-    let mut pairs = Vec::with_capacity(neighbours.iter().map(|v| v.len()).sum());
-    let mut first_pair = Vec::with_capacity(n + 1);
+    let total: usize = chunks.iter().map(|c| c.1.len()).sum();
+    lists.first_pair.clear();
+    lists.first_pair.reserve(n + 1);
+    lists.partner.clear();
+    lists.partner.reserve(total);
+    lists.first_pair.push(0);
+    for (counts, js) in chunks {
+        let mut at = lists.partner.len() as u32;
+        for c in counts {
+            at += c;
+            lists.first_pair.push(at);
+        }
+        lists.partner.extend_from_slice(&js);
+    }
+    lists.shear.clear();
+    lists.shear.resize(total, V3::zeros());
     let mut oi = 0usize;
-    for (i, list) in neighbours.iter().enumerate() {
-        first_pair.push(pairs.len() as u32);
-        for &j in list {
-            let key = (i as u32, j);
-            while oi < old.len() && (old[oi].0, old[oi].1) < key {
+    for i in 0..n {
+        for k in lists.first_pair[i] as usize..lists.first_pair[i + 1] as usize {
+            let key = (i as u32, lists.partner[k]);
+            while oi < old_pairs.len() && (old_pairs[oi].0, old_pairs[oi].1) < key {
                 oi += 1;
             }
-            let shear = if oi < old.len() && (old[oi].0, old[oi].1) == key {
-                old[oi].2
-            } else {
-                V3::zeros()
-            };
-            pairs.push(Pair {
-                i: i as u32,
-                j,
-                shear,
-                force: V3::zeros(),
-                torque_i: V3::zeros(),
-                torque_j: V3::zeros(),
-                overlap: 0.0,
-            });
+            if oi < old_pairs.len() && (old_pairs[oi].0, old_pairs[oi].1) == key {
+                lists.shear[k] = old_pairs[oi].2;
+            }
         }
     }
-    first_pair.push(pairs.len() as u32);
 
-    let mut as_j_start = vec![0u32; n + 1];
-    for p in &pairs {
-        as_j_start[p.j as usize + 1] += 1;
-    }
-    for k in 0..n {
-        as_j_start[k + 1] += as_j_start[k];
-    }
-    let mut as_j = vec![0u32; pairs.len()];
-    let mut fillj = as_j_start.clone();
-    for (k, p) in pairs.iter().enumerate() {
-        as_j[fillj[p.j as usize] as usize] = k as u32;
-        fillj[p.j as usize] += 1;
-    }
-
-    // particle–triangle candidates (4.9)
-    let mut cands: Vec<(u32, TriangleCandidate)> = Vec::new();
+    // particle–wall candidates (4.9): planes, then mesh triangles
+    let n_planes = planes.len() as u32;
+    let mut cands: Vec<(u32, WallCandidate)> = if planes.is_empty() {
+        Vec::new()
+    } else {
+        (0..n)
+            .into_par_iter()
+            .with_min_len(BLOCK)
+            .flat_map_iter(|k| {
+                planes.iter().enumerate().filter_map(move |(w, pl)| {
+                    let d = (pos[k] - pl.point).dot(&pl.normal);
+                    (d < rad[k] + skin).then_some((
+                        k as u32,
+                        WallCandidate {
+                            wall: w as u32,
+                            patch: 0,
+                            triangle: 0,
+                        },
+                    ))
+                })
+            })
+            .collect()
+    };
     for (m, mesh) in meshes.iter_mut().enumerate() {
-        let found: Vec<Vec<(u32, TriangleCandidate)>> = (0..mesh.triangles.len())
+        let found: Vec<Vec<(u32, WallCandidate)>> = (0..mesh.triangles.len())
             .into_par_iter()
             .map(|t| {
                 let [a, b, c] = mesh.corners(t);
@@ -277,7 +471,6 @@ pub fn rebuild(
                 if n == 0 {
                     return out;
                 }
-                let (clo, chi) = (grid.coord(&lo), grid.coord(&hi));
                 // skip triangles entirely outside the particle bounding box
                 let gmax = grid.origin
                     + V3::repeat(grid.h).component_mul(&V3::new(
@@ -288,18 +481,19 @@ pub fn rebuild(
                 if (0..3).any(|ax| hi[ax] < grid.origin[ax] || lo[ax] > gmax[ax]) {
                     return out;
                 }
+                let (clo, chi) = (grid.coord(&lo), grid.coord(&hi));
                 for z in clo[2]..=chi[2] {
                     for y in clo[1]..=chi[1] {
                         for x in clo[0]..=chi[0] {
                             let ci = grid.index([x, y, z]);
-                            for k in cell_start[ci]..cell_start[ci + 1] {
+                            for k in cell_start[ci]..cell_end[ci] {
                                 let k = k as usize;
                                 let rr = rad[k] + skin;
                                 if distance_squared(&pos[k], &a, &b, &c) <= rr * rr {
                                     out.push((
                                         k as u32,
-                                        TriangleCandidate {
-                                            mesh: m as u32,
+                                        WallCandidate {
+                                            wall: n_planes + m as u32,
                                             patch: mesh.patch[t],
                                             triangle: t as u32,
                                         },
@@ -315,22 +509,46 @@ pub fn rebuild(
         cands.extend(found.into_iter().flatten());
         mesh.positions_at_build.clone_from(&mesh.positions);
     }
-    cands.sort_unstable();
-    let mut tri_start = vec![0u32; n + 1];
+    cands.par_sort_unstable();
+    lists.wall_start.clear();
+    lists.wall_start.resize(n + 1, 0);
     for (k, _) in &cands {
-        tri_start[*k as usize + 1] += 1;
+        lists.wall_start[*k as usize + 1] += 1;
     }
     for k in 0..n {
-        tri_start[k + 1] += tri_start[k];
+        lists.wall_start[k + 1] += lists.wall_start[k];
     }
-    lists.tri = cands.into_iter().map(|(_, c)| c).collect();
-    lists.tri_start = tri_start;
-    lists.pairs = pairs;
-    lists.first_pair = first_pair;
-    lists.as_j_start = as_j_start;
-    lists.as_j = as_j;
+    lists.walls.clear();
+    lists.walls.extend(cands.iter().map(|&(_, c)| c));
+    lists.wall_contacts.clear();
+    lists
+        .wall_contacts
+        .resize(lists.walls.len(), WallContact::NONE);
+    // a history lives at the first candidate of its (wall, patch) group
+    let mut oi = 0usize;
+    for (k, &(p, c)) in cands.iter().enumerate() {
+        let first = k == 0 || cands[k - 1].0 != p || {
+            let prev = cands[k - 1].1;
+            (prev.wall, prev.patch) != (c.wall, c.patch)
+        };
+        if !first {
+            continue;
+        }
+        let key = (p, c.wall, c.patch);
+        while oi < old_walls.len() && (old_walls[oi].0, old_walls[oi].1, old_walls[oi].2) < key {
+            oi += 1;
+        }
+        if oi < old_walls.len() && (old_walls[oi].0, old_walls[oi].1, old_walls[oi].2) == key {
+            // carried history of a contact that existed in the last evaluation
+            lists.wall_contacts[k] = WallContact {
+                shear: old_walls[oi].3,
+                overlap: 0.0,
+            };
+        }
+    }
+
     lists.position_at_build.clone_from(&particles.position);
     lists.builds += 1;
     lists.valid = true;
-    perm
+    lists.index_blocks();
 }

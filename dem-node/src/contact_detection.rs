@@ -1,31 +1,31 @@
 //! Stage "detect particle–particle and particle–object contacts" (Ullrich Algorithm 1,
-//! line 3): keeps the Verlet neighbour lists valid (rebuilding them when a particle or mesh
-//! node moved half the skin). The exact overlap test runs inside the force stage on these lists.
+//! line 3): keeps the Verlet neighbour lists valid, rebuilding them when a particle or mesh
+//! node moved half the skin (Wellmann B4, eq. 4.10). The exact overlap test runs inside the
+//! force stage on these lists.
 
 use crate::broad_phase::{needs_rebuild, rebuild, NeighbourLists};
 use crate::particles::Particles;
-use crate::resolve_forces::{MeshRecords, WallState};
-use crate::walls::Mesh;
+use crate::resolve_forces::MeshForceRecord;
+use crate::walls::{Mesh, Plane};
 
-/// Returns true if the lists were rebuilt (particles may have been reordered).
+/// `particles_moved`: some particle moved more than half the skin since the last build (the
+/// drift checks this). Returns true if the lists were rebuilt (particles may have been
+/// reordered).
 pub fn detect(
     lists: &mut NeighbourLists,
     particles: &mut Particles,
+    particles_moved: bool,
+    planes: &[Plane],
     meshes: &mut [Mesh],
-    wall_state: &mut Vec<WallState>,
-    records: &mut Vec<MeshRecords>,
+    records: &mut Vec<MeshForceRecord>,
 ) -> bool {
-    if !needs_rebuild(lists, particles, meshes) {
+    if !particles_moved && !needs_rebuild(lists, particles, meshes) {
         return false;
     }
-    let perm = rebuild(lists, particles, meshes);
-    // per-particle wall histories move with their particles
-    let moved: Vec<WallState> = perm.iter().map(|&k| wall_state[k as usize]).collect();
-    *wall_state = moved;
-    let need_records = meshes.iter().any(|m| m.coupled);
+    rebuild(lists, particles, planes, meshes);
     records.clear();
-    if need_records {
-        records.resize(particles.len(), MeshRecords::default());
+    if meshes.iter().any(|m| m.coupled) {
+        records.resize(lists.walls.len(), MeshForceRecord::default());
     }
     true
 }

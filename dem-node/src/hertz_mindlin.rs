@@ -25,7 +25,7 @@ pub struct ContactForce {
 /// `m_eff` the effective radius (2.8) and mass (2.11), `v_c` the velocity of i's contact point
 /// relative to j's, `shear` the tangential displacement history ξ of this contact (updated in
 /// place), `dt` the increment time (0 for a force evaluation without history increment).
-#[inline]
+#[inline(always)]
 pub fn contact_force(
     p: &PairParams,
     delta: f64,
@@ -43,9 +43,9 @@ pub fn contact_force(
     // (2.6) F_n,e = 4/3 E* √R δ^{3/2}
     let f_elastic = 4.0 / 3.0 * p.e_star * sqrt_rd * delta;
     let v_n = v_c.dot(n);
-    // Tsuji/LIGGGHTS damping (replaces the schematic eq. 2.10)
+    // Tsuji/LIGGGHTS damping (replaces the schematic eq. 2.10); √(S_t m*) = √(S_n m*) √(S_t/S_n)
     let gamma_n = -2.0 * SQRT_5_6 * p.beta * (s_n * m_eff).sqrt();
-    let gamma_t = -2.0 * SQRT_5_6 * p.beta * (s_t * m_eff).sqrt();
+    let gamma_t = gamma_n * p.sqrt_stiffness_ratio;
     // (2.13), no attraction: the total normal force is clamped at zero.
     let normal = (f_elastic - gamma_n * v_n).max(0.0);
     let v_t = v_c - n * v_n;
@@ -68,7 +68,7 @@ pub fn contact_force(
     let tangential = if f_spring.norm_squared() > f_cap * f_cap {
         let len = f_spring.norm();
         let capped = f_spring * (f_cap / len);
-        *shear = capped / (-s_t);
+        *shear = capped * (-1.0 / s_t);
         capped
     } else {
         f_spring - v_t * gamma_t
@@ -85,7 +85,7 @@ pub fn contact_force(
 /// (I* the effective moment of inertia). Without that limit the constant torque overshoots
 /// and reverses ω_rel every step near rest, which feeds a permanent jitter through the
 /// tangential springs; the limit is what the elastic part of EPSD models achieves.
-#[inline]
+#[inline(always)]
 pub fn rolling_torque(
     mu_r: f64,
     r_eff: f64,

@@ -1,70 +1,223 @@
 //! Stage "update particle states" (Ullrich Algorithm 1, line 5): velocity Verlet for
 //! translation (second order, symplectic: with e = 1 the rebound error of fig. 2.5 falls as
 //! Δt²) and the same kick–drift–kick for rotation with an exact quaternion update.
+//!
+//! Each half of the update is one pass over the particles that also does the bookkeeping
+//! needing the same data: the drift checks the Verlet-skin displacement (Wellmann B4), the
+//! second kick checks that the state is finite.
 
 use crate::hertz_mindlin::V3;
 use crate::particles::Particles;
-use nalgebra::{Quaternion, UnitQuaternion};
+use nalgebra::Quaternion;
 use rayon::prelude::*;
 
-const MIN_LEN: usize = 2048;
+/// Particles per parallel chunk (the passes are element-wise: the result does not depend on
+/// it).
+const CHUNK: usize = 2048;
+
+/// What a pass over the particles does.
+const DRIFT: u8 = 1; // first half kick and drift (x, orientation), skin check
+const KICK: u8 = 2; // second half kick, finiteness check
+const KICK_DRIFT: u8 = 3; // second half kick of one step, then first half kick and drift of the next
 
 /// First half kick and drift: v ← v + ½Δt F/m, x ← x + Δt v (same for ω and orientation).
-pub fn kick_drift(p: &mut Particles, dt: f64, rotation: bool) {
-    p.position
-        .par_iter_mut()
-        .zip(p.velocity.par_iter_mut())
-        .zip(p.force.par_iter())
-        .zip(p.mass.par_iter())
-        .with_min_len(MIN_LEN)
-        .for_each(|(((x, v), f), m)| {
-            *v += f * (0.5 * dt / m);
-            *x += *v * dt;
-        });
-    if rotation {
-        p.orientation
-            .par_iter_mut()
-            .zip(p.angular_velocity.par_iter_mut())
-            .zip(p.torque.par_iter())
-            .zip(p.inertia.par_iter())
-            .with_min_len(MIN_LEN)
-            .for_each(|(((q, w), t), inertia)| {
-                *w += t * (0.5 * dt / inertia);
-                *q = rotate(q, w, dt);
-            });
-    }
+/// Returns true if some particle is now farther than `half_skin` from `position_at_build`
+/// (or the lengths differ).
+pub fn kick_drift(
+    p: &mut Particles,
+    position_at_build: &[V3],
+    half_skin: f64,
+    dt: f64,
+    rotation: bool,
+) -> bool {
+    pass::<DRIFT>(p, position_at_build, half_skin, dt, rotation).1
 }
 
-/// Second half kick with the new forces.
-pub fn kick(p: &mut Particles, dt: f64, rotation: bool) {
-    p.velocity
-        .par_iter_mut()
-        .zip(p.force.par_iter())
-        .zip(p.mass.par_iter())
-        .with_min_len(MIN_LEN)
-        .for_each(|((v, f), m)| {
-            *v += f * (0.5 * dt / m);
-        });
-    if rotation {
-        p.angular_velocity
-            .par_iter_mut()
-            .zip(p.torque.par_iter())
-            .zip(p.inertia.par_iter())
-            .with_min_len(MIN_LEN)
-            .for_each(|((w, t), inertia)| {
-                *w += t * (0.5 * dt / inertia);
-            });
-    }
+/// Second half kick with the new forces. Returns false if a position, velocity or angular
+/// velocity is not finite.
+pub fn kick(p: &mut Particles, dt: f64, rotation: bool) -> bool {
+    pass::<KICK>(p, &[], 0.0, dt, rotation).0
 }
 
-/// Orientation after rotating by the world-frame angular velocity ω over Δt.
-#[inline]
+/// [`kick`] of one step followed by [`kick_drift`] of the next, in one pass (the same
+/// operations on each particle in the same order, so bitwise the same result).
+/// Returns (finite after the kick, moved after the drift).
+pub fn kick_then_kick_drift(
+    p: &mut Particles,
+    position_at_build: &[V3],
+    half_skin: f64,
+    dt: f64,
+    rotation: bool,
+) -> (bool, bool) {
+    pass::<KICK_DRIFT>(p, position_at_build, half_skin, dt, rotation)
+}
+
+fn pass<const MODE: u8>(
+    p: &mut Particles,
+    position_at_build: &[V3],
+    half_skin: f64,
+    dt: f64,
+    rotation: bool,
+) -> (bool, bool) {
+    let half2 = half_skin * half_skin;
+    let check = position_at_build.len() == p.len();
+    let build: &[V3] = if check { position_at_build } else { &[] };
+    let (finite, moved) = (
+        p.position.par_chunks_mut(CHUNK),
+        p.velocity.par_chunks_mut(CHUNK),
+        p.force.par_chunks(CHUNK),
+        p.mass.par_chunks(CHUNK),
+        p.orientation.par_chunks_mut(CHUNK),
+        p.angular_velocity.par_chunks_mut(CHUNK),
+        p.torque.par_chunks(CHUNK),
+        p.inertia.par_chunks(CHUNK),
+    )
+        .into_par_iter()
+        .enumerate()
+        .map(|(c, (x, v, f, m, q, w, t, inertia))| {
+            let x0 = build.get(c * CHUNK..c * CHUNK + x.len()).unwrap_or(&[]);
+            let s = Chunk {
+                x,
+                v,
+                f,
+                m,
+                q,
+                w,
+                t,
+                inertia,
+                x0,
+            };
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("fma")
+            {
+                // SAFETY: the CPU supports AVX2 and FMA (checked above)
+                return unsafe { chunk_avx2::<MODE>(s, dt, half2, rotation) };
+            }
+            chunk::<MODE>(s, dt, half2, rotation)
+        })
+        .reduce(|| (true, false), |a, b| (a.0 && b.0, a.1 || b.1));
+    (finite, moved || (MODE & DRIFT != 0 && !check))
+}
+
+struct Chunk<'a> {
+    x: &'a mut [V3],
+    v: &'a mut [V3],
+    f: &'a [V3],
+    m: &'a [f64],
+    q: &'a mut [Quaternion<f64>],
+    w: &'a mut [V3],
+    t: &'a [V3],
+    inertia: &'a [f64],
+    x0: &'a [V3],
+}
+
+/// [`chunk`] compiled for AVX2 (no FMA contraction happens without explicit `mul_add`, so
+/// the results are bitwise those of the baseline build).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn chunk_avx2<const MODE: u8>(
+    s: Chunk,
+    dt: f64,
+    half2: f64,
+    rotation: bool,
+) -> (bool, bool) {
+    chunk::<MODE>(s, dt, half2, rotation)
+}
+
+#[inline(always)]
+fn chunk<const MODE: u8>(s: Chunk, dt: f64, half2: f64, rotation: bool) -> (bool, bool) {
+    let finite = |v: &V3| v.x.is_finite() && v.y.is_finite() && v.z.is_finite();
+    let Chunk {
+        x,
+        v,
+        f,
+        m,
+        q,
+        w,
+        t,
+        inertia,
+        x0,
+    } = s;
+    let mut ok = true;
+    let mut moved = false;
+    for k in 0..x.len() {
+        let half_kick = f[k] * (0.5 * dt / m[k]);
+        let half_turn = t[k] * (0.5 * dt / inertia[k]);
+        if MODE & KICK != 0 {
+            v[k] += half_kick;
+            if rotation {
+                w[k] += half_turn;
+            }
+            ok &= finite(&v[k]) & finite(&x[k]) & finite(&w[k]);
+        }
+        if MODE & DRIFT != 0 {
+            v[k] += half_kick;
+            x[k] += v[k] * dt;
+            if let Some(x0) = x0.get(k) {
+                moved |= (x[k] - x0).norm_squared() > half2;
+            }
+            if rotation {
+                w[k] += half_turn;
+                q[k] = rotate(&q[k], &w[k], dt);
+            }
+        }
+    }
+    (ok, moved)
+}
+
+/// Orientation after rotating by the world-frame angular velocity ω over Δt:
+/// q ← (cos θ/2, sin(θ/2) ω/|ω|) q with θ = |ω|Δt, renormalised (q is a unit quaternion).
+#[inline(always)]
 fn rotate(q: &Quaternion<f64>, w: &V3, dt: f64) -> Quaternion<f64> {
-    let angle = w.norm() * dt;
-    if angle == 0.0 {
+    let wdt = w * dt;
+    let theta2 = wdt.norm_squared();
+    if theta2 == 0.0 {
         return *q;
     }
-    let dq = UnitQuaternion::from_scaled_axis(w * dt);
-    let r = dq.into_inner() * q;
-    r / r.norm()
+    let h2 = 0.25 * theta2; // (θ/2)²
+                            // cos(θ/2) and sin(θ/2)/θ; for θ/2 < 0.01 (all but violent spins: |ω| < 2000 rad/s at
+                            // Δt = 1e-5 s) by their Taylor series, whose first omitted terms (< 3e-21) lie far below
+                            // the rounding of the result
+    let (c, s_over_theta) = if h2 < 1e-4 {
+        (
+            1.0 - h2 * (1.0 / 2.0 - h2 * (1.0 / 24.0 - h2 * (1.0 / 720.0))),
+            0.5 * (1.0 - h2 * (1.0 / 6.0 - h2 * (1.0 / 120.0 - h2 * (1.0 / 5040.0)))),
+        )
+    } else {
+        let theta = theta2.sqrt();
+        let (s, c) = (0.5 * theta).sin_cos();
+        (c, s / theta)
+    };
+    let dq = Quaternion::new(
+        c,
+        wdt.x * s_over_theta,
+        wdt.y * s_over_theta,
+        wdt.z * s_over_theta,
+    );
+    let r = dq * q;
+    // renormalise; |r|² = 1 + ε with ε at rounding level, so one Newton step for 1/|r|,
+    // (3 − |r|²)/2, is exact to rounding (error O(ε²)) without a square root or division
+    r * (1.5 - 0.5 * r.norm_squared())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::UnitQuaternion;
+
+    /// The series branch and the sin/cos branch agree with nalgebra's exact rotation to
+    /// rounding, on both sides of the switch.
+    #[test]
+    fn quaternion_update_matches_exact_rotation() {
+        let q0 = UnitQuaternion::from_euler_angles(0.3, -1.1, 2.0).into_inner();
+        for &speed in &[1e-3, 1.0, 150.0, 1999.0, 2001.0, 5e4] {
+            let w = V3::new(0.3, -0.5, 0.8).normalize() * speed;
+            let dt = 1e-5;
+            let exact = UnitQuaternion::from_scaled_axis(w * dt).into_inner() * q0;
+            let got = rotate(&q0, &w, dt);
+            let err = (got - exact).norm();
+            assert!(err < 4e-16, "|ω| = {speed}: error {err:e}");
+        }
+    }
 }

@@ -27,7 +27,7 @@ use config::{DemConfig, ParticleSource, WallConfig};
 use hertz_mindlin::V3;
 use materials::MaterialTable;
 use particles::Particles;
-use resolve_forces::{ForceContext, WallState};
+use resolve_forces::ForceContext;
 use snapshot::EngineState;
 use std::path::Path;
 use walls::{Mesh, Plane};
@@ -296,7 +296,6 @@ impl Engine {
             ),
             None => None,
         };
-        let n = particles.len();
         let mut engine = Engine {
             cfg: cfg.clone(),
             dt: cfg.time_step,
@@ -312,7 +311,6 @@ impl Engine {
                     skin,
                     ..Default::default()
                 },
-                wall_state: vec![WallState::default(); n],
                 records: Vec::new(),
                 meshes,
             },
@@ -324,10 +322,7 @@ impl Engine {
             box_region,
         };
         engine.check_time_step()?;
-        engine.run(|e| {
-            e.detect_contacts();
-            e.resolve_forces(0.0);
-        });
+        engine.refresh_forces();
         Ok(engine)
     }
 
@@ -404,35 +399,45 @@ impl Engine {
         &self.state.meshes
     }
 
+    /// Overlaps δ = r_i + r_j − |x_i − x_j| of the listed pairs (≤ 0 when not touching).
+    fn pair_overlaps(&self) -> impl Iterator<Item = f64> + '_ {
+        let p = &self.state.particles;
+        let l = &self.state.lists;
+        let n = if l.valid { p.len() } else { 0 };
+        (0..n).flat_map(move |i| {
+            l.partner[l.first_pair[i] as usize..l.first_pair[i + 1] as usize]
+                .iter()
+                .map(move |&j| {
+                    let j = j as usize;
+                    p.radius[i] + p.radius[j] - (p.position[i] - p.position[j]).norm()
+                })
+        })
+    }
+
     /// Number of particle–particle contacts (overlap > 0).
     pub fn num_contacts(&self) -> usize {
-        self.state
-            .lists
-            .pairs
-            .iter()
-            .filter(|p| p.overlap > 0.0)
-            .count()
+        self.pair_overlaps().filter(|&d| d > 0.0).count()
     }
 
     /// Number of particle–wall contacts.
     pub fn num_wall_contacts(&self) -> usize {
-        self.state.wall_state.iter().map(|w| w.count as usize).sum()
+        self.state
+            .lists
+            .wall_contacts
+            .iter()
+            .filter(|c| c.touching())
+            .count()
     }
 
     /// Largest overlap of any contact (pair or wall), m.
     pub fn max_overlap(&self) -> f64 {
-        let a = self
-            .state
-            .lists
-            .pairs
-            .iter()
-            .map(|p| p.overlap)
-            .fold(0.0, f64::max);
+        let a = self.pair_overlaps().fold(0.0, f64::max);
         let b = self
             .state
-            .wall_state
+            .lists
+            .wall_contacts
             .iter()
-            .flat_map(|w| w.slots[..w.count as usize].iter().map(|s| s.overlap))
+            .map(|c| c.overlap)
             .fold(0.0, f64::max);
         a.max(b)
     }
@@ -456,14 +461,19 @@ impl Engine {
             + b(&p.material)
             + b(&p.force)
             + b(&p.torque)
-            + b(&l.pairs)
             + b(&l.first_pair)
-            + b(&l.as_j_start)
-            + b(&l.as_j)
-            + b(&l.tri_start)
-            + b(&l.tri)
+            + b(&l.partner)
+            + b(&l.shear)
+            + b(&l.wall_start)
+            + b(&l.walls)
+            + b(&l.wall_contacts)
             + b(&l.position_at_build)
-            + b(&self.state.wall_state)
+            + b(&l.cross.block_start)
+            + b(&l.cross.receivers)
+            + b(&l.cross.block_receivers)
+            + b(&l.cross.receiver_start)
+            + b(&l.cross.incoming)
+            + b(&l.cross.force)
             + b(&self.state.records)
     }
 
@@ -582,9 +592,14 @@ impl Engine {
         m.move_to(0.0);
         m.nodal_force_sum.iter_mut().for_each(|f| *f = V3::zeros());
         m.window_substeps = 0;
-        m.patch = walls::compute_patches(&m.positions, &m.triangles);
-        // new patch ids must reach the candidate lists
-        self.state.lists.valid = false;
+        // The lists stay valid while no node moved d_V/2 since the build (checked every step,
+        // eq. 4.10) and the contact patches are unchanged; new patch ids must reach the
+        // candidate lists, so a deformation that changes them forces a rebuild.
+        let patch = walls::compute_patches(&m.positions, &m.triangles);
+        if patch != m.patch {
+            m.patch = patch;
+            self.state.lists.valid = false;
+        }
         Ok(())
     }
 
@@ -593,16 +608,46 @@ impl Engine {
     /// (otherwise the first half kick uses the forces of the previous configuration).
     pub fn refresh_forces(&mut self) {
         self.run(|e| {
-            e.detect_contacts();
+            let moved = broad_phase::particles_moved(&e.state.lists, &e.state.particles);
+            e.detect_contacts(moved);
             e.resolve_forces(0.0);
         });
     }
 
-    /// Runs `substeps` DEM steps of `time_step`.
+    /// Runs `substeps` DEM steps of `time_step` (bitwise the same as calling [`Engine::step`]
+    /// `substeps` times; the second half kick of a step and the first of the next share one
+    /// pass over the particles).
     pub fn advance(&mut self, substeps: usize) -> Result<(), DemError> {
+        if substeps == 0 {
+            return Ok(());
+        }
         self.run(|e| {
-            for _ in 0..substeps {
-                e.step()?;
+            let (dt, rotation) = (e.dt, e.cfg.rotation);
+            let mut moved = e.kick_drift();
+            for s in 0..substeps {
+                e.detect_contacts(moved);
+                e.resolve_forces(dt);
+                let p = &mut e.state.particles;
+                let finite = if s + 1 < substeps {
+                    let l = &e.state.lists;
+                    let (finite, m) = integrate::kick_then_kick_drift(
+                        p,
+                        &l.position_at_build,
+                        0.5 * l.skin,
+                        dt,
+                        rotation,
+                    );
+                    moved = m;
+                    finite
+                } else {
+                    integrate::kick(p, dt, rotation)
+                };
+                if !finite {
+                    return Err(e.instability());
+                }
+                if s + 1 < substeps {
+                    e.advance_clock();
+                }
             }
             Ok(())
         })
@@ -612,30 +657,53 @@ impl Engine {
     /// drift move the particles (and coupled meshes by their motion rule) to t + Δt, then
     /// contacts are detected, forces resolved, and the state update completed.
     pub fn step(&mut self) -> Result<(), DemError> {
+        let moved = self.kick_drift();
+        self.detect_contacts(moved);
+        self.resolve_forces(self.dt);
+        if integrate::kick(&mut self.state.particles, self.dt, self.cfg.rotation) {
+            Ok(())
+        } else {
+            Err(self.instability())
+        }
+    }
+
+    /// Algorithm 1, lines 1–2 (first half of velocity Verlet): first half kick and drift of the
+    /// particles, then the clock and the coupled meshes move to t + Δt. Returns true if a
+    /// particle moved more than half the skin since the last list build.
+    fn kick_drift(&mut self) -> bool {
+        let l = &self.state.lists;
+        let moved = integrate::kick_drift(
+            &mut self.state.particles,
+            &l.position_at_build,
+            0.5 * l.skin,
+            self.dt,
+            self.cfg.rotation,
+        );
+        self.advance_clock();
+        moved
+    }
+
+    fn advance_clock(&mut self) {
         let dt = self.dt;
-        let rotation = self.cfg.rotation;
-        integrate::kick_drift(&mut self.state.particles, dt, rotation);
-        self.state.time += dt;
-        self.state.steps += 1;
-        for m in self.state.meshes.iter_mut().filter(|m| m.coupled) {
+        let s = &mut self.state;
+        s.time += dt;
+        s.steps += 1;
+        for m in s.meshes.iter_mut().filter(|m| m.coupled) {
             m.window_steps += 1;
             m.tau = m.window_steps as f64 * dt;
             m.move_to(m.tau);
         }
-        self.detect_contacts();
-        self.resolve_forces(dt);
-        integrate::kick(&mut self.state.particles, dt, rotation);
-        self.check_finite()
     }
 
     /// Algorithm 1, line 3.
-    fn detect_contacts(&mut self) {
+    fn detect_contacts(&mut self, particles_moved: bool) {
         let s = &mut self.state;
         contact_detection::detect(
             &mut s.lists,
             &mut s.particles,
+            particles_moved,
+            &self.planes,
             &mut s.meshes,
-            &mut s.wall_state,
             &mut s.records,
         );
     }
@@ -650,47 +718,41 @@ impl Engine {
             gravity: self.gravity,
             dt,
         };
-        resolve_forces::pair_forces(&mut s.lists, &s.particles, &ctx);
-        resolve_forces::gather_and_walls(
-            &s.lists,
-            &mut s.particles,
-            &mut s.wall_state,
-            &mut s.records,
-            &ctx,
-        );
-        if !s.records.is_empty() {
-            resolve_forces::accumulate_nodal_forces(&mut s.meshes, &s.records, dt > 0.0);
+        resolve_forces::contact_forces(&mut s.lists, &mut s.particles, &mut s.records, &ctx);
+        if s.meshes.iter().any(|m| m.coupled) {
+            resolve_forces::accumulate_nodal_forces(
+                &mut s.meshes,
+                &s.lists,
+                self.planes.len(),
+                &s.records,
+                dt > 0.0,
+            );
         }
     }
 
-    fn check_finite(&self) -> Result<(), DemError> {
-        use rayon::prelude::*;
+    /// The error naming the first particle with a non-finite state.
+    fn instability(&self) -> DemError {
         let p = &self.state.particles;
         let bad = |v: &V3| !(v.x.is_finite() && v.y.is_finite() && v.z.is_finite());
-        let any_bad = p.position.par_iter().with_min_len(4096).any(bad)
-            || p.velocity.par_iter().with_min_len(4096).any(bad)
-            || p.angular_velocity.par_iter().with_min_len(4096).any(bad);
-        if !any_bad {
-            return Ok(());
+        let (particle, quantity) = (0..p.len())
+            .find_map(|k| {
+                [
+                    ("position", &p.position[k]),
+                    ("velocity", &p.velocity[k]),
+                    ("angular velocity", &p.angular_velocity[k]),
+                ]
+                .into_iter()
+                .find(|(_, v)| bad(v))
+                .map(|(q, _)| (p.id[k], q))
+            })
+            .unwrap_or((0, "state"));
+        DemError::Unstable {
+            time: self.state.time,
+            step: self.state.steps,
+            particle,
+            quantity,
+            rayleigh: self.rayleigh_time_step(),
         }
-        for k in 0..p.len() {
-            for (quantity, v) in [
-                ("position", &p.position[k]),
-                ("velocity", &p.velocity[k]),
-                ("angular velocity", &p.angular_velocity[k]),
-            ] {
-                if bad(v) {
-                    return Err(DemError::Unstable {
-                        time: self.state.time,
-                        step: self.state.steps,
-                        particle: p.id[k],
-                        quantity,
-                        rayleigh: self.rayleigh_time_step(),
-                    });
-                }
-            }
-        }
-        Ok(())
     }
 
     /// Nodal forces exerted by the particles on a coupled mesh (flat xyz): the last substep's,
@@ -742,7 +804,19 @@ impl Engine {
             )));
         }
         let n = s.particles.len();
-        if s.wall_state.len() != n
+        if !s.lists.consistent(n)
+            || !(s.records.is_empty() || s.records.len() == s.lists.walls.len())
+            || s.lists.walls.iter().any(|c| {
+                let w = c.wall as usize;
+                let np = self.planes.len();
+                match w.checked_sub(np) {
+                    None => false,
+                    Some(m) => s
+                        .meshes
+                        .get(m)
+                        .is_none_or(|mesh| c.triangle as usize >= mesh.triangles.len()),
+                }
+            })
             || s.particles
                 .material
                 .iter()
@@ -753,6 +827,7 @@ impl Engine {
             ));
         }
         self.state = s;
+        self.state.lists.index_blocks();
         Ok(())
     }
 

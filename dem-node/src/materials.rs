@@ -34,6 +34,8 @@ pub struct PairParams {
     /// Damping factor β (≤ 0) of F_d = −2√(5/6) β √(S m*) v, calibrated so that the Hertz
     /// contact with this damping rebounds with exactly `restitution` (see `hertz_mindlin`).
     pub beta: f64,
+    /// √(S_t/S_n) = √(4G*/E*) (eqs. 2.12, 2.16): ratio of the tangential to the normal damping.
+    pub sqrt_stiffness_ratio: f64,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -86,6 +88,7 @@ impl MaterialTable {
                     restitution,
                     rolling_friction,
                     beta: crate::hertz_mindlin::damping_beta(restitution),
+                    sqrt_stiffness_ratio: (4.0 * g_star / e_star).sqrt(),
                 });
             }
         }

@@ -1,10 +1,15 @@
 //! Stage "resolve and accumulate (contact) forces" (Ullrich Algorithm 1, line 4).
 //!
-//! Pair forces are computed in parallel into the pair list; each particle then gathers its
-//! pairs, wall contacts and gravity in a fixed order (no atomics, no order-dependent
-//! reductions), so the result is bitwise identical for any number of threads.
+//! The particles are split into force blocks of [`BLOCK`] consecutive (spatially sorted)
+//! particles, processed in parallel. Within a block one pass over its particles i sets the
+//! force to gravity, evaluates i's pairs (i, j > i) and adds the force to i and the reaction
+//! to j (Newton's third law, one evaluation per pair), then i's wall contacts. A reaction on a
+//! particle of a later block (a "cross pair") is written to a buffer instead, and each block
+//! gathers its incoming cross reactions afterwards in a fixed order. Block boundaries do not
+//! depend on the thread count, and no sum depends on the scheduling (no atomics), so the
+//! result is bitwise identical for any number of threads.
 
-use crate::broad_phase::NeighbourLists;
+use crate::broad_phase::{NeighbourLists, WallContact, BLOCK};
 use crate::hertz_mindlin::{contact_force, rolling_torque, V3};
 use crate::materials::MaterialTable;
 use crate::particles::Particles;
@@ -12,40 +17,14 @@ use crate::walls::{Mesh, Plane};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-/// Wall contacts remembered per particle (history slots); more simultaneous wall contacts are
-/// still resolved, without tangential history.
-pub const WALL_SLOTS: usize = 4;
-
-#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
-pub struct WallSlot {
-    /// Contact identity: (wall index << 32) | patch; walls are planes then meshes.
-    pub key: u64,
-    pub shear: V3,
-    pub overlap: f64,
-}
-
-#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
-pub struct WallState {
-    pub count: u32,
-    pub slots: [WallSlot; WALL_SLOTS],
-}
-
-/// A force on a coupled mesh at a point of triangle `triangle` with barycentric weights.
+/// A force on a coupled mesh at a point of triangle `triangle` with barycentric weights,
+/// stored per wall candidate group (valid while the group's contact is touching).
 #[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
 pub struct MeshForceRecord {
-    pub mesh: u32,
     pub triangle: u32,
     pub bary: [f64; 3],
     /// Force exerted by the particle on the mesh.
     pub force: V3,
-    /// Contact point (for moment checks).
-    pub point: V3,
-}
-
-#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
-pub struct MeshRecords {
-    pub count: u32,
-    pub recs: [MeshForceRecord; WALL_SLOTS],
 }
 
 pub struct ForceContext<'a> {
@@ -57,143 +36,389 @@ pub struct ForceContext<'a> {
     pub dt: f64,
 }
 
-/// Pair forces (Hertz–Mindlin, eqs. 2.6–2.19) into the pair list.
-pub fn pair_forces(lists: &mut NeighbourLists, p: &Particles, ctx: &ForceContext) {
-    let dt = ctx.dt;
-    lists
-        .pairs
-        .par_iter_mut()
-        .with_min_len(1024)
-        .for_each(|pair| {
-            let (i, j) = (pair.i as usize, pair.j as usize);
-            let d = p.position[i] - p.position[j];
-            let (ri, rj) = (p.radius[i], p.radius[j]);
-            let dist2 = d.norm_squared();
-            let sum = ri + rj;
-            if dist2 >= sum * sum {
-                pair.shear = V3::zeros();
-                pair.force = V3::zeros();
-                pair.torque_i = V3::zeros();
-                pair.torque_j = V3::zeros();
-                pair.overlap = sum - dist2.sqrt();
-                return;
+/// The mutable data a run of consecutive blocks writes: its particles' forces, its pairs'
+/// histories and cross reactions, its wall contacts and mesh records.
+struct BlockSlices<'a> {
+    /// First block, first particle, pair, cross pair and wall candidate of the slices.
+    block: usize,
+    particle: usize,
+    pair: usize,
+    cross: usize,
+    wall: usize,
+    force: &'a mut [V3],
+    torque: &'a mut [V3],
+    shear: &'a mut [V3],
+    cross_force: &'a mut [[V3; 2]],
+    wall_contacts: &'a mut [WallContact],
+    records: &'a mut [MeshForceRecord],
+}
+
+/// Evaluates all contact forces and gravity into `p.force` and `p.torque`: pair forces
+/// (Hertz–Mindlin, eqs. 2.6–2.19) and wall contacts, with history updates when `ctx.dt` > 0.
+/// `records` (one per wall candidate, or empty without coupled meshes) receive the forces on
+/// coupled meshes.
+pub fn contact_forces(
+    lists: &mut NeighbourLists,
+    p: &mut Particles,
+    records: &mut [MeshForceRecord],
+    ctx: &ForceContext,
+) {
+    let n = p.len();
+    let blocks = n.div_ceil(BLOCK);
+    let NeighbourLists {
+        first_pair,
+        partner,
+        shear,
+        wall_start,
+        walls,
+        wall_contacts,
+        cross,
+        ..
+    } = lists;
+    let slices = BlockSlices {
+        block: 0,
+        particle: 0,
+        pair: 0,
+        cross: 0,
+        wall: 0,
+        force: &mut p.force,
+        torque: &mut p.torque,
+        shear: &mut shear[..],
+        cross_force: &mut cross.force,
+        wall_contacts: &mut wall_contacts[..],
+        records,
+    };
+    let view = ListsView {
+        first_pair: &first_pair[..],
+        partner: &partner[..],
+        wall_start: &wall_start[..],
+        walls: &walls[..],
+        block_start: &cross.block_start,
+    };
+    let kin = Kinematics {
+        pos: &p.position,
+        vel: &p.velocity,
+        omega: &p.angular_velocity,
+        rad: &p.radius,
+        mass: &p.mass,
+        inertia: &p.inertia,
+        mat: &p.material,
+    };
+    for_blocks_view(0..blocks, slices, &view, &|b, s| {
+        block_forces(b, s, &view, &kin, ctx)
+    });
+
+    // incoming cross-pair reactions, per block in receiver order
+    let c = &lists.cross;
+    p.force
+        .par_chunks_mut(BLOCK)
+        .zip(p.torque.par_chunks_mut(BLOCK))
+        .enumerate()
+        .for_each(|(b, (f, t))| {
+            let lo = b * BLOCK;
+            for r in c.block_receivers[b] as usize..c.block_receivers[b + 1] as usize {
+                let j = c.receivers[r] as usize - lo;
+                let (mut fj, mut tj) = (f[j], t[j]);
+                for &o in
+                    &c.incoming[c.receiver_start[r] as usize..c.receiver_start[r + 1] as usize]
+                {
+                    let [df, dt] = c.force[o as usize];
+                    fj += df;
+                    tj += dt;
+                }
+                f[j] = fj;
+                t[j] = tj;
             }
-            let dist = dist2.sqrt();
-            let delta = sum - dist; // (2.9)
-            let n = if dist > 0.0 { d / dist } else { V3::z() };
-            let params = ctx.materials.pair(p.material[i], p.material[j]);
-            let r_eff = ri * rj / sum; // (2.8)
-            let m_eff = p.mass[i] * p.mass[j] / (p.mass[i] + p.mass[j]); // (2.11)
-            let (ai, aj) = (ri - 0.5 * delta, rj - 0.5 * delta);
-            let (wi, wj) = (p.angular_velocity[i], p.angular_velocity[j]);
-            let v_c = p.velocity[i] - p.velocity[j] - (wi * ai + wj * aj).cross(&n);
-            let cf = contact_force(params, delta, r_eff, m_eff, &n, &v_c, &mut pair.shear, dt);
-            let nxt = n.cross(&cf.tangential);
-            let i_eff = p.inertia[i] * p.inertia[j] / (p.inertia[i] + p.inertia[j]);
-            let roll = rolling_torque(
-                params.rolling_friction,
-                r_eff,
-                cf.normal,
-                &(wi - wj),
-                i_eff,
-                dt,
-            );
-            pair.force = cf.force;
-            pair.torque_i = nxt * (-ai) + roll;
-            pair.torque_j = nxt * (-aj) - roll;
-            pair.overlap = delta;
         });
 }
 
-struct WallContactGeom {
-    key: u64,
+/// Read-only parts of the lists during the force pass.
+struct ListsView<'a> {
+    first_pair: &'a [u32],
+    partner: &'a [u32],
+    wall_start: &'a [u32],
+    walls: &'a [crate::broad_phase::WallCandidate],
+    block_start: &'a [u32],
+}
+
+struct Kinematics<'a> {
+    pos: &'a [V3],
+    vel: &'a [V3],
+    omega: &'a [V3],
+    rad: &'a [f64],
+    mass: &'a [f64],
+    inertia: &'a [f64],
+    mat: &'a [u16],
+}
+
+impl<'a> BlockSlices<'a> {
+    fn split_view(self, b: usize, v: &ListsView) -> (BlockSlices<'a>, BlockSlices<'a>) {
+        let particle = b * BLOCK;
+        let pair = v.first_pair[particle] as usize;
+        let cross = v.block_start[b] as usize;
+        let wall = v.wall_start[particle] as usize;
+        let (f0, f1) = self.force.split_at_mut(particle - self.particle);
+        let (t0, t1) = self.torque.split_at_mut(particle - self.particle);
+        let (s0, s1) = self.shear.split_at_mut(pair - self.pair);
+        let (c0, c1) = self.cross_force.split_at_mut(cross - self.cross);
+        let (w0, w1) = self.wall_contacts.split_at_mut(wall - self.wall);
+        let (r0, r1) = if self.records.is_empty() {
+            (self.records, <&mut [MeshForceRecord]>::default())
+        } else {
+            self.records.split_at_mut(wall - self.wall)
+        };
+        (
+            BlockSlices {
+                block: self.block,
+                particle: self.particle,
+                pair: self.pair,
+                cross: self.cross,
+                wall: self.wall,
+                force: f0,
+                torque: t0,
+                shear: s0,
+                cross_force: c0,
+                wall_contacts: w0,
+                records: r0,
+            },
+            BlockSlices {
+                block: b,
+                particle,
+                pair,
+                cross,
+                wall,
+                force: f1,
+                torque: t1,
+                shear: s1,
+                cross_force: c1,
+                wall_contacts: w1,
+                records: r1,
+            },
+        )
+    }
+}
+
+fn for_blocks_view<F>(blocks: std::ops::Range<usize>, s: BlockSlices, v: &ListsView, f: &F)
+where
+    F: Fn(usize, BlockSlices) + Sync,
+{
+    if blocks.len() <= 1 {
+        if !blocks.is_empty() {
+            f(blocks.start, s);
+        }
+        return;
+    }
+    let mid = blocks.start + blocks.len() / 2;
+    let (a, b) = s.split_view(mid, v);
+    rayon::join(
+        || for_blocks_view(blocks.start..mid, a, v, f),
+        || for_blocks_view(mid..blocks.end, b, v, f),
+    );
+}
+
+struct WallGeom {
     n: V3,
     delta: f64,
     lever: f64,
-    point: V3,
     wall_velocity: V3,
     material: u16,
-    mesh_ref: Option<(u32, u32, [f64; 3])>,
+    /// (triangle, barycentric weights) of the contact point on a coupled mesh.
+    mesh_ref: Option<(u32, [f64; 3])>,
 }
 
-/// Gathers pair forces, resolves wall contacts and adds gravity, per particle.
-pub fn gather_and_walls(
-    lists: &NeighbourLists,
-    p: &mut Particles,
-    wall_state: &mut [WallState],
-    records: &mut [MeshRecords],
+/// One force block: gravity, pairs with reactions, wall contacts.
+fn block_forces(b: usize, s: BlockSlices, v: &ListsView, k: &Kinematics, ctx: &ForceContext) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+        // SAFETY: the CPU supports AVX2 and FMA (checked above)
+        return unsafe { block_forces_avx2(b, s, v, k, ctx) };
+    }
+    block_forces_generic(b, s, v, k, ctx)
+}
+
+/// [`block_forces`] compiled for AVX2 (no FMA contraction happens without explicit
+/// `mul_add`, so the results are bitwise those of the baseline build).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn block_forces_avx2(
+    b: usize,
+    s: BlockSlices,
+    v: &ListsView,
+    k: &Kinematics,
     ctx: &ForceContext,
 ) {
-    let pairs = &lists.pairs;
-    let (pos, vel, omega, rad, mass, mat, inertia) = (
-        &p.position,
-        &p.velocity,
-        &p.angular_velocity,
-        &p.radius,
-        &p.mass,
-        &p.material,
-        &p.inertia,
-    );
-    let with_records = !records.is_empty();
-    let n_planes = ctx.planes.len() as u64;
-    let body = |i: usize, ws: &mut WallState, mut rec: Option<&mut MeshRecords>| -> (V3, V3) {
-        let mut f = gravity_force(mass[i], &ctx.gravity);
-        let mut t = V3::zeros();
-        for k in lists.first_pair[i]..lists.first_pair[i + 1] {
-            let pr = &pairs[k as usize];
-            f += pr.force;
-            t += pr.torque_i;
-        }
-        for k in lists.as_j_start[i]..lists.as_j_start[i + 1] {
-            let pr = &pairs[lists.as_j[k as usize] as usize];
-            f -= pr.force;
-            t += pr.torque_j;
-        }
+    block_forces_generic(b, s, v, k, ctx)
+}
 
-        // wall contacts: planes, then one contact per (mesh, patch) at its closest point
-        let x = pos[i];
-        let r = rad[i];
-        let mut found: [Option<WallContactGeom>; 2 * WALL_SLOTS] = Default::default();
-        let mut nfound = 0usize;
-        let mut extra: Vec<WallContactGeom> = Vec::new();
-        let mut push = |g: WallContactGeom, nfound: &mut usize| {
-            if *nfound < found.len() {
-                found[*nfound] = Some(g);
-                *nfound += 1;
-            } else {
-                extra.push(g);
+#[inline(always)]
+fn block_forces_generic(
+    b: usize,
+    s: BlockSlices,
+    v: &ListsView,
+    k: &Kinematics,
+    ctx: &ForceContext,
+) {
+    let n = k.pos.len();
+    let (lo, hi) = (b * BLOCK, ((b + 1) * BLOCK).min(n));
+    let dt = ctx.dt;
+    let BlockSlices {
+        pair: pair0,
+        cross: cross0,
+        wall: wall0,
+        force,
+        torque,
+        shear,
+        cross_force,
+        wall_contacts,
+        records,
+        ..
+    } = s;
+    for i in lo..hi {
+        force[i - lo] = ctx.gravity * k.mass[i];
+        torque[i - lo] = V3::zeros();
+    }
+    let mut cross = 0usize;
+    debug_assert_eq!(cross0, v.block_start[b] as usize);
+    for i in lo..hi {
+        let (xi, vi, wi) = (k.pos[i], k.vel[i], k.omega[i]);
+        let (ri, mi, ii, mat_i) = (k.rad[i], k.mass[i], k.inertia[i], k.mat[i]);
+        let mut fi = force[i - lo];
+        let mut ti = torque[i - lo];
+        for pk in v.first_pair[i] as usize..v.first_pair[i + 1] as usize {
+            let j = v.partner[pk] as usize;
+            let local = j < hi;
+            let d = xi - k.pos[j];
+            let rj = k.rad[j];
+            let dist2 = d.norm_squared();
+            let sum = ri + rj;
+            if dist2 >= sum * sum {
+                let h = &mut shear[pk - pair0];
+                if *h != V3::zeros() {
+                    *h = V3::zeros();
+                }
+                if !local {
+                    cross_force[cross] = [V3::zeros(); 2];
+                    cross += 1;
+                }
+                continue;
             }
-        };
-        for (k, pl) in ctx.planes.iter().enumerate() {
+            let dist = dist2.sqrt();
+            let delta = sum - dist; // (2.9)
+            let nrm = if dist > 0.0 {
+                d * (1.0 / dist)
+            } else {
+                V3::z()
+            };
+            let params = ctx.materials.pair(mat_i, k.mat[j]);
+            let r_eff = ri * rj / sum; // (2.8)
+            let mj = k.mass[j];
+            let m_eff = mi * mj / (mi + mj); // (2.11)
+            let (ai, aj) = (ri - 0.5 * delta, rj - 0.5 * delta);
+            let wj = k.omega[j];
+            let v_c = vi - k.vel[j] - (wi * ai + wj * aj).cross(&nrm);
+            let cf = contact_force(
+                params,
+                delta,
+                r_eff,
+                m_eff,
+                &nrm,
+                &v_c,
+                &mut shear[pk - pair0],
+                dt,
+            );
+            let nxt = nrm.cross(&cf.tangential);
+            let roll = if params.rolling_friction > 0.0 {
+                let ij = k.inertia[j];
+                let i_eff = ii * ij / (ii + ij);
+                rolling_torque(
+                    params.rolling_friction,
+                    r_eff,
+                    cf.normal,
+                    &(wi - wj),
+                    i_eff,
+                    dt,
+                )
+            } else {
+                V3::zeros()
+            };
+            fi += cf.force;
+            ti += nxt * (-ai) + roll;
+            let tj = nxt * (-aj) - roll;
+            if local {
+                force[j - lo] -= cf.force;
+                torque[j - lo] += tj;
+            } else {
+                cross_force[cross] = [-cf.force, tj];
+                cross += 1;
+            }
+        }
+        let ws = v.wall_start[i] as usize..v.wall_start[i + 1] as usize;
+        if !ws.is_empty() {
+            let (df, dtq) = wall_forces(
+                i,
+                &v.walls[ws.clone()],
+                &mut wall_contacts[ws.start - wall0..ws.end - wall0],
+                if records.is_empty() {
+                    None
+                } else {
+                    Some(&mut records[ws.start - wall0..ws.end - wall0])
+                },
+                k,
+                ctx,
+            );
+            fi += df;
+            ti += dtq;
+        }
+        force[i - lo] = fi;
+        torque[i - lo] = ti;
+    }
+    debug_assert_eq!(cross, cross_force.len());
+}
+
+/// Wall contacts of particle i: planes, then one contact per (mesh, patch) at its closest
+/// point (see `triangle_contact`). Returns the force and torque on i.
+#[inline(always)]
+fn wall_forces(
+    i: usize,
+    cands: &[crate::broad_phase::WallCandidate],
+    contacts: &mut [WallContact],
+    mut records: Option<&mut [MeshForceRecord]>,
+    k: &Kinematics,
+    ctx: &ForceContext,
+) -> (V3, V3) {
+    let x = k.pos[i];
+    let r = k.rad[i];
+    let n_planes = ctx.planes.len() as u32;
+    let mut f = V3::zeros();
+    let mut t = V3::zeros();
+    let mut g = 0;
+    while g < cands.len() {
+        let first = g;
+        let (w, patch) = (cands[g].wall, cands[g].patch);
+        let mut geo = None;
+        if w < n_planes {
+            let pl = &ctx.planes[w as usize];
             let d = (x - pl.point).dot(&pl.normal);
             if d < r {
-                push(
-                    WallContactGeom {
-                        key: (k as u64) << 32,
-                        n: pl.normal,
-                        delta: r - d,
-                        lever: d.max(0.0),
-                        point: x - pl.normal * d,
-                        wall_velocity: V3::zeros(),
-                        material: pl.material,
-                        mesh_ref: None,
-                    },
-                    &mut nfound,
-                );
+                geo = Some(WallGeom {
+                    n: pl.normal,
+                    delta: r - d,
+                    lever: d.max(0.0),
+                    wall_velocity: V3::zeros(),
+                    material: pl.material,
+                    mesh_ref: None,
+                });
             }
-        }
-        let cands = &lists.tri[lists.tri_start[i] as usize..lists.tri_start[i + 1] as usize];
-        let mut g = 0;
-        while g < cands.len() {
-            let (m, patch) = (cands[g].mesh, cands[g].patch);
-            let mesh = &ctx.meshes[m as usize];
+            g += 1;
+        } else {
+            let mesh = &ctx.meshes[(w - n_planes) as usize];
             let mut best: Option<(f64, V3, [f64; 3], u32)> = None;
-            while g < cands.len() && cands[g].mesh == m && cands[g].patch == patch {
+            while g < cands.len() && cands[g].wall == w && cands[g].patch == patch {
                 let tri = cands[g].triangle;
                 let [a, b, c] = mesh.corners(tri as usize);
                 let (q, bary) = crate::triangle_contact::closest_point_on_triangle(&x, &a, &b, &c);
                 let d2 = (x - q).norm_squared();
-                if best.map_or(true, |(bd, ..)| d2 < bd) {
+                if best.is_none_or(|(bd, ..)| d2 < bd) {
                     best = Some((d2, q, bary, tri));
                 }
                 g += 1;
@@ -211,122 +436,83 @@ pub fn gather_and_walls(
                     let wv = mesh.velocities[na as usize] * bary[0]
                         + mesh.velocities[nb as usize] * bary[1]
                         + mesh.velocities[nc as usize] * bary[2];
-                    push(
-                        WallContactGeom {
-                            key: ((n_planes + m as u64) << 32) | patch as u64,
-                            n: nrm,
-                            delta: r - d,
-                            lever: d,
-                            point: q,
-                            wall_velocity: wv,
-                            material: mesh.material,
-                            mesh_ref: if mesh.coupled {
-                                Some((m, tri, bary))
-                            } else {
-                                None
-                            },
-                        },
-                        &mut nfound,
-                    );
+                    geo = Some(WallGeom {
+                        n: nrm,
+                        delta: r - d,
+                        lever: d,
+                        wall_velocity: wv,
+                        material: mesh.material,
+                        mesh_ref: mesh.coupled.then_some((tri, bary)),
+                    });
                 }
             }
         }
-
-        let old = *ws;
-        let mut new_state = WallState::default();
-        if let Some(rec) = rec.as_deref_mut() {
-            rec.count = 0;
-        }
-        let all = found[..nfound]
-            .iter()
-            .map(|o| o.as_ref().unwrap())
-            .chain(extra.iter());
-        for geo in all {
-            let params = ctx.materials.pair(mat[i], geo.material);
-            let mut shear = old.slots[..old.count as usize]
-                .iter()
-                .find(|s| s.key == geo.key)
-                .map_or(V3::zeros(), |s| s.shear);
-            let w = omega[i];
-            let v_c = vel[i] - (w * geo.lever).cross(&geo.n) - geo.wall_velocity;
-            let cf = contact_force(
-                params, geo.delta, r, mass[i], &geo.n, &v_c, &mut shear, ctx.dt,
+        let slot = &mut contacts[first];
+        let Some(geo) = geo else {
+            if *slot != WallContact::NONE {
+                *slot = WallContact::NONE;
+            }
+            continue;
+        };
+        let params = ctx.materials.pair(k.mat[i], geo.material);
+        // the history of a contact that did not exist in the last evaluation is zero
+        let mut shear = slot.shear;
+        let w = k.omega[i];
+        let v_c = k.vel[i] - (w * geo.lever).cross(&geo.n) - geo.wall_velocity;
+        let cf = contact_force(
+            params, geo.delta, r, k.mass[i], &geo.n, &v_c, &mut shear, ctx.dt,
+        );
+        f += cf.force;
+        t += geo.n.cross(&cf.tangential) * (-geo.lever);
+        if params.rolling_friction > 0.0 {
+            t += rolling_torque(
+                params.rolling_friction,
+                r,
+                cf.normal,
+                &w,
+                k.inertia[i],
+                ctx.dt,
             );
-            f += cf.force;
-            t += geo.n.cross(&cf.tangential) * (-geo.lever)
-                + rolling_torque(
-                    params.rolling_friction,
-                    r,
-                    cf.normal,
-                    &w,
-                    inertia[i],
-                    ctx.dt,
-                );
-            if (new_state.count as usize) < WALL_SLOTS {
-                new_state.slots[new_state.count as usize] = WallSlot {
-                    key: geo.key,
-                    shear,
-                    overlap: geo.delta,
-                };
-                new_state.count += 1;
-            }
-            if let (Some((m, tri, bary)), Some(rec)) = (geo.mesh_ref, rec.as_deref_mut()) {
-                if (rec.count as usize) < WALL_SLOTS {
-                    rec.recs[rec.count as usize] = MeshForceRecord {
-                        mesh: m,
-                        triangle: tri,
-                        bary,
-                        force: -cf.force,
-                        point: geo.point,
-                    };
-                    rec.count += 1;
-                }
-            }
         }
-        *ws = new_state;
-        (f, t)
-    };
-    let forces = p
-        .force
-        .par_iter_mut()
-        .zip(p.torque.par_iter_mut())
-        .zip(wall_state.par_iter_mut());
-    if with_records {
-        forces
-            .zip(records.par_iter_mut())
-            .enumerate()
-            .with_min_len(512)
-            .for_each(|(i, (((f_out, t_out), ws), rec))| {
-                (*f_out, *t_out) = body(i, ws, Some(rec));
-            });
-    } else {
-        forces
-            .enumerate()
-            .with_min_len(512)
-            .for_each(|(i, ((f_out, t_out), ws))| {
-                (*f_out, *t_out) = body(i, ws, None);
-            });
+        *slot = WallContact {
+            shear,
+            overlap: geo.delta,
+        };
+        if let (Some((tri, bary)), Some(rec)) = (geo.mesh_ref, records.as_deref_mut()) {
+            rec[first] = MeshForceRecord {
+                triangle: tri,
+                bary,
+                force: -cf.force,
+            };
+        }
     }
-}
-
-#[inline]
-fn gravity_force(m: f64, g: &V3) -> V3 {
-    g * m
+    (f, t)
 }
 
 /// Distributes the recorded forces on coupled meshes to their nodes, f_K = N_K f
 /// (Wellmann eqs. 4.3–4.4), in particle order, and updates the window accumulators.
-pub fn accumulate_nodal_forces(meshes: &mut [Mesh], records: &[MeshRecords], count_step: bool) {
+pub fn accumulate_nodal_forces(
+    meshes: &mut [Mesh],
+    lists: &NeighbourLists,
+    n_planes: usize,
+    records: &[MeshForceRecord],
+    count_step: bool,
+) {
     for m in meshes.iter_mut().filter(|m| m.coupled) {
         m.nodal_force_step.iter_mut().for_each(|f| *f = V3::zeros());
     }
-    for r in records {
-        for rec in &r.recs[..r.count as usize] {
-            let mesh = &mut meshes[rec.mesh as usize];
-            let tri = mesh.triangles[rec.triangle as usize];
-            for k in 0..3 {
-                mesh.nodal_force_step[tri[k] as usize] += rec.force * rec.bary[k];
-            }
+    for (k, rec) in records.iter().enumerate() {
+        let w = lists.walls[k].wall as usize;
+        if w < n_planes || !lists.wall_contacts[k].touching() {
+            continue;
+        }
+        let mesh = &mut meshes[w - n_planes];
+        if !mesh.coupled {
+            continue;
+        }
+        let tri = mesh.triangles[rec.triangle as usize];
+        for c in 0..3 {
+            mesh.nodal_force_step[tri[c] as usize] += rec.force * rec.bary[c];
         }
     }
     for m in meshes.iter_mut().filter(|m| m.coupled) {

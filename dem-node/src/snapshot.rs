@@ -4,11 +4,12 @@
 
 use crate::broad_phase::NeighbourLists;
 use crate::particles::Particles;
-use crate::resolve_forces::{MeshRecords, WallState};
+use crate::resolve_forces::MeshForceRecord;
 use crate::walls::Mesh;
 use serde::{Deserialize, Serialize};
 
-pub const SNAPSHOT_VERSION: u32 = 1;
+/// 2: pair lists as partner CSR with histories, wall histories per candidate group.
+pub const SNAPSHOT_VERSION: u32 = 2;
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct EngineState {
@@ -17,8 +18,8 @@ pub struct EngineState {
     pub steps: u64,
     pub particles: Particles,
     pub lists: NeighbourLists,
-    pub wall_state: Vec<WallState>,
-    pub records: Vec<MeshRecords>,
+    /// Forces on coupled meshes per wall candidate (empty without coupled meshes).
+    pub records: Vec<MeshForceRecord>,
     pub meshes: Vec<Mesh>,
 }
 

@@ -229,3 +229,84 @@ fn coupled_mesh_input_errors_name_the_mesh() {
         .set_mesh_kinematics(m + 5, &pos, &pos, &pos, MotionRule::Linear)
         .is_err());
 }
+
+/// The Verlet lists survive coupling windows: setting the kinematics of a mesh that barely
+/// moves does not rebuild them (Wellmann eq. 4.10: only a particle or node displacement of
+/// d_V/2 does), while a mesh that moves more than d_V/2 within a window still triggers a build
+/// and its contact is found.
+#[test]
+fn coupling_windows_rebuild_lists_only_when_the_mesh_moves_half_the_skin() {
+    // the four spheres of SCENE at rest, 0.5 mm above the plate
+    let spheres = SCENE.find("spheres = [").expect("SCENE lists spheres");
+    let at_rest = format!(
+        "{}spheres = [\n{}]\n",
+        &SCENE[..spheres],
+        [
+            [0.011, 0.013],
+            [0.047, 0.021],
+            [0.032, 0.052],
+            [0.068, 0.071]
+        ]
+        .map(|[x, y]| format!("  {{ position = [{x}, {y}, 0.0105], radius = 0.01 }},\n"))
+        .concat()
+    );
+    let mut e = engine(&at_rest);
+    let (pos, tris) = plate();
+    let m = e.add_coupled_mesh("plate", &pos, &tris).unwrap();
+    let zeros = vec![0.0; pos.len()];
+    e.set_mesh_kinematics(m, &pos, &zeros, &zeros, MotionRule::Linear)
+        .unwrap();
+    e.advance(1).unwrap();
+    let builds0 = e.neighbour_list_builds();
+    // 20 windows; the plate vibrates by 1 µm (the skin is 2.5 mm)
+    for w in 0..20 {
+        let p: Vec<f64> = pos
+            .iter()
+            .enumerate()
+            .map(|(k, x)| {
+                if k % 3 == 2 {
+                    x + 1e-6 * (w % 2) as f64
+                } else {
+                    *x
+                }
+            })
+            .collect();
+        e.set_mesh_kinematics(m, &p, &zeros, &zeros, MotionRule::Linear)
+            .unwrap();
+        e.advance(10).unwrap();
+    }
+    let builds = e.neighbour_list_builds() - builds0;
+    println!("20 windows of a plate vibrating by 1 µm: {builds} list builds");
+    assert_eq!(builds, 0, "lists rebuilt although nothing moved d_V/2");
+    assert_eq!(
+        e.num_wall_contacts(),
+        0,
+        "the spheres hover 0.5 mm above the plate"
+    );
+
+    // now the plate rises 1.5 mm (more than d_V/2 = 1.25 mm) within a window of 10 steps
+    let v: Vec<f64> = (0..pos.len())
+        .map(|k| {
+            if k % 3 == 2 {
+                1.5e-3 / (10.0 * e.time_step())
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    e.set_mesh_kinematics(m, &pos, &v, &zeros, MotionRule::Linear)
+        .unwrap();
+    e.advance(10).unwrap();
+    assert!(
+        e.neighbour_list_builds() > builds0,
+        "a 1.5 mm motion rebuilds the lists"
+    );
+    assert_eq!(
+        e.num_wall_contacts(),
+        4,
+        "all four spheres touch the risen plate"
+    );
+    let f = e.interface_forces(m, false);
+    let fz: f64 = f.iter().skip(2).step_by(3).sum();
+    assert!(fz < 0.0, "the spheres push the plate down: {fz}");
+}
