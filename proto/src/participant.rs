@@ -76,6 +76,9 @@ pub struct Participant {
     publishers: HashMap<String, Publisher<'static>>,
     subscribers: HashMap<String, Subscriber<FifoChannelHandler<Sample>>>,
     queryables: Vec<Queryable<()>>,
+    /// Repeated until the first command arrives: a coordinator that started after this node
+    /// (another machine) did not hear the first one.
+    hello: Option<Hello>,
 }
 
 impl Participant {
@@ -112,7 +115,7 @@ impl Participant {
             .with(zenoh::handlers::FifoChannel::new(CONTROL_QUEUE))
             .await
             .map_err(ProtoError::zenoh)?;
-        let p = Participant {
+        let mut p = Participant {
             session,
             keys,
             node: node.to_string(),
@@ -124,8 +127,10 @@ impl Participant {
             publishers: HashMap::new(),
             subscribers: HashMap::new(),
             queryables: Vec::new(),
+            hello: None,
         };
-        p.report(StatusBody::Hello(hello)).await?;
+        p.report(StatusBody::Hello(hello.clone())).await?;
+        p.hello = Some(hello);
         Ok(p)
     }
 
@@ -151,6 +156,12 @@ impl Participant {
                     None => std::future::pending().await,
                 }
             };
+            let repeat_hello = async {
+                match self.hello {
+                    Some(_) => tokio::time::sleep(Duration::from_millis(500)).await,
+                    None => std::future::pending().await,
+                }
+            };
             tokio::select! {
                 s = self.commands.recv_async() => break s.map_err(|_| ProtoError::Closed)?,
                 a = self.coordinator_alive.recv_async() => {
@@ -160,6 +171,11 @@ impl Participant {
                             node: COORDINATOR.into(),
                             context: format!("while node `{}` waited for its next command", self.node),
                         });
+                    }
+                }
+                _ = repeat_hello => {
+                    if let Some(h) = self.hello.clone() {
+                        self.report(StatusBody::Hello(h)).await?;
                     }
                 }
                 _ = sleep => return Err(ProtoError::Timeout {
@@ -180,6 +196,7 @@ impl Participant {
                 seq: cmd.seq,
             });
         }
+        self.hello = None;
         if self.token.is_none() {
             let token = self
                 .session

@@ -2,7 +2,7 @@
 //! running `cosim` as a user would.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::{Child, Command, Output};
 
 /// The folder of the binaries built with the tests (`target/<profile>`).
 pub fn bin_dir() -> PathBuf {
@@ -64,4 +64,74 @@ pub fn write_scene(dir: &Path, name: &str, text: &str) -> PathBuf {
     let p = dir.join(name);
     std::fs::write(&p, text).expect("write scene");
     p
+}
+
+/// Runs `cosim run` on scene text written to `dir/name`, output in `dir/out-<name>`; fails the
+/// test (printing the nodes' logs) if the run fails. Returns the summary.
+pub fn run_scene(dir: &Path, name: &str, text: &str) -> serde_json::Value {
+    let scene = write_scene(dir, name, text);
+    let out = dir.join(format!("out-{name}"));
+    let mut c = cosim();
+    c.arg("run")
+        .arg(&scene)
+        .arg("--no-progress")
+        .arg("--out")
+        .arg(&out);
+    let o = run(c);
+    if !o.status.success() {
+        for node in ["dem", "fem"] {
+            if let Ok(log) = std::fs::read_to_string(out.join(format!("logs/{node}.log"))) {
+                eprintln!("--- {node}.log\n{log}");
+            }
+        }
+        panic!("{name} failed");
+    }
+    summary(&out)
+}
+
+/// Arguments of the running process whose command line contains all of `needles`.
+pub fn process_args(needles: &[&str]) -> Option<(u32, Vec<String>)> {
+    for entry in std::fs::read_dir("/proc").ok()?.flatten() {
+        let Ok(pid) = entry.file_name().to_string_lossy().parse::<u32>() else {
+            continue;
+        };
+        let Ok(cmd) = std::fs::read(entry.path().join("cmdline")) else {
+            continue;
+        };
+        let args: Vec<String> = String::from_utf8_lossy(&cmd)
+            .split('\0')
+            .map(String::from)
+            .collect();
+        let line = args.join(" ");
+        if needles.iter().all(|n| line.contains(n)) {
+            return Some((pid, args));
+        }
+    }
+    None
+}
+
+/// Pid of the running process whose command line contains all of `needles`.
+pub fn pid_of(needles: &[&str]) -> Option<u32> {
+    process_args(needles).map(|(pid, _)| pid)
+}
+
+/// SIGKILL.
+pub fn kill(pid: u32) {
+    let ok = Command::new("kill")
+        .args(["-KILL", &pid.to_string()])
+        .status()
+        .map(|s| s.success());
+    assert!(matches!(ok, Ok(true)), "kill -KILL {pid}");
+}
+
+/// Kills and reaps its processes when dropped (also when a test fails half-way).
+pub struct Reaper(pub Vec<Child>);
+
+impl Drop for Reaper {
+    fn drop(&mut self) {
+        for c in &mut self.0 {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
 }

@@ -3,21 +3,7 @@
 
 use std::path::Path;
 
-use cosim_tests::{cosim, root, run, summary, write_scene};
-
-fn run_scene(dir: &Path, name: &str, text: &str) -> serde_json::Value {
-    let scene = write_scene(dir, name, text);
-    let out = dir.join(format!("out-{name}"));
-    let mut c = cosim();
-    c.arg("run")
-        .arg(&scene)
-        .arg("--no-progress")
-        .arg("--out")
-        .arg(&out);
-    let o = run(c);
-    assert!(o.status.success(), "{name} failed");
-    summary(&out)
-}
+use cosim_tests::{cosim, root, run, run_scene, write_scene};
 
 fn scene_text(name: &str) -> String {
     std::fs::read_to_string(root().join("scenes").join(name)).unwrap()

@@ -2,20 +2,10 @@
 //! under way is refused with a clear message while the run goes on.
 
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use cosim_tests::{bin, bin_dir, cosim, root, run, summary, write_scene};
-
-struct Reaper(Vec<Child>);
-impl Drop for Reaper {
-    fn drop(&mut self) {
-        for c in &mut self.0 {
-            let _ = c.kill();
-            let _ = c.wait();
-        }
-    }
-}
+use cosim_tests::{bin, bin_dir, cosim, root, run, summary, write_scene, Reaper};
 
 fn config(dir: &Path, name: &str, text: String) -> PathBuf {
     let p = dir.join(name);

@@ -4,24 +4,7 @@ use std::io::Read;
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 
-use cosim_tests::{cosim, root, summary, write_scene};
-
-/// Pid of the process whose command line contains all of `needles`.
-fn find_process(needles: &[&str]) -> Option<i32> {
-    for entry in std::fs::read_dir("/proc").ok()?.flatten() {
-        let Ok(pid) = entry.file_name().to_string_lossy().parse::<i32>() else {
-            continue;
-        };
-        let Ok(cmd) = std::fs::read(entry.path().join("cmdline")) else {
-            continue;
-        };
-        let cmd = String::from_utf8_lossy(&cmd).replace('\0', " ");
-        if needles.iter().all(|n| cmd.contains(n)) {
-            return Some(pid);
-        }
-    }
-    None
-}
+use cosim_tests::{cosim, kill, pid_of, root, summary, write_scene};
 
 #[test]
 fn killing_the_dem_node_mid_run_ends_the_run_within_5_s_naming_the_node_and_window() {
@@ -58,9 +41,9 @@ fn killing_the_dem_node_mid_run_ends_the_run_within_5_s_naming_the_node_and_wind
         );
         std::thread::sleep(Duration::from_millis(50));
     }
-    let pid = find_process(&["dem-node", &run_id]).expect("the dem-node process");
+    let pid = pid_of(&["dem-node", &run_id]).expect("the dem-node process");
     let killed = Instant::now();
-    assert_eq!(unsafe_kill(pid), 0);
+    kill(pid);
 
     let status = loop {
         if let Some(s) = child.try_wait().unwrap() {
@@ -95,13 +78,4 @@ fn killing_the_dem_node_mid_run_ends_the_run_within_5_s_naming_the_node_and_wind
     for row in rows.lines().skip(1) {
         assert_eq!(row.split(',').count(), 7, "{row}");
     }
-}
-
-/// SIGKILL without pulling in a libc crate for one call.
-fn unsafe_kill(pid: i32) -> i32 {
-    std::process::Command::new("kill")
-        .args(["-KILL", &pid.to_string()])
-        .status()
-        .map(|s| if s.success() { 0 } else { 1 })
-        .unwrap_or(1)
 }

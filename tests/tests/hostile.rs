@@ -5,7 +5,7 @@
 use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
-use cosim_tests::{cosim, root, summary, write_scene};
+use cosim_tests::{cosim, process_args, root, summary, write_scene};
 use proto::{encode, InterfaceForces, LinkConfig, Status, StatusBody, PROTOCOL_VERSION};
 
 fn start_plate(dir: &std::path::Path, end_time: &str, run_id: &str, port: u16) -> Child {
@@ -35,22 +35,10 @@ fn start_plate(dir: &std::path::Path, end_time: &str, run_id: &str, port: u16) -
 
 /// The `--listen` port of the run's node process `node`.
 fn node_port(node: &str, run_id: &str) -> u16 {
-    for entry in std::fs::read_dir("/proc").unwrap().flatten() {
-        let Ok(cmd) = std::fs::read(entry.path().join("cmdline")) else {
-            continue;
-        };
-        let args: Vec<String> = String::from_utf8_lossy(&cmd)
-            .split('\0')
-            .map(String::from)
-            .collect();
-        if args.iter().any(|a| a.ends_with(&format!("{node}-node")))
-            && args.iter().any(|a| a == run_id)
-        {
-            let i = args.iter().position(|a| a == "--listen").expect("--listen");
-            return args[i + 1].rsplit(':').next().unwrap().parse().unwrap();
-        }
-    }
-    panic!("no {node}-node process in run {run_id}");
+    let (_, args) = process_args(&[&format!("{node}-node"), run_id])
+        .unwrap_or_else(|| panic!("no {node}-node in run {run_id}"));
+    let i = args.iter().position(|a| a == "--listen").expect("--listen");
+    args[i + 1].rsplit(':').next().unwrap().parse().unwrap()
 }
 
 /// A session on the run's network, linked to the coordinator and to both nodes.
@@ -174,14 +162,25 @@ async fn nan_forces_stop_the_run_cleanly_naming_the_field() {
     // keep injecting until the run reacts (the rogue's links may take a moment to form)
     let mut w = 0;
     while child.try_wait().unwrap().is_none() {
-        assert!(t0.elapsed() < Duration::from_secs(20), "the run ignored NaN interface data");
-        s.put(keys.forces("top"), encode(&forces(&run_id, w, f64::NAN)).unwrap()).await.unwrap();
+        assert!(
+            t0.elapsed() < Duration::from_secs(20),
+            "the run ignored NaN interface data"
+        );
+        s.put(
+            keys.forces("top"),
+            encode(&forces(&run_id, w, f64::NAN)).unwrap(),
+        )
+        .await
+        .unwrap();
         w += 1;
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
     let out = child.wait_with_output().unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
-    eprintln!("stopped {:.2} s after the injection began:\n{err}", t0.elapsed().as_secs_f64());
+    eprintln!(
+        "stopped {:.2} s after the injection began:\n{err}",
+        t0.elapsed().as_secs_f64()
+    );
     assert!(!out.status.success());
     let sum = summary(&dir.path().join("out"));
     let e = sum["error"].as_str().unwrap();

@@ -3,7 +3,7 @@
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 
-use cosim_tests::{cosim, root, summary, write_scene};
+use cosim_tests::{cosim, pid_of, root, summary, write_scene};
 
 /// Peak and current resident memory (kB) of a process.
 fn memory_kb(pid: u32) -> Option<(u64, u64)> {
@@ -16,22 +16,6 @@ fn memory_kb(pid: u32) -> Option<(u64, u64)> {
             .and_then(|v| v.parse().ok())
     };
     Some((field("VmHWM:")?, field("VmRSS:")?))
-}
-
-fn pid_of(needles: &[&str]) -> Option<u32> {
-    for entry in std::fs::read_dir("/proc").ok()?.flatten() {
-        let Ok(pid) = entry.file_name().to_string_lossy().parse::<u32>() else {
-            continue;
-        };
-        let Ok(cmd) = std::fs::read(entry.path().join("cmdline")) else {
-            continue;
-        };
-        let cmd = String::from_utf8_lossy(&cmd).replace('\0', " ");
-        if needles.iter().all(|n| cmd.contains(n)) {
-            return Some(pid);
-        }
-    }
-    None
 }
 
 fn windows_done(csv: &std::path::Path) -> usize {

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use cosim_tests::{bin, bin_dir, cosim, root, run, summary};
+use cosim_tests::{bin, bin_dir, cosim, root, run, summary, Reaper};
 
 /// Router configuration: usrpwd authentication and an ACL that lets only `coordinator`, `dem`
 /// and `fem` use `cosim/<run>/**` (the shape of deploy/router.json5, on TCP).
@@ -62,16 +62,6 @@ fn client_config(dir: &Path, user: Option<(&str, &str)>, router: &str) -> PathBu
     ));
     std::fs::write(&p, text).unwrap();
     p
-}
-
-struct Reaper(Vec<Child>);
-impl Drop for Reaper {
-    fn drop(&mut self) {
-        for c in &mut self.0 {
-            let _ = c.kill();
-            let _ = c.wait();
-        }
-    }
 }
 
 fn start_router(cfg: &Path, netns: Option<&str>) -> Child {

@@ -6,7 +6,7 @@
 use std::path::Path;
 use std::process::Command;
 
-use cosim_tests::{cosim, root, run, summary, write_scene};
+use cosim_tests::{root, run, run_scene};
 
 const WINDOWS: usize = 100;
 const WINDOW_S: f64 = 1e-4;
@@ -58,25 +58,6 @@ fn plate_scene(fem_command: Option<&Path>) -> String {
         "the scene changed: update this test"
     );
     text
-}
-
-fn run_plate(dir: &Path, name: &str, text: &str) -> serde_json::Value {
-    let scene = write_scene(dir, name, text);
-    let out = dir.join(format!("out-{name}"));
-    let mut c = cosim();
-    c.arg("run")
-        .arg(&scene)
-        .arg("--no-progress")
-        .arg("--out")
-        .arg(&out);
-    let o = run(c);
-    if !o.status.success() {
-        if let Ok(log) = std::fs::read_to_string(out.join("logs/fem.log")) {
-            eprintln!("--- fem.log\n{log}");
-        }
-        panic!("{name} failed");
-    }
-    summary(&out)
 }
 
 /// Rows of a trace or output CSV: first column (window or time) → the other columns.
@@ -144,8 +125,8 @@ fn python_fem_node_matches_rust_fem_node_on_the_predictive_plate() {
     }
     let dir = tempfile::tempdir().unwrap();
     let node = root().join("examples/python-fem-node/fem_node.py");
-    let py = run_plate(dir.path(), "plate-py.toml", &plate_scene(Some(&node)));
-    let rs = run_plate(dir.path(), "plate-rs.toml", &plate_scene(None));
+    let py = run_scene(dir.path(), "plate-py.toml", &plate_scene(Some(&node)));
+    let rs = run_scene(dir.path(), "plate-rs.toml", &plate_scene(None));
     let py_out = dir.path().join("out-plate-py.toml");
     let rs_out = dir.path().join("out-plate-rs.toml");
 

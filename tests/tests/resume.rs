@@ -5,7 +5,7 @@ use std::path::Path;
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 
-use cosim_tests::{cosim, root, run, summary, write_scene};
+use cosim_tests::{cosim, kill, pid_of, root, run, summary, write_scene};
 
 fn plate_scene(dir: &Path, schedule: &str) -> std::path::PathBuf {
     let text = std::fs::read_to_string(root().join("scenes/plate.toml"))
@@ -23,30 +23,6 @@ fn plate_scene(dir: &Path, schedule: &str) -> std::path::PathBuf {
 
 fn read(p: &Path) -> Vec<u8> {
     std::fs::read(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
-}
-
-fn kill(pid: u32) {
-    assert!(std::process::Command::new("kill")
-        .args(["-KILL", &pid.to_string()])
-        .status()
-        .unwrap()
-        .success());
-}
-
-fn pid_of(needles: &[&str]) -> Option<u32> {
-    for entry in std::fs::read_dir("/proc").ok()?.flatten() {
-        let Ok(pid) = entry.file_name().to_string_lossy().parse::<u32>() else {
-            continue;
-        };
-        let Ok(cmd) = std::fs::read(entry.path().join("cmdline")) else {
-            continue;
-        };
-        let cmd = String::from_utf8_lossy(&cmd).replace('\0', " ");
-        if needles.iter().all(|n| cmd.contains(n)) {
-            return Some(pid);
-        }
-    }
-    None
 }
 
 /// Runs the scene, kills `victim` (`dem`, `fem` or `cosim`) once the checkpoint after window
