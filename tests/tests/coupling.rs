@@ -21,8 +21,10 @@ fn beam_coupled_vs_pure_fem(mass: f64) -> (f64, f64) {
     let dir = tempfile::tempdir().unwrap();
     // one layer of 640 spheres r = 6.25 mm: density for the requested total mass
     let volume = 640.0 * 4.0 / 3.0 * std::f64::consts::PI * 0.00625f64.powi(3);
-    let text = scene_text("beam.toml")
-        .replace("density = 77921.0", &format!("density = {}", mass / volume));
+    let text = scene_text("beam.toml").replace(
+        "density = 77922.26",
+        &format!("density = {}", mass / volume),
+    );
     let coupled = run_scene(dir.path(), "beam.toml", &text);
     assert_eq!(coupled["status"], "completed");
     let fz = f(&coupled, "fem.interface_force.z");

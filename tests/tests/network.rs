@@ -321,3 +321,111 @@ fn beam_over_three_network_namespaces_matches_the_local_run_bitwise() {
     assert_eq!(a["results"], b["results"]);
     assert_eq!(a["windows_done"], b["windows_done"]);
 }
+
+/// Needs root. A cut link (the DEM machine's cable pulled mid-run) ends the run within 5 s,
+/// naming the node and the window.
+#[test]
+#[ignore = "needs root to create network namespaces: run with --run-ignored all"]
+fn a_cut_link_ends_the_run_within_5_s_naming_node_and_window() {
+    let tag = format!("{}", (std::process::id() + 7) % 100_000);
+    let net =
+        Netns::create(&tag).unwrap_or_else(|e| panic!("cannot create network namespaces: {e}"));
+    let dir = tempfile::tempdir().unwrap();
+    let run_id = format!("plate-cut-{tag}");
+    let endpoints = vec![
+        "tcp/10.77.1.1:7447".to_string(),
+        "tcp/10.77.2.1:7447".to_string(),
+    ];
+    let router_cfg = router_config(dir.path(), &endpoints, &run_id);
+    let coord_cfg = client_config(
+        dir.path(),
+        Some(("coordinator", "pw-c")),
+        "tcp/10.77.1.1:7447",
+    );
+    let dem_cfg = client_config(dir.path(), Some(("dem", "pw-d")), "tcp/10.77.1.1:7447");
+    let fem_cfg = client_config(dir.path(), Some(("fem", "pw-f")), "tcp/10.77.2.1:7447");
+    let text = std::fs::read_to_string(root().join("scenes/plate.toml"))
+        .unwrap()
+        .replace("end_time = \"30 ms\"", "end_time = \"10 s\"");
+    let scene = cosim_tests::write_scene(dir.path(), "plate.toml", &text);
+    let mut procs = Reaper(vec![start_router(&router_cfg, Some(&net.names[0]))]);
+    let out = dir.path().join("out");
+    let mut coordinator = in_netns(&net.names[0], bin("cosim"));
+    coordinator
+        .arg("run")
+        .arg(&scene)
+        .args([
+            "--no-progress",
+            "--external",
+            "dem",
+            "--external",
+            "fem",
+            "--run-id",
+            &run_id,
+        ])
+        .arg("--config")
+        .arg(&coord_cfg)
+        .arg("--out")
+        .arg(&out)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped());
+    let mut coordinator = coordinator.spawn().unwrap();
+    for (ns, node, cfg) in [
+        (&net.names[1], "dem", &dem_cfg),
+        (&net.names[2], "fem", &fem_cfg),
+    ] {
+        let mut c = in_netns(ns, bin(&format!("{node}-node")));
+        c.args(["--run-id", &run_id, "--node", node])
+            .arg("--zenoh-config")
+            .arg(cfg);
+        c.stdout(Stdio::null()).stderr(Stdio::null());
+        procs.0.push(c.spawn().unwrap());
+    }
+    let csv = out.join("windows.csv");
+    let t0 = Instant::now();
+    while std::fs::read_to_string(&csv)
+        .map(|s| s.lines().count())
+        .unwrap_or(0)
+        < 20
+    {
+        assert!(
+            t0.elapsed() < Duration::from_secs(60),
+            "the run did not start"
+        );
+        assert!(
+            coordinator.try_wait().unwrap().is_none(),
+            "the run ended early"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // pull the DEM machine's cable
+    Netns::sh(&[
+        "-n",
+        &net.names[0],
+        "link",
+        "set",
+        &format!("cv1a{tag}"),
+        "down",
+    ])
+    .unwrap();
+    let cut = Instant::now();
+    let status = loop {
+        if let Some(s) = coordinator.try_wait().unwrap() {
+            break s;
+        }
+        assert!(
+            cut.elapsed() < Duration::from_secs(5),
+            "the coordinator still runs 5 s after the link was cut"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let mut err = String::new();
+    std::io::Read::read_to_string(coordinator.stderr.as_mut().unwrap(), &mut err).unwrap();
+    eprintln!(
+        "exited {status} {:.2} s after the cut:\n{err}",
+        cut.elapsed().as_secs_f64()
+    );
+    assert!(!status.success());
+    assert!(err.contains("dem") && err.contains("window"), "{err}");
+    assert_eq!(summary(&out)["status"], "failed");
+}
