@@ -370,34 +370,63 @@ pub fn rebuild(
     let pos = &particles.position;
     let rad = &particles.radius;
     let skin = lists.skin;
+    // row-major index offsets of the 27 cells around a cell not on the grid boundary
+    let (dx, dxy) = (
+        grid.dims[0] as isize,
+        (grid.dims[0] * grid.dims[1]) as isize,
+    );
+    let mut stencil = [0isize; 27];
+    for (s, o) in stencil.iter_mut().enumerate() {
+        let (ox, oy, oz) = (
+            (s % 3) as isize - 1,
+            ((s / 3) % 3) as isize - 1,
+            (s / 9) as isize - 1,
+        );
+        *o = oz * dxy + oy * dx + ox;
+    }
     let chunks: Vec<(Vec<u32>, Vec<u32>)> = (0..n.div_ceil(BLOCK))
         .into_par_iter()
         .map(|b| {
             let range = b * BLOCK..((b + 1) * BLOCK).min(n);
             let mut counts = Vec::with_capacity(range.len());
-            let mut out = Vec::new();
+            let mut out = Vec::with_capacity(8 * range.len());
+            let mut cells = [0usize; 27];
             for i in range {
                 let xi = pos[i];
                 let c = grid.coord(&xi);
-                let start = out.len();
-                for dz in -1i64..=1 {
-                    for dy in -1i64..=1 {
-                        for dx in -1i64..=1 {
-                            let cc = [c[0] as i64 + dx, c[1] as i64 + dy, c[2] as i64 + dz];
-                            if (0..3).any(|a| cc[a] < 0 || cc[a] >= grid.dims[a] as i64) {
-                                continue;
-                            }
-                            let ci = grid.index([cc[0] as usize, cc[1] as usize, cc[2] as usize]);
-                            for j in cell_start[ci]..cell_end[ci] {
-                                let j = j as usize;
-                                if j <= i {
+                let interior = (0..3).all(|a| c[a] >= 1 && c[a] + 1 < grid.dims[a]);
+                let nc = if interior {
+                    let ci = grid.index(c) as isize;
+                    for (cell, o) in cells.iter_mut().zip(&stencil) {
+                        *cell = (ci + o) as usize;
+                    }
+                    27
+                } else {
+                    let mut m = 0;
+                    for dz in -1i64..=1 {
+                        for dy in -1i64..=1 {
+                            for dx in -1i64..=1 {
+                                let cc = [c[0] as i64 + dx, c[1] as i64 + dy, c[2] as i64 + dz];
+                                if (0..3).any(|a| cc[a] < 0 || cc[a] >= grid.dims[a] as i64) {
                                     continue;
                                 }
-                                let reach = rad[i] + rad[j] + skin;
-                                if (pos[j] - xi).norm_squared() < reach * reach {
-                                    out.push(j as u32);
-                                }
+                                cells[m] =
+                                    grid.index([cc[0] as usize, cc[1] as usize, cc[2] as usize]);
+                                m += 1;
                             }
+                        }
+                    }
+                    m
+                };
+                let start = out.len();
+                let (ri, first) = (rad[i], i as u32 + 1);
+                for &ci in &cells[..nc] {
+                    // only partners j > i
+                    for j in cell_start[ci].max(first)..cell_end[ci] {
+                        let j = j as usize;
+                        let reach = ri + rad[j] + skin;
+                        if (pos[j] - xi).norm_squared() < reach * reach {
+                            out.push(j as u32);
                         }
                     }
                 }

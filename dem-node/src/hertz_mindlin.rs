@@ -8,7 +8,7 @@ use nalgebra::Vector3;
 pub type V3 = Vector3<f64>;
 
 /// √(5/6) of the Tsuji mapping F_d = −2√(5/6) β √(S m*) v.
-const SQRT_5_6: f64 = 0.912_870_929_175_276_8;
+pub const SQRT_5_6: f64 = 0.912_870_929_175_276_8;
 
 /// Result of one contact evaluation, forces acting on body i.
 #[derive(Debug, Clone, Copy)]
@@ -38,13 +38,13 @@ pub fn contact_force(
 ) -> ContactForce {
     let sqrt_rd = (r_eff * delta).sqrt();
     // (2.12) S_n = k_n = 2E*√(Rδ); (2.16) S_t = k_t = 8G*√(Rδ)
-    let s_n = 2.0 * p.e_star * sqrt_rd;
-    let s_t = 8.0 * p.g_star * sqrt_rd;
+    let s_n = p.two_e_star * sqrt_rd;
+    let s_t = p.eight_g_star * sqrt_rd;
     // (2.6) F_n,e = 4/3 E* √R δ^{3/2}
-    let f_elastic = 4.0 / 3.0 * p.e_star * sqrt_rd * delta;
+    let f_elastic = p.four_thirds_e_star * sqrt_rd * delta;
     let v_n = v_c.dot(n);
     // Tsuji/LIGGGHTS damping (replaces the schematic eq. 2.10); √(S_t m*) = √(S_n m*) √(S_t/S_n)
-    let gamma_n = -2.0 * SQRT_5_6 * p.beta * (s_n * m_eff).sqrt();
+    let gamma_n = p.damping_factor * (s_n * m_eff).sqrt();
     let gamma_t = gamma_n * p.sqrt_stiffness_ratio;
     // (2.13), no attraction: the total normal force is clamped at zero.
     let normal = (f_elastic - gamma_n * v_n).max(0.0);

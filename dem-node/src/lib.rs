@@ -745,7 +745,20 @@ impl Engine {
                 .find(|(_, v)| bad(v))
                 .map(|(q, _)| (p.id[k], q))
             })
-            .unwrap_or((0, "state"));
+            .unwrap_or_else(|| {
+                // all components finite but their sum overflowed (|value| > 1e307)
+                let k = (0..p.len())
+                    .find(|&k| {
+                        let s =
+                            p.position[k].sum() + p.velocity[k].sum() + p.angular_velocity[k].sum();
+                        !s.is_finite()
+                    })
+                    .unwrap_or(0);
+                (
+                    p.id.get(k).copied().unwrap_or(0),
+                    "state (magnitude overflow)",
+                )
+            });
         DemError::Unstable {
             time: self.state.time,
             step: self.state.steps,

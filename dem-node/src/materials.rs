@@ -36,6 +36,11 @@ pub struct PairParams {
     pub beta: f64,
     /// √(S_t/S_n) = √(4G*/E*) (eqs. 2.12, 2.16): ratio of the tangential to the normal damping.
     pub sqrt_stiffness_ratio: f64,
+    /// Constant factors of `hertz_mindlin::contact_force`: 2E*, 8G*, 4/3 E*, −2√(5/6)β.
+    pub two_e_star: f64,
+    pub eight_g_star: f64,
+    pub four_thirds_e_star: f64,
+    pub damping_factor: f64,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -81,13 +86,18 @@ impl MaterialTable {
                 let g_star = 1.0
                     / ((2.0 - a.poisson_ratio) / a.shear_modulus()
                         + (2.0 - b.poisson_ratio) / b.shear_modulus());
+                let beta = crate::hertz_mindlin::damping_beta(restitution);
                 pairs.push(PairParams {
                     e_star,
                     g_star,
                     friction,
                     restitution,
                     rolling_friction,
-                    beta: crate::hertz_mindlin::damping_beta(restitution),
+                    beta,
+                    two_e_star: 2.0 * e_star,
+                    eight_g_star: 8.0 * g_star,
+                    four_thirds_e_star: 4.0 / 3.0 * e_star,
+                    damping_factor: -2.0 * crate::hertz_mindlin::SQRT_5_6 * beta,
                     sqrt_stiffness_ratio: (4.0 * g_star / e_star).sqrt(),
                 });
             }
