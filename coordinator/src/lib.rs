@@ -10,4 +10,5 @@ pub mod run;
 pub mod scene;
 pub mod schedule;
 pub mod stability;
+pub mod study;
 pub mod units;

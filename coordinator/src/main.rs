@@ -53,6 +53,23 @@ enum Command {
         #[arg(long)]
         no_progress: bool,
     },
+    /// Measure the speed–accuracy trade: run the scene for every combination of values,
+    /// e.g. `--vary coupling.window=1e-4,5e-5 --vary coupling.schedule=jit,predictive`;
+    /// writes study.csv, error_vs_wall.svg and stability.svg; a half-done sweep resumes.
+    Study {
+        scene: PathBuf,
+        /// `key=value1,value2,…` (dotted scene key; repeatable).
+        #[arg(long, required = true)]
+        vary: Vec<String>,
+        /// Result compared between runs (default: the first FEM probe's uz).
+        #[arg(long)]
+        metric: Option<String>,
+        /// Index of the reference run (default: the finest completed run).
+        #[arg(long)]
+        reference: Option<usize>,
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
     /// Serve as the zenoh router of runs over several machines (a zenohd with this
     /// project's defaults): `cosim router --config deploy/router.json5`.
     Router {
@@ -143,6 +160,38 @@ fn main() -> ExitCode {
                     &opts.out_dir.clone().unwrap_or(scene.out_dir.clone()),
                 );
                 anyhow::Ok(())
+            }
+            Command::Study {
+                scene,
+                vary,
+                metric,
+                reference,
+                out,
+            } => {
+                let scene = Scene::load(&scene)?;
+                let vars = vary
+                    .iter()
+                    .map(|v| coordinator::study::parse_variation(v))
+                    .collect::<anyhow::Result<Vec<_>>>()?;
+                let out = out.unwrap_or_else(|| coordinator::study::default_out(&scene));
+                let (metric, outcomes) = coordinator::study::run_study(
+                    &scene,
+                    &vars,
+                    metric.as_deref(),
+                    reference,
+                    &out,
+                )
+                .await?;
+                println!(
+                    "{}: {} runs, error of {metric} against the finest run",
+                    scene.name,
+                    outcomes.len()
+                );
+                for (name, line) in coordinator::study::table(&outcomes) {
+                    println!("  {name} {line}");
+                }
+                println!("study: {}", out.join("study.csv").display());
+                Ok(())
             }
             Command::Router { config } => {
                 let link = proto::LinkConfig {

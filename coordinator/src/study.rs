@@ -1,0 +1,524 @@
+//! `cosim study`: the speed–accuracy trade of a scene, measured. A sweep over scene values
+//! (coupling window, DEM time step, schedule, force averaging, mesh size, …); every run's wall
+//! time, cost split, error against a reference run and whether it stayed stable, in a CSV and
+//! two plots (error vs wall time, one colour per schedule; stability map). A half-done sweep
+//! resumes: runs whose summary exists are not run again.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{anyhow, bail, Context};
+
+use crate::run::{run_scene, RunOptions};
+use crate::scene::Scene;
+
+/// One `--vary key=v1,v2,…`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Variation {
+    /// Dotted path in the scene file, e.g. `coupling.window` or `dem.time_step`.
+    pub key: String,
+    pub values: Vec<toml::Value>,
+}
+
+/// Parses `key=v1,v2,…`; values are TOML values (numbers, booleans, strings) or bare words.
+pub fn parse_variation(text: &str) -> anyhow::Result<Variation> {
+    let (key, values) = text.split_once('=').ok_or_else(|| {
+        anyhow!("--vary `{text}`: expected key=value1,value2,… (e.g. coupling.window=1e-4,5e-5)")
+    })?;
+    let key = key.trim().to_string();
+    if key.is_empty() || key.split('.').any(str::is_empty) {
+        bail!("--vary `{text}`: `{key}` is not a dotted key such as coupling.window");
+    }
+    let values = values
+        .split(',')
+        .map(|v| {
+            let v = v.trim();
+            toml::from_str::<toml::Table>(&format!("x = {v}"))
+                .ok()
+                .and_then(|t| t.get("x").cloned())
+                .unwrap_or_else(|| toml::Value::String(v.to_string()))
+        })
+        .collect::<Vec<_>>();
+    if values.is_empty() {
+        bail!("--vary `{text}`: no values");
+    }
+    Ok(Variation { key, values })
+}
+
+/// Sets `key` (dotted) in a TOML table, creating tables on the way.
+fn set_path(table: &mut toml::Table, key: &str, value: toml::Value) -> anyhow::Result<()> {
+    let parts: Vec<&str> = key.split('.').collect();
+    let mut t = table;
+    for p in &parts[..parts.len() - 1] {
+        t = t
+            .entry(p.to_string())
+            .or_insert_with(|| toml::Value::Table(Default::default()))
+            .as_table_mut()
+            .ok_or_else(|| anyhow!("`{key}`: `{p}` is not a table in the scene"))?;
+    }
+    t.insert(parts[parts.len() - 1].to_string(), value);
+    Ok(())
+}
+
+fn value_text(v: &toml::Value) -> String {
+    match v {
+        toml::Value::String(s) => s.clone(),
+        other => other.to_string(),
+    }
+}
+
+/// One run of the sweep.
+#[derive(Debug, Clone)]
+pub struct Variant {
+    pub name: String,
+    pub settings: Vec<(String, toml::Value)>,
+    pub text: String,
+}
+
+/// Every combination of the variations (the Cartesian product), as scene texts.
+pub fn variants(base_text: &str, vars: &[Variation]) -> anyhow::Result<Vec<Variant>> {
+    let base: toml::Table = toml::from_str(base_text).context("the scene is not valid TOML")?;
+    let mut combos: Vec<Vec<(String, toml::Value)>> = vec![Vec::new()];
+    for v in vars {
+        combos = combos
+            .into_iter()
+            .flat_map(|c| {
+                v.values.iter().map(move |val| {
+                    let mut c = c.clone();
+                    c.push((v.key.clone(), val.clone()));
+                    c
+                })
+            })
+            .collect();
+    }
+    combos
+        .into_iter()
+        .enumerate()
+        .map(|(i, settings)| {
+            let mut t = base.clone();
+            for (k, v) in &settings {
+                set_path(&mut t, k, v.clone())?;
+            }
+            Ok(Variant {
+                name: format!("run{i:03}"),
+                settings,
+                text: toml::to_string(&t)?,
+            })
+        })
+        .collect()
+}
+
+/// What one run gave.
+#[derive(Debug, Clone)]
+pub struct Outcome {
+    pub variant: Variant,
+    pub status: String,
+    pub error_message: Option<String>,
+    pub wall_s: f64,
+    pub dem_s: f64,
+    pub fem_s: f64,
+    pub overhead_s: f64,
+    pub metric: Option<f64>,
+    /// Relative error of the metric against the reference run.
+    pub error: Option<f64>,
+}
+
+fn number(v: &serde_json::Value, path: &[&str]) -> f64 {
+    path.iter()
+        .fold(v, |v, p| &v[*p])
+        .as_f64()
+        .unwrap_or(f64::NAN)
+}
+
+/// Runs (or reuses) every variant; `metric` names a summary result (e.g.
+/// `fem.probe.centre.uz`); the reference is the variant `reference` (index), or the one with
+/// the smallest coupling window and DEM time step.
+pub async fn run_study(
+    scene: &Scene,
+    vars: &[Variation],
+    metric: Option<&str>,
+    reference: Option<usize>,
+    out_dir: &Path,
+) -> anyhow::Result<(String, Vec<Outcome>)> {
+    let variants = variants(&scene.text, vars)?;
+    std::fs::create_dir_all(out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
+    let bar = indicatif::ProgressBar::new(variants.len() as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{elapsed_precise} [{bar:30}] run {pos}/{len} {msg}",
+        )
+        .expect("valid template")
+        .progress_chars("=> "),
+    );
+    let mut outcomes = Vec::new();
+    let mut summaries = Vec::new();
+    for v in &variants {
+        let dir = out_dir.join(&v.name);
+        let summary_path = dir.join("summary.json");
+        let label: Vec<String> = v
+            .settings
+            .iter()
+            .map(|(k, x)| format!("{k}={}", value_text(x)))
+            .collect();
+        bar.set_message(label.join(" "));
+        if !summary_path.exists() {
+            // each variant is a scene of its own, next to the original (relative paths hold)
+            let path = scene
+                .path
+                .with_file_name(format!(".study-{}-{}.toml", scene.name, v.name));
+            let parsed = Scene::parse(&path, v.text.clone())
+                .map_err(|e| anyhow!("{}: {e}", label.join(" ")));
+            match parsed {
+                Ok(s) => {
+                    std::fs::write(&path, &v.text)?;
+                    let opts = RunOptions {
+                        out_dir: Some(dir.clone()),
+                        progress: false,
+                        ..Default::default()
+                    };
+                    if let Err(e) = run_scene(&s, &opts).await {
+                        tracing::info!("{}: {e:#}", label.join(" "));
+                    }
+                    let _ = std::fs::remove_file(&path);
+                }
+                Err(e) => {
+                    std::fs::create_dir_all(&dir)?;
+                    let refused =
+                        serde_json::json!({ "status": "refused", "error": e.to_string() });
+                    std::fs::write(&summary_path, serde_json::to_string_pretty(&refused)?)?;
+                }
+            }
+        }
+        let s: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&summary_path).unwrap_or_default())
+                .unwrap_or(serde_json::json!({ "status": "failed" }));
+        summaries.push(s.clone());
+        outcomes.push(Outcome {
+            variant: v.clone(),
+            status: s["status"].as_str().unwrap_or("failed").to_string(),
+            error_message: s["error"].as_str().map(String::from),
+            wall_s: number(&s, &["timing", "total_wall_s"]),
+            dem_s: number(&s, &["timing", "dem_compute_s"]),
+            fem_s: number(&s, &["timing", "fem_compute_s"]),
+            overhead_s: number(&s, &["timing", "coupling_overhead_s"]),
+            metric: None,
+            error: None,
+        });
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    // default metric: the first probe's vertical displacement, else the DEM's kinetic energy
+    let metric = match metric {
+        Some(m) => m.to_string(),
+        None => summaries
+            .iter()
+            .filter(|s| s["status"] == "completed")
+            .flat_map(|s| {
+                s["results"]
+                    .as_object()
+                    .map(|r| r.keys().cloned().collect::<Vec<_>>())
+                    .unwrap_or_default()
+            })
+            .find(|k| k.starts_with("fem.probe.") && k.ends_with(".uz"))
+            .unwrap_or_else(|| "dem.kinetic_energy".into()),
+    };
+    for (o, s) in outcomes.iter_mut().zip(&summaries) {
+        o.metric = s["results"][metric.as_str()].as_f64();
+    }
+    let metric = metric.as_str();
+    let finest = |o: &Outcome| {
+        let get = |k: &str| {
+            o.variant
+                .settings
+                .iter()
+                .find(|(key, _)| key == k)
+                .and_then(|(_, v)| v.as_float().or(v.as_integer().map(|i| i as f64)))
+        };
+        (
+            get("coupling.window").unwrap_or(scene.window),
+            get("dem.time_step").unwrap_or(f64::INFINITY),
+        )
+    };
+    let reference = match reference {
+        Some(i) => i,
+        None => (0..outcomes.len())
+            .filter(|&i| outcomes[i].status == "completed")
+            .min_by(|&a, &b| {
+                finest(&outcomes[a])
+                    .partial_cmp(&finest(&outcomes[b]))
+                    .unwrap_or(std::cmp::Ordering::Equal)
+            })
+            .ok_or_else(|| anyhow!("no run of the study completed: nothing to compare with"))?,
+    };
+    let ref_value = outcomes
+        .get(reference)
+        .and_then(|o| o.metric)
+        .ok_or_else(|| anyhow!("the reference run has no result `{metric}`"))?;
+    for o in &mut outcomes {
+        o.error = o
+            .metric
+            .filter(|_| o.status == "completed")
+            .map(|m| (m - ref_value).abs() / ref_value.abs().max(f64::MIN_POSITIVE));
+    }
+    write_csv(
+        &out_dir.join("study.csv"),
+        vars,
+        metric,
+        &outcomes,
+        reference,
+    )?;
+    std::fs::write(
+        out_dir.join("error_vs_wall.svg"),
+        pareto_svg(&outcomes, metric),
+    )?;
+    std::fs::write(
+        out_dir.join("stability.svg"),
+        stability_svg(&outcomes, vars),
+    )?;
+    Ok((metric.to_string(), outcomes))
+}
+
+fn write_csv(
+    path: &Path,
+    vars: &[Variation],
+    metric: &str,
+    outcomes: &[Outcome],
+    reference: usize,
+) -> anyhow::Result<()> {
+    let mut s = String::from("run");
+    for v in vars {
+        write!(s, ",{}", v.key)?;
+    }
+    writeln!(s, ",status,wall_s,dem_compute_s,fem_compute_s,coupling_overhead_s,{metric},relative_error,reference")?;
+    for (i, o) in outcomes.iter().enumerate() {
+        write!(s, "{}", o.variant.name)?;
+        for (_, v) in &o.variant.settings {
+            write!(s, ",{}", value_text(v).replace(',', ";"))?;
+        }
+        let opt = |x: Option<f64>| x.map(|x| format!("{x:e}")).unwrap_or_default();
+        writeln!(
+            s,
+            ",{},{:.4},{:.4},{:.4},{:.4},{},{},{}",
+            o.status,
+            o.wall_s,
+            o.dem_s,
+            o.fem_s,
+            o.overhead_s,
+            opt(o.metric),
+            opt(o.error),
+            i == reference
+        )?;
+    }
+    std::fs::write(path, s).with_context(|| format!("writing {}", path.display()))
+}
+
+const COLOURS: [&str; 6] = [
+    "#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b",
+];
+
+fn schedule_of(o: &Outcome) -> String {
+    o.variant
+        .settings
+        .iter()
+        .find(|(k, _)| k == "coupling.schedule")
+        .map(|(_, v)| value_text(v))
+        .unwrap_or_else(|| "scene".into())
+}
+
+/// Error vs wall time, log–log, one colour per schedule (the Pareto front of the trade).
+fn pareto_svg(outcomes: &[Outcome], metric: &str) -> String {
+    let pts: Vec<(f64, f64, String)> = outcomes
+        .iter()
+        .filter_map(|o| o.error.map(|e| (o.wall_s, e.max(1e-16), schedule_of(o))))
+        .collect();
+    let (w, h, m) = (640.0, 440.0, 70.0);
+    let lx = |v: f64| v.max(1e-300).log10();
+    let (x0, x1) = pts
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
+            (a.min(lx(p.0)), b.max(lx(p.0)))
+        });
+    let (y0, y1) = pts
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
+            (a.min(lx(p.1)), b.max(lx(p.1)))
+        });
+    let (x0, x1) = if x0.is_finite() {
+        (x0.floor(), x1.ceil().max(x0.floor() + 1.0))
+    } else {
+        (0.0, 1.0)
+    };
+    let (y0, y1) = if y0.is_finite() {
+        (y0.floor(), y1.ceil().max(y0.floor() + 1.0))
+    } else {
+        (-6.0, 0.0)
+    };
+    let sx = |v: f64| m + (lx(v) - x0) / (x1 - x0) * (w - 2.0 * m);
+    let sy = |v: f64| h - m - (lx(v) - y0) / (y1 - y0) * (h - 2.0 * m);
+    let mut s = format!(
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" font-family="sans-serif" font-size="12"><rect width="100%" height="100%" fill="white"/>"#
+    );
+    let _ = write!(
+        s,
+        r#"<rect x="{m}" y="{m}" width="{}" height="{}" fill="none" stroke="black"/>"#,
+        w - 2.0 * m,
+        h - 2.0 * m
+    );
+    for d in (x0 as i32)..=(x1 as i32) {
+        let x = m + (d as f64 - x0) / (x1 - x0) * (w - 2.0 * m);
+        let _ = write!(
+            s,
+            r#"<text x="{x}" y="{}" text-anchor="middle">1e{d}</text>"#,
+            h - m + 16.0
+        );
+    }
+    for d in (y0 as i32)..=(y1 as i32) {
+        let y = h - m - (d as f64 - y0) / (y1 - y0) * (h - 2.0 * m);
+        let _ = write!(
+            s,
+            r#"<text x="{}" y="{}" text-anchor="end">1e{d}</text>"#,
+            m - 6.0,
+            y + 4.0
+        );
+    }
+    let _ = write!(
+        s,
+        r#"<text x="{}" y="{}" text-anchor="middle">wall time (s)</text>"#,
+        w / 2.0,
+        h - 20.0
+    );
+    let _ = write!(
+        s,
+        r#"<text x="18" y="{}" transform="rotate(-90 18 {})" text-anchor="middle">relative error of {metric}</text>"#,
+        h / 2.0,
+        h / 2.0
+    );
+    let mut schedules: Vec<String> = pts.iter().map(|p| p.2.clone()).collect();
+    schedules.sort();
+    schedules.dedup();
+    for (i, sch) in schedules.iter().enumerate() {
+        let c = COLOURS[i % COLOURS.len()];
+        for p in pts.iter().filter(|p| &p.2 == sch) {
+            let _ = write!(
+                s,
+                r#"<circle cx="{:.1}" cy="{:.1}" r="5" fill="{c}"/>"#,
+                sx(p.0),
+                sy(p.1)
+            );
+        }
+        let _ = write!(
+            s,
+            r#"<circle cx="{}" cy="{}" r="5" fill="{c}"/><text x="{}" y="{}">{sch}</text>"#,
+            w - m - 110.0,
+            m + 16.0 + 18.0 * i as f64,
+            w - m - 98.0,
+            m + 20.0 + 18.0 * i as f64
+        );
+    }
+    s.push_str("</svg>\n");
+    s
+}
+
+/// Stability map: one row per run, green completed, red unstable/failed, grey refused.
+fn stability_svg(outcomes: &[Outcome], vars: &[Variation]) -> String {
+    let row = 22.0;
+    let h = 40.0 + row * outcomes.len() as f64;
+    let mut s = format!(
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="760" height="{h}" font-family="sans-serif" font-size="12"><rect width="100%" height="100%" fill="white"/>"#
+    );
+    let header: Vec<&str> = vars.iter().map(|v| v.key.as_str()).collect();
+    let _ = write!(
+        s,
+        r#"<text x="10" y="20" font-weight="bold">{}  →  status</text>"#,
+        header.join(", ")
+    );
+    for (i, o) in outcomes.iter().enumerate() {
+        let y = 30.0 + row * i as f64;
+        let c = match o.status.as_str() {
+            "completed" => "#2ca02c",
+            "refused" => "#999999",
+            _ => "#d62728",
+        };
+        let label: Vec<String> = o
+            .variant
+            .settings
+            .iter()
+            .map(|(_, v)| value_text(v))
+            .collect();
+        let _ = write!(
+            s,
+            r#"<rect x="10" y="{y}" width="16" height="16" fill="{c}"/><text x="34" y="{}">{}: {}</text>"#,
+            y + 13.0,
+            label.join(", "),
+            o.status
+        );
+    }
+    s.push_str("</svg>\n");
+    s
+}
+
+/// Default folder of a study.
+pub fn default_out(scene: &Scene) -> PathBuf {
+    PathBuf::from("out").join(format!("{}-study", scene.name))
+}
+
+/// Columns for a terminal table.
+pub fn table(outcomes: &[Outcome]) -> BTreeMap<String, String> {
+    outcomes
+        .iter()
+        .map(|o| {
+            let label: Vec<String> = o
+                .variant
+                .settings
+                .iter()
+                .map(|(k, v)| format!("{k}={}", value_text(v)))
+                .collect();
+            (
+                o.variant.name.clone(),
+                format!(
+                    "{:<50} {:>10} {:>9.2} s  error {}",
+                    label.join(" "),
+                    o.status,
+                    o.wall_s,
+                    o.error
+                        .map(|e| format!("{e:.3e}"))
+                        .unwrap_or_else(|| "-".into())
+                ),
+            )
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn variations_multiply_and_set_dotted_keys() {
+        let vars = vec![
+            parse_variation("coupling.window=1e-4,5e-5").unwrap(),
+            parse_variation("coupling.schedule=jit,predictive").unwrap(),
+        ];
+        assert_eq!(vars[1].values[0], toml::Value::String("jit".into()));
+        let v = variants(
+            "[scene]\nend_time = 1.0\n[coupling]\nwindow = 1.0\n[dem]\ntime_step = 1e-6\n",
+            &vars,
+        )
+        .unwrap();
+        assert_eq!(v.len(), 4);
+        let t: toml::Table = toml::from_str(&v[3].text).unwrap();
+        assert_eq!(t["coupling"]["window"].as_float(), Some(5e-5));
+        assert_eq!(t["coupling"]["schedule"].as_str(), Some("predictive"));
+        assert_eq!(t["dem"]["time_step"].as_float(), Some(1e-6));
+    }
+
+    #[test]
+    fn a_malformed_variation_is_named() {
+        assert!(parse_variation("coupling.window")
+            .unwrap_err()
+            .to_string()
+            .contains("key=value"));
+        assert!(parse_variation("coupling..window=1").is_err());
+    }
+}

@@ -1,0 +1,60 @@
+//! `cosim study`: a sweep writes its table and plots, names a failing combination, and a second
+//! call reuses the runs it already has.
+
+use cosim_tests::{cosim, run};
+
+#[test]
+fn study_sweeps_marks_failures_and_resumes() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("study");
+    let study = || {
+        let mut c = cosim();
+        c.args([
+            "study",
+            "scenes/minimal.toml",
+            "--vary",
+            "dem.time_step=1e-5,2e-5,3e-5",
+            "--metric",
+            "dem.kinetic_energy",
+            "--out",
+        ])
+        .arg(&out);
+        run(c)
+    };
+    assert!(study().status.success());
+    let csv = std::fs::read_to_string(out.join("study.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
+    assert_eq!(rows.len(), 3);
+    // header: run,dem.time_step,status,...
+    assert_eq!(rows[0][2], "completed");
+    assert_eq!(rows[1][2], "completed");
+    // 10 ms windows are not a whole number of 3e-5 s steps: that run fails, named as such
+    assert_eq!(rows[2][2], "failed");
+    let err = std::fs::read_to_string(out.join("run002/summary.json")).unwrap();
+    assert!(err.contains("not a whole multiple"), "{err}");
+    assert_eq!(
+        rows[0].last(),
+        Some(&"true"),
+        "the finest completed run is the reference"
+    );
+    for plot in ["error_vs_wall.svg", "stability.svg"] {
+        assert!(std::fs::read_to_string(out.join(plot))
+            .unwrap()
+            .starts_with("<svg"));
+    }
+    // a second call finds every run done and does not run it again
+    let before = std::fs::metadata(out.join("run000/summary.json"))
+        .unwrap()
+        .modified()
+        .unwrap();
+    assert!(study().status.success());
+    let after = std::fs::metadata(out.join("run000/summary.json"))
+        .unwrap()
+        .modified()
+        .unwrap();
+    assert_eq!(before, after);
+}
