@@ -840,7 +840,9 @@ impl Engine {
             ));
         }
         self.state = s;
-        self.state.lists.index_blocks();
+        if self.state.lists.valid {
+            self.state.lists.index_blocks();
+        }
         Ok(())
     }
 
