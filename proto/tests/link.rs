@@ -32,33 +32,31 @@ fn kinematics(run: &str, window: u64, nodes: usize) -> InterfaceKinematics {
     }
 }
 
+/// A FEM and a DEM participant on loopback with interface `top` open and matched.
+async fn coupled_pair(run: &str) -> (Participant, Participant) {
+    let (pf, pd) = (free_loopback_port().unwrap(), free_loopback_port().unwrap());
+    let ifaces = vec!["top".to_string()];
+    let fem_link = LinkConfig::loopback_peer(Some(pf), &[]);
+    let mut fem = Participant::connect(&fem_link, run, "fem", hello(Role::Fem))
+        .await
+        .unwrap();
+    let dem_link = LinkConfig::loopback_peer(Some(pd), &[pf]);
+    let mut dem = Participant::connect(&dem_link, run, "dem", hello(Role::Dem))
+        .await
+        .unwrap();
+    fem.open_interfaces(Role::Fem, &ifaces).await.unwrap();
+    dem.open_interfaces(Role::Dem, &ifaces).await.unwrap();
+    fem.wait_for_peers(Duration::from_secs(10)).await.unwrap();
+    dem.wait_for_peers(Duration::from_secs(10)).await.unwrap();
+    (fem, dem)
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn thousand_windows_of_10k_node_kinematics_arrive_in_order_none_lost_none_duplicated() {
     const WINDOWS: u64 = 1000;
     const NODES: usize = 10_000;
     let run = "link-order";
-    let (pf, pd) = (free_loopback_port().unwrap(), free_loopback_port().unwrap());
-    let ifaces = vec!["top".to_string()];
-    let mut fem = Participant::connect(
-        &LinkConfig::loopback_peer(Some(pf), &[]),
-        run,
-        "fem",
-        hello(Role::Fem),
-    )
-    .await
-    .unwrap();
-    let mut dem = Participant::connect(
-        &LinkConfig::loopback_peer(Some(pd), &[pf]),
-        run,
-        "dem",
-        hello(Role::Dem),
-    )
-    .await
-    .unwrap();
-    fem.open_interfaces(Role::Fem, &ifaces).await.unwrap();
-    dem.open_interfaces(Role::Dem, &ifaces).await.unwrap();
-    fem.wait_for_peers(Duration::from_secs(10)).await.unwrap();
-    dem.wait_for_peers(Duration::from_secs(10)).await.unwrap();
+    let (fem, mut dem) = coupled_pair(run).await;
 
     let t0 = Instant::now();
     let sender = tokio::spawn(async move {
@@ -134,27 +132,7 @@ async fn a_missing_peer_is_a_timeout_error_not_a_hang() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn wrong_window_and_bad_sizes_are_refused_at_the_boundary() {
     let run = "link-refuse";
-    let (pf, pd) = (free_loopback_port().unwrap(), free_loopback_port().unwrap());
-    let ifaces = vec!["top".to_string()];
-    let mut fem = Participant::connect(
-        &LinkConfig::loopback_peer(Some(pf), &[]),
-        run,
-        "fem",
-        hello(Role::Fem),
-    )
-    .await
-    .unwrap();
-    let mut dem = Participant::connect(
-        &LinkConfig::loopback_peer(Some(pd), &[pf]),
-        run,
-        "dem",
-        hello(Role::Dem),
-    )
-    .await
-    .unwrap();
-    fem.open_interfaces(Role::Fem, &ifaces).await.unwrap();
-    dem.open_interfaces(Role::Dem, &ifaces).await.unwrap();
-    fem.wait_for_peers(Duration::from_secs(10)).await.unwrap();
+    let (fem, mut dem) = coupled_pair(run).await;
     fem.write_kinematics(&kinematics(run, 5, 4)).await.unwrap();
     let e = dem
         .read_kinematics("top", 4, 4, Duration::from_secs(5))

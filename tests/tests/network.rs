@@ -251,6 +251,59 @@ fn in_netns(ns: &str, program: PathBuf) -> Command {
     c
 }
 
+/// Router and coordinator in the first namespace, the DEM and FEM nodes in the other two, all
+/// authenticated, the router's ACL open to this run only. Returns the coordinator (stderr
+/// piped) and the other processes.
+fn run_over_namespaces(
+    net: &Netns,
+    dir: &Path,
+    run_id: &str,
+    scene: &Path,
+    out: &Path,
+) -> (Child, Reaper) {
+    let endpoints = vec![
+        "tcp/10.77.1.1:7447".to_string(),
+        "tcp/10.77.2.1:7447".to_string(),
+    ];
+    let router_cfg = router_config(dir, &endpoints, run_id);
+    let coord_cfg = client_config(dir, Some(("coordinator", "pw-c")), "tcp/10.77.1.1:7447");
+    let dem_cfg = client_config(dir, Some(("dem", "pw-d")), "tcp/10.77.1.1:7447");
+    let fem_cfg = client_config(dir, Some(("fem", "pw-f")), "tcp/10.77.2.1:7447");
+    let mut procs = Reaper(vec![start_router(&router_cfg, Some(&net.names[0]))]);
+    let mut coordinator = in_netns(&net.names[0], bin("cosim"));
+    coordinator
+        .arg("run")
+        .arg(scene)
+        .args([
+            "--no-progress",
+            "--external",
+            "dem",
+            "--external",
+            "fem",
+            "--run-id",
+            run_id,
+        ])
+        .arg("--config")
+        .arg(&coord_cfg)
+        .arg("--out")
+        .arg(out)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped());
+    let coordinator = coordinator.spawn().unwrap();
+    for (ns, node, cfg) in [
+        (&net.names[1], "dem", &dem_cfg),
+        (&net.names[2], "fem", &fem_cfg),
+    ] {
+        let mut c = in_netns(ns, bin(&format!("{node}-node")));
+        c.args(["--run-id", run_id, "--node", node])
+            .arg("--zenoh-config")
+            .arg(cfg);
+        c.stdout(Stdio::null()).stderr(Stdio::null());
+        procs.0.push(c.spawn().unwrap());
+    }
+    (coordinator, procs)
+}
+
 /// Needs root (CI runs it with `--run-ignored all`; elsewhere it is reported as skipped).
 #[test]
 #[ignore = "needs root to create network namespaces: run with --run-ignored all"]
@@ -259,53 +312,14 @@ fn beam_over_three_network_namespaces_matches_the_local_run_bitwise() {
     let net =
         Netns::create(&tag).unwrap_or_else(|e| panic!("cannot create network namespaces: {e}"));
     let dir = tempfile::tempdir().unwrap();
-    let run_id = format!("beam-netns-{tag}");
-    let endpoints = vec![
-        "tcp/10.77.1.1:7447".to_string(),
-        "tcp/10.77.2.1:7447".to_string(),
-    ];
-    let router_cfg = router_config(dir.path(), &endpoints, &run_id);
-    let coord_cfg = client_config(
-        dir.path(),
-        Some(("coordinator", "pw-c")),
-        "tcp/10.77.1.1:7447",
-    );
-    let dem_cfg = client_config(dir.path(), Some(("dem", "pw-d")), "tcp/10.77.1.1:7447");
-    let fem_cfg = client_config(dir.path(), Some(("fem", "pw-f")), "tcp/10.77.2.1:7447");
-
-    let mut procs = Reaper(vec![start_router(&router_cfg, Some(&net.names[0]))]);
     let out = dir.path().join("netns");
-    let mut coordinator = in_netns(&net.names[0], bin("cosim"));
-    coordinator
-        .args([
-            "run",
-            "scenes/beam.toml",
-            "--no-progress",
-            "--external",
-            "dem",
-            "--external",
-            "fem",
-            "--run-id",
-            &run_id,
-        ])
-        .arg("--config")
-        .arg(&coord_cfg)
-        .arg("--out")
-        .arg(&out)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped());
-    let coordinator = coordinator.spawn().unwrap();
-    for (ns, node, cfg) in [
-        (&net.names[1], "dem", &dem_cfg),
-        (&net.names[2], "fem", &fem_cfg),
-    ] {
-        let mut c = in_netns(ns, bin(&format!("{node}-node")));
-        c.args(["--run-id", &run_id, "--node", node])
-            .arg("--zenoh-config")
-            .arg(cfg);
-        c.stdout(Stdio::null()).stderr(Stdio::null());
-        procs.0.push(c.spawn().unwrap());
-    }
+    let (coordinator, _procs) = run_over_namespaces(
+        &net,
+        dir.path(),
+        &format!("beam-netns-{tag}"),
+        &root().join("scenes/beam.toml"),
+        &out,
+    );
     let o = coordinator.wait_with_output().unwrap();
     eprintln!("{}", String::from_utf8_lossy(&o.stderr));
     assert!(o.status.success(), "the run over namespaces failed");
@@ -331,56 +345,13 @@ fn a_cut_link_ends_the_run_within_5_s_naming_node_and_window() {
     let net =
         Netns::create(&tag).unwrap_or_else(|e| panic!("cannot create network namespaces: {e}"));
     let dir = tempfile::tempdir().unwrap();
-    let run_id = format!("plate-cut-{tag}");
-    let endpoints = vec![
-        "tcp/10.77.1.1:7447".to_string(),
-        "tcp/10.77.2.1:7447".to_string(),
-    ];
-    let router_cfg = router_config(dir.path(), &endpoints, &run_id);
-    let coord_cfg = client_config(
-        dir.path(),
-        Some(("coordinator", "pw-c")),
-        "tcp/10.77.1.1:7447",
-    );
-    let dem_cfg = client_config(dir.path(), Some(("dem", "pw-d")), "tcp/10.77.1.1:7447");
-    let fem_cfg = client_config(dir.path(), Some(("fem", "pw-f")), "tcp/10.77.2.1:7447");
     let text = std::fs::read_to_string(root().join("scenes/plate.toml"))
         .unwrap()
         .replace("end_time = \"30 ms\"", "end_time = \"10 s\"");
     let scene = cosim_tests::write_scene(dir.path(), "plate.toml", &text);
-    let mut procs = Reaper(vec![start_router(&router_cfg, Some(&net.names[0]))]);
     let out = dir.path().join("out");
-    let mut coordinator = in_netns(&net.names[0], bin("cosim"));
-    coordinator
-        .arg("run")
-        .arg(&scene)
-        .args([
-            "--no-progress",
-            "--external",
-            "dem",
-            "--external",
-            "fem",
-            "--run-id",
-            &run_id,
-        ])
-        .arg("--config")
-        .arg(&coord_cfg)
-        .arg("--out")
-        .arg(&out)
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped());
-    let mut coordinator = coordinator.spawn().unwrap();
-    for (ns, node, cfg) in [
-        (&net.names[1], "dem", &dem_cfg),
-        (&net.names[2], "fem", &fem_cfg),
-    ] {
-        let mut c = in_netns(ns, bin(&format!("{node}-node")));
-        c.args(["--run-id", &run_id, "--node", node])
-            .arg("--zenoh-config")
-            .arg(cfg);
-        c.stdout(Stdio::null()).stderr(Stdio::null());
-        procs.0.push(c.spawn().unwrap());
-    }
+    let (mut coordinator, _procs) =
+        run_over_namespaces(&net, dir.path(), &format!("plate-cut-{tag}"), &scene, &out);
     let csv = out.join("windows.csv");
     let t0 = Instant::now();
     while std::fs::read_to_string(&csv)
