@@ -260,6 +260,12 @@ fn main() -> ExitCode {
                     scene.windows,
                     scene.window
                 );
+                if s.dem_substeps > 0 {
+                    println!(
+                        "  DEM substeps per coupling window n^D = {}",
+                        s.dem_substeps
+                    );
+                }
                 for (node, n) in &s.nodes {
                     for (k, v) in &n.limits {
                         println!("  {node}.{k} = {v:.6e}");

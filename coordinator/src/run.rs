@@ -783,7 +783,7 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
                 let dt = run
                     .limit("dem", "time_step")
                     .ok_or_else(|| anyhow!("the DEM node did not report `time_step`"))?;
-                substeps(scene.window, dt)
+                run.summary.dem_substeps = substeps(scene.window, dt)
                     .map_err(|e| anyhow!("{}: coupling.window: {e}", scene.path.display()))?;
             }
             run.stop("check done", true).await?;
