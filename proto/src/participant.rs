@@ -19,7 +19,7 @@ use crate::codec::{decode, encode, Message};
 use crate::keys::{validate_name, Keys};
 use crate::link::LinkConfig;
 use crate::messages::*;
-use crate::{ProtoError, PROTOCOL_VERSION};
+use crate::ProtoError;
 
 /// Queue length of data subscribers: windows are consumed one at a time, a few may queue.
 const DATA_QUEUE: usize = 8;
@@ -689,9 +689,4 @@ impl Monitor {
         }
         out
     }
-}
-
-/// Protocol version of this build, for `hello` texts.
-pub fn version() -> u32 {
-    PROTOCOL_VERSION
 }

@@ -100,7 +100,7 @@ async fn only_the_runs_authenticated_nodes_can_publish_into_the_run() {
     let port = proto::link::free_loopback_port().unwrap();
     let router = format!("tcp/127.0.0.1:{port}");
     let run_id = "acl-run";
-    let cfg = router_config(dir.path(), &[router.clone()], run_id);
+    let cfg = router_config(dir.path(), std::slice::from_ref(&router), run_id);
     let _r = Reaper(vec![start_router(&cfg, None)]);
     let key = format!("cosim/{run_id}/iface/top/forces");
 
@@ -133,12 +133,9 @@ async fn only_the_runs_authenticated_nodes_can_publish_into_the_run() {
     .expect("mallory authenticates");
     mallory.put(&key, b"mallory".to_vec()).await.unwrap();
     // the run's own node gets through, and a legitimate node cannot write outside its run
-    dem.put(
-        format!("cosim/other-run/iface/top/forces"),
-        b"elsewhere".to_vec(),
-    )
-    .await
-    .unwrap();
+    dem.put("cosim/other-run/iface/top/forces", b"elsewhere".to_vec())
+        .await
+        .unwrap();
     dem.put(&key, b"dem".to_vec()).await.unwrap();
 
     let mut got = Vec::new();
