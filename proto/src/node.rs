@@ -301,3 +301,38 @@ pub fn total(xyz: &[f64]) -> [f64; 3] {
     }
     t
 }
+
+impl Init {
+    /// The folder the scene's relative file names are relative to.
+    pub fn scene_dir(&self) -> &Path {
+        Path::new(&self.scene_path)
+            .parent()
+            .unwrap_or(Path::new("."))
+    }
+
+    /// Reads this node's table of the scene (`[dem]`, `[fem]`, …) with the engine's parser;
+    /// errors name the scene file (the parser gives line, column and field).
+    pub fn scene_table<T, E: std::fmt::Display>(
+        &self,
+        table: &str,
+        parse: impl FnOnce(&str) -> Result<Option<T>, E>,
+    ) -> Result<T, NodeError> {
+        parse(&self.scene_toml)
+            .map_err(|e| NodeError::new(ErrorCode::Scene, format!("{}: {e}", self.scene_path)))?
+            .ok_or_else(|| {
+                NodeError::new(
+                    ErrorCode::Scene,
+                    format!("{}: the scene has no [{table}] table", self.scene_path),
+                )
+            })
+    }
+
+    /// This node's output folder `<out_dir>/<node>`, created.
+    pub fn node_out_dir(&self, node: &str) -> Result<PathBuf, NodeError> {
+        let dir = PathBuf::from(&self.out_dir).join(node);
+        std::fs::create_dir_all(&dir).map_err(|e| {
+            NodeError::new(ErrorCode::Io, format!("creating {}: {e}", dir.display()))
+        })?;
+        Ok(dir)
+    }
+}

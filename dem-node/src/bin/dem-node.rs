@@ -2,7 +2,7 @@
 //! `proto` over zenoh and calls the `dem` engine; all physics is in the library.
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use clap::Parser;
@@ -86,24 +86,12 @@ impl Solver for DemNode {
         p: &mut Participant,
         init: &Init,
     ) -> Result<(BTreeMap<String, f64>, Vec<String>), NodeError> {
-        let cfg = dem::parse_scene_section(&init.scene_toml)
-            .map_err(|e| scene_error(format!("{}: {e}", init.scene_path)))?
-            .ok_or_else(|| {
-                scene_error(format!("{}: the scene has no [dem] table", init.scene_path))
-            })?;
-        let base = Path::new(&init.scene_path)
-            .parent()
-            .unwrap_or(Path::new("."));
+        let cfg = init.scene_table("dem", dem::parse_scene_section)?;
+        let base = init.scene_dir();
         let mut engine = Engine::from_config(&cfg, base)
             .map_err(|e| scene_error(format!("{}: {e}", init.scene_path)))?;
-        self.out_dir = PathBuf::from(&init.out_dir).join("dem");
+        self.out_dir = init.node_out_dir("dem")?;
         self.trace = init.trace.then(Trace::default);
-        std::fs::create_dir_all(&self.out_dir).map_err(|e| {
-            NodeError::new(
-                ErrorCode::Io,
-                format!("creating {}: {e}", self.out_dir.display()),
-            )
-        })?;
         p.open_interfaces(Role::Dem, &init.interfaces).await?;
         for name in &init.interfaces {
             let mesh = p.read_mesh(name, self.data_timeout).await?;

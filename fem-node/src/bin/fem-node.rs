@@ -172,25 +172,13 @@ impl Solver for FemNode {
         p: &mut Participant,
         init: &Init,
     ) -> Result<(BTreeMap<String, f64>, Vec<String>), NodeError> {
-        let cfg = fem::parse_scene_section(&init.scene_toml)
-            .map_err(|e| scene_error(format!("{}: {e}", init.scene_path)))?
-            .ok_or_else(|| {
-                scene_error(format!("{}: the scene has no [fem] table", init.scene_path))
-            })?;
-        let base = Path::new(&init.scene_path)
-            .parent()
-            .unwrap_or(Path::new("."));
+        let cfg = init.scene_table("fem", fem::parse_scene_section)?;
+        let base = init.scene_dir();
         let model = Model::from_config(&cfg, base)
             .map_err(|e| scene_error(format!("{}: {e}", init.scene_path)))?;
         self.config = Some((cfg.clone(), base.to_path_buf()));
-        self.out_dir = PathBuf::from(&init.out_dir).join("fem");
+        self.out_dir = init.node_out_dir("fem")?;
         self.trace = init.trace.then(Trace::default);
-        std::fs::create_dir_all(&self.out_dir).map_err(|e| {
-            NodeError::new(
-                ErrorCode::Io,
-                format!("creating {}: {e}", self.out_dir.display()),
-            )
-        })?;
         if init.interfaces.len() > 1 {
             return Err(scene_error(format!(
                 "coupling.interfaces lists {} interfaces; the FEM node couples one surface",
