@@ -53,7 +53,15 @@ fn killed_and_resumed_equals_uninterrupted(schedule: &str, victim: &str) {
         .spawn()
         .unwrap();
     let t0 = Instant::now();
-    while !broken.join("checkpoints/w000000049/state.json").exists() {
+    // the checkpoint after window 49 counts once `latest.json` points at it (it moves last)
+    let latest_window = || -> u64 {
+        std::fs::read_to_string(broken.join("checkpoints/latest.json"))
+            .ok()
+            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+            .and_then(|v| v["window"].as_u64())
+            .unwrap_or(0)
+    };
+    while latest_window() < 49 {
         assert!(
             t0.elapsed() < Duration::from_secs(60),
             "no checkpoint after window 49"
