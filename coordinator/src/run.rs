@@ -342,12 +342,15 @@ impl Run<'_> {
             None => {
                 let mut scheduler = scheduler;
                 let actions = scheduler.start();
-                (
-                    scheduler,
-                    StabilityMonitor::new(scene.max_force_growth),
-                    actions,
-                    String::new(),
-                )
+                let mut stability = StabilityMonitor::new(scene.max_force_growth);
+                // the drift check needs the interfaces' size (their bounding-box diagonal)
+                for name in &scene.interfaces {
+                    let mesh = self.link.read_mesh(name, timeout).await?;
+                    let size = crate::stability::bounding_diagonal(mesh.positions.as_slice());
+                    stability.mesh_size =
+                        Some(stability.mesh_size.map_or(size, |s: f64| s.min(size)));
+                }
+                (scheduler, stability, actions, String::new())
             }
             Some((dir, state)) => {
                 // every node takes its state from the checkpoint ...
@@ -678,10 +681,7 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
         scene_file: scene.path.display().to_string(),
         run_id: run_id.clone(),
         status: "failed".into(),
-        schedule: serde_json::to_value(scene.schedule)?
-            .as_str()
-            .unwrap_or("")
-            .to_string(),
+        schedule: schedule_name(scene.schedule),
         coupling_window_s: scene.window,
         windows_planned: scene.windows,
         ..Default::default()

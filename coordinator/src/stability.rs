@@ -33,6 +33,21 @@ impl std::fmt::Display for Instability {
     }
 }
 
+/// Diagonal of the bounding box of flat xyz positions (m).
+pub fn bounding_diagonal(xyz: &[f64]) -> f64 {
+    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    for p in xyz.chunks_exact(3) {
+        for i in 0..3 {
+            lo[i] = lo[i].min(p[i]);
+            hi[i] = hi[i].max(p[i]);
+        }
+    }
+    if xyz.len() < 3 {
+        return 0.0;
+    }
+    (0..3).map(|i| (hi[i] - lo[i]).powi(2)).sum::<f64>().sqrt()
+}
+
 impl StabilityMonitor {
     pub fn new(max_growth: f64) -> Self {
         StabilityMonitor {
@@ -126,6 +141,26 @@ mod tests {
             e.to_string().starts_with("unstable at window 3 (t = 3.0"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn an_interface_drifting_more_than_its_size_stops() {
+        let mut m = StabilityMonitor::new(1e3);
+        m.mesh_size = Some(bounding_diagonal(&[0.0, 0.0, 0.0, 0.3, 0.4, 0.0]));
+        assert_eq!(m.mesh_size, Some(0.5));
+        let kin = |window: u64, z: f64| Digest {
+            interface: "top".into(),
+            window,
+            time: 0.0,
+            kind: "kinematics",
+            max_norm: 0.0,
+            total: [0.1, 0.1, z],
+            non_finite: None,
+        };
+        assert!(m.observe(&kin(0, 0.0)).is_none());
+        assert!(m.observe(&kin(1, -0.4)).is_none());
+        let e = m.observe(&kin(2, -0.6)).unwrap();
+        assert!(e.cause.contains("drifted"), "{e}");
     }
 
     #[test]

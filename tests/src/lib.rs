@@ -135,3 +135,27 @@ impl Drop for Reaper {
         }
     }
 }
+
+/// Waits until `<out>/windows.csv` holds `n` completed windows; fails if `child` (the run)
+/// ends first or `limit` passes.
+pub fn wait_for_windows(out: &Path, n: usize, child: &mut Child, limit: std::time::Duration) {
+    let csv = out.join("windows.csv");
+    let t0 = std::time::Instant::now();
+    loop {
+        let done = std::fs::read_to_string(&csv)
+            .map(|s| s.lines().count().saturating_sub(1))
+            .unwrap_or(0);
+        if done >= n {
+            return;
+        }
+        assert!(
+            t0.elapsed() < limit,
+            "{n} windows not done after {limit:?} ({done} are)"
+        );
+        assert!(
+            child.try_wait().expect("run status").is_none(),
+            "the run ended after {done} windows, before {n}"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+}

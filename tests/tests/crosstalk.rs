@@ -3,9 +3,9 @@
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-use cosim_tests::{bin, bin_dir, cosim, root, run, summary, write_scene, Reaper};
+use cosim_tests::{bin, bin_dir, cosim, root, run, summary, wait_for_windows, write_scene, Reaper};
 
 fn config(dir: &Path, name: &str, text: String) -> PathBuf {
     let p = dir.join(name);
@@ -93,19 +93,12 @@ fn two_runs_on_one_router_do_not_cross_talk_and_a_late_duplicate_node_is_refused
     }
 
     // a second DEM node for run a, once the run is under way
-    let csv = dir.path().join(&runs[0]).join("windows.csv");
-    let t0 = Instant::now();
-    while std::fs::read_to_string(&csv)
-        .map(|s| s.lines().count())
-        .unwrap_or(0)
-        < 20
-    {
-        assert!(
-            t0.elapsed() < Duration::from_secs(60),
-            "run a did not start"
-        );
-        std::thread::sleep(Duration::from_millis(10));
-    }
+    wait_for_windows(
+        &dir.path().join(&runs[0]),
+        19,
+        &mut coordinators[0],
+        Duration::from_secs(60),
+    );
     let late = node("dem", &runs[0], &client).output().unwrap();
     let late_err = String::from_utf8_lossy(&late.stderr);
     eprintln!("late node: {late_err}");

@@ -4,7 +4,7 @@ use std::io::Read;
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 
-use cosim_tests::{cosim, kill, pid_of, root, summary, write_scene};
+use cosim_tests::{cosim, kill, pid_of, root, summary, wait_for_windows, write_scene};
 
 #[test]
 fn killing_the_dem_node_mid_run_ends_the_run_within_5_s_naming_the_node_and_window() {
@@ -28,19 +28,8 @@ fn killing_the_dem_node_mid_run_ends_the_run_within_5_s_naming_the_node_and_wind
         .unwrap();
 
     // wait until windows are being computed
+    wait_for_windows(&out, 4, &mut child, Duration::from_secs(60));
     let csv = out.join("windows.csv");
-    let t0 = Instant::now();
-    while std::fs::read_to_string(&csv)
-        .map(|s| s.lines().count())
-        .unwrap_or(0)
-        < 5
-    {
-        assert!(
-            t0.elapsed() < Duration::from_secs(60),
-            "the run did not start"
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    }
     let pid = pid_of(&["dem-node", &run_id]).expect("the dem-node process");
     let killed = Instant::now();
     kill(pid);

@@ -5,7 +5,7 @@
 use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
-use cosim_tests::{cosim, process_args, root, summary, write_scene};
+use cosim_tests::{cosim, process_args, root, summary, wait_for_windows, write_scene};
 use proto::{encode, InterfaceForces, LinkConfig, Status, StatusBody, PROTOCOL_VERSION};
 
 fn start_plate(dir: &std::path::Path, end_time: &str, run_id: &str, port: u16) -> Child {
@@ -52,22 +52,6 @@ async fn rogue(port: u16, run_id: &str) -> zenoh::Session {
     s
 }
 
-fn wait_for_windows(dir: &std::path::Path, n: usize) {
-    let csv = dir.join("out/windows.csv");
-    let t0 = Instant::now();
-    while std::fs::read_to_string(&csv)
-        .map(|s| s.lines().count())
-        .unwrap_or(0)
-        < n + 1
-    {
-        assert!(
-            t0.elapsed() < Duration::from_secs(60),
-            "the run did not start"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
-}
-
 fn forces(run_id: &str, window: u64, value: f64) -> InterfaceForces {
     InterfaceForces {
         version: PROTOCOL_VERSION,
@@ -86,8 +70,13 @@ async fn garbage_wrong_run_and_wrong_version_are_refused_and_the_run_goes_on() {
     let dir = tempfile::tempdir().unwrap();
     let port = proto::link::free_loopback_port().unwrap();
     let run_id = format!("hostile-a-{}", std::process::id());
-    let child = start_plate(dir.path(), "60 ms", &run_id, port);
-    wait_for_windows(dir.path(), 5);
+    let mut child = start_plate(dir.path(), "60 ms", &run_id, port);
+    wait_for_windows(
+        &dir.path().join("out"),
+        5,
+        &mut child,
+        Duration::from_secs(60),
+    );
     let s = rogue(port, &run_id).await;
     let keys = proto::Keys::new(&run_id).unwrap();
     // garbage and a foreign version on the status keys: the coordinator refuses and logs them
@@ -153,12 +142,16 @@ async fn nan_forces_stop_the_run_cleanly_naming_the_field() {
     let dir = tempfile::tempdir().unwrap();
     let port = proto::link::free_loopback_port().unwrap();
     let run_id = format!("hostile-b-{}", std::process::id());
-    let child = start_plate(dir.path(), "10 s", &run_id, port);
-    wait_for_windows(dir.path(), 5);
+    let mut child = start_plate(dir.path(), "10 s", &run_id, port);
+    wait_for_windows(
+        &dir.path().join("out"),
+        5,
+        &mut child,
+        Duration::from_secs(60),
+    );
     let s = rogue(port, &run_id).await;
     let keys = proto::Keys::new(&run_id).unwrap();
     let t0 = Instant::now();
-    let mut child = child;
     // keep injecting until the run reacts (the rogue's links may take a moment to form)
     let mut w = 0;
     while child.try_wait().unwrap().is_none() {

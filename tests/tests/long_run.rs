@@ -3,7 +3,7 @@
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 
-use cosim_tests::{cosim, pid_of, root, summary, write_scene};
+use cosim_tests::{cosim, pid_of, root, summary, wait_for_windows, write_scene};
 
 /// Peak and current resident memory (kB) of a process.
 fn memory_kb(pid: u32) -> Option<(u64, u64)> {
@@ -16,12 +16,6 @@ fn memory_kb(pid: u32) -> Option<(u64, u64)> {
             .and_then(|v| v.parse().ok())
     };
     Some((field("VmHWM:")?, field("VmRSS:")?))
-}
-
-fn windows_done(csv: &std::path::Path) -> usize {
-    std::fs::read_to_string(csv)
-        .map(|s| s.lines().count().saturating_sub(1))
-        .unwrap_or(0)
 }
 
 #[test]
@@ -46,20 +40,13 @@ fn hundred_thousand_windows_with_flat_memory() {
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let csv = out.join("windows.csv");
     let t0 = Instant::now();
-    let wait_until = |n: usize, child: &mut std::process::Child| {
-        while windows_done(&csv) < n {
-            assert!(child.try_wait().unwrap().is_none(), "the run ended early");
-            assert!(t0.elapsed() < Duration::from_secs(600), "too slow");
-            std::thread::sleep(Duration::from_millis(100));
-        }
-    };
-    wait_until(WINDOWS / 10, &mut child);
+    let limit = Duration::from_secs(600);
+    wait_for_windows(&out, WINDOWS / 10, &mut child, limit);
     let coord = child.id();
     let dem = pid_of(&["dem-node", &run_id]).unwrap();
     let start = (memory_kb(coord).unwrap(), memory_kb(dem).unwrap());
-    wait_until(WINDOWS * 95 / 100, &mut child);
+    wait_for_windows(&out, WINDOWS * 95 / 100, &mut child, limit);
     let end = (memory_kb(coord).unwrap(), memory_kb(dem).unwrap());
     assert!(child.wait().unwrap().success());
     let s = summary(&out);

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use cosim_tests::{bin, bin_dir, cosim, root, run, summary, Reaper};
+use cosim_tests::{bin, bin_dir, cosim, root, run, summary, wait_for_windows, Reaper};
 
 /// Router configuration: usrpwd authentication and an ACL that lets only `coordinator`, `dem`
 /// and `fem` use `cosim/<run>/**` (the shape of deploy/router.json5, on TCP).
@@ -349,23 +349,7 @@ fn a_cut_link_ends_the_run_within_5_s_naming_node_and_window() {
     let out = dir.path().join("out");
     let (mut coordinator, _procs) =
         run_over_namespaces(&net, dir.path(), &format!("plate-cut-{tag}"), &scene, &out);
-    let csv = out.join("windows.csv");
-    let t0 = Instant::now();
-    while std::fs::read_to_string(&csv)
-        .map(|s| s.lines().count())
-        .unwrap_or(0)
-        < 20
-    {
-        assert!(
-            t0.elapsed() < Duration::from_secs(60),
-            "the run did not start"
-        );
-        assert!(
-            coordinator.try_wait().unwrap().is_none(),
-            "the run ended early"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    wait_for_windows(&out, 19, &mut coordinator, Duration::from_secs(60));
     // pull the DEM machine's cable
     Netns::sh(&[
         "-n",
