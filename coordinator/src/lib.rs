@@ -6,6 +6,7 @@
 
 pub mod checkpoint;
 pub mod launch;
+pub mod limits;
 pub mod run;
 pub mod scene;
 pub mod schedule;

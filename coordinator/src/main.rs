@@ -266,6 +266,14 @@ fn main() -> ExitCode {
                         s.dem_substeps
                     );
                 }
+                for c in &s.checks {
+                    let tag = match c.level {
+                        coordinator::limits::Level::Info => "ok",
+                        coordinator::limits::Level::Warn => "warning",
+                        coordinator::limits::Level::Refuse => "beyond (allowed)",
+                    };
+                    println!("  [{tag}] {c}");
+                }
                 for (node, n) in &s.nodes {
                     for (k, v) in &n.limits {
                         println!("  {node}.{k} = {v:.6e}");

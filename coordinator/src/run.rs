@@ -101,6 +101,9 @@ pub struct Summary {
     /// The scene's result quantities, `<node>.<name>`.
     pub results: BTreeMap<String, f64>,
     pub warnings: Vec<String>,
+    /// The scene compared with the known stability limits before the first window.
+    #[serde(default)]
+    pub checks: Vec<crate::limits::Finding>,
     /// The run continued from the checkpoint after this window (`cosim resume`).
     pub resumed_after_window: Option<u64>,
 }
@@ -291,6 +294,44 @@ impl Run<'_> {
             }
         }
         Ok(())
+    }
+
+    /// Compares the scene with the known limits (crate::limits); a refusal stops the nodes and
+    /// fails the run before its first window, unless `coupling.allow_beyond_limits`.
+    async fn check_limits(&mut self, check_only: bool) -> anyhow::Result<()> {
+        let facts = crate::limits::SceneFacts::from(self.scene);
+        let findings = crate::limits::assess(
+            &facts,
+            self.summary.nodes.get("dem").map(|n| &n.limits),
+            self.summary.nodes.get("fem").map(|n| &n.limits),
+        );
+        let mut refusals = Vec::new();
+        for f in &findings {
+            match f.level {
+                crate::limits::Level::Info => tracing::info!("limit check: {f}"),
+                crate::limits::Level::Warn => {
+                    tracing::warn!("{f}");
+                    self.summary.warnings.push(f.to_string());
+                }
+                crate::limits::Level::Refuse if self.scene.allow_beyond_limits => {
+                    tracing::warn!("{f} (run anyway: coupling.allow_beyond_limits = true)");
+                    self.summary.warnings.push(f.to_string());
+                }
+                crate::limits::Level::Refuse => refusals.push(f.to_string()),
+            }
+        }
+        self.summary.checks = findings;
+        if refusals.is_empty() {
+            return Ok(());
+        }
+        if !check_only {
+            let _ = self.stop("the scene is beyond a stability limit", false).await;
+        }
+        bail!(
+            "{}: the scene is beyond a stability limit (set coupling.allow_beyond_limits = true to run anyway):\n  {}",
+            self.scene.path.display(),
+            refusals.join("\n  ")
+        )
     }
 
     fn windows_wall(&self) -> f64 {
@@ -778,6 +819,7 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
     let result: anyhow::Result<()> = async {
         run.start(opts.check_only, opts.startup_timeout).await?;
         run.summary.timing.startup_s = t0.elapsed().as_secs_f64();
+        run.check_limits(opts.check_only).await?;
         if opts.check_only {
             if scene.has_dem {
                 let dt = run

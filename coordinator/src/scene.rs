@@ -96,6 +96,10 @@ pub struct CouplingSection {
     /// between consecutive windows while exceeding 10 × its running maximum.
     #[serde(default = "default_growth")]
     pub max_force_growth: f64,
+    /// Run even when the scene is beyond a known stability limit (the refusal becomes a
+    /// warning; the stability monitor still stops a diverging run).
+    #[serde(default)]
+    pub allow_beyond_limits: bool,
 }
 
 impl Default for CouplingSection {
@@ -109,6 +113,7 @@ impl Default for CouplingSection {
             steady_kinetic_energy: None,
             steady_windows: default_steady_windows(),
             max_force_growth: default_growth(),
+            allow_beyond_limits: false,
         }
     }
 }
@@ -182,6 +187,7 @@ pub struct Scene {
     pub steady_kinetic_energy: Option<f64>,
     pub steady_windows: u32,
     pub max_force_growth: f64,
+    pub allow_beyond_limits: bool,
     pub out_dir: PathBuf,
     pub trace_interfaces: bool,
     pub checkpoint_every: u64,
@@ -361,6 +367,7 @@ impl Scene {
             steady_kinetic_energy: steady,
             steady_windows: c.steady_windows.max(1),
             max_force_growth: c.max_force_growth,
+            allow_beyond_limits: c.allow_beyond_limits,
             out_dir,
             trace_interfaces: raw.output.trace_interfaces,
             checkpoint_every: raw.output.checkpoint_every,

@@ -1,0 +1,306 @@
+//! Up-front stability checks: before the first window, the scene is compared with the known
+//! limits, from the numbers the nodes report in `ready` (the coordinator links no engine).
+//!
+//! | limit | from | rule |
+//! |---|---|---|
+//! | DEM Rayleigh step (Ullrich 2.27) | `dem.time_step`, `dem.rayleigh_time_step` | the DEM node refuses Δt^D above its `rayleigh_fraction` itself; here only reported |
+//! | impact resolution (Ullrich fig. 2.5) | `dem.contact_duration_min` | a 1 m/s impact of the smallest, stiffest particle must last ≥ [`MIN_STEPS_PER_CONTACT`] steps (warn below [`GOOD_STEPS_PER_CONTACT`]) |
+//! | FEM explicit critical step | `fem.critical_time_step` | Δt^F = Δt^C ≤ Δt_crit |
+//! | coupling window (two-way) | `dem.contact_stiffness_max`, `fem.interface_node_mass_min` | Δt^C ≤ C_schedule · T_c, T_c = 2π √(M_node / k_c) |
+//!
+//! The coupling window limit: the interface forces reach the structure one window late (JIT:
+//! computed with extrapolated mesh motion; predictive: the forces of the previous window), so
+//! the contact spring k_c acting on an interface node of mass M is integrated explicitly with
+//! step Δt^C. Its period T_c = 2π √(M/k_c) sets the scale; the constants per schedule were
+//! measured with `cosim study` on the sleeper scene's CI variant (docs/speed-accuracy.md):
+//! the largest stable window was [`JIT_WINDOW_FRACTION`] · T_c for JIT and
+//! [`PREDICTIVE_WINDOW_FRACTION`] · T_c for predictive. Above the limit the run is refused
+//! (the stability monitor would stop it later with NaN-free but useless results);
+//! `coupling.allow_beyond_limits = true` turns refusals into warnings.
+
+use std::collections::BTreeMap;
+
+use crate::scene::{Scene, ScheduleKind};
+
+/// A 1 m/s impact resolved by fewer steps than this is refused (the contact can be missed).
+pub const MIN_STEPS_PER_CONTACT: f64 = 3.0;
+/// ... and by fewer than this gives a rebound error above ~2e-3 (A2 sweep): warn.
+pub const GOOD_STEPS_PER_CONTACT: f64 = 10.0;
+
+/// Relative rebound-velocity error of a Hertz impact resolved by `steps` DEM steps per contact
+/// duration, fitted to the bouncing-sphere sweep (REFERENCE A2; the problem is self-similar in
+/// Δt / t_c): 5.3e-3 at 7.6 steps, 5.8e-6 at 61 steps.
+pub fn impact_error(steps: f64) -> f64 {
+    5.3e-3 * (7.6 / steps).powf(3.3)
+}
+
+/// Steps per contact duration for a rebound error `err` (inverse of [`impact_error`]).
+pub fn steps_for_impact_error(err: f64) -> f64 {
+    7.6 * (5.3e-3 / err).powf(1.0 / 3.3)
+}
+/// Largest stable JIT window as a fraction of the interface contact period T_c (measured).
+pub const JIT_WINDOW_FRACTION: f64 = 1.0 / 30.0;
+/// Largest stable predictive window as a fraction of T_c (measured).
+pub const PREDICTIVE_WINDOW_FRACTION: f64 = 1.0 / 3.0;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Level {
+    Info,
+    Warn,
+    Refuse,
+}
+
+/// One comparison of the scene with a limit.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Finding {
+    pub level: Level,
+    /// Short name of the limit, e.g. `coupling window`.
+    pub limit: String,
+    /// What was compared, the limit's value and the number to use.
+    pub message: String,
+}
+
+impl std::fmt::Display for Finding {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}: {}", self.limit, self.message)
+    }
+}
+
+/// What the checks need from the scene (kept small so tests can build it directly).
+#[derive(Debug, Clone)]
+pub struct SceneFacts {
+    pub schedule: ScheduleKind,
+    pub window: f64,
+    pub has_dem: bool,
+    pub has_fem: bool,
+}
+
+impl From<&Scene> for SceneFacts {
+    fn from(s: &Scene) -> Self {
+        SceneFacts {
+            schedule: s.schedule,
+            window: s.window,
+            has_dem: s.has_dem,
+            has_fem: s.has_fem,
+        }
+    }
+}
+
+/// The interface contact period T_c = 2π √(M_node / k_c) (s), when both numbers are known.
+pub fn contact_period(
+    dem: &BTreeMap<String, f64>,
+    fem: &BTreeMap<String, f64>,
+) -> Option<f64> {
+    let k = *dem.get("contact_stiffness_max")?;
+    let m = *fem.get("interface_node_mass_min")?;
+    (k > 0.0 && m > 0.0 && k.is_finite() && m.is_finite())
+        .then(|| 2.0 * std::f64::consts::PI * (m / k).sqrt())
+}
+
+/// The largest coupling window the schedule is known to keep stable (s), if it has one.
+pub fn window_limit(
+    schedule: ScheduleKind,
+    dem: &BTreeMap<String, f64>,
+    fem: &BTreeMap<String, f64>,
+) -> Option<f64> {
+    let fraction = match schedule {
+        ScheduleKind::Jit => JIT_WINDOW_FRACTION,
+        ScheduleKind::Predictive => PREDICTIVE_WINDOW_FRACTION,
+        ScheduleKind::None | ScheduleKind::OneWay => return None,
+    };
+    contact_period(dem, fem).map(|t| fraction * t)
+}
+
+/// Compares the scene with every limit the nodes' numbers allow.
+pub fn assess(
+    scene: &SceneFacts,
+    dem: Option<&BTreeMap<String, f64>>,
+    fem: Option<&BTreeMap<String, f64>>,
+) -> Vec<Finding> {
+    let mut out = Vec::new();
+    let empty = BTreeMap::new();
+    let d = dem.unwrap_or(&empty);
+    let f = fem.unwrap_or(&empty);
+    let mut push = |level, limit: &str, message: String| {
+        out.push(Finding {
+            level,
+            limit: limit.to_string(),
+            message,
+        })
+    };
+    // DEM: Rayleigh step and impact resolution
+    if let (Some(&dt), Some(&dt_r)) = (d.get("time_step"), d.get("rayleigh_time_step")) {
+        push(
+            Level::Info,
+            "DEM Rayleigh step",
+            format!("Δt^D = {dt:.3e} s = {:.3} Δt_R (Δt_R = {dt_r:.3e} s)", dt / dt_r),
+        );
+        if let Some(&tc) = d.get("contact_duration_min") {
+            let steps = tc / dt;
+            let good = tc / steps_for_impact_error(1e-4);
+            if steps < MIN_STEPS_PER_CONTACT {
+                push(Level::Refuse, "DEM impact resolution", format!(
+                    "a 1 m/s impact of the smallest, stiffest particle lasts {tc:.3e} s = {steps:.2} DEM steps (< {MIN_STEPS_PER_CONTACT}): contacts can be stepped over; use Δt^D ≤ {good:.3e} s"
+                ));
+            } else if steps < GOOD_STEPS_PER_CONTACT {
+                push(Level::Warn, "DEM impact resolution", format!(
+                    "a 1 m/s impact of the smallest, stiffest particle lasts only {steps:.1} DEM steps ({tc:.3e} s): rebound velocities err by ~{:.1e} (faster impacts: more); use Δt^D ≤ {good:.3e} s for 1e-4", impact_error(steps)
+                ));
+            }
+        }
+    }
+    // FEM explicit: Δt^F = Δt^C
+    if let Some(&crit) = f.get("critical_time_step") {
+        let w = scene.window;
+        if w > crit {
+            push(Level::Refuse, "FEM explicit critical step", format!(
+                "the coupling window Δt^C = Δt^F = {w:.3e} s exceeds the explicit FEM's critical step {crit:.3e} s (Lanczos estimate); use a window ≤ {:.3e} s or the dynamic (Bossak) analysis",
+                0.9 * crit
+            ));
+        } else {
+            push(
+                Level::Info,
+                "FEM explicit critical step",
+                format!("Δt^F = {w:.3e} s = {:.3} Δt_crit", w / crit),
+            );
+        }
+    }
+    // two-way coupling window
+    if scene.has_dem && scene.has_fem {
+        if let Some(tc) = contact_period(d, f) {
+            let k = d["contact_stiffness_max"];
+            let m = f["interface_node_mass_min"];
+            let name = crate::run::schedule_name(scene.schedule);
+            match window_limit(scene.schedule, d, f) {
+                Some(limit) => {
+                    let w = scene.window;
+                    let basis = format!(
+                        "interface contact period T_c = 2π√(M/k) = {tc:.3e} s (lightest interface node M = {m:.3e} kg, stiffest contact k = {k:.3e} N/m)"
+                    );
+                    if w > limit {
+                        push(Level::Refuse, "coupling window", format!(
+                            "Δt^C = {w:.3e} s exceeds the {name} limit {limit:.3e} s = {:.3} T_c; {basis}; use Δt^C ≤ {limit:.3e} s{}",
+                            limit / tc,
+                            if scene.schedule == ScheduleKind::Jit {
+                                format!(" (the predictive schedule allows {:.3e} s)", PREDICTIVE_WINDOW_FRACTION * tc)
+                            } else {
+                                String::new()
+                            }
+                        ));
+                    } else {
+                        push(
+                            Level::Info,
+                            "coupling window",
+                            format!("Δt^C = {w:.3e} s = {:.3} of the {name} limit {limit:.3e} s; {basis}", w / limit),
+                        );
+                    }
+                }
+                None => push(
+                    Level::Info,
+                    "coupling window",
+                    format!("{name}: no window limit (T_c = {tc:.3e} s)"),
+                ),
+            }
+            if let Some(&mp) = d.get("particle_mass_max") {
+                let ratio = mp / m;
+                if !(1e-4..=1e4).contains(&ratio) {
+                    push(Level::Info, "mass ratio", format!(
+                        "heaviest particle / lightest interface node = {ratio:.3e}; the window limit above accounts for it through T_c"
+                    ));
+                }
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn m(pairs: &[(&str, f64)]) -> BTreeMap<String, f64> {
+        pairs.iter().map(|(k, v)| (k.to_string(), *v)).collect()
+    }
+
+    fn facts(schedule: ScheduleKind, window: f64) -> SceneFacts {
+        SceneFacts {
+            schedule,
+            window,
+            has_dem: true,
+            has_fem: true,
+        }
+    }
+
+    #[test]
+    fn contact_period_is_the_spring_mass_period() {
+        let t = contact_period(
+            &m(&[("contact_stiffness_max", 4e6)]),
+            &m(&[("interface_node_mass_min", 1.0)]),
+        )
+        .unwrap();
+        assert!((t - 2.0 * std::f64::consts::PI / 2000.0).abs() < 1e-15);
+        assert!(contact_period(&m(&[]), &m(&[("interface_node_mass_min", 1.0)])).is_none());
+    }
+
+    #[test]
+    fn a_window_beyond_the_schedule_limit_is_refused_with_the_number_to_use() {
+        let d = m(&[("contact_stiffness_max", 4e6)]);
+        let f = m(&[("interface_node_mass_min", 1.0)]);
+        let tc = 2.0 * std::f64::consts::PI / 2000.0;
+        let jit_limit = JIT_WINDOW_FRACTION * tc;
+        let ok = assess(&facts(ScheduleKind::Jit, 0.9 * jit_limit), Some(&d), Some(&f));
+        assert!(ok.iter().all(|x| x.level != Level::Refuse), "{ok:?}");
+        let bad = assess(&facts(ScheduleKind::Jit, 1.1 * jit_limit), Some(&d), Some(&f));
+        let r = bad.iter().find(|x| x.level == Level::Refuse).expect("refused");
+        assert_eq!(r.limit, "coupling window");
+        assert!(r.message.contains(&format!("{jit_limit:.3e}")), "{r}");
+        assert!(r.message.contains("predictive schedule allows"), "{r}");
+        // the same window is fine for the predictive schedule
+        let p = assess(&facts(ScheduleKind::Predictive, 1.1 * jit_limit), Some(&d), Some(&f));
+        assert!(p.iter().all(|x| x.level != Level::Refuse), "{p:?}");
+        // one-way coupling has no window limit
+        let o = assess(&facts(ScheduleKind::OneWay, 1.0), Some(&d), Some(&f));
+        assert!(o.iter().all(|x| x.level != Level::Refuse), "{o:?}");
+    }
+
+    #[test]
+    fn explicit_fem_beyond_its_critical_step_is_refused() {
+        let f = m(&[("critical_time_step", 1e-6)]);
+        let s = SceneFacts {
+            schedule: ScheduleKind::None,
+            window: 2e-6,
+            has_dem: false,
+            has_fem: true,
+        };
+        let r = assess(&s, None, Some(&f));
+        assert!(r[0].level == Level::Refuse && r[0].message.contains("9.000e-7"), "{r:?}");
+    }
+
+    #[test]
+    fn unresolved_impacts_are_refused_and_poorly_resolved_ones_warned() {
+        let s = SceneFacts {
+            schedule: ScheduleKind::None,
+            window: 1e-3,
+            has_dem: true,
+            has_fem: false,
+        };
+        let d = |tc: f64| {
+            m(&[
+                ("time_step", 1e-5),
+                ("rayleigh_time_step", 1e-4),
+                ("contact_duration_min", tc),
+            ])
+        };
+        let level = |tc| {
+            assess(&s, Some(&d(tc)), None)
+                .iter()
+                .map(|x| x.level)
+                .max()
+                .unwrap()
+        };
+        assert_eq!(level(2e-5), Level::Refuse);
+        assert_eq!(level(5e-5), Level::Warn);
+        assert_eq!(level(1e-3), Level::Info);
+    }
+}
