@@ -1,0 +1,335 @@
+#!/usr/bin/env bash
+# Side-by-side benchmark of our solvers against the peer programs of REFERENCE D:
+#   dem    dense bed, 24,696 spheres, 10,000 timed steps   ours: dense_bed bench  peer: LIGGGHTS
+#   fem10  static beam, C3D8 at 10 mm (36,663 dof)         ours: static_beam      peer: CalculiX ccx
+#   fem5   static beam, C3D8 at 5 mm (265,923 dof)         ours: static_beam      peer: CalculiX ccx
+#   transport  zenoh round trip (no peer program; REFERENCE D's figures are printed alongside)
+#
+# For each case the two programs alternate in one sitting (ABBA order: run 1 peer then ours,
+# run 2 ours then peer, ...), N times each; the tables report medians, every single value, and
+# the ratio peer/ours of the medians (> 1: ours is faster / smaller). A peer that is not
+# installed is skipped with a message; ours is still measured.
+#
+# Environment (defaults in brackets):
+#   N [3]               runs of each program per case
+#   CASES ["dem fem10 fem5 transport"]
+#   THREADS [2]         cores given to each program: MPI ranks of LIGGGHTS, OMP threads of
+#                       ccx (spooles), rayon threads of ours
+#   DEM_SETTLE [40000]  settling steps before the timed ones (0.4 s), both codes
+#   DEM_STEPS [10000]   timed DEM steps, both codes
+#   TRANSPORT_ROUNDS [200]
+#   BENCH_WORK [mktemp] folder for the decks, logs and raw records (kept; printed at the end)
+#   COSIM_TARGET_DIR    cargo target folder holding release/deps/{dense_bed,static_beam,transport}-*
+#                       (else $CARGO_TARGET_DIR, ~/.cache/cosim-target, <repo>/target; when no
+#                       bench binary is found there it is built with `cargo bench --no-run`)
+#   LIGGGHTS [liggghts] CCX [ccx] MPIRUN [mpirun]
+#
+# Output: markdown on stdout; raw records (one line per run) in $BENCH_WORK/runs.tsv.
+set -euo pipefail
+
+HERE=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
+ROOT=$(dirname "$HERE")
+N=${N:-3}
+CASES=${CASES:-"dem fem10 fem5 transport"}
+THREADS=${THREADS:-2}
+DEM_SETTLE=${DEM_SETTLE:-40000}
+DEM_STEPS=${DEM_STEPS:-10000}
+TRANSPORT_ROUNDS=${TRANSPORT_ROUNDS:-200}
+LIGGGHTS=${LIGGGHTS:-liggghts}
+CCX=${CCX:-ccx}
+MPIRUN=${MPIRUN:-mpirun}
+WORK=${BENCH_WORK:-$(mktemp -d "${TMPDIR:-/tmp}/cosim-bench.XXXXXX")}
+mkdir -p "$WORK"
+RUNS="$WORK/runs.tsv"
+: >"$RUNS"
+
+log() { printf '%s\n' "$*" >&2; }
+die() { log "compare.sh: $*"; exit 1; }
+
+[[ $N =~ ^[1-9][0-9]*$ ]] || die "N must be a positive integer (got '$N')"
+TIME=/usr/bin/time
+[[ -x $TIME ]] || die "GNU time is needed at $TIME (Debian: apt-get install time)"
+
+# ---------------------------------------------------------------- our bench executables
+target_dirs() {
+    [[ -n ${COSIM_TARGET_DIR:-} ]] && echo "$COSIM_TARGET_DIR"
+    [[ -n ${CARGO_TARGET_DIR:-} ]] && echo "$CARGO_TARGET_DIR"
+    echo "$HOME/.cache/cosim-target"
+    echo "$ROOT/target"
+}
+
+# newest executable release/deps/<name>-<hash> in the candidate target folders
+find_bench() {
+    local name=$1 best="" t bt=0 d f
+    while read -r d; do
+        for f in "$d"/release/deps/"$name"-*; do
+            [[ -f $f && -x $f && $f != *.d ]] || continue
+            t=$(stat -c %Y "$f")
+            if ((t > bt)); then bt=$t; best=$f; fi
+        done
+    done < <(target_dirs)
+    echo "$best"
+}
+
+# bench name -> cargo package and flags (static_beam builds without the node feature)
+build_bench() {
+    case $1 in
+    dense_bed) (cd "$ROOT" && cargo bench --no-run -p dem-node --bench dense_bed) ;;
+    static_beam) (cd "$ROOT" && cargo bench --no-run -p fem-node --no-default-features --bench static_beam) ;;
+    transport) (cd "$ROOT" && cargo bench --no-run -p proto --bench transport) ;;
+    esac
+}
+
+ours_bin() {
+    local b
+    b=$(find_bench "$1")
+    if [[ -z $b ]]; then
+        command -v cargo >/dev/null || die "no $1 bench executable found and no cargo to build it"
+        log "no $1 bench executable found: building it (cargo bench --no-run)"
+        build_bench "$1" >&2
+        b=$(find_bench "$1")
+        [[ -n $b ]] || die "built $1 but cannot find release/deps/$1-*; set COSIM_TARGET_DIR"
+    fi
+    echo "$b"
+}
+
+# ---------------------------------------------------------------- measuring
+# run_timed <dir> <tag> cmd... : runs cmd in <dir> under GNU time; stdout+stderr to <tag>.log,
+# "wall user sys maxrss_kB" to <tag>.time
+run_timed() {
+    local dir=$1 tag=$2
+    shift 2
+    (cd "$dir" && "$TIME" -f '%e %U %S %M' -o "$tag.time" "$@" >"$tag.log" 2>&1) ||
+        { log "FAILED: $* (see $dir/$tag.log)"; tail -5 "$dir/$tag.log" >&2; return 1; }
+}
+
+# record <case> <prog> <run> <time_s> <wall_s> <cpu_s> <rss_MB> <answers...>
+record() { local IFS=$'\t'; echo "$*" >>"$RUNS"; }
+
+timefile() { read -r W U S M <"$1"; CPU=$(awk -v u="$U" -v s="$S" 'BEGIN{printf "%.2f", u+s}'); }
+
+# ---------------------------------------------------------------- DEM: dense bed
+dem_peer() { # run index
+    local d="$WORK/dem" tag="liggghts.$1" r
+    if ((THREADS > 1)); then
+        # each rank under its own GNU time, for the peak RSS summed over ranks
+        run_timed "$d" "$tag" "$MPIRUN" --allow-run-as-root -np "$THREADS" \
+            sh -c 'exec '"$TIME"' -f %M -o "$0.rss.$OMPI_COMM_WORLD_RANK" '"$LIGGGHTS"' "$@"' "$tag" \
+            -in "$HERE/liggghts/dense_bed.in" -var settle "$DEM_SETTLE" -var steps "$DEM_STEPS" \
+            -log "$tag.lammps" -echo none -screen none
+    else
+        run_timed "$d" "$tag" "$LIGGGHTS" -in "$HERE/liggghts/dense_bed.in" \
+            -var settle "$DEM_SETTLE" -var steps "$DEM_STEPS" -log "$tag.lammps" -echo none -screen none
+    fi
+    timefile "$d/$tag.time"
+    local rss_kb=$M
+    if ((THREADS > 1)); then rss_kb=$(cat "$d/$tag".rss.* | awk '{s+=$1} END{print s}'); fi
+    local t atoms ke contacts
+    t=$(awk '/^Loop time of/{t=$4} END{print t}' "$d/$tag.lammps")
+    # last thermo line: step atoms ke rke contacts zmax
+    read -r _ atoms ke _ contacts _ < <(awk '$1 ~ /^[0-9]+$/ && NF == 6 {l=$0} END{print l}' "$d/$tag.lammps")
+    [[ $atoms == 24696 ]] || log "WARNING: LIGGGHTS ran $atoms particles (expected 24696)"
+    record dem liggghts "$1" "$t" "$W" "$CPU" "$((rss_kb / 1024))" "particles=$atoms" "KE=$ke" "contacts=$contacts"
+}
+
+dem_ours() {
+    local d="$WORK/dem" tag="ours.$1"
+    run_timed "$d" "$tag" env DENSE_BED_THREADS="$THREADS" DENSE_BED_SETTLE="$DEM_SETTLE" \
+        DENSE_BED_STEPS="$DEM_STEPS" DENSE_BED_SCALING_MAX=0 "$DENSE_BED"
+    timefile "$d/$tag.time"
+    local t n ke contacts
+    t=$(sed -n 's/^timed [0-9]* steps: \([0-9.]*\) s wall.*/\1/p' "$d/$tag.log")
+    n=$(sed -n 's/^dense bed: \([0-9]*\) particles.*/\1/p' "$d/$tag.log")
+    ke=$(sed -n 's/^timed .* KE \([-0-9.e+]*\) J.*/\1/p' "$d/$tag.log")
+    contacts=$(sed -n 's/^timed .*; contacts \([0-9]*\),.*/\1/p' "$d/$tag.log")
+    [[ -n $t ]] || die "no 'timed ... steps' line in $d/$tag.log"
+    record dem ours "$1" "$t" "$W" "$CPU" "$((M / 1024))" "particles=$n" "KE=$ke" "contacts=$contacts"
+}
+
+# ---------------------------------------------------------------- FEM: static beam
+fem_prepare() { # h
+    local d="$WORK/fem$1"
+    mkdir -p "$d"
+    cp "$HERE/ccx/beam_$1mm.inp" "$d/"
+    [[ -s $d/mesh_$1mm.inp ]] || python3 "$HERE/ccx/beam_mesh.py" "$1" >"$d/mesh_$1mm.inp"
+}
+
+fem_peer() { # h run
+    local d="$WORK/fem$1" tag="ccx.$2"
+    rm -f "$d/beam_$1mm.dat"
+    run_timed "$d" "$tag" env OMP_NUM_THREADS="$THREADS" CCX_NPROC_EQUATION_SOLVER="$THREADS" \
+        "$CCX" -i "beam_$1mm"
+    timefile "$d/$tag.time"
+    local uz inner
+    uz=$(awk '/displacements/{f=1; next} f && NF == 4 {print $4; exit}' "$d/beam_$1mm.dat")
+    inner=$(awk '/Total CalculiX Time/{print $NF}' "$d/$tag.log")
+    # the compared time is the process wall time (input reading, assembly, solve, stresses)
+    record "fem$1" ccx "$2" "$W" "$W" "$CPU" "$((M / 1024))" "uz=$uz" "ccx_total=$inner"
+}
+
+fem_ours() { # h run
+    local d="$WORK/fem$1" tag="ours.$2" args=("$1")
+    # the bench ends with a dynamic run at its largest size: give it the 10 mm mesh after 5 mm,
+    # so the 5 mm process is not lengthened by a 5 mm dynamic solve (not timed below anyway)
+    [[ $1 != 10 ]] && args+=(10)
+    run_timed "$d" "$tag" env RAYON_NUM_THREADS="$THREADS" "$STATIC_BEAM" "${args[@]}"
+    timefile "$d/$tag.time"
+    local line t uz hwm
+    line=$(grep -m1 "^static hex8 $1 mm:" "$d/$tag.log") || die "no 'static hex8 $1 mm' line in $d/$tag.log"
+    t=$(sed -n 's/.* total \([0-9.]*\) s,.*/\1/p' <<<"$line")
+    uz=$(sed -n 's/.*midspan uz \([-0-9.e+]*\) m.*/\1/p' <<<"$line")
+    hwm=$(sed -n 's/.*VmHWM \([0-9]*\) MB.*/\1/p' <<<"$line")
+    # compared: build + assembly + factorise + solve as printed, and VmHWM right after the
+    # solve (the process goes on with a re-solve and a dynamic run; its wall time is recorded)
+    record "fem$1" ours "$2" "$t" "$W" "$CPU" "$hwm" "uz=$uz"
+}
+
+# ---------------------------------------------------------------- transport (ours only)
+transport_ours() {
+    local d="$WORK/transport" tag="ours.$1"
+    run_timed "$d" "$tag" env COSIM_BENCH_ROUNDS="$TRANSPORT_ROUNDS" "$TRANSPORT"
+    timefile "$d/$tag.time"
+    local a
+    a=$(awk '$1 ~ /^[0-9]+$/ && NF == 6 {printf "%s%s=%s", sep, $1, $3; sep=" "}' "$d/$tag.log")
+    record transport ours "$1" "" "$W" "$CPU" "$((M / 1024))" $a
+}
+
+# ---------------------------------------------------------------- report helpers
+median() { sort -g | awk '{v[NR]=$1} END{if (NR == 0) print ""; else if (NR % 2) print v[(NR+1)/2]; else print (v[NR/2]+v[NR/2+1])/2}'; }
+col() { awk -F'\t' -v c="$1" -v p="$2" -v k="$3" '$1 == c && $2 == p {print $k}' "$RUNS"; }
+all() { col "$@" | awk '{printf "%s%s", (NR > 1 ? ", " : ""), ($1 + 0 >= 100 ? sprintf("%.0f", $1) : sprintf("%.3g", $1))}'; }
+answer() { # case prog key -> values of key=... in the answer fields
+    awk -F'\t' -v c="$1" -v p="$2" -v k="$3" '$1 == c && $2 == p {for (i = 8; i <= NF; i++) if (index($i, k "=") == 1) print substr($i, length(k) + 2)}' "$RUNS"
+}
+ratio() { awk -v a="$1" -v b="$2" 'BEGIN{if (a == "" || b == "" || b + 0 == 0) print "n/a"; else printf "%.2f", a / b}'; }
+fmt() { awk -v x="$1" 'BEGIN{if (x == "") print "—"; else if (x + 0 >= 100) printf "%.0f", x; else printf "%.3g", x}'; }
+
+have() { command -v "$1" >/dev/null 2>&1; }
+
+# ---------------------------------------------------------------- run
+declare -A PEER_OK PEER_NAME
+PEER_NAME[dem]=LIGGGHTS
+PEER_NAME[fem10]=CalculiX
+PEER_NAME[fem5]=CalculiX
+UPTIME_BEFORE=$(uptime)
+
+for c in $CASES; do
+    case $c in
+    dem)
+        DENSE_BED=$(ours_bin dense_bed)
+        mkdir -p "$WORK/dem"
+        PEER_OK[dem]=1
+        if ! have "$LIGGGHTS"; then
+            log "SKIP peer: LIGGGHTS ('$LIGGGHTS') is not installed (Debian: apt-get install liggghts); measuring ours only"
+            PEER_OK[dem]=0
+        elif ((THREADS > 1)) && ! have "$MPIRUN"; then
+            log "SKIP peer: $THREADS LIGGGHTS ranks need '$MPIRUN' (Debian: apt-get install openmpi-bin); measuring ours only"
+            PEER_OK[dem]=0
+        fi
+        # Open MPI in containers: no cross-memory attach
+        export OMPI_MCA_btl_vader_single_copy_mechanism=${OMPI_MCA_btl_vader_single_copy_mechanism:-none}
+        for ((i = 1; i <= N; i++)); do
+            log "[dem $i/$N] $(date +%T) load $(cut -d' ' -f1-3 /proc/loadavg)"
+            if ((PEER_OK[dem] && i % 2 == 1)); then dem_peer "$i"; fi
+            dem_ours "$i"
+            if ((PEER_OK[dem] && i % 2 == 0)); then dem_peer "$i"; fi
+        done
+        ;;
+    fem10 | fem5)
+        h=${c#fem}
+        STATIC_BEAM=$(ours_bin static_beam)
+        fem_prepare "$h"
+        PEER_OK[$c]=1
+        if ! have "$CCX"; then
+            log "SKIP peer: CalculiX ('$CCX') is not installed (Debian: apt-get install calculix-ccx); measuring ours only"
+            PEER_OK[$c]=0
+        fi
+        for ((i = 1; i <= N; i++)); do
+            log "[$c $i/$N] $(date +%T) load $(cut -d' ' -f1-3 /proc/loadavg)"
+            if ((PEER_OK[$c] && i % 2 == 1)); then fem_peer "$h" "$i"; fi
+            fem_ours "$h" "$i"
+            if ((PEER_OK[$c] && i % 2 == 0)); then fem_peer "$h" "$i"; fi
+        done
+        ;;
+    transport)
+        TRANSPORT=$(ours_bin transport)
+        mkdir -p "$WORK/transport"
+        for ((i = 1; i <= N; i++)); do
+            log "[transport $i/$N] $(date +%T) load $(cut -d' ' -f1-3 /proc/loadavg)"
+            transport_ours "$i"
+        done
+        ;;
+    *) die "unknown case '$c' (dem fem10 fem5 transport)" ;;
+    esac
+done
+UPTIME_AFTER=$(uptime)
+
+# ---------------------------------------------------------------- report
+peer_prog() { case $1 in dem) echo liggghts ;; *) echo ccx ;; esac; }
+describe() {
+    case $1 in
+    dem) echo "DEM dense bed, 24,696 spheres, $DEM_STEPS steps after $DEM_SETTLE settling" ;;
+    fem10) echo "FEM static beam C3D8 10 mm (36,663 dof)" ;;
+    fem5) echo "FEM static beam C3D8 5 mm (265,923 dof)" ;;
+    esac
+}
+
+echo "## Benchmark: ours vs peer, $(date -u '+%Y-%m-%d %H:%M UTC')"
+echo
+echo "- repo $(git -C "$ROOT" rev-parse --short HEAD 2>/dev/null || echo '?'), $N runs per program per case, ABBA order, $THREADS cores per program ($(nproc) online)"
+echo "- load before: \`${UPTIME_BEFORE## }\`"
+echo "- load after:  \`${UPTIME_AFTER## }\`"
+for v in DENSE_BED STATIC_BEAM TRANSPORT; do
+    [[ -n ${!v:-} ]] && echo "- ours: \`${!v}\` (built $(date -u -r "${!v}" '+%Y-%m-%d %H:%M UTC'))"
+done
+have "$LIGGGHTS" && echo "- LIGGGHTS: \`$(command -v "$LIGGGHTS")\` $(dpkg-query -W -f='${Version}' liggghts 2>/dev/null || true)"
+have "$CCX" && echo "- CalculiX: \`$(command -v "$CCX")\` $(dpkg-query -W -f='${Version}' calculix-ccx 2>/dev/null || true)"
+echo
+echo "Time: DEM = the $DEM_STEPS timed steps (LIGGGHTS \"Loop time\", ours \"timed ... s wall\");"
+echo "FEM = ccx process wall time vs ours build + assembly + factorise + solve. Peak RSS: LIGGGHTS"
+echo "summed over its ranks; ccx and ours DEM the process maximum; ours FEM VmHWM after the solve."
+echo "Ratio = peer median / ours median (> 1: ours is faster or smaller)."
+echo
+echo "| case | peer | peer time s (median) | ours time s (median) | time ratio | peer runs | ours runs | peer RSS MB | ours RSS MB | RSS ratio | peer wall / CPU s | ours wall / CPU s |"
+echo "|---|---|---|---|---|---|---|---|---|---|---|---|"
+for c in $CASES; do
+    [[ $c == transport ]] && continue
+    p=$(peer_prog "$c")
+    pt=$(col "$c" "$p" 4 | median); ot=$(col "$c" ours 4 | median)
+    pr=$(col "$c" "$p" 7 | median); orr=$(col "$c" ours 7 | median)
+    pw=$(col "$c" "$p" 5 | median); ow=$(col "$c" ours 5 | median)
+    pc=$(col "$c" "$p" 6 | median); oc=$(col "$c" ours 6 | median)
+    pname=${PEER_NAME[$c]}
+    ((PEER_OK[$c])) || pname="$pname (not installed: skipped)"
+    echo "| $(describe "$c") | $pname | $(fmt "$pt") | $(fmt "$ot") | $(ratio "$pt" "$ot") | $(all "$c" "$p" 4) | $(all "$c" ours 4) | $(fmt "$pr") | $(fmt "$orr") | $(ratio "$pr" "$orr") | $(fmt "$pw") / $(fmt "$pc") | $(fmt "$ow") / $(fmt "$oc") |"
+done
+echo
+echo "Answers (last value of each run):"
+echo
+echo "| case | quantity | peer | ours |"
+echo "|---|---|---|---|"
+for c in $CASES; do
+    p=$(peer_prog "$c")
+    case $c in
+    dem)
+        for k in particles KE contacts; do
+            echo "| dem | $k | $(answer dem "$p" $k | paste -sd, - | sed 's/,/, /g') | $(answer dem ours $k | paste -sd, - | sed 's/,/, /g') |"
+        done
+        ;;
+    fem*)
+        echo "| $c | mid-span uz, m | $(answer "$c" "$p" uz | sort -u | paste -sd, -) | $(answer "$c" ours uz | sort -u | paste -sd, -) |"
+        ;;
+    esac
+done
+if [[ " $CASES " == *" transport "* ]]; then
+    echo
+    echo "Transport round trip (ours only; REFERENCE D zenoh TCP: 1k 0.2 ms, 10k 1.0 ms, 100k 9.6 ms):"
+    echo
+    echo "| nodes | median of run medians, µs | run medians, µs |"
+    echo "|---|---|---|"
+    for n in 1000 10000 100000; do
+        echo "| $n | $(fmt "$(answer transport ours $n | median)") | $(answer transport ours $n | paste -sd, - | sed 's/,/, /g') |"
+    done
+fi
+echo
+echo "Raw records and logs: $WORK"
