@@ -7,6 +7,7 @@
 pub mod checkpoint;
 pub mod launch;
 pub mod limits;
+pub mod plot;
 pub mod run;
 pub mod scene;
 pub mod schedule;

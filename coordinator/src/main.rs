@@ -55,7 +55,7 @@ enum Command {
     },
     /// Measure the speed–accuracy trade: run the scene for every combination of values,
     /// e.g. `--vary coupling.window=1e-4,5e-5 --vary coupling.schedule=jit,predictive`;
-    /// writes study.csv, error_vs_wall.svg and stability.svg; a half-done sweep resumes.
+    /// writes study.csv and error_vs_wall / stability plots (PNG and SVG); a half-done sweep resumes.
     Study {
         scene: PathBuf,
         /// `key=value1,value2,…` (dotted scene key; repeatable).
@@ -64,9 +64,16 @@ enum Command {
         /// Result compared between runs (default: the first FEM probe's uz).
         #[arg(long)]
         metric: Option<String>,
+        /// Compare a time series instead of one value: `file:column` in each run's folder,
+        /// e.g. `fem/fem_probes.csv:probe.centre.uz` (relative L2 error over time).
+        #[arg(long)]
+        series: Option<String>,
         /// Index of the reference run (default: the finest completed run).
         #[arg(long)]
         reference: Option<usize>,
+        /// Runs at the same time (default: one per two cores; each run is two processes).
+        #[arg(long)]
+        jobs: Option<usize>,
         #[arg(long)]
         out: Option<PathBuf>,
     },
@@ -165,7 +172,9 @@ fn main() -> ExitCode {
                 scene,
                 vary,
                 metric,
+                series,
                 reference,
+                jobs,
                 out,
             } => {
                 let scene = Scene::load(&scene)?;
@@ -174,14 +183,18 @@ fn main() -> ExitCode {
                     .map(|v| coordinator::study::parse_variation(v))
                     .collect::<anyhow::Result<Vec<_>>>()?;
                 let out = out.unwrap_or_else(|| coordinator::study::default_out(&scene));
-                let (metric, outcomes) = coordinator::study::run_study(
-                    &scene,
-                    &vars,
-                    metric.as_deref(),
+                let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+                let study = coordinator::study::StudyOptions {
+                    metric,
+                    series: series
+                        .as_deref()
+                        .map(coordinator::study::parse_series)
+                        .transpose()?,
                     reference,
-                    &out,
-                )
-                .await?;
+                    jobs: jobs.unwrap_or((cores / 2).max(1)),
+                };
+                let (metric, outcomes) =
+                    coordinator::study::run_study(&scene, &vars, &study, &out).await?;
                 println!(
                     "{}: {} runs, error of {metric} against the finest run",
                     scene.name,

@@ -61,7 +61,7 @@ fn set_path(table: &mut toml::Table, key: &str, value: toml::Value) -> anyhow::R
     Ok(())
 }
 
-fn value_text(v: &toml::Value) -> String {
+pub(crate) fn value_text(v: &toml::Value) -> String {
     match v {
         toml::Value::String(s) => s.clone(),
         other => other.to_string(),
@@ -131,17 +131,104 @@ fn number(v: &serde_json::Value, path: &[&str]) -> f64 {
         .unwrap_or(f64::NAN)
 }
 
-/// Runs (or reuses) every variant; `metric` names a summary result (e.g.
-/// `fem.probe.centre.uz`); the reference is the variant `reference` (index), or the one with
-/// the smallest coupling window and DEM time step.
+/// How a study runs and what it compares.
+#[derive(Debug, Clone, Default)]
+pub struct StudyOptions {
+    /// Summary result compared between runs (e.g. `fem.probe.centre.uz`).
+    pub metric: Option<String>,
+    /// A time series compared between runs instead: `(file in the run folder, column)`, e.g.
+    /// `("fem/fem_probes.csv", "probe.centre.uz")`; the error is the relative L2 norm over
+    /// the reference run's times (Ullrich's time histories, not one final value).
+    pub series: Option<(String, String)>,
+    /// Index of the reference run (default: the finest completed run).
+    pub reference: Option<usize>,
+    /// Runs at the same time (default 1).
+    pub jobs: usize,
+}
+
+/// Parses `--series file:column`.
+pub fn parse_series(text: &str) -> anyhow::Result<(String, String)> {
+    match text.rsplit_once(':') {
+        Some((f, c)) if !f.is_empty() && !c.is_empty() => Ok((f.to_string(), c.to_string())),
+        _ => bail!("--series `{text}`: expected `file:column`, e.g. `fem/fem_probes.csv:probe.centre.uz`"),
+    }
+}
+
+/// Reads `(time, column)` pairs from a CSV with a header row whose first column is time.
+pub fn read_series(path: &Path, column: &str) -> anyhow::Result<Vec<(f64, f64)>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines
+        .next()
+        .ok_or_else(|| anyhow!("{}: empty file", path.display()))?
+        .split(',')
+        .collect();
+    let col = header.iter().position(|h| h.trim() == column).ok_or_else(|| {
+        anyhow!(
+            "{}: no column `{column}` (columns: {})",
+            path.display(),
+            header.join(", ")
+        )
+    })?;
+    let mut out = Vec::new();
+    for (i, l) in lines.enumerate() {
+        let f: Vec<&str> = l.split(',').collect();
+        let num = |k: usize| -> anyhow::Result<f64> {
+            f.get(k)
+                .and_then(|x| x.trim().parse::<f64>().ok())
+                .ok_or_else(|| anyhow!("{}:{}: not a number in column {}", path.display(), i + 2, k + 1))
+        };
+        out.push((num(0)?, num(col)?));
+    }
+    Ok(out)
+}
+
+/// Relative L2 distance of `y` from the reference `r` over the reference's times inside both
+/// ranges (`y` interpolated linearly): √(Σ (y − r)²) / √(Σ r²).
+pub fn series_error(y: &[(f64, f64)], r: &[(f64, f64)]) -> Option<f64> {
+    let (t0, t1) = (y.first()?.0, y.last()?.0);
+    let at = |t: f64| -> f64 {
+        let k = y.partition_point(|p| p.0 < t);
+        if k == 0 {
+            return y[0].1;
+        }
+        if k >= y.len() {
+            return y[y.len() - 1].1;
+        }
+        let (a, b) = (y[k - 1], y[k]);
+        if b.0 == a.0 {
+            b.1
+        } else {
+            a.1 + (b.1 - a.1) * (t - a.0) / (b.0 - a.0)
+        }
+    };
+    let (mut num, mut den, mut n) = (0.0, 0.0, 0);
+    for &(t, v) in r.iter().filter(|p| p.0 >= t0 - 1e-12 && p.0 <= t1 + 1e-12) {
+        num += (at(t) - v).powi(2);
+        den += v * v;
+        n += 1;
+    }
+    (n > 0 && den > 0.0).then(|| (num / den).sqrt())
+}
+
+/// Runs (or reuses) every variant and compares them (see [`StudyOptions`]). Every variant
+/// runs with `coupling.allow_beyond_limits = true` unless the sweep varies it: a study is how
+/// the limits are measured.
 pub async fn run_study(
     scene: &Scene,
     vars: &[Variation],
-    metric: Option<&str>,
-    reference: Option<usize>,
+    opts: &StudyOptions,
     out_dir: &Path,
 ) -> anyhow::Result<(String, Vec<Outcome>)> {
-    let variants = variants(&scene.text, vars)?;
+    let mut variants = variants(&scene.text, vars)?;
+    if !vars.iter().any(|v| v.key == "coupling.allow_beyond_limits") {
+        for v in &mut variants {
+            let mut t: toml::Table = toml::from_str(&v.text)?;
+            set_path(&mut t, "coupling.allow_beyond_limits", toml::Value::Boolean(true))?;
+            v.text = toml::to_string(&t)?;
+        }
+    }
     std::fs::create_dir_all(out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
     let bar = indicatif::ProgressBar::new(variants.len() as u64);
     bar.set_style(
@@ -151,45 +238,64 @@ pub async fn run_study(
         .expect("valid template")
         .progress_chars("=> "),
     );
-    let mut outcomes = Vec::new();
-    let mut summaries = Vec::new();
-    for v in &variants {
-        let dir = out_dir.join(&v.name);
-        let summary_path = dir.join("summary.json");
-        let label: Vec<String> = v
-            .settings
+    let label_of = |v: &Variant| -> String {
+        v.settings
             .iter()
             .map(|(k, x)| format!("{k}={}", value_text(x)))
-            .collect();
-        bar.set_message(label.join(" "));
-        if !summary_path.exists() {
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
+    // run what is missing, `jobs` at a time
+    let jobs = opts.jobs.max(1);
+    let mut pending = variants
+        .iter()
+        .filter(|v| !out_dir.join(&v.name).join("summary.json").exists())
+        .cloned()
+        .collect::<std::collections::VecDeque<_>>();
+    bar.inc((variants.len() - pending.len()) as u64);
+    let mut running = tokio::task::JoinSet::new();
+    while !pending.is_empty() || !running.is_empty() {
+        while running.len() < jobs {
+            let Some(v) = pending.pop_front() else { break };
+            let dir = out_dir.join(&v.name);
+            let label = label_of(&v);
+            bar.set_message(label.clone());
             // each variant is a scene of its own, next to the original (relative paths hold)
             let path = scene
                 .path
                 .with_file_name(format!(".study-{}-{}.toml", scene.name, v.name));
-            let parsed = Scene::parse(&path, v.text.clone())
-                .map_err(|e| anyhow!("{}: {e}", label.join(" ")));
-            match parsed {
-                Ok(s) => {
-                    std::fs::write(&path, &v.text)?;
-                    let opts = RunOptions {
-                        out_dir: Some(dir.clone()),
-                        progress: false,
-                        ..Default::default()
-                    };
-                    if let Err(e) = run_scene(&s, &opts).await {
-                        tracing::info!("{}: {e:#}", label.join(" "));
+            running.spawn(async move {
+                match Scene::parse(&path, v.text.clone()) {
+                    Ok(s) => {
+                        std::fs::write(&path, &v.text)?;
+                        let opts = RunOptions {
+                            out_dir: Some(dir.clone()),
+                            progress: false,
+                            ..Default::default()
+                        };
+                        if let Err(e) = run_scene(&s, &opts).await {
+                            tracing::info!("{label}: {e:#}");
+                        }
+                        let _ = std::fs::remove_file(&path);
                     }
-                    let _ = std::fs::remove_file(&path);
+                    Err(e) => {
+                        std::fs::create_dir_all(&dir)?;
+                        let refused = serde_json::json!({ "status": "refused", "error": format!("{label}: {e}") });
+                        std::fs::write(dir.join("summary.json"), serde_json::to_string_pretty(&refused)?)?;
+                    }
                 }
-                Err(e) => {
-                    std::fs::create_dir_all(&dir)?;
-                    let refused =
-                        serde_json::json!({ "status": "refused", "error": e.to_string() });
-                    std::fs::write(&summary_path, serde_json::to_string_pretty(&refused)?)?;
-                }
-            }
+                anyhow::Ok(())
+            });
         }
+        if let Some(done) = running.join_next().await {
+            done.map_err(|e| anyhow!("a study run panicked: {e}"))??;
+            bar.inc(1);
+        }
+    }
+    let mut outcomes = Vec::new();
+    let mut summaries = Vec::new();
+    for v in &variants {
+        let summary_path = out_dir.join(&v.name).join("summary.json");
         let s: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(&summary_path).unwrap_or_default())
                 .unwrap_or(serde_json::json!({ "status": "failed" }));
@@ -205,9 +311,9 @@ pub async fn run_study(
             metric: None,
             error: None,
         });
-        bar.inc(1);
     }
     bar.finish_and_clear();
+    let (metric, reference) = (opts.metric.as_deref(), opts.reference);
     // default metric: the first probe's vertical displacement, else the DEM's kinetic energy
     let metric = match metric {
         Some(m) => m.to_string(),
@@ -226,6 +332,10 @@ pub async fn run_study(
     for (o, s) in outcomes.iter_mut().zip(&summaries) {
         o.metric = s["results"][metric.as_str()].as_f64();
     }
+    let metric = match &opts.series {
+        Some((file, column)) => format!("{file}:{column}"),
+        None => metric,
+    };
     let metric = metric.as_str();
     let finest = |o: &Outcome| {
         let get = |k: &str| {
@@ -251,15 +361,35 @@ pub async fn run_study(
             })
             .ok_or_else(|| anyhow!("no run of the study completed: nothing to compare with"))?,
     };
-    let ref_value = outcomes
-        .get(reference)
-        .and_then(|o| o.metric)
-        .ok_or_else(|| anyhow!("the reference run has no result `{metric}`"))?;
-    for o in &mut outcomes {
-        o.error = o
-            .metric
-            .filter(|_| o.status == "completed")
-            .map(|m| (m - ref_value).abs() / ref_value.abs().max(f64::MIN_POSITIVE));
+    if let Some((file, column)) = &opts.series {
+        let name = &outcomes
+            .get(reference)
+            .ok_or_else(|| anyhow!("--reference {reference}: the study has {} runs", outcomes.len()))?
+            .variant
+            .name;
+        let r = read_series(&out_dir.join(name).join(file), column)?;
+        for (i, o) in outcomes.iter_mut().enumerate() {
+            if o.status == "completed" {
+                let y = read_series(&out_dir.join(&o.variant.name).join(file), column)?;
+                o.error = if i == reference {
+                    Some(0.0)
+                } else {
+                    series_error(&y, &r)
+                };
+                o.metric = y.last().map(|p| p.1);
+            }
+        }
+    } else {
+        let ref_value = outcomes
+            .get(reference)
+            .and_then(|o| o.metric)
+            .ok_or_else(|| anyhow!("the reference run has no result `{metric}`"))?;
+        for o in &mut outcomes {
+            o.error = o
+                .metric
+                .filter(|_| o.status == "completed")
+                .map(|m| (m - ref_value).abs() / ref_value.abs().max(f64::MIN_POSITIVE));
+        }
     }
     write_csv(
         &out_dir.join("study.csv"),
@@ -276,6 +406,9 @@ pub async fn run_study(
         out_dir.join("stability.svg"),
         stability_svg(&outcomes, vars),
     )?;
+    if let Err(e) = crate::plot::study_pngs(out_dir, &outcomes, vars, metric) {
+        tracing::warn!("PNG plots not written ({e:#}); the SVG plots are");
+    }
     Ok((metric.to_string(), outcomes))
 }
 
@@ -317,7 +450,7 @@ const COLOURS: [&str; 6] = [
     "#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b",
 ];
 
-fn schedule_of(o: &Outcome) -> String {
+pub(crate) fn schedule_of(o: &Outcome) -> String {
     o.variant
         .settings
         .iter()

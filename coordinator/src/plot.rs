@@ -1,0 +1,265 @@
+//! PNG plots of a study (plotters, bitmap backend). Text needs a TrueType font: the first of
+//! `COSIM_FONT`, DejaVu Sans, Liberation Sans or any `.ttf` under /usr/share/fonts is used;
+//! without one no PNG is written (the SVG plots are, and need no font).
+
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+use anyhow::{anyhow, Context};
+use plotters::prelude::*;
+
+use crate::study::{schedule_of, value_text, Outcome, Variation};
+
+const PALETTE: [RGBColor; 6] = [
+    RGBColor(0x1f, 0x77, 0xb4),
+    RGBColor(0xd6, 0x27, 0x28),
+    RGBColor(0x2c, 0xa0, 0x2c),
+    RGBColor(0xff, 0x7f, 0x0e),
+    RGBColor(0x94, 0x67, 0xbd),
+    RGBColor(0x8c, 0x56, 0x4b),
+];
+
+fn find_font() -> Option<PathBuf> {
+    if let Some(p) = std::env::var_os("COSIM_FONT") {
+        return Some(PathBuf::from(p));
+    }
+    for p in [
+        "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
+        "/usr/share/fonts/truetype/liberation/LiberationSans-Regular.ttf",
+        "/usr/share/fonts/TTF/DejaVuSans.ttf",
+    ] {
+        if Path::new(p).exists() {
+            return Some(PathBuf::from(p));
+        }
+    }
+    fn walk(dir: &Path, depth: usize) -> Option<PathBuf> {
+        for e in std::fs::read_dir(dir).ok()?.flatten() {
+            let p = e.path();
+            if p.is_dir() && depth < 4 {
+                if let Some(f) = walk(&p, depth + 1) {
+                    return Some(f);
+                }
+            } else if p.extension().is_some_and(|x| x == "ttf") {
+                return Some(p);
+            }
+        }
+        None
+    }
+    walk(Path::new("/usr/share/fonts"), 0)
+}
+
+/// Registers a font as "sans-serif" once per process.
+fn ensure_font() -> anyhow::Result<()> {
+    static FONT: OnceLock<Result<(), String>> = OnceLock::new();
+    FONT.get_or_init(|| {
+        let path = find_font().ok_or("no TrueType font found (set COSIM_FONT to a .ttf file)")?;
+        let bytes = std::fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+        let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
+        plotters::style::register_font("sans-serif", FontStyle::Normal, bytes)
+            .map_err(|_| format!("{}: not a usable font", path.display()))
+    })
+    .clone()
+    .map_err(|e| anyhow!(e))
+}
+
+fn err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
+    anyhow!("{e:?}")
+}
+
+/// `error_vs_wall.png` (log–log, one colour per schedule, each schedule's Pareto front drawn)
+/// and `stability.png` (a grid over the first two varied keys, or one row per run).
+pub fn study_pngs(
+    out_dir: &Path,
+    outcomes: &[Outcome],
+    vars: &[Variation],
+    metric: &str,
+) -> anyhow::Result<()> {
+    ensure_font()?;
+    pareto_png(&out_dir.join("error_vs_wall.png"), outcomes, metric)
+        .context("error_vs_wall.png")?;
+    stability_png(&out_dir.join("stability.png"), outcomes, vars).context("stability.png")
+}
+
+/// The points of `pts` (x, y) not dominated by another (smaller x and smaller y), by x.
+pub fn pareto_front(pts: &[(f64, f64)]) -> Vec<(f64, f64)> {
+    let mut p: Vec<(f64, f64)> = pts.to_vec();
+    p.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
+    let mut front: Vec<(f64, f64)> = Vec::new();
+    for q in p {
+        if front.last().is_none_or(|l| q.1 < l.1) {
+            front.push(q);
+        }
+    }
+    front
+}
+
+fn pareto_png(path: &Path, outcomes: &[Outcome], metric: &str) -> anyhow::Result<()> {
+    // the reference run (error 0) and round-off-level errors are drawn at the bottom of the axis
+    let pts: Vec<(f64, f64, String)> = outcomes
+        .iter()
+        .filter_map(|o| {
+            o.error
+                .filter(|_| o.wall_s > 0.0)
+                .map(|e| (o.wall_s, e, schedule_of(o)))
+        })
+        .collect();
+    let positive = pts.iter().map(|p| p.1).filter(|&e| e > 1e-14);
+    let ymin = positive.clone().fold(f64::INFINITY, f64::min);
+    let ymax = positive.fold(0.0, f64::max);
+    let (ylo, yhi) = if ymin.is_finite() {
+        (
+            10f64.powf(ymin.log10().floor() - 1.0),
+            10f64.powf(ymax.log10().ceil()),
+        )
+    } else {
+        (1e-6, 1.0)
+    };
+    let xmin = pts.iter().map(|p| p.0).fold(f64::INFINITY, f64::min);
+    let xmax = pts.iter().map(|p| p.0).fold(0.0, f64::max);
+    let (xlo, xhi) = if xmin.is_finite() {
+        (xmin / 1.5, xmax * 1.5)
+    } else {
+        (0.1, 10.0)
+    };
+    let root = BitMapBackend::new(path, (900, 620)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            format!("Speed–accuracy trade: error of {metric}"),
+            ("sans-serif", 20),
+        )
+        .margin(16)
+        .x_label_area_size(48)
+        .y_label_area_size(72)
+        .build_cartesian_2d((xlo..xhi).log_scale(), (ylo..yhi).log_scale())
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc("wall time (s)")
+        .y_desc("relative error vs reference")
+        .y_label_formatter(&|y| format!("{y:.0e}"))
+        .x_label_formatter(&|x| format!("{x:.2}"))
+        .draw()
+        .map_err(err)?;
+    let mut schedules: Vec<String> = pts.iter().map(|p| p.2.clone()).collect();
+    schedules.sort();
+    schedules.dedup();
+    for (i, sch) in schedules.iter().enumerate() {
+        let c = PALETTE[i % PALETTE.len()];
+        let mine: Vec<(f64, f64)> = pts
+            .iter()
+            .filter(|p| &p.2 == sch)
+            .map(|p| (p.0, p.1.max(ylo)))
+            .collect();
+        chart
+            .draw_series(mine.iter().map(|&p| Circle::new(p, 5, c.filled())))
+            .map_err(err)?
+            .label(sch.as_str())
+            .legend(move |(x, y)| Circle::new((x + 8, y), 5, c.filled()));
+        chart
+            .draw_series(LineSeries::new(pareto_front(&mine), c.stroke_width(2)))
+            .map_err(err)?;
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 16))
+        .draw()
+        .map_err(err)?;
+    root.present().map_err(err)?;
+    Ok(())
+}
+
+fn status_colour(status: &str) -> RGBColor {
+    match status {
+        "completed" => RGBColor(0x2c, 0xa0, 0x2c),
+        "unstable" => RGBColor(0xd6, 0x27, 0x28),
+        "refused" => RGBColor(0x99, 0x99, 0x99),
+        _ => RGBColor(0xff, 0x7f, 0x0e),
+    }
+}
+
+fn stability_png(path: &Path, outcomes: &[Outcome], vars: &[Variation]) -> anyhow::Result<()> {
+    // grid: columns = values of the first key, rows = combinations of the others
+    let key0 = vars.first().map(|v| v.key.clone()).unwrap_or_default();
+    let cols: Vec<String> = vars
+        .first()
+        .map(|v| v.values.iter().map(value_text).collect())
+        .unwrap_or_default();
+    let row_of = |o: &Outcome| -> String {
+        o.variant
+            .settings
+            .iter()
+            .skip(1)
+            .map(|(k, v)| format!("{k}={}", value_text(v)))
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
+    let mut rows: Vec<String> = outcomes.iter().map(row_of).collect();
+    rows.dedup();
+    let mut seen = std::collections::BTreeSet::new();
+    rows.retain(|r| seen.insert(r.clone()));
+    let (cw, rh, left, top) = (110i32, 34i32, 330i32, 70i32);
+    let w = (left + cw * cols.len().max(1) as i32 + 20) as u32;
+    let h = (top + rh * rows.len().max(1) as i32 + 60) as u32;
+    let root = BitMapBackend::new(path, (w.max(640), h)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let font = |s| ("sans-serif", s).into_font();
+    root.draw(&Text::new(
+        format!("Stability map ({key0} across)"),
+        (10, 10),
+        font(20),
+    ))
+    .map_err(err)?;
+    for (j, c) in cols.iter().enumerate() {
+        root.draw(&Text::new(
+            c.clone(),
+            (left + cw * j as i32 + 6, top - 24),
+            font(14),
+        ))
+        .map_err(err)?;
+    }
+    for (i, r) in rows.iter().enumerate() {
+        let y = top + rh * i as i32;
+        root.draw(&Text::new(
+            if r.is_empty() { "runs".into() } else { r.clone() },
+            (10, y + 9),
+            font(14),
+        ))
+        .map_err(err)?;
+        for o in outcomes.iter().filter(|o| &row_of(o) == r) {
+            let j = o
+                .variant
+                .settings
+                .first()
+                .and_then(|(_, v)| cols.iter().position(|c| *c == value_text(v)))
+                .unwrap_or(0) as i32;
+            let x = left + cw * j;
+            root.draw(&Rectangle::new(
+                [(x + 2, y + 2), (x + cw - 2, y + rh - 2)],
+                status_colour(&o.status).filled(),
+            ))
+            .map_err(err)?;
+            root.draw(&Text::new(
+                o.status.clone(),
+                (x + 8, y + 9),
+                ("sans-serif", 14).into_font().color(&WHITE),
+            ))
+            .map_err(err)?;
+        }
+    }
+    root.present().map_err(err)?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_pareto_front_keeps_only_undominated_points() {
+        let f = pareto_front(&[(1.0, 0.1), (2.0, 0.2), (3.0, 0.01), (0.5, 1.0), (4.0, 0.01)]);
+        assert_eq!(f, vec![(0.5, 1.0), (1.0, 0.1), (3.0, 0.01)]);
+    }
+}
