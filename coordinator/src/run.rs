@@ -391,6 +391,11 @@ impl Run<'_> {
                     stability.mesh_size =
                         Some(stability.mesh_size.map_or(size, |s: f64| s.min(size)));
                 }
+                if matches!(scene.schedule, ScheduleKind::Jit | ScheduleKind::Predictive) {
+                    if let Some(r) = self.limit("dem", "particle_radius_min") {
+                        stability.step_limit = Some((scene.window, r));
+                    }
+                }
                 (scheduler, stability, actions, String::new())
             }
             Some((dir, state)) => {

@@ -12,6 +12,11 @@ pub struct StabilityMonitor {
     last_force: std::collections::BTreeMap<String, f64>,
     /// A length scale of the interface (its bounding-box diagonal), for the drift check.
     pub mesh_size: Option<f64>,
+    /// `(window length, smallest particle radius)`: an interface moving more than half a
+    /// particle radius in one window no longer resolves its contacts (the coupled system has
+    /// diverged even when no force has run away yet).
+    #[serde(default)]
+    pub step_limit: Option<(f64, f64)>,
     reference_centre: std::collections::BTreeMap<String, [f64; 3]>,
 }
 
@@ -55,6 +60,7 @@ impl StabilityMonitor {
             peak_force: Default::default(),
             last_force: Default::default(),
             mesh_size: None,
+            step_limit: None,
             reference_centre: Default::default(),
         }
     }
@@ -93,6 +99,15 @@ impl StabilityMonitor {
                     .reference_centre
                     .entry(d.interface.clone())
                     .or_insert(d.total);
+                if let Some((window, radius)) = self.step_limit {
+                    let step = d.max_norm * window;
+                    if step > 0.5 * radius {
+                        return fail(format!(
+                            "a node of interface `{}` moves at {:.3e} m/s: {step:.3e} m in one window of {window:.3e} s, more than half the smallest particle radius ({radius:.3e} m); the coupling diverges — reduce the coupling window or use the predictive schedule",
+                            d.interface, d.max_norm
+                        ));
+                    }
+                }
                 if let Some(size) = self.mesh_size {
                     let drift = ((0..3)
                         .map(|i| (d.total[i] - centre[i]).powi(2))
@@ -126,6 +141,24 @@ mod tests {
             total: [0.0, 0.0, f],
             non_finite: None,
         }
+    }
+
+    #[test]
+    fn an_interface_outrunning_the_particles_stops_the_run() {
+        let mut m = StabilityMonitor::new(1e3);
+        m.step_limit = Some((1e-4, 0.01));
+        let k = |speed: f64| Digest {
+            interface: "bottom".into(),
+            window: 7,
+            time: 7e-4,
+            kind: "kinematics",
+            max_norm: speed,
+            total: [0.0; 3],
+            non_finite: None,
+        };
+        assert!(m.observe(&k(49.0)).is_none());
+        let e = m.observe(&k(51.0)).unwrap();
+        assert!(e.cause.contains("half the smallest particle radius"), "{e}");
     }
 
     #[test]
