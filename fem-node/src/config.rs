@@ -53,6 +53,9 @@ pub struct FemConfig {
     /// Points whose displacement is reported (CSV, summary).
     #[serde(default)]
     pub probes: Vec<Probe>,
+    /// Strain maxima reported each output (CSV, summary).
+    #[serde(default)]
+    pub strain_gauges: Vec<StrainGauge>,
     #[serde(default)]
     pub output: Output,
 }
@@ -392,6 +395,18 @@ pub struct Probe {
     pub point: Option<[f64; 3]>,
 }
 
+/// `[[fem.strain_gauges]]`: the largest strains over a part of the mesh (default all of it),
+/// reported as `strain.<name>.max_principal`, `.min_principal`, `.von_mises`.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct StrainGauge {
+    pub name: String,
+    /// Elements whose nodes are all selected (a `set` naming an element set selects its
+    /// elements); default every element.
+    #[serde(default)]
+    pub on: Option<Selector>,
+}
+
 /// `[fem.output]`.
 #[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
@@ -668,6 +683,18 @@ impl FemConfig {
                     format!("fem.probes[{i}]"),
                     "give exactly one of node (file id) or point [m]".into(),
                 ));
+            }
+        }
+        let mut names = std::collections::BTreeSet::new();
+        for (i, g) in self.strain_gauges.iter().enumerate() {
+            if g.name.is_empty() || !names.insert(g.name.clone()) {
+                return Err((
+                    format!("fem.strain_gauges[{i}].name"),
+                    format!("strain gauge name '{}' is empty or repeated", g.name),
+                ));
+            }
+            if let Some(on) = &g.on {
+                check_selector(on, &format!("fem.strain_gauges[{i}].on"))?;
             }
         }
         Ok(())

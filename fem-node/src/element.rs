@@ -644,20 +644,24 @@ pub fn volume(kind: ElementKind, x: &[[f64; 3]]) -> Result<f64, BadJacobian> {
     Ok(w.iter().sum())
 }
 
-/// Mean Cauchy stress over the element's integration points, Voigt order
-/// (xx, yy, zz, xy, yz, zx), from σ = λ tr ε I + 2 μ ε (2.37).
-pub fn mean_stress(
+/// Displacement gradients at the integration points and their weights w_q det J_q.
+pub type PointGradients = (Vec<[[f64; 3]; 3]>, Vec<f64>);
+
+/// Displacement gradients H_ij = ∂u_i/∂x_j at the element's stiffness integration points,
+/// with their weights w_q det J_q. For the incompatible hex the condensed internal modes
+/// α = −K_ii⁻¹ K_ic u are recovered and their gradients added, so that the strain is the one
+/// the element's stiffness saw.
+pub fn point_gradients(
     kind: ElementKind,
     x: &[[f64; 3]],
     u: &[[f64; 3]],
     mat: Lame,
-) -> Result<[f64; 6], BadJacobian> {
+) -> Result<PointGradients, BadJacobian> {
     let nn = kind.num_nodes();
     let tab = stiffness_rule(kind);
     let mut g = Vec::new();
     let mut w = Vec::new();
     gradients(tab, x, &mut g, &mut w)?;
-    // For the incompatible hex, recover the condensed internal modes α = −K_ii⁻¹ K_ic u.
     let mut bub_amp = [[0.0; 3]; 3];
     let mut bub = Vec::new();
     if kind == ElementKind::Hex8i {
@@ -674,10 +678,8 @@ pub fn mean_stress(
         }
         bub = hex8i_bubble_gradients(x, tab, &w);
     }
-    let mut acc = [0.0; 6];
-    let vol: f64 = w.iter().sum();
+    let mut out = Vec::with_capacity(w.len());
     for q in 0..w.len() {
-        // Displacement gradient H_ij = ∂u_i/∂x_j
         let mut h = [[0.0; 3]; 3];
         for a in 0..nn {
             let ga = g[q * nn + a];
@@ -697,12 +699,72 @@ pub fn mean_stress(
                 }
             }
         }
-        let s = stress_from_gradient(&h, mat);
+        out.push(h);
+    }
+    Ok((out, w))
+}
+
+/// Mean Cauchy stress over the element's integration points, Voigt order
+/// (xx, yy, zz, xy, yz, zx), from σ = λ tr ε I + 2 μ ε (2.37).
+pub fn mean_stress(
+    kind: ElementKind,
+    x: &[[f64; 3]],
+    u: &[[f64; 3]],
+    mat: Lame,
+) -> Result<[f64; 6], BadJacobian> {
+    let (h, w) = point_gradients(kind, x, u, mat)?;
+    let vol: f64 = w.iter().sum();
+    let mut acc = [0.0; 6];
+    for (hq, wq) in h.iter().zip(&w) {
+        let s = stress_from_gradient(hq, mat);
         for c in 0..6 {
-            acc[c] += s[c] * w[q] / vol;
+            acc[c] += s[c] * wq / vol;
         }
     }
     Ok(acc)
+}
+
+/// Small-strain tensor ε = ½(H + Hᵀ) (2.32) at each stiffness integration point, as
+/// (xx, yy, zz, xy, yz, zx) tensor components (not engineering shear).
+pub fn point_strains(
+    kind: ElementKind,
+    x: &[[f64; 3]],
+    u: &[[f64; 3]],
+    mat: Lame,
+) -> Result<Vec<[f64; 6]>, BadJacobian> {
+    let (h, _) = point_gradients(kind, x, u, mat)?;
+    Ok(h.iter().map(strain_from_gradient).collect())
+}
+
+/// ε = ½(H + Hᵀ) as (xx, yy, zz, xy, yz, zx) tensor components.
+pub fn strain_from_gradient(h: &[[f64; 3]; 3]) -> [f64; 6] {
+    [
+        h[0][0],
+        h[1][1],
+        h[2][2],
+        0.5 * (h[0][1] + h[1][0]),
+        0.5 * (h[1][2] + h[2][1]),
+        0.5 * (h[2][0] + h[0][2]),
+    ]
+}
+
+/// Principal values of a symmetric tensor given as (xx, yy, zz, xy, yz, zx), ascending.
+pub fn principal_values(t: &[f64; 6]) -> [f64; 3] {
+    let m = Matrix3::new(t[0], t[3], t[5], t[3], t[1], t[4], t[5], t[4], t[2]);
+    let e = m.symmetric_eigenvalues();
+    let mut v = [e[0], e[1], e[2]];
+    v.sort_by(f64::total_cmp);
+    v
+}
+
+/// Von Mises equivalent strain ε_eq = √(⅔ e:e), e = ε − ⅓ tr ε I (tensor components):
+/// equals the axial strain in incompressible uniaxial tension, (2/3)(1+ν) ε for a linear
+/// elastic bar.
+pub fn von_mises_strain(e: &[f64; 6]) -> f64 {
+    let m = (e[0] + e[1] + e[2]) / 3.0;
+    let (a, b, c) = (e[0] - m, e[1] - m, e[2] - m);
+    let ee = a * a + b * b + c * c + 2.0 * (e[3] * e[3] + e[4] * e[4] + e[5] * e[5]);
+    (2.0 / 3.0 * ee).sqrt()
 }
 
 /// σ (Voigt xx,yy,zz,xy,yz,zx) from the displacement gradient, eqs. (2.32), (2.37).

@@ -35,6 +35,10 @@ struct State {
     steps: u64,
     windows: u64,
     csv_started: bool,
+    /// Per strain gauge, the extremes over all outputs so far: largest max-principal strain,
+    /// smallest min-principal strain, largest von Mises strain. (Absent in older snapshots.)
+    #[serde(default)]
+    strain_peaks: Vec<[f64; 3]>,
 }
 
 struct LoadVector {
@@ -47,6 +51,7 @@ struct LoadVector {
 pub struct Model {
     mesh: Mesh,
     mat: Lame,
+    poisson_ratio: f64,
     rho: f64,
     analysis: Analysis,
     dofs: DofMap,
@@ -64,9 +69,12 @@ pub struct Model {
     boundary: Boundary,
     iface: Interface,
     probes: Vec<(String, u32)>,
+    /// Strain gauges: name and the elements they watch.
+    gauges: Vec<(String, Vec<u32>)>,
     output: Output,
     st: State,
     crit: OnceLock<Option<f64>>,
+    lumped_max_eigenvalue: OnceLock<Option<f64>>,
     vtu_files: Vec<(f64, String)>,
 }
 
@@ -266,6 +274,12 @@ impl Model {
             probes.push((p.name.clone(), node));
         }
 
+        let mut gauges = Vec::new();
+        for (i, g) in cfg.strain_gauges.iter().enumerate() {
+            let elements = gauge_elements(&mesh, g.on.as_ref(), i)?;
+            gauges.push((g.name.clone(), elements));
+        }
+
         let n_iface = iface.nodes.len();
         Ok(Model {
             st: State {
@@ -281,9 +295,11 @@ impl Model {
                 steps: 0,
                 windows: 0,
                 csv_started: false,
+                strain_peaks: vec![NO_PEAK; gauges.len()],
             },
             mesh,
             mat,
+            poisson_ratio: cfg.material.poisson_ratio,
             rho,
             analysis: cfg.analysis.clone(),
             dofs,
@@ -301,8 +317,10 @@ impl Model {
             boundary,
             iface,
             probes,
+            gauges,
             output: cfg.output.clone(),
             crit: OnceLock::new(),
+            lumped_max_eigenvalue: OnceLock::new(),
             vtu_files: Vec::new(),
         })
     }
@@ -445,6 +463,139 @@ impl Model {
         })
     }
 
+    /// The model's own stability and sizing figures for the coordinator's up-front checks
+    /// (the `limits` of the node's ready message; keys in FEM.md):
+    /// `dofs`, `critical_time_step`, `interface_nodes`, `interface_node_mass_min`,
+    /// `interface_node_mass_mean` [kg], `structure_mass` [kg], and for dynamic and explicit
+    /// analyses `highest_frequency_hz` and (up to `LOWEST_FREQUENCY_MAX_EQUATIONS` free dofs)
+    /// `lowest_frequency_hz`.
+    pub fn limits(&mut self) -> Result<BTreeMap<String, f64>, FemError> {
+        let mut l = BTreeMap::from([
+            ("dofs".to_string(), self.num_dofs() as f64),
+            ("structure_mass".to_string(), self.total_mass()),
+            ("interface_nodes".to_string(), self.iface.nodes.len() as f64),
+        ]);
+        if let Some(dt) = self.critical_time_step() {
+            l.insert("critical_time_step".to_string(), dt);
+        }
+        let masses = self.interface_node_masses();
+        if !masses.is_empty() {
+            let min = masses.iter().copied().fold(f64::INFINITY, f64::min);
+            let mean = masses.iter().sum::<f64>() / masses.len() as f64;
+            l.insert("interface_node_mass_min".to_string(), min);
+            l.insert("interface_node_mass_mean".to_string(), mean);
+        }
+        if !matches!(self.analysis, Analysis::Static) {
+            if let Some(f) = self.highest_frequency_hz()? {
+                l.insert("highest_frequency_hz".to_string(), f);
+            }
+            if self.dofs.n_eq <= LOWEST_FREQUENCY_MAX_EQUATIONS {
+                if let Some(f) = self.lowest_frequency_hz()? {
+                    l.insert("lowest_frequency_hz".to_string(), f);
+                }
+            }
+        }
+        Ok(l)
+    }
+
+    /// Warnings about the scene that do not stop it (shown by the coordinator): elements that
+    /// lock volumetrically at the scene's Poisson ratio (measured table in FEM.md).
+    pub fn warnings(&self) -> Vec<String> {
+        let nu = self.poisson_ratio;
+        let mut out = Vec::new();
+        if nu <= LOCKING_POISSON_RATIO {
+            return out;
+        }
+        let has = |k: element::ElementKind| self.mesh.kinds.contains(&k);
+        if has(element::ElementKind::Tet4) {
+            out.push(format!(
+                "fem.material.poisson_ratio = {nu}: linear tetrahedra (tet4, C3D4) lock \
+                 volumetrically above ν = {LOCKING_POISSON_RATIO} (in pure bending 3.6× too stiff \
+                 at ν = 0.49, 15× at 0.499; FEM.md); use tet10 (C3D10)"
+            ));
+        }
+        if has(element::ElementKind::Hex8) {
+            out.push(format!(
+                "fem.material.poisson_ratio = {nu}: fully integrated hexahedra (hex8, C3D8) lock \
+                 volumetrically above ν = {LOCKING_POISSON_RATIO} (in pure bending 17 % too stiff \
+                 at ν = 0.49, 33 % at 0.499; FEM.md); use hex8i (mesh = {{ file = ..., hex8 = \
+                 \"incompatible\" }} or element = \"hex8i\") or hex20"
+            ));
+        }
+        out
+    }
+
+    /// Lumped (HRZ) nodal masses of the interface nodes [kg], in interface node order: the
+    /// mass a DEM contact pushes against.
+    pub fn interface_node_masses(&self) -> Vec<f64> {
+        self.iface
+            .nodes
+            .iter()
+            .map(|&n| self.m_lumped[3 * n as usize])
+            .collect()
+    }
+
+    /// Lowest natural frequency f₁ = ω₁/2π [Hz] of K φ = ω² M φ with the analysis' mass
+    /// (consistent unless lumped; lumped for static and explicit analyses): Lanczos on K⁻¹M
+    /// in the M inner product, one solve with a Cholesky factor of K per step. None when
+    /// nothing is free. Factorises K once (not kept unless the analysis is static).
+    pub fn lowest_frequency_hz(&mut self) -> Result<Option<f64>, FemError> {
+        let n = self.dofs.n_eq;
+        if n == 0 {
+            return Ok(None);
+        }
+        let local;
+        let factor = match &self.k_factor {
+            Some(f) => f,
+            None => {
+                local = Factor::new(&self.pattern, &self.k, &mut self.symbolic)?;
+                &local
+            }
+        };
+        let theta = lanczos_largest(
+            n,
+            |x, y| {
+                y.copy_from_slice(x);
+                factor.solve_in_place(y);
+            },
+            |x, y| self.mass_mul(x, y),
+            true,
+            80,
+            1e-10,
+        );
+        Ok((theta > 0.0).then(|| (1.0 / theta).sqrt() / (2.0 * std::f64::consts::PI)))
+    }
+
+    /// Highest natural frequency f_max = ω_max/2π [Hz] of the discrete model with the
+    /// analysis' mass (Lanczos; with a consistent mass, on M⁻¹K using a Cholesky factor of M).
+    /// None when nothing is free.
+    pub fn highest_frequency_hz(&mut self) -> Result<Option<f64>, FemError> {
+        let lam = match &self.m_consistent {
+            None => self.max_eigenvalue(),
+            Some(m) => {
+                if self.dofs.n_eq == 0 {
+                    return Ok(None);
+                }
+                if self.m_factor.is_none() {
+                    self.m_factor = Some(Factor::new(&self.pattern, m, &mut self.symbolic)?);
+                }
+                let mf = self.m_factor.as_ref().expect("set");
+                Some(lanczos_largest(
+                    self.dofs.n_eq,
+                    |x, y| {
+                        self.pattern.mul(&self.k, x, y);
+                        mf.solve_in_place(y);
+                    },
+                    |x, y| self.mass_mul(x, y),
+                    false,
+                    300,
+                    1e-8,
+                ))
+            }
+        };
+        Ok(lam.map(|l| l.max(0.0).sqrt() / (2.0 * std::f64::consts::PI)))
+    }
+
     /// MessagePack bytes of the time-dependent state.
     pub fn snapshot(&self) -> Vec<u8> {
         rmp_serde::to_vec(&self.st).expect("state serialises")
@@ -476,6 +627,10 @@ impl Model {
             )));
         }
         self.st = st;
+        if self.st.strain_peaks.len() != self.gauges.len() {
+            // a snapshot from before strain gauges existed, or of a scene without them
+            self.st.strain_peaks = vec![NO_PEAK; self.gauges.len()];
+        }
         Ok(())
     }
 
@@ -488,7 +643,15 @@ impl Model {
         };
         std::fs::create_dir_all(out_dir).map_err(|e| io(e, out_dir))?;
         self.st.windows += 1;
-        if self.output.csv && !self.probes.is_empty() {
+        let strains = self.gauge_strains();
+        for (peak, now) in self.st.strain_peaks.iter_mut().zip(&strains) {
+            *peak = [
+                peak[0].max(now[0]),
+                peak[1].min(now[1]),
+                peak[2].max(now[2]),
+            ];
+        }
+        if self.output.csv && !(self.probes.is_empty() && self.gauges.is_empty()) {
             let path = out_dir.join("fem_probes.csv");
             let mut text = String::new();
             if !self.st.csv_started {
@@ -498,6 +661,11 @@ impl Model {
                         text.push_str(&format!(",probe.{name}.{c}"));
                     }
                 }
+                for (name, _) in &self.gauges {
+                    for q in STRAIN_QUANTITIES {
+                        text.push_str(&format!(",strain.{name}.{q}"));
+                    }
+                }
                 text.push('\n');
             }
             text.push_str(&format!("{:.9e}", self.st.time));
@@ -505,6 +673,9 @@ impl Model {
                 for c in 0..3 {
                     text.push_str(&format!(",{:.9e}", self.st.u[3 * n as usize + c]));
                 }
+            }
+            for v in strains.iter().flatten() {
+                text.push_str(&format!(",{v:.9e}"));
             }
             text.push('\n');
             output::append(&path, &text, !self.st.csv_started).map_err(|e| io(e, &path))?;
@@ -552,6 +723,22 @@ impl Model {
             })
             .fold(0.0, f64::max);
         r.push(("max_displacement".to_string(), umax));
+        let strains = self.gauge_strains();
+        for ((name, _), (now, peak)) in self
+            .gauges
+            .iter()
+            .zip(strains.iter().zip(&self.st.strain_peaks))
+        {
+            let peak = [
+                peak[0].max(now[0]),
+                peak[1].min(now[1]),
+                peak[2].max(now[2]),
+            ];
+            for (k, q) in STRAIN_QUANTITIES.iter().enumerate() {
+                r.push((format!("strain.{name}.{q}"), now[k]));
+                r.push((format!("strain.{name}.{q}.peak"), peak[k]));
+            }
+        }
         if let Some(Some(dt)) = self.crit.get() {
             r.push(("critical_time_step".to_string(), *dt));
         }
@@ -693,6 +880,74 @@ impl Model {
                     })
                     .collect();
                 element::mean_stress(self.mesh.kinds[e], &x, &u, self.mat).unwrap_or([f64::NAN; 6])
+            })
+            .collect()
+    }
+    /// Per strain gauge (in scene order): name and the current [largest max-principal strain,
+    /// smallest min-principal strain, largest von Mises equivalent strain] over its elements'
+    /// integration points.
+    pub fn strain_gauges(&self) -> Vec<(String, [f64; 3])> {
+        self.gauges
+            .iter()
+            .map(|(n, _)| n.clone())
+            .zip(self.gauge_strains())
+            .collect()
+    }
+    /// Per element: [max principal, min principal, max von Mises] strain over its integration
+    /// points (NaN for an element that cannot be integrated).
+    pub fn element_strain_extremes(&self, elements: &[u32]) -> Vec<[f64; 3]> {
+        elements
+            .par_iter()
+            .map(|&e| {
+                let e = e as usize;
+                let mut x = Vec::new();
+                self.mesh.element_coords(e, &mut x);
+                let u: Vec<[f64; 3]> = self
+                    .mesh
+                    .element_nodes(e)
+                    .iter()
+                    .map(|&n| {
+                        let d = 3 * n as usize;
+                        [self.st.u[d], self.st.u[d + 1], self.st.u[d + 2]]
+                    })
+                    .collect();
+                match element::point_strains(self.mesh.kinds[e], &x, &u, self.mat) {
+                    Ok(eps) => eps.iter().fold(NO_PEAK, |acc, ep| {
+                        let p = element::principal_values(ep);
+                        [
+                            acc[0].max(p[2]),
+                            acc[1].min(p[0]),
+                            acc[2].max(element::von_mises_strain(ep)),
+                        ]
+                    }),
+                    Err(_) => [f64::NAN; 3],
+                }
+            })
+            .collect()
+    }
+    fn gauge_strains(&self) -> Vec<[f64; 3]> {
+        self.gauges
+            .iter()
+            .map(|(_, elements)| {
+                self.element_strain_extremes(elements)
+                    .iter()
+                    .fold(NO_PEAK, |acc, v| {
+                        // NaN (a collapsed element) propagates: it must not hide as a maximum
+                        let pick = |a: f64, b: f64, hi: bool| {
+                            if a.is_nan() || b.is_nan() {
+                                f64::NAN
+                            } else if hi {
+                                a.max(b)
+                            } else {
+                                a.min(b)
+                            }
+                        };
+                        [
+                            pick(acc[0], v[0], true),
+                            pick(acc[1], v[1], false),
+                            pick(acc[2], v[2], true),
+                        ]
+                    })
             })
             .collect()
     }
@@ -1007,8 +1262,15 @@ impl Model {
         Ok(())
     }
 
-    /// Largest eigenvalue of M_L⁻¹ K by Lanczos on the symmetric M_L^{-½} K M_L^{-½}.
+    /// Largest eigenvalue of M_L⁻¹ K (computed once).
     fn max_eigenvalue(&self) -> Option<f64> {
+        *self
+            .lumped_max_eigenvalue
+            .get_or_init(|| self.compute_max_eigenvalue())
+    }
+
+    /// Largest eigenvalue of M_L⁻¹ K by Lanczos on the symmetric M_L^{-½} K M_L^{-½}.
+    fn compute_max_eigenvalue(&self) -> Option<f64> {
         let n = self.dofs.n_eq;
         if n == 0 {
             return None;
@@ -1114,6 +1376,115 @@ impl Model {
         }
         out
     }
+}
+
+/// Poisson ratio above which tet4 and full-integration hex8 meshes draw a locking warning.
+pub const LOCKING_POISSON_RATIO: f64 = 0.45;
+
+/// Above this many free dofs, `limits` skips the lowest frequency (a Cholesky factor of K and
+/// tens of solves).
+pub const LOWEST_FREQUENCY_MAX_EQUATIONS: usize = 200_000;
+
+/// Largest eigenvalue θ of an operator A that is self-adjoint in the M inner product
+/// (K⁻¹M or M⁻¹K), by Lanczos with the M-norm; `apply` computes y = A x given x. With
+/// `apply_to_mass`, `apply` receives M x instead of x (A = K⁻¹M reuses the product).
+fn lanczos_largest(
+    n: usize,
+    mut apply: impl FnMut(&[f64], &mut [f64]),
+    mass_mul: impl Fn(&[f64], &mut [f64]),
+    apply_to_mass: bool,
+    max_it: usize,
+    tol: f64,
+) -> f64 {
+    // deterministic pseudo-random start vector
+    let mut seed = 0x2545_F491_4F6C_DD1Du64;
+    let mut q: Vec<f64> = (0..n)
+        .map(|_| {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        })
+        .collect();
+    let mut mq = vec![0.0; n];
+    mass_mul(&q, &mut mq);
+    let nq = dot(&q, &mq).sqrt();
+    q.iter_mut().for_each(|x| *x /= nq);
+    mq.iter_mut().for_each(|x| *x /= nq);
+    let mut q_prev = vec![0.0; n];
+    let (mut w, mut mw) = (vec![0.0; n], vec![0.0; n]);
+    let (mut alphas, mut betas) = (Vec::new(), Vec::new());
+    let mut beta = 0.0;
+    let mut last = f64::NAN;
+    for it in 0..max_it.min(n) {
+        apply(if apply_to_mass { &mq } else { &q }, &mut w);
+        for i in 0..n {
+            w[i] -= beta * q_prev[i];
+        }
+        // ⟨q, w⟩_M = (M q)·w
+        let alpha = dot(&mq, &w);
+        for i in 0..n {
+            w[i] -= alpha * q[i];
+        }
+        alphas.push(alpha);
+        mass_mul(&w, &mut mw);
+        let b = dot(&w, &mw).max(0.0).sqrt();
+        let done = b <= 1e-13 * alpha.abs();
+        if (it + 1) % 5 == 0 || done || it + 1 == max_it.min(n) {
+            let top = tridiagonal_max_eigenvalue(&alphas, &betas);
+            if done || (top - last).abs() <= tol * top.abs() {
+                return top;
+            }
+            last = top;
+        }
+        betas.push(b);
+        std::mem::swap(&mut q_prev, &mut q);
+        for i in 0..n {
+            q[i] = w[i] / b;
+            mq[i] = mw[i] / b;
+        }
+        beta = b;
+    }
+    tridiagonal_max_eigenvalue(&alphas, &betas)
+}
+
+/// Column/result names of a strain gauge's three quantities.
+const STRAIN_QUANTITIES: [&str; 3] = ["max_principal", "min_principal", "von_mises"];
+/// Neutral element of the [max, min, max] strain reductions.
+const NO_PEAK: [f64; 3] = [f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY];
+
+/// Elements of a strain gauge: a `set` naming an element set gives its elements; otherwise
+/// the elements whose nodes are all selected; no selector means every element.
+fn gauge_elements(
+    mesh: &Mesh,
+    on: Option<&crate::config::Selector>,
+    i: usize,
+) -> Result<Vec<u32>, FemError> {
+    let what = format!("fem.strain_gauges[{i}].on");
+    let Some(sel) = on else {
+        return Ok((0..mesh.num_elements() as u32).collect());
+    };
+    if let Some(set) = sel.set.as_ref().and_then(|name| mesh.elem_set(name)) {
+        if !set.is_empty() {
+            return Ok(set.clone());
+        }
+    }
+    let nodes = surface::select_nodes(mesh, sel, &what)?;
+    let mut mark = vec![false; mesh.num_nodes()];
+    for n in nodes {
+        mark[n as usize] = true;
+    }
+    let elements: Vec<u32> = (0..mesh.num_elements())
+        .filter(|&e| mesh.element_nodes(e).iter().all(|&n| mark[n as usize]))
+        .map(|e| e as u32)
+        .collect();
+    if elements.is_empty() {
+        return Err(FemError::Selection(format!(
+            "{what}: selects nodes but no whole element of {} (an element counts when all its nodes are selected)",
+            mesh.source
+        )));
+    }
+    Ok(elements)
 }
 
 fn gravity_loads(mesh: &Mesh, rho: f64, g: [f64; 3], f: &mut [f64]) -> Result<(), FemError> {

@@ -41,6 +41,25 @@ fn invalid_poisson_ratio_names_field_and_line() {
     assert!(e.to_string().starts_with("line 13, column "));
 }
 
+/// ν ≥ ½ (incompressible: λ infinite) and ν ≤ −1 (G infinite or negative) are refused with the
+/// field and its line; ν = 0.499 is accepted.
+#[test]
+fn poisson_ratio_outside_open_interval_is_refused_with_its_line() {
+    for bad in ["0.5", "0.7", "-1.0", "-1.5"] {
+        let text = BEAM.replace("poisson_ratio = 0.3", &format!("poisson_ratio = {bad}"));
+        let e = fem::parse_scene_section(&text).unwrap_err();
+        assert!(
+            e.message.contains("fem.material.poisson_ratio")
+                && e.message
+                    .contains(&format!("got {}", bad.parse::<f64>().unwrap())),
+            "{e}"
+        );
+        assert_eq!(e.line, 13, "{e}");
+    }
+    let text = BEAM.replace("poisson_ratio = 0.3", "poisson_ratio = 0.499");
+    assert!(fem::parse_scene_section(&text).unwrap().is_some());
+}
+
 #[test]
 fn unknown_field_is_reported_at_its_line() {
     let text = BEAM.replace("density = 7800.0", "density = 7800.0\ndensty = 1.0");

@@ -174,7 +174,7 @@ impl Solver for FemNode {
     ) -> Result<(BTreeMap<String, f64>, Vec<String>), NodeError> {
         let cfg = init.scene_table("fem", fem::parse_scene_section)?;
         let base = init.scene_dir();
-        let model = Model::from_config(&cfg, base)
+        let mut model = Model::from_config(&cfg, base)
             .map_err(|e| scene_error(format!("{}: {e}", init.scene_path)))?;
         self.config = Some((cfg.clone(), base.to_path_buf()));
         self.out_dir = init.node_out_dir("fem")?;
@@ -200,12 +200,12 @@ impl Solver for FemNode {
             p.provide_mesh(&mesh).await?;
             p.wait_for_peers(self.data_timeout).await?;
         }
-        let mut limits = BTreeMap::from([("dofs".to_string(), model.num_dofs() as f64)]);
-        if let Some(dt) = model.critical_time_step() {
-            limits.insert("critical_time_step".to_string(), dt);
-        }
+        let limits = model
+            .limits()
+            .map_err(|e| scene_error(format!("{}: {e}", init.scene_path)))?;
+        let warnings = model.warnings();
         self.model = Some(model);
-        Ok((limits, Vec::new()))
+        Ok((limits, warnings))
     }
 
     async fn advance(
