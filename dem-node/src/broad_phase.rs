@@ -70,6 +70,9 @@ pub struct NeighbourLists {
     pub walls: Vec<WallCandidate>,
     pub wall_contacts: Vec<WallContact>,
     pub position_at_build: Vec<V3>,
+    /// Displacement of each prescribed-motion wall at the last build (rebuild when one moved
+    /// d_V/2 since, eq. 4.10 for a rigid translation).
+    pub wall_shift_at_build: Vec<V3>,
     pub builds: u64,
     pub valid: bool,
     /// Pairs whose partner lies in a later block ("cross pairs"), derived from the pair list
@@ -354,12 +357,12 @@ pub fn rebuild(
     let mut old_walls: Vec<(u32, u32, u32, V3)> = Vec::new();
     if lists.wall_start.len() >= 2 {
         let n_old = lists.wall_start.len() - 1;
-        for i in 0..n_old.min(n) {
+        for (i, &new) in inverse.iter().enumerate().take(n_old) {
             for k in lists.wall_start[i] as usize..lists.wall_start[i + 1] as usize {
                 let c = &lists.wall_contacts[k];
                 if c.touching() {
                     let w = &lists.walls[k];
-                    old_walls.push((inverse[i], w.wall, w.patch, c.shear));
+                    old_walls.push((new, w.wall, w.patch, c.shear));
                 }
             }
         }
@@ -476,7 +479,7 @@ pub fn rebuild(
             .flat_map_iter(|k| {
                 planes.iter().enumerate().filter_map(move |(w, pl)| {
                     let d = (pos[k] - pl.point).dot(&pl.normal);
-                    (d < rad[k] + skin).then_some((
+                    (pl.active && d < rad[k] + skin).then_some((
                         k as u32,
                         WallCandidate {
                             wall: w as u32,
@@ -489,6 +492,10 @@ pub fn rebuild(
             .collect()
     };
     for (m, mesh) in meshes.iter_mut().enumerate() {
+        if !mesh.active {
+            mesh.positions_at_build.clone_from(&mesh.positions);
+            continue;
+        }
         let found: Vec<Vec<(u32, WallCandidate)>> = (0..mesh.triangles.len())
             .into_par_iter()
             .map(|t| {

@@ -51,9 +51,12 @@ pub struct DemConfig {
     /// Particle sources, `[[dem.particles]]`.
     #[serde(default)]
     pub particles: Vec<ParticleSource>,
-    /// Static walls, `[[dem.walls]]`.
+    /// Static walls, `[[dem.walls]]`, optionally with a prescribed motion.
     #[serde(default)]
     pub walls: Vec<WallConfig>,
+    /// Measurements, `[[dem.sensors]]`.
+    #[serde(default)]
+    pub sensors: Vec<SensorConfig>,
     /// Material of coupled (FEM interface) meshes; required when a coupled mesh is added.
     #[serde(default)]
     pub interface_material: Option<String>,
@@ -198,6 +201,10 @@ pub enum ParticleSource {
         #[serde(default)]
         velocity: [f64; 3],
     },
+    /// Spheres from a CSV file (`path` relative to the scene folder) with the header
+    /// `x,y,z,radius` and optionally `vx,vy,vz` (columns in any order), e.g. a settled bed
+    /// written by `[dem.output] final_particles = true`.
+    File { material: String, path: String },
 }
 
 fn default_seed() -> u64 {
@@ -213,6 +220,10 @@ pub enum WallConfig {
         material: String,
         point: [f64; 3],
         normal: [f64; 3],
+        #[serde(default)]
+        motion: Option<WallMotion>,
+        #[serde(default)]
+        remove_at: Option<f64>,
     },
     /// Axis-aligned box [min, max] as a triangle mesh with inward normals; `open` lists the
     /// faces left out: any of "-x", "+x", "-y", "+y", "-z", "+z".
@@ -222,6 +233,10 @@ pub enum WallConfig {
         max: [f64; 3],
         #[serde(default)]
         open: Vec<String>,
+        #[serde(default)]
+        motion: Option<WallMotion>,
+        #[serde(default)]
+        remove_at: Option<f64>,
     },
     /// Triangle mesh from an ASCII or binary STL file; `path` is relative to the scene file.
     /// Vertices are transformed as `scale · x + offset`.
@@ -232,7 +247,111 @@ pub enum WallConfig {
         scale: f64,
         #[serde(default)]
         offset: [f64; 3],
+        #[serde(default)]
+        motion: Option<WallMotion>,
+        #[serde(default)]
+        remove_at: Option<f64>,
     },
+}
+
+impl WallConfig {
+    /// The wall's prescribed motion and removal time (`motion`, `remove_at`).
+    pub fn kinematics(&self) -> (Option<&WallMotion>, Option<f64>) {
+        match self {
+            WallConfig::Plane {
+                motion, remove_at, ..
+            }
+            | WallConfig::Box {
+                motion, remove_at, ..
+            }
+            | WallConfig::Stl {
+                motion, remove_at, ..
+            } => (motion.as_ref(), *remove_at),
+        }
+    }
+}
+
+/// Prescribed rigid translation of a wall: constant `velocity` during [`start`, `end`], at
+/// rest before and after (`end` absent: moves until the end of the run).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct WallMotion {
+    /// Velocity in m/s.
+    pub velocity: [f64; 3],
+    /// Start time in s, default 0.
+    #[serde(default)]
+    pub start: f64,
+    /// End time in s (> start), default: never stops.
+    #[serde(default)]
+    pub end: Option<f64>,
+}
+
+/// A coordinate axis (the normal of a sensor plane).
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum Axis {
+    X,
+    Y,
+    Z,
+}
+
+impl Axis {
+    /// Index of the axis (x = 0) and of the two in-plane coordinates in increasing order.
+    pub fn indices(self) -> (usize, [usize; 2]) {
+        match self {
+            Axis::X => (0, [1, 2]),
+            Axis::Y => (1, [0, 2]),
+            Axis::Z => (2, [0, 1]),
+        }
+    }
+}
+
+/// `[[dem.sensors]]`: a measurement written to `dem_sensors.csv` and the results.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum SensorConfig {
+    /// Net mass flow rate (kg/s) through the plane `axis = value` in the negative axis
+    /// direction, optionally only inside the rectangle [`min`, `max`] of the two other
+    /// coordinates (in increasing axis order: x → (y, z), y → (x, z), z → (x, y)).
+    Flow {
+        name: String,
+        axis: Axis,
+        value: f64,
+        #[serde(default)]
+        min: Option<[f64; 2]>,
+        #[serde(default)]
+        max: Option<[f64; 2]>,
+    },
+    /// Normal stress (Pa, compression positive) transmitted through the rectangle
+    /// [`min`, `max`] of the plane `axis = value`.
+    Pressure {
+        name: String,
+        axis: Axis,
+        value: f64,
+        min: [f64; 2],
+        max: [f64; 2],
+    },
+    /// Angle of repose (degrees) of a heap around the vertical (z) axis through `centre`:
+    /// highest particle top per radial bin of width `bin_width` (default: the mean particle
+    /// diameter), least-squares line over `r_min` ≤ ρ ≤ `r_max`.
+    Repose {
+        name: String,
+        centre: [f64; 2],
+        r_min: f64,
+        r_max: f64,
+        #[serde(default)]
+        bin_width: Option<f64>,
+    },
+}
+
+impl SensorConfig {
+    pub fn name(&self) -> &str {
+        match self {
+            SensorConfig::Flow { name, .. }
+            | SensorConfig::Pressure { name, .. }
+            | SensorConfig::Repose { name, .. } => name,
+        }
+    }
 }
 
 /// `[dem.output]`.
@@ -245,6 +364,9 @@ pub struct OutputConfig {
     /// Append a row to `dem_timeseries.csv` at every `write_outputs` call.
     #[serde(default = "default_true")]
     pub csv: bool,
+    /// Write `particles_final.csv` (the `kind = "file"` format) at the end of the run.
+    #[serde(default)]
+    pub final_particles: bool,
 }
 
 impl Default for OutputConfig {
@@ -252,6 +374,7 @@ impl Default for OutputConfig {
         OutputConfig {
             vtk_every: 0,
             csv: true,
+            final_particles: false,
         }
     }
 }
@@ -424,7 +547,7 @@ impl DemConfig {
                             format!("must be >= 2 * radius = {}, got {spacing}", 2.0 * radius),
                         );
                     }
-                    if count.iter().any(|&n| n == 0) {
+                    if count.contains(&0) {
                         c.fail(
                             f("count"),
                             format!("all counts must be >= 1, got {count:?}"),
@@ -505,6 +628,12 @@ impl DemConfig {
                         }
                     }
                 }
+                ParticleSource::File { material, path } => {
+                    c.material(f("material"), material, self);
+                    if path.is_empty() {
+                        c.fail(f("path"), "must name a CSV file".into());
+                    }
+                }
             }
         }
         for (k, w) in self.walls.iter().enumerate() {
@@ -514,6 +643,7 @@ impl DemConfig {
                     material,
                     point,
                     normal,
+                    ..
                 } => {
                     c.material(f("material"), material, self);
                     c.finite3(f("point"), point);
@@ -530,9 +660,12 @@ impl DemConfig {
                     min,
                     max,
                     open,
+                    ..
                 } => {
                     c.material(f("material"), material, self);
-                    if (0..3).any(|a| !(max[a] > min[a])) {
+                    if (0..3)
+                        .any(|a| max[a].partial_cmp(&min[a]) != Some(std::cmp::Ordering::Greater))
+                    {
                         c.fail(
                             f("max"),
                             format!("must exceed min {min:?} on every axis, got {max:?}"),
@@ -556,6 +689,94 @@ impl DemConfig {
                     c.material(f("material"), material, self);
                     c.positive(f("scale"), *scale);
                     c.finite3(f("offset"), offset);
+                }
+            }
+            let (motion, remove_at) = w.kinematics();
+            if let Some(m) = motion {
+                let g = |field: &str| pi(&["dem", "walls"], k, &["motion", field]);
+                c.finite3(g("velocity"), &m.velocity);
+                c.non_negative(g("start"), m.start);
+                if let Some(end) = m.end {
+                    if !(end.is_finite() && end > m.start) {
+                        c.fail(
+                            g("end"),
+                            format!("must be finite and > start = {}, got {end}", m.start),
+                        );
+                    }
+                }
+            }
+            if let Some(t) = remove_at {
+                c.non_negative(f("remove_at"), t);
+            }
+        }
+        let mut names: Vec<&str> = Vec::new();
+        for (k, s) in self.sensors.iter().enumerate() {
+            let f = |field: &str| pi(&["dem", "sensors"], k, &[field]);
+            let name = s.name();
+            if name.is_empty()
+                || !name
+                    .chars()
+                    .all(|ch| ch.is_ascii_alphanumeric() || ch == '_' || ch == '-')
+            {
+                c.fail(
+                    f("name"),
+                    format!("must be non-empty letters, digits, `_` or `-`, got `{name}`"),
+                );
+            } else if names.contains(&name) {
+                c.fail(f("name"), format!("duplicate sensor name `{name}`"));
+            }
+            names.push(name);
+            let rectangle = |c: &mut Check, min: &[f64; 2], max: &[f64; 2]| {
+                if min.iter().chain(max).any(|x| !x.is_finite()) {
+                    c.fail(f("min"), format!("must be finite, got {min:?} .. {max:?}"));
+                } else if (0..2).any(|a| max[a] <= min[a]) {
+                    c.fail(
+                        f("max"),
+                        format!("must exceed min {min:?} in both coordinates, got {max:?}"),
+                    );
+                }
+            };
+            match s {
+                SensorConfig::Flow {
+                    value, min, max, ..
+                } => {
+                    if !value.is_finite() {
+                        c.fail(f("value"), format!("must be finite, got {value}"));
+                    }
+                    match (min, max) {
+                        (None, None) => {}
+                        (Some(lo), Some(hi)) => rectangle(&mut c, lo, hi),
+                        _ => c.fail(f("min"), "give both `min` and `max`, or neither".into()),
+                    }
+                }
+                SensorConfig::Pressure {
+                    value, min, max, ..
+                } => {
+                    if !value.is_finite() {
+                        c.fail(f("value"), format!("must be finite, got {value}"));
+                    }
+                    rectangle(&mut c, min, max);
+                }
+                SensorConfig::Repose {
+                    centre,
+                    r_min,
+                    r_max,
+                    bin_width,
+                    ..
+                } => {
+                    if centre.iter().any(|x| !x.is_finite()) {
+                        c.fail(f("centre"), format!("must be finite, got {centre:?}"));
+                    }
+                    c.non_negative(f("r_min"), *r_min);
+                    if !(r_max.is_finite() && r_max > r_min) {
+                        c.fail(
+                            f("r_max"),
+                            format!("must be > r_min = {r_min}, got {r_max}"),
+                        );
+                    }
+                    if let Some(w) = bin_width {
+                        c.positive(f("bin_width"), *w);
+                    }
                 }
             }
         }
@@ -604,7 +825,7 @@ fn locate(text: &str, path: &[Seg]) -> Option<std::ops::Range<usize>> {
                     })
             }),
             (Seg::Index(i), Some(v)) => v.get_ref().as_array().and_then(|a| {
-                a.iter().nth(*i).inspect(|v| {
+                a.get(*i).inspect(|v| {
                     best = v.span();
                 })
             }),
@@ -649,6 +870,25 @@ fn find_key_in_table(text: &str, from: usize, name: &str) -> Option<usize> {
     None
 }
 
+/// Byte offset of the string value `"value"` after `from` and before the next table header.
+fn find_string_value_in_table(text: &str, from: usize, value: &str) -> Option<usize> {
+    let mut offset = text[..from.min(text.len())]
+        .rfind('\n')
+        .map(|i| i + 1)
+        .unwrap_or(0);
+    let quoted = format!("\"{value}\"");
+    for (k, line) in text[offset..].split_inclusive('\n').enumerate() {
+        if k > 0 && line.trim_start().starts_with('[') {
+            return None;
+        }
+        if let Some(pos) = line.find(&quoted) {
+            return Some(offset + pos);
+        }
+        offset += line.len();
+    }
+    None
+}
+
 /// Parses the `[dem]` table of a whole scene file; other top-level tables are ignored.
 pub fn parse_scene_section(text: &str) -> Result<Option<DemConfig>, SceneError> {
     let doc: SceneDoc = toml::from_str(text).map_err(|e| {
@@ -661,6 +901,16 @@ pub fn parse_scene_section(text: &str) -> Result<Option<DemConfig>, SceneError> 
             .and_then(|m| m.split('`').next())
         {
             if let Some(off) = find_key_in_table(text, start, name) {
+                start = off;
+            }
+        }
+        // ... and at the offending string value for an unknown variant (`axis = "w"`)
+        if let Some(value) = e
+            .message()
+            .strip_prefix("unknown variant `")
+            .and_then(|m| m.split('`').next())
+        {
+            if let Some(off) = find_string_value_in_table(text, start, value) {
                 start = off;
             }
         }

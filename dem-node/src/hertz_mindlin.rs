@@ -26,6 +26,7 @@ pub struct ContactForce {
 /// relative to j's, `shear` the tangential displacement history ξ of this contact (updated in
 /// place), `dt` the increment time (0 for a force evaluation without history increment).
 #[inline(always)]
+#[allow(clippy::too_many_arguments)] // the physical inputs of one contact, kept unbundled for the hot loop
 pub fn contact_force(
     p: &PairParams,
     delta: f64,

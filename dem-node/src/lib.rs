@@ -14,10 +14,13 @@ pub mod contact_detection;
 pub mod generate;
 pub mod hertz_mindlin;
 pub mod integrate;
+pub mod limits;
 pub mod materials;
 pub mod output;
+pub mod particle_file;
 pub mod particles;
 pub mod resolve_forces;
+pub mod sensors;
 pub mod snapshot;
 pub mod stl;
 pub mod triangle_contact;
@@ -30,7 +33,7 @@ use particles::Particles;
 use resolve_forces::ForceContext;
 use snapshot::EngineState;
 use std::path::Path;
-use walls::{Mesh, Plane};
+use walls::{Mesh, Plane, PrescribedMotion, WallRef};
 
 pub use config::{parse_scene_section, SceneError};
 pub use walls::MotionRule;
@@ -57,6 +60,13 @@ pub enum DemError {
         fraction: f64,
         limit: f64,
         particle: u32,
+    },
+    #[error("{field}: particle file {file}, line {line}: {message}")]
+    ParticleFile {
+        field: String,
+        file: String,
+        line: usize,
+        message: String,
     },
     #[error("dem.particles[{source_index}]: {message}")]
     Generation {
@@ -112,6 +122,8 @@ pub struct Engine {
     output: OutputState,
     /// Footprint of the first box wall (for the packing fraction).
     box_region: Option<(V3, V3)>,
+    /// Static walls with a prescribed motion or removal time.
+    wall_motions: Vec<PrescribedMotion>,
 }
 
 fn v3(a: &[f64; 3]) -> V3 {
@@ -135,9 +147,10 @@ impl Engine {
                 message: format!("unknown material `{name}`"),
             })
         };
-        let mut planes = Vec::new();
-        let mut meshes = Vec::new();
+        let mut planes: Vec<Plane> = Vec::new();
+        let mut meshes: Vec<Mesh> = Vec::new();
         let mut box_region = None;
+        let mut wall_motions = Vec::new();
         for (k, w) in cfg.walls.iter().enumerate() {
             let field = format!("dem.walls[{k}].material");
             match w {
@@ -145,16 +158,20 @@ impl Engine {
                     material,
                     point,
                     normal,
+                    ..
                 } => planes.push(Plane {
                     point: v3(point),
                     normal: v3(normal).normalize(),
                     material: mat(material, field)?,
+                    velocity: V3::zeros(),
+                    active: true,
                 }),
                 WallConfig::Box {
                     material,
                     min,
                     max,
                     open,
+                    ..
                 } => {
                     let (pos, tris) = walls::box_mesh(v3(min), v3(max), open);
                     if box_region.is_none() {
@@ -173,6 +190,7 @@ impl Engine {
                     path,
                     scale,
                     offset,
+                    ..
                 } => {
                     let full = base_dir.join(path);
                     let mut tm = stl::read_stl(&full)?;
@@ -187,6 +205,27 @@ impl Engine {
                         tm.triangles,
                     ));
                 }
+            }
+            let (motion, remove_at) = w.kinematics();
+            if motion.is_some() || remove_at.is_some() {
+                let (wall, base) = match w {
+                    WallConfig::Plane { .. } => {
+                        let k = planes.len() - 1;
+                        (WallRef::Plane(k), vec![planes[k].point])
+                    }
+                    _ => {
+                        let k = meshes.len() - 1;
+                        (WallRef::Mesh(k), meshes[k].positions.clone())
+                    }
+                };
+                wall_motions.push(PrescribedMotion {
+                    wall,
+                    velocity: motion.map_or(V3::zeros(), |m| v3(&m.velocity)),
+                    start: motion.map_or(0.0, |m| m.start),
+                    end: motion.and_then(|m| m.end).unwrap_or(f64::INFINITY),
+                    remove_at: remove_at.unwrap_or(f64::INFINITY),
+                    base,
+                });
             }
         }
         let mut particles = Particles::default();
@@ -274,6 +313,21 @@ impl Engine {
                         particles.push(x, v3(velocity), V3::zeros(), r, rho, m);
                     }
                 }
+                ParticleSource::File { material, path } => {
+                    let m = mat(material, field)?;
+                    let rho = materials.materials[m as usize].density;
+                    let full = base_dir.join(path);
+                    let spheres =
+                        particle_file::read(&full).map_err(|e| DemError::ParticleFile {
+                            field: format!("dem.particles[{k}].path"),
+                            file: full.display().to_string(),
+                            line: e.line,
+                            message: e.message,
+                        })?;
+                    for s in spheres {
+                        particles.push(s.position, s.velocity, V3::zeros(), s.radius, rho, m);
+                    }
+                }
             }
         }
         let skin = cfg.skin.unwrap_or_else(|| {
@@ -296,6 +350,7 @@ impl Engine {
             ),
             None => None,
         };
+        let sensors = sensors::SensorState::new(&cfg.sensors, &particles, 0.0);
         let mut engine = Engine {
             cfg: cfg.clone(),
             dt: cfg.time_step,
@@ -313,6 +368,7 @@ impl Engine {
                 },
                 records: Vec::new(),
                 meshes,
+                sensors,
             },
             pool,
             output: OutputState {
@@ -320,7 +376,9 @@ impl Engine {
                 vtk_files: 0,
             },
             box_region,
+            wall_motions,
         };
+        engine.place_walls(false);
         engine.check_time_step()?;
         engine.refresh_forces();
         Ok(engine)
@@ -624,6 +682,7 @@ impl Engine {
         self.run(|e| {
             let (dt, rotation) = (e.dt, e.cfg.rotation);
             let mut moved = e.kick_drift();
+            e.track_flow();
             for s in 0..substeps {
                 e.detect_contacts(moved);
                 e.resolve_forces(dt);
@@ -647,6 +706,7 @@ impl Engine {
                 }
                 if s + 1 < substeps {
                     e.advance_clock();
+                    e.track_flow();
                 }
             }
             Ok(())
@@ -658,6 +718,7 @@ impl Engine {
     /// contacts are detected, forces resolved, and the state update completed.
     pub fn step(&mut self) -> Result<(), DemError> {
         let moved = self.kick_drift();
+        self.track_flow();
         self.detect_contacts(moved);
         self.resolve_forces(self.dt);
         if integrate::kick(&mut self.state.particles, self.dt, self.cfg.rotation) {
@@ -693,19 +754,56 @@ impl Engine {
             m.tau = m.window_steps as f64 * dt;
             m.move_to(m.tau);
         }
+        self.place_walls(true);
     }
 
-    /// Algorithm 1, line 3.
+    /// Puts the static walls with a prescribed motion where they are at the current time.
+    /// A wall appearing or disappearing invalidates the neighbour lists if `invalidate`
+    /// (not on restore: the restored lists already match the restored time).
+    fn place_walls(&mut self, invalidate: bool) {
+        let t = self.state.time;
+        for m in &self.wall_motions {
+            if m.apply(t, &mut self.planes, &mut self.state.meshes) && invalidate {
+                self.state.lists.valid = false;
+            }
+        }
+    }
+
+    /// Books the flow sensors' plane crossings of the last drift.
+    fn track_flow(&mut self) {
+        if self.cfg.sensors.is_empty() {
+            return;
+        }
+        let s = &mut self.state;
+        s.sensors.track_flow(&self.cfg.sensors, &s.particles);
+    }
+
+    /// Algorithm 1, line 3. Prescribed-motion walls are rigid translations: the lists are
+    /// rebuilt when one moved d_V/2 since the last build (eq. 4.10), like coupled meshes.
     fn detect_contacts(&mut self, particles_moved: bool) {
         let s = &mut self.state;
-        contact_detection::detect(
+        let t = s.time;
+        let half_skin = 0.5 * s.lists.skin;
+        let walls_moved = s.lists.wall_shift_at_build.len() != self.wall_motions.len()
+            || self
+                .wall_motions
+                .iter()
+                .zip(&s.lists.wall_shift_at_build)
+                .any(|(m, d0)| (m.displacement(t) - d0).norm() > half_skin);
+        let rebuilt = contact_detection::detect(
             &mut s.lists,
             &mut s.particles,
-            particles_moved,
+            particles_moved || walls_moved,
             &self.planes,
             &mut s.meshes,
             &mut s.records,
         );
+        if rebuilt {
+            s.lists.wall_shift_at_build.clear();
+            s.lists
+                .wall_shift_at_build
+                .extend(self.wall_motions.iter().map(|m| m.displacement(t)));
+        }
     }
 
     /// Algorithm 1, line 4.
@@ -839,10 +937,18 @@ impl Engine {
                 "snapshot does not match this scene's materials/particles".into(),
             ));
         }
+        if s.sensors.sensors.len() != self.cfg.sensors.len() {
+            return Err(DemError::Snapshot(format!(
+                "snapshot has {} sensors, this scene defines {}",
+                s.sensors.sensors.len(),
+                self.cfg.sensors.len()
+            )));
+        }
         self.state = s;
         if self.state.lists.valid {
             self.state.lists.index_blocks();
         }
+        self.place_walls(false);
         Ok(())
     }
 
@@ -858,8 +964,17 @@ impl Engine {
                 ("time".to_string(), self.time()),
                 ("step".to_string(), self.state.steps as f64),
             ];
-            row.extend(self.results());
+            row.extend(self.engine_results());
             output::append_csv(&out_dir.join("dem_timeseries.csv"), &row)?;
+        }
+        if let Some(values) = self.sample_sensors() {
+            let mut row = vec![("time".to_string(), self.time())];
+            row.extend(
+                sensors::column_names(&self.cfg.sensors)
+                    .into_iter()
+                    .zip(values),
+            );
+            output::append_csv(&out_dir.join("dem_sensors.csv"), &row)?;
         }
         let every = self.cfg.output.vtk_every;
         let due = every > 0
@@ -875,7 +990,14 @@ impl Engine {
                 self.time(),
             )?;
             for (k, m) in self.state.meshes.iter().enumerate() {
-                if m.coupled || step == 0 || self.output.vtk_files == 0 {
+                let moving = self
+                    .wall_motions
+                    .iter()
+                    .any(|w| w.wall == WallRef::Mesh(k) && w.velocity != V3::zeros());
+                if !m.active {
+                    continue;
+                }
+                if m.coupled || moving || step == 0 || self.output.vtk_files == 0 {
                     let safe: String = m
                         .name
                         .chars()
@@ -926,8 +1048,86 @@ impl Engine {
         Some(vol / (area * height))
     }
 
-    /// Scene result quantities for summary.json.
+    /// Samples the sensors at the current time (once per time), see [`sensors`].
+    fn sample_sensors(&mut self) -> Option<Vec<f64>> {
+        if self.cfg.sensors.is_empty() {
+            return None;
+        }
+        let s = &mut self.state;
+        let ctx = ForceContext {
+            materials: &self.materials,
+            planes: &self.planes,
+            meshes: &s.meshes,
+            gravity: self.gravity,
+            dt: 0.0,
+        };
+        s.sensors
+            .sample(&self.cfg.sensors, s.time, &s.particles, &s.lists, &ctx)
+    }
+
+    /// Scene result quantities for summary.json: the engine's and the sensors'
+    /// (`sensor.<name>.last`, `.max`, `.mean`, flow also `.mass`).
     pub fn results(&self) -> Vec<(String, f64)> {
+        let mut r = self.engine_results();
+        let s = &self.state;
+        let ctx = ForceContext {
+            materials: &self.materials,
+            planes: &self.planes,
+            meshes: &s.meshes,
+            gravity: self.gravity,
+            dt: 0.0,
+        };
+        r.extend(
+            s.sensors
+                .results(&self.cfg.sensors, s.time, &s.particles, &s.lists, &ctx),
+        );
+        r
+    }
+
+    /// Writes `particles_final.csv` (the `kind = "file"` format) into `out_dir` when
+    /// `[dem.output] final_particles` is set; returns the path written.
+    pub fn write_final_particles(
+        &self,
+        out_dir: &Path,
+    ) -> Result<Option<std::path::PathBuf>, DemError> {
+        if !self.cfg.output.final_particles {
+            return Ok(None);
+        }
+        let path = out_dir.join("particles_final.csv");
+        std::fs::create_dir_all(out_dir)
+            .and_then(|_| std::fs::write(&path, particle_file::format(&self.state.particles)))
+            .map_err(|e| DemError::Output {
+                path: path.display().to_string(),
+                message: e.to_string(),
+            })?;
+        Ok(Some(path))
+    }
+
+    /// Physics limits for the coordinator's up-front checks: `time_step`,
+    /// `rayleigh_time_step`, `particles`, and with particles `particle_mass_min/max`,
+    /// `particle_radius_min/max`, `contact_stiffness_max`, `contact_duration_min` (see
+    /// [`limits`]).
+    pub fn limits(&self) -> Vec<(String, f64)> {
+        let mut l = vec![
+            ("time_step".to_string(), self.time_step()),
+            ("rayleigh_time_step".to_string(), self.rayleigh_time_step()),
+            ("particles".to_string(), self.num_particles() as f64),
+        ];
+        let interface = self
+            .cfg
+            .interface_material
+            .as_deref()
+            .and_then(|m| self.materials.index(m));
+        l.extend(limits::contact_limits(
+            &self.state.particles,
+            &self.materials,
+            interface,
+        ));
+        l
+    }
+
+    /// Engine result quantities (also the columns of `dem_timeseries.csv`).
+    fn engine_results(&self) -> Vec<(String, f64)> {
         let mut r = vec![
             ("particles".to_string(), self.num_particles() as f64),
             ("kinetic_energy".to_string(), self.kinetic_energy()),

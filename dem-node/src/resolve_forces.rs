@@ -95,6 +95,7 @@ pub fn contact_forces(
         walls: &walls[..],
         block_start: &cross.block_start,
     };
+    // field by field: `force` and `torque` are borrowed mutably above
     let kin = Kinematics {
         pos: &p.position,
         vel: &p.velocity,
@@ -141,7 +142,8 @@ struct ListsView<'a> {
     block_start: &'a [u32],
 }
 
-struct Kinematics<'a> {
+/// Read-only particle state of the force pass.
+pub(crate) struct Kinematics<'a> {
     pos: &'a [V3],
     vel: &'a [V3],
     omega: &'a [V3],
@@ -149,6 +151,67 @@ struct Kinematics<'a> {
     mass: &'a [f64],
     inertia: &'a [f64],
     mat: &'a [u16],
+}
+
+impl<'a> Kinematics<'a> {
+    pub(crate) fn of(p: &'a Particles) -> Kinematics<'a> {
+        Kinematics {
+            pos: &p.position,
+            vel: &p.velocity,
+            omega: &p.angular_velocity,
+            rad: &p.radius,
+            mass: &p.mass,
+            inertia: &p.inertia,
+            mat: &p.material,
+        }
+    }
+}
+
+/// A touching particle pair (i, j): the force on i and what the torques need.
+pub(crate) struct PairContact {
+    pub cf: crate::hertz_mindlin::ContactForce,
+    /// Unit normal towards i.
+    pub nrm: V3,
+    /// Lever arms r − δ/2 of i and j.
+    pub ai: f64,
+    pub aj: f64,
+    pub r_eff: f64,
+}
+
+/// Hertz–Mindlin force on i of the touching pair (i, j) with `d` = x_i − x_j,
+/// `dist2` = |d|² < `sum`² = (r_i + r_j)² (eqs. 2.6–2.19); `shear` is the pair's history.
+#[inline(always)]
+pub(crate) fn pair_contact(
+    k: &Kinematics,
+    ctx: &ForceContext,
+    (i, j): (usize, usize),
+    d: V3,
+    dist2: f64,
+    shear: &mut V3,
+) -> PairContact {
+    let (ri, rj) = (k.rad[i], k.rad[j]);
+    let sum = ri + rj;
+    let dist = dist2.sqrt();
+    let delta = sum - dist; // (2.9)
+    let nrm = if dist > 0.0 {
+        d * (1.0 / dist)
+    } else {
+        V3::z()
+    };
+    let params = ctx.materials.pair(k.mat[i], k.mat[j]);
+    let r_eff = ri * rj / sum; // (2.8)
+    let (mi, mj) = (k.mass[i], k.mass[j]);
+    let m_eff = mi * mj / (mi + mj); // (2.11)
+    let (ai, aj) = (ri - 0.5 * delta, rj - 0.5 * delta);
+    let v_c = k.vel[i] - k.vel[j] - (k.omega[i] * ai + k.omega[j] * aj).cross(&nrm);
+    let cf = contact_force(params, delta, r_eff, m_eff, &nrm, &v_c, shear, ctx.dt);
+    PairContact {
+        cf,
+        nrm,
+        ai,
+        aj,
+        r_eff,
+    }
 }
 
 impl<'a> BlockSlices<'a> {
@@ -216,14 +279,106 @@ where
     );
 }
 
-struct WallGeom {
-    n: V3,
-    delta: f64,
-    lever: f64,
-    wall_velocity: V3,
-    material: u16,
+/// Geometry of the contact of a particle with one wall (plane, or a mesh patch at its
+/// closest point).
+pub(crate) struct WallGeom {
+    /// Unit normal towards the particle.
+    pub n: V3,
+    pub delta: f64,
+    /// Distance from the centre to the contact point (≥ 0).
+    pub lever: f64,
+    /// Contact point on the wall.
+    pub point: V3,
+    pub wall_velocity: V3,
+    pub material: u16,
     /// (triangle, barycentric weights) of the contact point on a coupled mesh.
-    mesh_ref: Option<(u32, [f64; 3])>,
+    pub mesh_ref: Option<(u32, [f64; 3])>,
+}
+
+/// The wall group (same wall and patch) of `cands` starting at `g`: its contact geometry when
+/// the particle (centre `x`, radius `r`) touches it, and the start of the next group.
+#[inline(always)]
+pub(crate) fn wall_group(
+    x: V3,
+    r: f64,
+    cands: &[crate::broad_phase::WallCandidate],
+    mut g: usize,
+    ctx: &ForceContext,
+) -> (Option<WallGeom>, usize) {
+    let n_planes = ctx.planes.len() as u32;
+    let (w, patch) = (cands[g].wall, cands[g].patch);
+    let mut geo = None;
+    if w < n_planes {
+        let pl = &ctx.planes[w as usize];
+        let d = (x - pl.point).dot(&pl.normal);
+        if d < r {
+            geo = Some(WallGeom {
+                n: pl.normal,
+                delta: r - d,
+                lever: d.max(0.0),
+                point: x - pl.normal * d,
+                wall_velocity: pl.velocity,
+                material: pl.material,
+                mesh_ref: None,
+            });
+        }
+        g += 1;
+    } else {
+        let mesh = &ctx.meshes[(w - n_planes) as usize];
+        let mut best: Option<(f64, V3, [f64; 3], u32)> = None;
+        while g < cands.len() && cands[g].wall == w && cands[g].patch == patch {
+            let tri = cands[g].triangle;
+            let [a, b, c] = mesh.corners(tri as usize);
+            let (q, bary) = crate::triangle_contact::closest_point_on_triangle(&x, &a, &b, &c);
+            let d2 = (x - q).norm_squared();
+            if best.is_none_or(|(bd, ..)| d2 < bd) {
+                best = Some((d2, q, bary, tri));
+            }
+            g += 1;
+        }
+        if let Some((d2, q, bary, tri)) = best {
+            if d2 < r * r {
+                let d = d2.sqrt();
+                let nrm = if d > 0.0 {
+                    (x - q) / d
+                } else {
+                    let [a, b, c] = mesh.corners(tri as usize);
+                    (b - a).cross(&(c - a)).normalize()
+                };
+                let [na, nb, nc] = mesh.triangles[tri as usize];
+                let wv = mesh.velocities[na as usize] * bary[0]
+                    + mesh.velocities[nb as usize] * bary[1]
+                    + mesh.velocities[nc as usize] * bary[2];
+                geo = Some(WallGeom {
+                    n: nrm,
+                    delta: r - d,
+                    lever: d,
+                    point: q,
+                    wall_velocity: wv,
+                    material: mesh.material,
+                    mesh_ref: mesh.coupled.then_some((tri, bary)),
+                });
+            }
+        }
+    }
+    (geo, g)
+}
+
+/// Hertz–Mindlin force on particle i of its wall contact `geo`; the relative velocity is
+/// that of i's contact point against the wall's (moving walls, coupled meshes).
+#[inline(always)]
+pub(crate) fn wall_contact(
+    k: &Kinematics,
+    ctx: &ForceContext,
+    i: usize,
+    geo: &WallGeom,
+    shear: &mut V3,
+) -> crate::hertz_mindlin::ContactForce {
+    let params = ctx.materials.pair(k.mat[i], geo.material);
+    let v_c = k.vel[i] - (k.omega[i] * geo.lever).cross(&geo.n) - geo.wall_velocity;
+    contact_force(
+        params, geo.delta, k.rad[i], k.mass[i], &geo.n, &v_c, shear, ctx.dt,
+    )
 }
 
 /// One force block: gravity, pairs with reactions, wall contacts.
@@ -280,8 +435,8 @@ fn block_forces_generic(
     let mut cross = 0usize;
     debug_assert_eq!(cross0, v.block_start[b] as usize);
     for i in lo..hi {
-        let (xi, vi, wi) = (k.pos[i], k.vel[i], k.omega[i]);
-        let (ri, mi, ii, mat_i) = (k.rad[i], k.mass[i], k.inertia[i], k.mat[i]);
+        let xi = k.pos[i];
+        let (ri, ii, mat_i) = (k.rad[i], k.inertia[i], k.mat[i]);
         let mut fi = force[i - lo];
         let mut ti = torque[i - lo];
         for pk in v.first_pair[i] as usize..v.first_pair[i + 1] as usize {
@@ -302,31 +457,15 @@ fn block_forces_generic(
                 }
                 continue;
             }
-            let dist = dist2.sqrt();
-            let delta = sum - dist; // (2.9)
-            let nrm = if dist > 0.0 {
-                d * (1.0 / dist)
-            } else {
-                V3::z()
-            };
-            let params = ctx.materials.pair(mat_i, k.mat[j]);
-            let r_eff = ri * rj / sum; // (2.8)
-            let mj = k.mass[j];
-            let m_eff = mi * mj / (mi + mj); // (2.11)
-            let (ai, aj) = (ri - 0.5 * delta, rj - 0.5 * delta);
-            let wj = k.omega[j];
-            let v_c = vi - k.vel[j] - (wi * ai + wj * aj).cross(&nrm);
-            let cf = contact_force(
-                params,
-                delta,
+            let PairContact {
+                cf,
+                nrm,
+                ai,
+                aj,
                 r_eff,
-                m_eff,
-                &nrm,
-                &v_c,
-                &mut shear[pk - pair0],
-                dt,
-            );
+            } = pair_contact(k, ctx, (i, j), d, dist2, &mut shear[pk - pair0]);
             let nxt = nrm.cross(&cf.tangential);
+            let params = ctx.materials.pair(mat_i, k.mat[j]);
             let roll = if params.rolling_friction > 0.0 {
                 let ij = k.inertia[j];
                 let i_eff = ii * ij / (ii + ij);
@@ -334,7 +473,7 @@ fn block_forces_generic(
                     params.rolling_friction,
                     r_eff,
                     cf.normal,
-                    &(wi - wj),
+                    &(k.omega[i] - k.omega[j]),
                     i_eff,
                     dt,
                 )
@@ -388,65 +527,13 @@ fn wall_forces(
 ) -> (V3, V3) {
     let x = k.pos[i];
     let r = k.rad[i];
-    let n_planes = ctx.planes.len() as u32;
     let mut f = V3::zeros();
     let mut t = V3::zeros();
     let mut g = 0;
     while g < cands.len() {
         let first = g;
-        let (w, patch) = (cands[g].wall, cands[g].patch);
-        let mut geo = None;
-        if w < n_planes {
-            let pl = &ctx.planes[w as usize];
-            let d = (x - pl.point).dot(&pl.normal);
-            if d < r {
-                geo = Some(WallGeom {
-                    n: pl.normal,
-                    delta: r - d,
-                    lever: d.max(0.0),
-                    wall_velocity: V3::zeros(),
-                    material: pl.material,
-                    mesh_ref: None,
-                });
-            }
-            g += 1;
-        } else {
-            let mesh = &ctx.meshes[(w - n_planes) as usize];
-            let mut best: Option<(f64, V3, [f64; 3], u32)> = None;
-            while g < cands.len() && cands[g].wall == w && cands[g].patch == patch {
-                let tri = cands[g].triangle;
-                let [a, b, c] = mesh.corners(tri as usize);
-                let (q, bary) = crate::triangle_contact::closest_point_on_triangle(&x, &a, &b, &c);
-                let d2 = (x - q).norm_squared();
-                if best.is_none_or(|(bd, ..)| d2 < bd) {
-                    best = Some((d2, q, bary, tri));
-                }
-                g += 1;
-            }
-            if let Some((d2, q, bary, tri)) = best {
-                if d2 < r * r {
-                    let d = d2.sqrt();
-                    let nrm = if d > 0.0 {
-                        (x - q) / d
-                    } else {
-                        let [a, b, c] = mesh.corners(tri as usize);
-                        (b - a).cross(&(c - a)).normalize()
-                    };
-                    let [na, nb, nc] = mesh.triangles[tri as usize];
-                    let wv = mesh.velocities[na as usize] * bary[0]
-                        + mesh.velocities[nb as usize] * bary[1]
-                        + mesh.velocities[nc as usize] * bary[2];
-                    geo = Some(WallGeom {
-                        n: nrm,
-                        delta: r - d,
-                        lever: d,
-                        wall_velocity: wv,
-                        material: mesh.material,
-                        mesh_ref: mesh.coupled.then_some((tri, bary)),
-                    });
-                }
-            }
-        }
+        let (geo, next) = wall_group(x, r, cands, g, ctx);
+        g = next;
         let slot = &mut contacts[first];
         let Some(geo) = geo else {
             if *slot != WallContact::NONE {
@@ -454,14 +541,11 @@ fn wall_forces(
             }
             continue;
         };
-        let params = ctx.materials.pair(k.mat[i], geo.material);
         // the history of a contact that did not exist in the last evaluation is zero
         let mut shear = slot.shear;
+        let cf = wall_contact(k, ctx, i, &geo, &mut shear);
+        let params = ctx.materials.pair(k.mat[i], geo.material);
         let w = k.omega[i];
-        let v_c = k.vel[i] - (w * geo.lever).cross(&geo.n) - geo.wall_velocity;
-        let cf = contact_force(
-            params, geo.delta, r, k.mass[i], &geo.n, &v_c, &mut shear, ctx.dt,
-        );
         f += cf.force;
         t += geo.n.cross(&cf.tangential) * (-geo.lever);
         if params.rolling_friction > 0.0 {
@@ -511,8 +595,8 @@ pub fn accumulate_nodal_forces(
             continue;
         }
         let tri = mesh.triangles[rec.triangle as usize];
-        for c in 0..3 {
-            mesh.nodal_force_step[tri[c] as usize] += rec.force * rec.bary[c];
+        for (&node, &weight) in tri.iter().zip(&rec.bary) {
+            mesh.nodal_force_step[node as usize] += rec.force * weight;
         }
     }
     for m in meshes.iter_mut().filter(|m| m.coupled) {

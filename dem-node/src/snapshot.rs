@@ -5,11 +5,14 @@
 use crate::broad_phase::NeighbourLists;
 use crate::particles::Particles;
 use crate::resolve_forces::MeshForceRecord;
+use crate::sensors::SensorState;
 use crate::walls::Mesh;
 use serde::{Deserialize, Serialize};
 
 /// 2: pair lists as partner CSR with histories, wall histories per candidate group.
-pub const SNAPSHOT_VERSION: u32 = 2;
+/// 3: moving/removable static walls (mesh `active`, wall displacements at the list build),
+/// sensor state.
+pub const SNAPSHOT_VERSION: u32 = 3;
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct EngineState {
@@ -21,6 +24,8 @@ pub struct EngineState {
     /// Forces on coupled meshes per wall candidate (empty without coupled meshes).
     pub records: Vec<MeshForceRecord>,
     pub meshes: Vec<Mesh>,
+    /// Flow sensors' particle sides and cumulative masses, sensor statistics.
+    pub sensors: SensorState,
 }
 
 pub fn encode(state: &EngineState) -> Vec<u8> {

@@ -19,6 +19,78 @@ pub struct Plane {
     pub point: V3,
     pub normal: V3,
     pub material: u16,
+    /// Velocity of a plane with a prescribed motion (zero otherwise).
+    pub velocity: V3,
+    /// False once the plane was removed (`remove_at`).
+    pub active: bool,
+}
+
+/// A static wall: plane or mesh index.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum WallRef {
+    Plane(usize),
+    Mesh(usize),
+}
+
+/// Prescribed rigid translation of a static wall (`[[dem.walls]] motion` and `remove_at`):
+/// velocity v during [start, end), at rest otherwise, so the displacement at time t is
+/// v · (min(t, end) − start)⁺; the wall is absent from `remove_at` on. A pure function of the
+/// time, so a restored snapshot puts the walls back exactly.
+#[derive(Debug, Clone)]
+pub struct PrescribedMotion {
+    pub wall: WallRef,
+    pub velocity: V3,
+    pub start: f64,
+    /// +∞ when the motion never stops.
+    pub end: f64,
+    /// +∞ when the wall stays.
+    pub remove_at: f64,
+    /// Plane point or mesh node positions at rest before `start`.
+    pub base: Vec<V3>,
+}
+
+impl PrescribedMotion {
+    pub fn displacement(&self, t: f64) -> V3 {
+        self.velocity * (t.min(self.end) - self.start).max(0.0)
+    }
+
+    pub fn velocity_at(&self, t: f64) -> V3 {
+        if t >= self.start && t < self.end {
+            self.velocity
+        } else {
+            V3::zeros()
+        }
+    }
+
+    pub fn present(&self, t: f64) -> bool {
+        t < self.remove_at
+    }
+
+    /// Puts the wall where it is at time t. Returns true if it appeared or disappeared.
+    pub fn apply(&self, t: f64, planes: &mut [Plane], meshes: &mut [Mesh]) -> bool {
+        let (d, v, present) = (self.displacement(t), self.velocity_at(t), self.present(t));
+        match self.wall {
+            WallRef::Plane(k) => {
+                let pl = &mut planes[k];
+                pl.point = self.base[0] + d;
+                pl.velocity = v;
+                std::mem::replace(&mut pl.active, present) != present
+            }
+            WallRef::Mesh(k) => {
+                let m = &mut meshes[k];
+                for ((x, x0), u) in m
+                    .positions
+                    .iter_mut()
+                    .zip(&self.base)
+                    .zip(&mut m.velocities)
+                {
+                    *x = x0 + d;
+                    *u = v;
+                }
+                std::mem::replace(&mut m.active, present) != present
+            }
+        }
+    }
 }
 
 /// Angle below which two triangles sharing an edge are treated as one smooth face even when
@@ -53,6 +125,8 @@ pub struct Mesh {
     pub window_substeps: u64,
     /// Node positions at the last neighbour-list build (Wellmann eq. 4.10).
     pub positions_at_build: Vec<V3>,
+    /// False once a static wall was removed (`remove_at`): no contacts.
+    pub active: bool,
 }
 
 impl Mesh {
@@ -84,6 +158,7 @@ impl Mesh {
             window_substeps: 0,
             positions_at_build: positions.clone(),
             positions,
+            active: true,
         }
     }
 

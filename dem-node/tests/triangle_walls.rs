@@ -245,7 +245,8 @@ fn frictionless_elastic_bounce_on_edges_and_vertices_conserves_energy() {
         0, 1, 2, 0, 2, 3, /* y=0 wall */ 0, 5, 1, 0, 4, 5, /* x=0 wall */ 0, 3, 6, 0, 6,
         4,
     ];
-    let cases: Vec<(&str, Vec<f64>, Vec<u32>, [f64; 3], [f64; 3])> = vec![
+    type Case = (&'static str, Vec<f64>, Vec<u32>, [f64; 3], [f64; 3]);
+    let cases: Vec<Case> = vec![
         (
             "convex edge",
             ridge_pos.to_vec(),

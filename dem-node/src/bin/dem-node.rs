@@ -105,14 +105,7 @@ impl Solver for DemNode {
             });
         }
         p.wait_for_peers(self.data_timeout).await?;
-        let limits = BTreeMap::from([
-            ("time_step".to_string(), engine.time_step()),
-            (
-                "rayleigh_time_step".to_string(),
-                engine.rayleigh_time_step(),
-            ),
-            ("particles".to_string(), engine.num_particles() as f64),
-        ]);
+        let limits = engine.limits().into_iter().collect();
         self.engine = Some(engine);
         Ok((limits, Vec::new()))
     }
@@ -237,8 +230,9 @@ impl Solver for DemNode {
         let out_dir = self.out_dir.clone();
         match self.engine.as_mut() {
             Some(e) => {
-                e.write_outputs(&out_dir)
-                    .map_err(|e| NodeError::new(ErrorCode::Io, e.to_string()))?;
+                let io = |e: dem::DemError| NodeError::new(ErrorCode::Io, e.to_string());
+                e.write_outputs(&out_dir).map_err(io)?;
+                e.write_final_particles(&out_dir).map_err(io)?;
                 Ok(e.results().into_iter().collect())
             }
             None => Ok(BTreeMap::new()),

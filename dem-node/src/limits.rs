@@ -1,0 +1,236 @@
+//! Physics limits of the DEM part of a scene, reported to the coordinator in the node's
+//! `ready` message for its up-front stability checks (DESIGN: "Physics limits are computed by
+//! each node for its own part of the scene").
+//!
+//! - `contact_stiffness_max`: the largest Hertz normal stiffness k_n = 2E*√(R*δ) (Ullrich
+//!   eq. 2.12) over the material pairs present — particle–particle pairs of the materials
+//!   that particles use, and particle–interface-material pairs (flat wall, R* = r) when
+//!   `interface_material` is set — with the largest radii of each material and the reference
+//!   overlap δ = 1 % of the smaller of the two radii. Hertz stiffness grows with the overlap,
+//!   so this is a representative, not an upper bound: at 4 % overlap it doubles.
+//! - `contact_duration_min`: the shortest Hertz contact duration at a 1 m/s impact,
+//!   t_c = 2.87 (m*²/(R* E*² v))^{1/5}, over the same pairs with the smallest radii (and
+//!   masses) of each material; m* = m for a wall.
+
+use crate::materials::MaterialTable;
+use crate::particles::Particles;
+
+/// Overlap at which `contact_stiffness_max` is evaluated, as a fraction of the smaller radius.
+pub const REFERENCE_OVERLAP_FRACTION: f64 = 0.01;
+/// Impact velocity of `contact_duration_min`, m/s.
+pub const REFERENCE_IMPACT_VELOCITY: f64 = 1.0;
+
+/// Hertz normal stiffness k_n = 2E*√(R*δ) (Ullrich eq. 2.12).
+pub fn hertz_stiffness(e_star: f64, r_eff: f64, overlap: f64) -> f64 {
+    2.0 * e_star * (r_eff * overlap).sqrt()
+}
+
+/// Hertz contact duration of an elastic impact at relative normal velocity `v`:
+/// t_c = 2.87 (m*²/(R* E*² v))^{1/5} (2.87 ≈ 2 (15/16)^{2/5} ∫₀¹ dx/√(1 − x^{5/2})).
+pub fn hertz_contact_duration(m_eff: f64, r_eff: f64, e_star: f64, v: f64) -> f64 {
+    2.87 * (m_eff * m_eff / (r_eff * e_star * e_star * v)).powf(0.2)
+}
+
+/// Smallest and largest radius and mass of the particles of one material.
+#[derive(Debug, Clone, Copy)]
+struct Extent {
+    r_min: f64,
+    r_max: f64,
+    m_of_r_min: f64,
+    m_of_r_max: f64,
+}
+
+/// The limits as (key, value) pairs; nothing without particles.
+pub fn contact_limits(
+    p: &Particles,
+    materials: &MaterialTable,
+    interface_material: Option<u16>,
+) -> Vec<(String, f64)> {
+    if p.is_empty() {
+        return Vec::new();
+    }
+    let mut ext: Vec<Option<Extent>> = vec![None; materials.materials.len()];
+    for k in 0..p.len() {
+        let (r, m) = (p.radius[k], p.mass[k]);
+        let e = ext[p.material[k] as usize].get_or_insert(Extent {
+            r_min: r,
+            r_max: r,
+            m_of_r_min: m,
+            m_of_r_max: m,
+        });
+        if r < e.r_min {
+            (e.r_min, e.m_of_r_min) = (r, m);
+        }
+        if r > e.r_max {
+            (e.r_max, e.m_of_r_max) = (r, m);
+        }
+    }
+    let radii = &p.radius;
+    let masses = &p.mass;
+    let min = |v: &[f64]| v.iter().cloned().fold(f64::INFINITY, f64::min);
+    let max = |v: &[f64]| v.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+    let mut k_max = 0.0f64;
+    let mut t_min = f64::INFINITY;
+    let present: Vec<(u16, Extent)> = ext
+        .iter()
+        .enumerate()
+        .filter_map(|(m, e)| e.map(|e| (m as u16, e)))
+        .collect();
+    for (x, &(a, ea)) in present.iter().enumerate() {
+        for &(b, eb) in &present[x..] {
+            let e_star = materials.pair(a, b).e_star;
+            let (ra, rb) = (ea.r_max, eb.r_max);
+            k_max = k_max.max(hertz_stiffness(
+                e_star,
+                ra * rb / (ra + rb),
+                REFERENCE_OVERLAP_FRACTION * ra.min(rb),
+            ));
+            let (ra, rb, ma, mb) = (ea.r_min, eb.r_min, ea.m_of_r_min, eb.m_of_r_min);
+            t_min = t_min.min(hertz_contact_duration(
+                ma * mb / (ma + mb),
+                ra * rb / (ra + rb),
+                e_star,
+                REFERENCE_IMPACT_VELOCITY,
+            ));
+        }
+        if let Some(w) = interface_material {
+            let e_star = materials.pair(a, w).e_star;
+            k_max = k_max.max(hertz_stiffness(
+                e_star,
+                ea.r_max,
+                REFERENCE_OVERLAP_FRACTION * ea.r_max,
+            ));
+            t_min = t_min.min(hertz_contact_duration(
+                ea.m_of_r_min,
+                ea.r_min,
+                e_star,
+                REFERENCE_IMPACT_VELOCITY,
+            ));
+        }
+    }
+    vec![
+        ("particle_mass_min".into(), min(masses)),
+        ("particle_mass_max".into(), max(masses)),
+        ("particle_radius_min".into(), min(radii)),
+        ("particle_radius_max".into(), max(radii)),
+        ("contact_stiffness_max".into(), k_max),
+        ("contact_duration_min".into(), t_min),
+    ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::parse_scene_section;
+
+    #[test]
+    fn hertz_stiffness_is_two_e_star_root_r_delta() {
+        // 2 · 1e8 · √(1e-3 · 1e-5) = 2e4 N/m
+        assert!((hertz_stiffness(1e8, 1e-3, 1e-5) - 2e4).abs() < 1e-9);
+        // grows as √δ: four times the overlap, twice the stiffness
+        let ratio = hertz_stiffness(3e9, 0.02, 4e-4) / hertz_stiffness(3e9, 0.02, 1e-4);
+        assert!((ratio - 2.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn hertz_contact_duration_matches_an_integrated_elastic_impact() {
+        // m* ẍ = −4/3 E* √R* x^{3/2}, entering at 1 m/s: time until the overlap is zero again
+        let (m, r, e, v0) = (1e-3, 1e-3, 1e8, 1.0);
+        let want = hertz_contact_duration(m, r, e, v0);
+        let dt = want * 1e-6;
+        let (mut x, mut v, mut t) = (0.0f64, v0, 0.0);
+        let acc = |x: f64| -4.0 / 3.0 * e * r.sqrt() * x.max(0.0).powf(1.5) / m;
+        let mut a = acc(x);
+        loop {
+            v += 0.5 * dt * a;
+            x += dt * v;
+            a = acc(x);
+            v += 0.5 * dt * a;
+            t += dt;
+            if x <= 0.0 {
+                break;
+            }
+        }
+        println!("t_c formula {want:e} s, integrated {t:e} s");
+        assert!((t - want).abs() < 2e-3 * want, "{t} vs {want}");
+        assert!((v + v0).abs() < 1e-6, "elastic rebound {v}");
+    }
+
+    const SCENE: &str = r#"
+[dem]
+time_step = 1e-6
+allow_large_time_step = true
+interface_material = "steel"
+[dem.materials.grain]
+youngs_modulus = 1e8
+poisson_ratio = 0.3
+density = 1000.0
+restitution = 0.5
+friction = 0.5
+[dem.materials.steel]
+youngs_modulus = 2e11
+poisson_ratio = 0.3
+density = 7800.0
+restitution = 0.5
+friction = 0.3
+[[dem.particles]]
+kind = "list"
+material = "grain"
+spheres = [
+  { position = [0.0, 0.0, 0.0], radius = 0.001 },
+  { position = [1.0, 0.0, 0.0], radius = 0.003 },
+]
+"#;
+
+    #[test]
+    fn limits_of_a_two_size_grain_against_steel_by_hand() {
+        let cfg = parse_scene_section(SCENE).unwrap().unwrap();
+        let e = crate::Engine::from_config(&cfg, std::path::Path::new(".")).unwrap();
+        let l: std::collections::BTreeMap<String, f64> = e.limits().into_iter().collect();
+        let pi = std::f64::consts::PI;
+        let (m1, m3) = (
+            1000.0 * 4.0 / 3.0 * pi * 1e-9,
+            1000.0 * 4.0 / 3.0 * pi * 27e-9,
+        );
+        let close = |l: &std::collections::BTreeMap<String, f64>, k: &str, want: f64| {
+            let got = l[k];
+            assert!(
+                (got - want).abs() <= 1e-12 * want.abs(),
+                "{k}: {got} vs {want}"
+            );
+        };
+        close(&l, "particle_radius_min", 0.001);
+        close(&l, "particle_radius_max", 0.003);
+        close(&l, "particle_mass_min", m1);
+        close(&l, "particle_mass_max", m3);
+        // grain–steel: E* = 1/((1−0.09)/1e8 + (1−0.09)/2e11); the flat wall is stiffer than
+        // a grain pair (R* = r instead of r/2, larger E*), at r = 3 mm, δ = 30 µm
+        let e_gs = 1.0 / (0.91 / 1e8 + 0.91 / 2e11);
+        close(
+            &l,
+            "contact_stiffness_max",
+            2.0 * e_gs * (0.003f64 * 3e-5).sqrt(),
+        );
+        // shortest: the 1 mm grain on the steel wall (m* = m, R* = r) vs the grain pair
+        // (m* = m/2, R* = r/2, E* = E/(2(1−ν²))): wall 2.87 (m²/(r E*²))^{1/5}
+        let e_gg = 1.0 / (2.0 * 0.91 / 1e8);
+        let wall = 2.87 * (m1 * m1 / (1e-3 * e_gs * e_gs)).powf(0.2);
+        let pair = 2.87 * (m1 * m1 / 4.0 / (0.5e-3 * e_gg * e_gg)).powf(0.2);
+        assert!(wall < pair);
+        close(&l, "contact_duration_min", wall);
+        assert_eq!(l["particles"], 2.0);
+        assert_eq!(l["time_step"], 1e-6);
+        // without an interface material only the grain pair counts
+        let mut cfg = cfg;
+        cfg.interface_material = None;
+        let e = crate::Engine::from_config(&cfg, std::path::Path::new(".")).unwrap();
+        let l: std::collections::BTreeMap<String, f64> = e.limits().into_iter().collect();
+        close(&l, "contact_duration_min", pair);
+        // grain pair at the largest radius: R* = 1.5 mm, δ = 30 µm
+        close(
+            &l,
+            "contact_stiffness_max",
+            2.0 * e_gg * (0.0015f64 * 3e-5).sqrt(),
+        );
+    }
+}

@@ -1,0 +1,129 @@
+//! Particle files: `[[dem.particles]] kind = "file"` and `[dem.output] final_particles`, so a
+//! settled bed from one run starts the next.
+use dem::{parse_scene_section, Engine};
+use std::path::Path;
+
+fn scene(particles: &str, output: &str) -> String {
+    format!(
+        r#"
+[dem]
+time_step = 2e-5
+[dem.materials.grain]
+youngs_modulus = 1e7
+poisson_ratio = 0.3
+density = 1000.0
+restitution = 0.5
+friction = 0.5
+[[dem.walls]]
+kind = "box"
+material = "grain"
+min = [0.0, 0.0, 0.0]
+max = [0.05, 0.05, 0.2]
+open = ["+z"]
+{particles}
+{output}
+"#
+    )
+}
+
+const FILL: &str = r#"[[dem.particles]]
+kind = "fill"
+material = "grain"
+min = [0.0, 0.0, 0.0]
+max = [0.05, 0.05, 0.1]
+count = 200
+distribution = { kind = "uniform", min = 0.002, max = 0.004 }"#;
+
+fn build(text: &str, dir: &Path) -> Result<Engine, dem::DemError> {
+    let cfg = parse_scene_section(text).unwrap().unwrap();
+    Engine::from_config(&cfg, dir)
+}
+
+/// (position, velocity, radius) in id order.
+fn by_id(e: &Engine) -> Vec<([f64; 3], [f64; 3], f64)> {
+    let p = e.particles();
+    let mut k: Vec<usize> = (0..p.len()).collect();
+    k.sort_by_key(|&k| p.id[k]);
+    k.into_iter()
+        .map(|k| {
+            let (x, v) = (p.position[k], p.velocity[k]);
+            ([x.x, x.y, x.z], [v.x, v.y, v.z], p.radius[k])
+        })
+        .collect()
+}
+
+#[test]
+fn final_particles_start_the_next_run_where_the_last_stopped() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let mut first = build(
+        &scene(FILL, "[dem.output]\nfinal_particles = true"),
+        dir.path(),
+    )
+    .unwrap();
+    first.advance(2500).unwrap(); // 0.05 s of settling
+    let written = first.write_final_particles(&out).unwrap().expect("enabled");
+    assert_eq!(written, out.join("particles_final.csv"));
+    let text = std::fs::read_to_string(&written).unwrap();
+    assert!(text.starts_with("x,y,z,radius,vx,vy,vz\n"));
+    assert_eq!(text.lines().count(), 201);
+
+    std::fs::copy(&written, dir.path().join("bed.csv")).unwrap();
+    let next = build(
+        &scene(
+            "[[dem.particles]]\nkind = \"file\"\nmaterial = \"grain\"\npath = \"bed.csv\"",
+            "",
+        ),
+        dir.path(),
+    )
+    .unwrap();
+    let (a, b) = (by_id(&first), by_id(&next));
+    assert_eq!(a.len(), b.len());
+    assert!(a == b, "positions, velocities and radii round-trip bitwise");
+    let masses = |e: &Engine| e.particles().mass.iter().sum::<f64>();
+    assert!((masses(&first) - masses(&next)).abs() < 1e-12 * masses(&first));
+    // without the option nothing is written
+    assert!(next
+        .write_final_particles(&dir.path().join("none"))
+        .unwrap()
+        .is_none());
+    assert!(!dir.path().join("none").exists());
+}
+
+#[test]
+fn bad_particle_files_name_the_field_file_and_line() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("bed.csv"),
+        "x,y,z,radius\n0.01,0.01,0.01,0.002\n0.02,0.02,oops,0.002\n",
+    )
+    .unwrap();
+    let text = scene(
+        "[[dem.particles]]\nkind = \"file\"\nmaterial = \"grain\"\npath = \"bed.csv\"",
+        "",
+    );
+    let err = build(&text, dir.path()).err().unwrap().to_string();
+    println!("{err}");
+    assert!(
+        err.contains("dem.particles[0].path")
+            && err.contains("bed.csv")
+            && err.contains("line 3")
+            && err.contains("`oops`"),
+        "{err}"
+    );
+    let err = build(&text.replace("bed.csv", "missing.csv"), dir.path())
+        .err()
+        .unwrap()
+        .to_string();
+    println!("{err}");
+    assert!(
+        err.contains("missing.csv") && err.contains("cannot read"),
+        "{err}"
+    );
+    let err = parse_scene_section(
+        &text.replace("material = \"grain\"\npath", "material = \"rye\"\npath"),
+    )
+    .unwrap_err();
+    println!("{err}");
+    assert!(err.message.contains("dem.particles[0].material"), "{err}");
+}
