@@ -4,6 +4,10 @@
 //! grid with Verlet skin, velocity Verlet, static and coupled triangle-mesh walls with
 //! face/edge/vertex contact without force jumps (Wellmann ch. 4), rayon parallelism with
 //! bitwise-identical results for any thread count, snapshot/restore and VTK/CSV output.
+//! Static walls may translate or vanish on a prescribed schedule ([`walls::PrescribedMotion`]);
+//! sensors measure flow, pressure and the angle of repose ([`sensors`]); particle beds are read
+//! from and written to CSV ([`particle_file`]); [`Engine::limits`] reports the physics limits
+//! for the coordinator's checks.
 //!
 //! [`Engine::step`] reads like Ullrich's Algorithm 1: detect contacts → resolve forces →
 //! update particle states, each stage in its own module.
