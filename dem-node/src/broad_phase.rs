@@ -295,7 +295,7 @@ pub fn particles_moved(lists: &NeighbourLists, particles: &Particles) -> bool {
 }
 
 /// Rebuilds the lists. Sorts the particles along the Morton curve of their cells first
-/// (`particles` are permuted: new index k holds old particle perm[k]); tangential histories of
+/// (`particles` are permuted: new index k holds old particle `perm[k]`); tangential histories of
 /// pairs and wall contacts are carried over.
 pub fn rebuild(
     lists: &mut NeighbourLists,

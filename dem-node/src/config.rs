@@ -1,7 +1,7 @@
 //! The `[dem]` table of a scene file (see `DEM.md` for the format with an example).
 //!
 //! All quantities are SI (m, s, kg, Pa). Parsing rejects unknown fields
-//! (`deny_unknown_fields`); [`parse_scene_section`](crate::parse_scene_section) reports the line
+//! (`deny_unknown_fields`); [`crate::parse_scene_section`] reports the line
 //! and column of the offending key or value, and value checks name the full field path, e.g.
 //! `dem.materials.wheat.poisson_ratio`.
 
