@@ -64,10 +64,12 @@ pub struct FemConfig {
 #[derive(Clone, Debug, Serialize, PartialEq)]
 pub enum MeshSpec {
     /// A `.msh` (Gmsh 4.1 ASCII) or `.inp` (Abaqus/CalculiX) file; `hex8_incompatible`
-    /// switches C3D8 hexahedra to the incompatible-modes formulation.
+    /// switches C3D8 hexahedra to the incompatible-modes formulation, `hex8_bbar` to the
+    /// mean-dilatation B̄ one.
     File {
         path: String,
         hex8_incompatible: bool,
+        hex8_bbar: bool,
     },
     /// Structured box `[origin, origin + size]` [m] with element edge ≈ `element_size` [m]
     /// (or explicit `divisions`).
@@ -98,6 +100,7 @@ struct MeshTable {
 enum Hex8Formulation {
     Full,
     Incompatible,
+    Bbar,
 }
 
 impl<'de> Deserialize<'de> for MeshSpec {
@@ -114,6 +117,7 @@ impl<'de> Deserialize<'de> for MeshSpec {
                 Ok(MeshSpec::File {
                     path: s.to_string(),
                     hex8_incompatible: false,
+                    hex8_bbar: false,
                 })
             }
             fn visit_map<A: MapAccess<'de>>(self, map: A) -> Result<MeshSpec, A::Error> {
@@ -130,6 +134,7 @@ impl<'de> Deserialize<'de> for MeshSpec {
                     return Ok(MeshSpec::File {
                         path,
                         hex8_incompatible: t.hex8 == Some(Hex8Formulation::Incompatible),
+                        hex8_bbar: t.hex8 == Some(Hex8Formulation::Bbar),
                     });
                 }
                 let size = t
@@ -137,7 +142,7 @@ impl<'de> Deserialize<'de> for MeshSpec {
                     .ok_or_else(|| de::Error::custom("mesh: missing `file` or box `size`"))?;
                 if t.hex8.is_some() {
                     return Err(de::Error::custom(
-                        "mesh.hex8 applies to mesh files; for a box use element = \"hex8i\"",
+                        "mesh.hex8 applies to mesh files; for a box use element = \"hex8i\" or \"hex8b\"",
                     ));
                 }
                 Ok(MeshSpec::Box {

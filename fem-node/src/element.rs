@@ -21,6 +21,10 @@ pub enum ElementKind {
     /// 8-node hexahedron with Wilson–Taylor incompatible modes (C3D8I / QM6): no shear locking
     /// in bending, passes the patch test on distorted meshes.
     Hex8i,
+    /// 8-node hexahedron with the mean-dilatation B̄ (Hughes 1980): full 2×2×2 rule for the
+    /// deviatoric part, the element-mean volumetric strain for the volumetric part; removes
+    /// volumetric locking (ν → ½), keeps hex8's shear locking in bending.
+    Hex8b,
     /// 20-node serendipity hexahedron (C3D20), 3×3×3 rule.
     Hex20,
 }
@@ -30,7 +34,7 @@ impl ElementKind {
         match self {
             ElementKind::Tet4 => 4,
             ElementKind::Tet10 => 10,
-            ElementKind::Hex8 | ElementKind::Hex8i => 8,
+            ElementKind::Hex8 | ElementKind::Hex8i | ElementKind::Hex8b => 8,
             ElementKind::Hex20 => 20,
         }
     }
@@ -40,6 +44,7 @@ impl ElementKind {
             ElementKind::Tet10 => "tet10",
             ElementKind::Hex8 => "hex8",
             ElementKind::Hex8i => "hex8i",
+            ElementKind::Hex8b => "hex8b",
             ElementKind::Hex20 => "hex20",
         }
     }
@@ -48,7 +53,7 @@ impl ElementKind {
         match self {
             ElementKind::Tet4 => 10,
             ElementKind::Tet10 => 24,
-            ElementKind::Hex8 | ElementKind::Hex8i => 12,
+            ElementKind::Hex8 | ElementKind::Hex8i | ElementKind::Hex8b => 12,
             ElementKind::Hex20 => 25,
         }
     }
@@ -63,7 +68,7 @@ impl ElementKind {
         match self {
             ElementKind::Tet4 => ShapeKind::Tet4,
             ElementKind::Tet10 => ShapeKind::Tet10,
-            ElementKind::Hex8 | ElementKind::Hex8i => ShapeKind::Hex8,
+            ElementKind::Hex8 | ElementKind::Hex8i | ElementKind::Hex8b => ShapeKind::Hex8,
             ElementKind::Hex20 => ShapeKind::Hex20,
         }
     }
@@ -73,7 +78,7 @@ impl ElementKind {
         match self {
             ElementKind::Tet4 => &TET4_FACES,
             ElementKind::Tet10 => &TET10_FACES,
-            ElementKind::Hex8 | ElementKind::Hex8i => &HEX8_FACES,
+            ElementKind::Hex8 | ElementKind::Hex8i | ElementKind::Hex8b => &HEX8_FACES,
             ElementKind::Hex20 => &HEX20_FACES,
         }
     }
@@ -363,7 +368,7 @@ pub(crate) fn stiffness_rule(kind: ElementKind) -> &'static Tabulated {
     match kind {
         ElementKind::Tet4 => &TET4_K,
         ElementKind::Tet10 => &TET10_K,
-        ElementKind::Hex8 | ElementKind::Hex8i => &HEX8_K,
+        ElementKind::Hex8 | ElementKind::Hex8i | ElementKind::Hex8b => &HEX8_K,
         ElementKind::Hex20 => &HEX20_K,
     }
 }
@@ -372,7 +377,7 @@ pub(crate) fn mass_rule(kind: ElementKind) -> &'static Tabulated {
     match kind {
         ElementKind::Tet4 => &TET4_M,
         ElementKind::Tet10 => &TET10_M,
-        ElementKind::Hex8 | ElementKind::Hex8i => &HEX8_M,
+        ElementKind::Hex8 | ElementKind::Hex8i | ElementKind::Hex8b => &HEX8_M,
         ElementKind::Hex20 => &HEX20_M,
     }
 }
@@ -517,10 +522,44 @@ pub fn stiffness(
     if kind == ElementKind::Hex8i {
         return hex8i_stiffness(x, mat, &g, &w, k);
     }
+    if kind == ElementKind::Hex8b {
+        // B̄ with the mean dilatation (Hughes 1980): with κ = λ + ⅔μ the energy splits into
+        // 2μ dev ε : dev ε (full rule; λ' = −⅔μ in the isotropic block) and κ V (tr ε̄)², where
+        // tr ε̄ = Σ_a ḡ_a · u_a with the element-mean gradients ḡ_a = (1/V) ∫ ∇N_a dV.
+        let dev = Lame {
+            lambda: -2.0 / 3.0 * mat.mu,
+            mu: mat.mu,
+        };
+        for q in 0..w.len() {
+            add_isotropic_block(k, ndof, &g[q * nn..(q + 1) * nn], w[q], dev);
+        }
+        let (gbar, vol) = mean_gradients(&g, &w, nn);
+        let kappa_v = (mat.lambda + 2.0 / 3.0 * mat.mu) * vol;
+        for r in 0..ndof {
+            for c in 0..ndof {
+                k[r * ndof + c] += kappa_v * gbar[r / 3][r % 3] * gbar[c / 3][c % 3];
+            }
+        }
+        return Ok(());
+    }
     for q in 0..w.len() {
         add_isotropic_block(k, ndof, &g[q * nn..(q + 1) * nn], w[q], mat);
     }
     Ok(())
+}
+
+/// Element-mean shape-function gradients ḡ_a = (1/V) Σ_q w_q ∇N_a(x_q) and the volume V.
+fn mean_gradients(g: &[[f64; 3]], w: &[f64], nn: usize) -> (Vec<[f64; 3]>, f64) {
+    let vol: f64 = w.iter().sum();
+    let mut gbar = vec![[0.0; 3]; nn];
+    for (wq, gq) in w.iter().zip(g.chunks_exact(nn)) {
+        for (gb, ga) in gbar.iter_mut().zip(gq) {
+            for k in 0..3 {
+                gb[k] += wq * ga[k] / vol;
+            }
+        }
+    }
+    (gbar, vol)
 }
 
 /// Gradients of the three incompatible bubble modes 1−ξ², 1−η², 1−ζ² at each point, evaluated
@@ -700,6 +739,19 @@ pub fn point_gradients(
             }
         }
         out.push(h);
+    }
+    if kind == ElementKind::Hex8b {
+        // B̄: the volumetric part of each point's gradient is the element mean
+        let (gbar, _) = mean_gradients(&g, &w, nn);
+        let mean_tr: f64 = (0..nn)
+            .map(|a| (0..3).map(|i| gbar[a][i] * u[a][i]).sum::<f64>())
+            .sum();
+        for h in &mut out {
+            let shift = (mean_tr - (h[0][0] + h[1][1] + h[2][2])) / 3.0;
+            for (i, row) in h.iter_mut().enumerate() {
+                row[i] += shift;
+            }
+        }
     }
     Ok((out, w))
 }

@@ -1,8 +1,9 @@
 //! `fem`: the finite element engine of the DEM–FEM co-simulation (Ullrich 2022, ch. 2.2, 3.3).
 //!
-//! Linear elastic solids (tet4, tet10, hex8, hex8 with incompatible modes, hex20), static
-//! solves and Bossak–Newmark / explicit dynamics with faer's sparse Cholesky, exterior-surface
-//! extraction for the coupling interface, snapshots and VTK/CSV output. No transport here:
+//! Linear elastic solids (tet4, tet10, hex8, hex8 with incompatible modes or mean-dilatation
+//! B̄, hex20), static solves and Bossak–Newmark / explicit dynamics with faer's sparse
+//! Cholesky, exterior-surface extraction for the coupling interface, snapshots, VTK/CSV output
+//! and strain gauges. No transport here:
 //! the `fem-node` binary adapts this library to zenoh.
 //!
 //! ```no_run

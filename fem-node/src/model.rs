@@ -85,17 +85,7 @@ impl Model {
         cfg.validate()
             .map_err(|(field, message)| FemError::Config { field, message })?;
         let mesh = match &cfg.mesh {
-            MeshSpec::File {
-                path,
-                hex8_incompatible,
-            } => {
-                let p = base_dir.join(path);
-                let mut m = Mesh::read(&p)?;
-                if *hex8_incompatible {
-                    m.set_hex8_incompatible(true);
-                }
-                m
-            }
+            MeshSpec::File { path, .. } => Mesh::read(&base_dir.join(path))?,
             MeshSpec::Box {
                 size,
                 origin,
@@ -119,11 +109,16 @@ impl Model {
         cfg.validate()
             .map_err(|(field, message)| FemError::Config { field, message })?;
         if let MeshSpec::File {
-            hex8_incompatible: true,
+            hex8_incompatible,
+            hex8_bbar,
             ..
         } = cfg.mesh
         {
-            mesh.set_hex8_incompatible(true);
+            if hex8_incompatible {
+                mesh.set_hex8_formulation(element::ElementKind::Hex8i);
+            } else if hex8_bbar {
+                mesh.set_hex8_formulation(element::ElementKind::Hex8b);
+            }
         }
         let timing = tracing::enabled!(tracing::Level::DEBUG);
         let t0 = std::time::Instant::now();
@@ -518,8 +513,8 @@ impl Model {
             out.push(format!(
                 "fem.material.poisson_ratio = {nu}: fully integrated hexahedra (hex8, C3D8) lock \
                  volumetrically above ν = {LOCKING_POISSON_RATIO} (in pure bending 17 % too stiff \
-                 at ν = 0.49, 33 % at 0.499; FEM.md); use hex8i (mesh = {{ file = ..., hex8 = \
-                 \"incompatible\" }} or element = \"hex8i\") or hex20"
+                 at ν = 0.49, 33 % at 0.499; FEM.md); use hex8b (mean-dilatation B̄: mesh = {{ file = \
+                 ..., hex8 = \"bbar\" }} or element = \"hex8b\"), hex8i or hex20"
             ));
         }
         out

@@ -170,6 +170,11 @@ fn patch_test_hex8_incompatible_constant_strain_exact() {
 }
 
 #[test]
+fn patch_test_hex8_bbar_constant_strain_exact() {
+    assert_patch(ElementKind::Hex8b, 3);
+}
+
+#[test]
 fn patch_test_hex20_constant_strain_exact() {
     assert_patch(ElementKind::Hex20, 3);
 }

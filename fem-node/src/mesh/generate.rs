@@ -19,7 +19,10 @@ pub fn box_mesh(origin: [f64; 3], size: [f64; 3], div: [usize; 3], kind: Element
                 // corner c = (a, b, c) ∈ {0,1}³ in fine-grid units
                 let c = |a: usize, b: usize, cc: usize| [i0 + r * a, j0 + r * b, k0 + r * cc];
                 match kind {
-                    ElementKind::Hex8 | ElementKind::Hex8i | ElementKind::Hex20 => {
+                    ElementKind::Hex8
+                    | ElementKind::Hex8i
+                    | ElementKind::Hex8b
+                    | ElementKind::Hex20 => {
                         let corners = [
                             c(0, 0, 0),
                             c(1, 0, 0),

@@ -155,11 +155,21 @@ impl Mesh {
 
     /// Switches 8-node hexahedra between full integration and incompatible modes.
     pub fn set_hex8_incompatible(&mut self, incompatible: bool) {
+        self.set_hex8_formulation(if incompatible {
+            ElementKind::Hex8i
+        } else {
+            ElementKind::Hex8
+        });
+    }
+
+    /// Gives every 8-node hexahedron the formulation `kind` (hex8, hex8i or hex8b).
+    pub fn set_hex8_formulation(&mut self, kind: ElementKind) {
         for k in &mut self.kinds {
-            match (*k, incompatible) {
-                (ElementKind::Hex8, true) => *k = ElementKind::Hex8i,
-                (ElementKind::Hex8i, false) => *k = ElementKind::Hex8,
-                _ => {}
+            if matches!(
+                *k,
+                ElementKind::Hex8 | ElementKind::Hex8i | ElementKind::Hex8b
+            ) {
+                *k = kind;
             }
         }
     }
