@@ -37,6 +37,8 @@ struct FemNode {
     config: Option<(fem::config::FemConfig, PathBuf)>,
     /// Results of that reference, reported with the model's own.
     reference: BTreeMap<String, f64>,
+    /// Model time of the last output row, so that `finish` does not repeat it.
+    last_output_time: Option<f64>,
 }
 
 /// Ullrich ch. 4 / REFERENCE A3: the pure-FEM solution under the same total interface load
@@ -259,6 +261,7 @@ impl Solver for FemNode {
             .write_outputs(&out_dir)
             .map_err(|e| fem_error(ErrorCode::Io, e))?;
         let t_end = model.time();
+        self.last_output_time = Some(t_end);
         let (pos, vel, acc) = model.interface_kinematics();
         if let (Some(trace), Some((name, _))) = (self.trace.as_mut(), &self.interface) {
             let path = out_dir.join(format!("trace_{name}_mesh.csv"));
@@ -335,8 +338,11 @@ impl Solver for FemNode {
         let out_dir = self.out_dir.clone();
         match self.model.as_mut() {
             Some(m) => {
-                m.write_outputs(&out_dir)
-                    .map_err(|e| fem_error(ErrorCode::Io, e))?;
+                // the state after the last window is already written (time series row, VTU)
+                if self.last_output_time != Some(m.time()) {
+                    m.write_outputs(&out_dir)
+                        .map_err(|e| fem_error(ErrorCode::Io, e))?;
+                }
                 let mut results: BTreeMap<String, f64> = m.results().into_iter().collect();
                 results.extend(std::mem::take(&mut self.reference));
                 Ok(results)
@@ -364,6 +370,7 @@ fn main() -> std::process::ExitCode {
         trace: None,
         config: None,
         reference: BTreeMap::new(),
+        last_output_time: None,
     };
     main_with(args.node, hello, node)
 }
