@@ -17,6 +17,9 @@
 #                       ccx (spooles), rayon threads of ours
 #   DEM_SETTLE [40000]  settling steps before the timed ones (0.4 s), both codes
 #   DEM_STEPS [10000]   timed DEM steps, both codes
+#   DEM_JITTER [0]      random horizontal displacement (m) of LIGGGHTS' lattice sites; 0 is
+#                       REFERENCE D's exact lattice, which LIGGGHTS keeps as 441 static columns
+#                       (see README.md: ours breaks that symmetry by itself, later)
 #   TRANSPORT_ROUNDS [200]
 #   BENCH_WORK [mktemp] folder for the decks, logs and raw records (kept; printed at the end)
 #   COSIM_TARGET_DIR    cargo target folder holding release/deps/{dense_bed,static_beam,transport}-*
@@ -34,6 +37,7 @@ CASES=${CASES:-"dem fem10 fem5 transport"}
 THREADS=${THREADS:-2}
 DEM_SETTLE=${DEM_SETTLE:-40000}
 DEM_STEPS=${DEM_STEPS:-10000}
+DEM_JITTER=${DEM_JITTER:-0}
 TRANSPORT_ROUNDS=${TRANSPORT_ROUNDS:-200}
 LIGGGHTS=${LIGGGHTS:-liggghts}
 CCX=${CCX:-ccx}
@@ -115,21 +119,22 @@ dem_peer() { # run index
         # each rank under its own GNU time, for the peak RSS summed over ranks
         run_timed "$d" "$tag" "$MPIRUN" --allow-run-as-root -np "$THREADS" \
             sh -c 'exec '"$TIME"' -f %M -o "$0.rss.$OMPI_COMM_WORLD_RANK" '"$LIGGGHTS"' "$@"' "$tag" \
-            -in "$HERE/liggghts/dense_bed.in" -var settle "$DEM_SETTLE" -var steps "$DEM_STEPS" \
+            -in "$HERE/liggghts/dense_bed.in" -var settle "$DEM_SETTLE" -var steps "$DEM_STEPS" -var jitter "$DEM_JITTER" \
             -log "$tag.lammps" -echo none -screen none
     else
         run_timed "$d" "$tag" "$LIGGGHTS" -in "$HERE/liggghts/dense_bed.in" \
-            -var settle "$DEM_SETTLE" -var steps "$DEM_STEPS" -log "$tag.lammps" -echo none -screen none
+            -var settle "$DEM_SETTLE" -var steps "$DEM_STEPS" -var jitter "$DEM_JITTER" -log "$tag.lammps" -echo none -screen none
     fi
     timefile "$d/$tag.time"
     local rss_kb=$M
     if ((THREADS > 1)); then rss_kb=$(cat "$d/$tag".rss.* | awk '{s+=$1} END{print s}'); fi
-    local t atoms ke contacts
+    local t atoms ke contacts builds
     t=$(awk '/^Loop time of/{t=$4} END{print t}' "$d/$tag.lammps")
+    builds=$(awk '/^Neighbor list builds/{b=$NF} END{print b}' "$d/$tag.lammps")
     # last thermo line: step atoms ke rke contacts zmax
     read -r _ atoms ke _ contacts _ < <(awk '$1 ~ /^[0-9]+$/ && NF == 6 {l=$0} END{print l}' "$d/$tag.lammps")
     [[ $atoms == 24696 ]] || log "WARNING: LIGGGHTS ran $atoms particles (expected 24696)"
-    record dem liggghts "$1" "$t" "$W" "$CPU" "$((rss_kb / 1024))" "particles=$atoms" "KE=$ke" "contacts=$contacts"
+    record dem liggghts "$1" "$t" "$W" "$CPU" "$((rss_kb / 1024))" "particles=$atoms" "KE=$ke" "contacts=$contacts" "builds=$builds"
 }
 
 dem_ours() {
@@ -137,13 +142,14 @@ dem_ours() {
     run_timed "$d" "$tag" env DENSE_BED_THREADS="$THREADS" DENSE_BED_SETTLE="$DEM_SETTLE" \
         DENSE_BED_STEPS="$DEM_STEPS" DENSE_BED_SCALING_MAX=0 "$DENSE_BED"
     timefile "$d/$tag.time"
-    local t n ke contacts
+    local t n ke contacts builds
     t=$(sed -n 's/^timed [0-9]* steps: \([0-9.]*\) s wall.*/\1/p' "$d/$tag.log")
     n=$(sed -n 's/^dense bed: \([0-9]*\) particles.*/\1/p' "$d/$tag.log")
     ke=$(sed -n 's/^timed .* KE \([-0-9.e+]*\) J.*/\1/p' "$d/$tag.log")
     contacts=$(sed -n 's/^timed .*; contacts \([0-9]*\),.*/\1/p' "$d/$tag.log")
+    builds=$(sed -n 's/^timed .*, list builds \([0-9]*\),.*/\1/p' "$d/$tag.log")
     [[ -n $t ]] || die "no 'timed ... steps' line in $d/$tag.log"
-    record dem ours "$1" "$t" "$W" "$CPU" "$((M / 1024))" "particles=$n" "KE=$ke" "contacts=$contacts"
+    record dem ours "$1" "$t" "$W" "$CPU" "$((M / 1024))" "particles=$n" "KE=$ke" "contacts=$contacts" "builds=$builds"
 }
 
 # ---------------------------------------------------------------- FEM: static beam
@@ -268,7 +274,7 @@ UPTIME_AFTER=$(uptime)
 peer_prog() { case $1 in dem) echo liggghts ;; *) echo ccx ;; esac; }
 describe() {
     case $1 in
-    dem) echo "DEM dense bed, 24,696 spheres, $DEM_STEPS steps after $DEM_SETTLE settling" ;;
+    dem) echo "DEM dense bed, 24,696 spheres, $DEM_STEPS steps after $DEM_SETTLE settling$( [[ $DEM_JITTER == 0 ]] || echo ", LIGGGHTS lattice jitter $DEM_JITTER m")" ;;
     fem10) echo "FEM static beam C3D8 10 mm (36,663 dof)" ;;
     fem5) echo "FEM static beam C3D8 5 mm (265,923 dof)" ;;
     esac
@@ -312,8 +318,8 @@ for c in $CASES; do
     p=$(peer_prog "$c")
     case $c in
     dem)
-        for k in particles KE contacts; do
-            echo "| dem | $k | $(answer dem "$p" $k | paste -sd, - | sed 's/,/, /g') | $(answer dem ours $k | paste -sd, - | sed 's/,/, /g') |"
+        for k in particles KE contacts builds; do
+            echo "| dem | $k$( [[ $k == builds ]] && echo ' (neighbour lists, timed steps)') | $(answer dem "$p" $k | paste -sd, - | sed 's/,/, /g') | $(answer dem ours $k | paste -sd, - | sed 's/,/, /g') |"
         done
         ;;
     fem*)
