@@ -473,6 +473,9 @@ impl Model {
         if let Some(dt) = self.critical_time_step() {
             l.insert("critical_time_step".to_string(), dt);
         }
+        // the coordinator's checks need to know whether Δt_crit binds (it does not for Bossak)
+        let explicit = matches!(self.analysis, Analysis::Explicit { .. });
+        l.insert("explicit".to_string(), if explicit { 1.0 } else { 0.0 });
         let masses = self.interface_node_masses();
         if !masses.is_empty() {
             let min = masses.iter().copied().fold(f64::INFINITY, f64::min);
@@ -484,8 +487,10 @@ impl Model {
             if let Some(f) = self.highest_frequency_hz()? {
                 l.insert("highest_frequency_hz".to_string(), f);
             }
+            // a free-floating body (e.g. a sleeper resting on ballast) has a singular K and
+            // rigid-body modes at 0 Hz: no lowest frequency, and no error for it
             if self.dofs.n_eq <= LOWEST_FREQUENCY_MAX_EQUATIONS {
-                if let Some(f) = self.lowest_frequency_hz()? {
+                if let Ok(Some(f)) = self.lowest_frequency_hz() {
                     l.insert("lowest_frequency_hz".to_string(), f);
                 }
             }
