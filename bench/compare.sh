@@ -119,10 +119,10 @@ dem_peer() { # run index
         # each rank under its own GNU time, for the peak RSS summed over ranks
         run_timed "$d" "$tag" "$MPIRUN" --allow-run-as-root -np "$THREADS" \
             sh -c 'exec '"$TIME"' -f %M -o "$0.rss.$OMPI_COMM_WORLD_RANK" '"$LIGGGHTS"' "$@"' "$tag" \
-            -in "$HERE/liggghts/dense_bed.in" -var settle "$DEM_SETTLE" -var steps "$DEM_STEPS" -var jitter "$DEM_JITTER" \
+            -in dense_bed.in -var settle "$DEM_SETTLE" -var steps "$DEM_STEPS" -var jitter "$DEM_JITTER" \
             -log "$tag.lammps" -echo none -screen none
     else
-        run_timed "$d" "$tag" "$LIGGGHTS" -in "$HERE/liggghts/dense_bed.in" \
+        run_timed "$d" "$tag" "$LIGGGHTS" -in dense_bed.in \
             -var settle "$DEM_SETTLE" -var steps "$DEM_STEPS" -var jitter "$DEM_JITTER" -log "$tag.lammps" -echo none -screen none
     fi
     timefile "$d/$tag.time"
@@ -224,6 +224,8 @@ for c in $CASES; do
     dem)
         DENSE_BED=$(ours_bin dense_bed)
         mkdir -p "$WORK/dem"
+        # a private copy: LIGGGHTS reads its input line by line while it runs
+        cp "$HERE/liggghts/dense_bed.in" "$WORK/dem/"
         PEER_OK[dem]=1
         if ! have "$LIGGGHTS"; then
             log "SKIP peer: LIGGGHTS ('$LIGGGHTS') is not installed (Debian: apt-get install liggghts); measuring ours only"
