@@ -14,9 +14,10 @@
 //! step Δt^C. Its period T_c = 2π √(M/k_c) sets the scale; the constants per schedule were
 //! measured with `cosim study` on the sleeper scene's CI variant (docs/speed-accuracy.md):
 //! the largest stable window was [`JIT_WINDOW_FRACTION`] · T_c for JIT and
-//! [`PREDICTIVE_WINDOW_FRACTION`] · T_c for predictive. Above the limit the run is refused
-//! (the stability monitor would stop it later with NaN-free but useless results);
-//! `coupling.allow_beyond_limits = true` turns refusals into warnings.
+//! [`PREDICTIVE_WINDOW_FRACTION`] · T_c for predictive. Above the limit the run starts
+//! with a warning (the stability monitor stops it if it diverges), and refused beyond
+//! [`REFUSE_BEYOND`] times the limit; `coupling.allow_beyond_limits = true` turns refusals into
+//! warnings.
 
 use std::collections::BTreeMap;
 
@@ -38,10 +39,15 @@ pub fn impact_error(steps: f64) -> f64 {
 pub fn steps_for_impact_error(err: f64) -> f64 {
     7.6 * (5.3e-3 / err).powf(1.0 / 3.3)
 }
-/// Largest stable JIT window as a fraction of the interface contact period T_c (measured).
-pub const JIT_WINDOW_FRACTION: f64 = 1.0 / 30.0;
-/// Largest stable predictive window as a fraction of T_c (measured).
-pub const PREDICTIVE_WINDOW_FRACTION: f64 = 1.0 / 3.0;
+/// Largest stable JIT window as a fraction of the interface contact period T_c, measured on
+/// scenes/sleeper-ci.toml (T_c = 1.467e-4 s): stable at 5 µs = 0.034 T_c, diverging at 10 µs.
+pub const JIT_WINDOW_FRACTION: f64 = 0.04;
+/// Largest stable predictive window as a fraction of T_c, measured on the same scene: stable
+/// at 100 µs = 0.68 T_c, an oscillation growing 2× per ms at 200 µs.
+pub const PREDICTIVE_WINDOW_FRACTION: f64 = 0.7;
+/// Beyond the limit the run is warned about; beyond this many times the limit it is refused
+/// (the limit is an estimate: T_c uses the stiffness at a 1 % overlap and the lightest node).
+pub const REFUSE_BEYOND: f64 = 10.0;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -175,7 +181,12 @@ pub fn assess(
                         "interface contact period T_c = 2π√(M/k) = {tc:.3e} s (lightest interface node M = {m:.3e} kg, stiffest contact k = {k:.3e} N/m)"
                     );
                     if w > limit {
-                        push(Level::Refuse, "coupling window", format!(
+                        let level = if w > REFUSE_BEYOND * limit {
+                            Level::Refuse
+                        } else {
+                            Level::Warn
+                        };
+                        push(level, "coupling window", format!(
                             "Δt^C = {w:.3e} s exceeds the {name} limit {limit:.3e} s = {:.3} T_c; {basis}; use Δt^C ≤ {limit:.3e} s{}",
                             limit / tc,
                             if scene.schedule == ScheduleKind::Jit {
@@ -247,13 +258,16 @@ mod tests {
         let jit_limit = JIT_WINDOW_FRACTION * tc;
         let ok = assess(&facts(ScheduleKind::Jit, 0.9 * jit_limit), Some(&d), Some(&f));
         assert!(ok.iter().all(|x| x.level != Level::Refuse), "{ok:?}");
-        let bad = assess(&facts(ScheduleKind::Jit, 1.1 * jit_limit), Some(&d), Some(&f));
+        let warned = assess(&facts(ScheduleKind::Jit, 1.1 * jit_limit), Some(&d), Some(&f));
+        assert!(warned.iter().any(|x| x.level == Level::Warn && x.limit == "coupling window"));
+        assert!(warned.iter().all(|x| x.level != Level::Refuse), "{warned:?}");
+        let bad = assess(&facts(ScheduleKind::Jit, 11.0 * jit_limit), Some(&d), Some(&f));
         let r = bad.iter().find(|x| x.level == Level::Refuse).expect("refused");
         assert_eq!(r.limit, "coupling window");
         assert!(r.message.contains(&format!("{jit_limit:.3e}")), "{r}");
         assert!(r.message.contains("predictive schedule allows"), "{r}");
         // the same window is fine for the predictive schedule
-        let p = assess(&facts(ScheduleKind::Predictive, 1.1 * jit_limit), Some(&d), Some(&f));
+        let p = assess(&facts(ScheduleKind::Predictive, 11.0 * jit_limit), Some(&d), Some(&f));
         assert!(p.iter().all(|x| x.level != Level::Refuse), "{p:?}");
         // one-way coupling has no window limit
         let o = assess(&facts(ScheduleKind::OneWay, 1.0), Some(&d), Some(&f));

@@ -71,6 +71,9 @@ enum Command {
         /// Index of the reference run (default: the finest completed run).
         #[arg(long)]
         reference: Option<usize>,
+        /// Mark a completed run `inaccurate` when its error exceeds this (default 1.0 = 100 %).
+        #[arg(long)]
+        inaccurate_above: Option<f64>,
         /// Runs at the same time (default: one per two cores; each run is two processes).
         #[arg(long)]
         jobs: Option<usize>,
@@ -175,6 +178,7 @@ fn main() -> ExitCode {
                 series,
                 reference,
                 jobs,
+                inaccurate_above,
                 out,
             } => {
                 let scene = Scene::load(&scene)?;
@@ -192,6 +196,7 @@ fn main() -> ExitCode {
                         .transpose()?,
                     reference,
                     jobs: jobs.unwrap_or((cores / 2).max(1)),
+                    inaccurate_above,
                 };
                 let (metric, outcomes) =
                     coordinator::study::run_study(&scene, &vars, &study, &out).await?;

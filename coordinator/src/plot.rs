@@ -176,7 +176,8 @@ fn status_colour(status: &str) -> RGBColor {
         "completed" => RGBColor(0x2c, 0xa0, 0x2c),
         "unstable" => RGBColor(0xd6, 0x27, 0x28),
         "refused" => RGBColor(0x99, 0x99, 0x99),
-        _ => RGBColor(0xff, 0x7f, 0x0e),
+        "inaccurate" => RGBColor(0xff, 0x7f, 0x0e),
+        _ => RGBColor(0x8c, 0x56, 0x4b),
     }
 }
 

@@ -144,6 +144,10 @@ pub struct StudyOptions {
     pub reference: Option<usize>,
     /// Runs at the same time (default 1).
     pub jobs: usize,
+    /// A completed run whose error exceeds this is marked `inaccurate` (default 1.0 = 100 %):
+    /// its history has little to do with the reference's (a slow divergence the monitor did not
+    /// stop, or a window far too long for the physics).
+    pub inaccurate_above: Option<f64>,
 }
 
 /// Parses `--series file:column`.
@@ -391,6 +395,12 @@ pub async fn run_study(
                 .map(|m| (m - ref_value).abs() / ref_value.abs().max(f64::MIN_POSITIVE));
         }
     }
+    let threshold = opts.inaccurate_above.unwrap_or(1.0);
+    for o in &mut outcomes {
+        if o.status == "completed" && o.error.is_some_and(|e| e > threshold) {
+            o.status = "inaccurate".into();
+        }
+    }
     write_csv(
         &out_dir.join("study.csv"),
         vars,
@@ -570,6 +580,7 @@ fn stability_svg(outcomes: &[Outcome], vars: &[Variation]) -> String {
         let y = 30.0 + row * i as f64;
         let c = match o.status.as_str() {
             "completed" => "#2ca02c",
+            "inaccurate" => "#ff7f0e",
             "refused" => "#999999",
             _ => "#d62728",
         };
