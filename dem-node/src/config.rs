@@ -13,6 +13,8 @@ use std::fmt;
 /// guides recommend 20–40 % of Δt_R for dense packings; 0.3 lets the REFERENCE D dense bed
 /// (Δt = 1e-5 s, Δt_R = 3.86e-5 s, fraction 0.26) run without the override.
 pub const DEFAULT_RAYLEIGH_FRACTION: f64 = 0.3;
+/// Largest `impact_substeps`.
+pub const MAX_IMPACT_SUBSTEPS: usize = 1024;
 
 /// A scene-file error with a 1-based position in the whole scene text.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -78,6 +80,10 @@ pub struct DemConfig {
     /// Integrate rotations (default true). `false` locks every particle's rotation.
     #[serde(default = "default_true")]
     pub rotation: bool,
+    /// Impact refinement: a step during which a contact touches runs as this many sub-steps
+    /// of Δt/N (default 1 = off; see `impact_refinement`).
+    #[serde(default = "default_impact_substeps")]
+    pub impact_substeps: usize,
 }
 
 fn default_gravity() -> [f64; 3] {
@@ -85,6 +91,9 @@ fn default_gravity() -> [f64; 3] {
 }
 fn default_rayleigh_fraction() -> f64 {
     DEFAULT_RAYLEIGH_FRACTION
+}
+fn default_impact_substeps() -> usize {
+    1
 }
 fn default_true() -> bool {
     true
@@ -470,6 +479,15 @@ impl DemConfig {
         }
         if let Some(s) = self.skin {
             c.positive(p(&["dem", "skin"]), s);
+        }
+        if !(1..=MAX_IMPACT_SUBSTEPS).contains(&self.impact_substeps) {
+            c.fail(
+                p(&["dem", "impact_substeps"]),
+                format!(
+                    "must be in 1..={MAX_IMPACT_SUBSTEPS}, got {}",
+                    self.impact_substeps
+                ),
+            );
         }
         if self.threads == Some(0) {
             c.fail(p(&["dem", "threads"]), "must be >= 1".into());

@@ -7,7 +7,8 @@
 //! Static walls may translate or vanish on a prescribed schedule ([`walls::PrescribedMotion`]);
 //! sensors measure flow, pressure and the angle of repose ([`sensors`]); particle beds are read
 //! from and written to CSV ([`particle_file`]); [`Engine::limits`] reports the physics limits
-//! for the coordinator's checks.
+//! for the coordinator's checks. `impact_substeps` sub-steps the steps with touching contacts
+//! for accurate impacts in dilute scenes ([`impact_refinement`]).
 //!
 //! [`Engine::step`] reads like Ullrich's Algorithm 1: detect contacts → resolve forces →
 //! update particle states, each stage in its own module.
@@ -17,6 +18,7 @@ pub mod config;
 pub mod contact_detection;
 pub mod generate;
 pub mod hertz_mindlin;
+pub mod impact_refinement;
 pub mod integrate;
 pub mod limits;
 pub mod materials;
@@ -128,6 +130,10 @@ pub struct Engine {
     box_region: Option<(V3, V3)>,
     /// Static walls with a prescribed motion or removal time.
     wall_motions: Vec<PrescribedMotion>,
+    /// Steps run as `impact_substeps` sub-steps (not part of snapshots).
+    refined_steps: u64,
+    /// Scratch: the positions the next unrefined step would reach.
+    predicted: Vec<V3>,
 }
 
 fn v3(a: &[f64; 3]) -> V3 {
@@ -381,6 +387,8 @@ impl Engine {
             },
             box_region,
             wall_motions,
+            refined_steps: 0,
+            predicted: Vec::new(),
         };
         engine.place_walls(false);
         engine.check_time_step()?;
@@ -672,7 +680,7 @@ impl Engine {
         self.run(|e| {
             let moved = broad_phase::particles_moved(&e.state.lists, &e.state.particles);
             e.detect_contacts(moved);
-            e.resolve_forces(0.0);
+            e.resolve_forces(0.0, 0.0, false);
         });
     }
 
@@ -683,13 +691,17 @@ impl Engine {
         if substeps == 0 {
             return Ok(());
         }
+        if self.cfg.impact_substeps > 1 {
+            // each step decides on refinement from its start state: no fused passes
+            return self.run(|e| (0..substeps).try_for_each(|_| e.step_in_pool()));
+        }
         self.run(|e| {
             let (dt, rotation) = (e.dt, e.cfg.rotation);
             let mut moved = e.kick_drift();
             e.track_flow();
             for s in 0..substeps {
                 e.detect_contacts(moved);
-                e.resolve_forces(dt);
+                e.resolve_forces(dt, 1.0, true);
                 let p = &mut e.state.particles;
                 let finite = if s + 1 < substeps {
                     let l = &e.state.lists;
@@ -720,16 +732,114 @@ impl Engine {
     /// One DEM step, Ullrich's Algorithm 1 in velocity-Verlet form: the first half kick and
     /// drift move the particles (and coupled meshes by their motion rule) to t + Δt, then
     /// contacts are detected, forces resolved, and the state update completed.
+    ///
+    /// With `impact_substeps` = N > 1, a step during which a contact is predicted to touch
+    /// runs as N sub-steps of Δt/N ([`impact_refinement`]).
     pub fn step(&mut self) -> Result<(), DemError> {
+        self.run(|e| e.step_in_pool())
+    }
+
+    fn step_in_pool(&mut self) -> Result<(), DemError> {
+        let n = self.cfg.impact_substeps;
+        if n > 1 && self.contact_during_step() {
+            return self.refined_step(n);
+        }
         let moved = self.kick_drift();
         self.track_flow();
         self.detect_contacts(moved);
-        self.resolve_forces(self.dt);
+        self.resolve_forces(self.dt, 1.0, true);
         if integrate::kick(&mut self.state.particles, self.dt, self.cfg.rotation) {
             Ok(())
         } else {
             Err(self.instability())
         }
+    }
+
+    /// Does a contact touch during the next step (see [`impact_refinement`])?
+    fn contact_during_step(&mut self) -> bool {
+        let s = &self.state;
+        let t1 = s.time + self.dt;
+        let wall_shift_at_step_end = if s.lists.wall_shift_at_build.len() == self.wall_motions.len()
+        {
+            self.wall_motions
+                .iter()
+                .zip(&s.lists.wall_shift_at_build)
+                .map(|(m, d0)| (m.displacement(t1) - d0).norm())
+                .fold(0.0, f64::max)
+        } else {
+            f64::INFINITY
+        };
+        let walls = impact_refinement::WallsView {
+            planes: &self.planes,
+            meshes: &s.meshes,
+            wall_shift_at_step_end,
+        };
+        impact_refinement::contact_during_step(
+            &s.lists,
+            &s.particles,
+            &walls,
+            self.dt,
+            &mut self.predicted,
+        )
+    }
+
+    /// One step of Δt as `n` velocity-Verlet sub-steps of Δt/n. The clock, coupled meshes and
+    /// prescribed walls follow the sub-step times; the step counter, the meshes' window step
+    /// count and the end time are those of an unrefined step (bitwise). Each sub-step's nodal
+    /// forces enter the window average with weight 1/n, so the average stays a time average
+    /// (Ullrich eq. 3.8 with the substeps' forces weighted by their duration).
+    fn refined_step(&mut self, n: usize) -> Result<(), DemError> {
+        let (dt, rotation) = (self.dt, self.cfg.rotation);
+        let h = dt / n as f64;
+        let t0 = self.state.time;
+        for k in 1..=n {
+            let l = &self.state.lists;
+            let moved = integrate::kick_drift(
+                &mut self.state.particles,
+                &l.position_at_build,
+                0.5 * l.skin,
+                h,
+                rotation,
+            );
+            if k < n {
+                self.set_substep_clock(t0, k as f64 / n as f64);
+            } else {
+                // from t0 by the unrefined step's own operation, so the end time is bitwise
+                self.state.time = t0;
+                self.advance_clock();
+            }
+            self.track_flow();
+            self.detect_contacts(moved);
+            self.resolve_forces(h, 1.0 / n as f64, k == n);
+            if !integrate::kick(&mut self.state.particles, h, rotation) {
+                return Err(self.instability());
+            }
+        }
+        self.refined_steps += 1;
+        Ok(())
+    }
+
+    /// Puts the clock, coupled meshes and prescribed walls at t0 + fraction·Δt inside the
+    /// current step (the step and window-step counters stay).
+    fn set_substep_clock(&mut self, t0: f64, fraction: f64) {
+        let dt = self.dt;
+        let s = &mut self.state;
+        s.time = t0 + fraction * dt;
+        for m in s.meshes.iter_mut().filter(|m| m.coupled) {
+            m.tau = (m.window_steps as f64 + fraction) * dt;
+            m.move_to(m.tau);
+        }
+        self.place_walls(true);
+    }
+
+    /// Number of steps run as `impact_substeps` sub-steps since the engine was built.
+    pub fn refined_steps(&self) -> u64 {
+        self.refined_steps
+    }
+
+    /// Number of DEM steps since the start (snapshots included); a refined step counts once.
+    pub fn steps(&self) -> u64 {
+        self.state.steps
     }
 
     /// Algorithm 1, lines 1–2 (first half of velocity Verlet): first half kick and drift of the
@@ -810,8 +920,10 @@ impl Engine {
         }
     }
 
-    /// Algorithm 1, line 4.
-    fn resolve_forces(&mut self, dt: f64) {
+    /// Algorithm 1, line 4. `dt` is the history increment time (0: pure evaluation); the
+    /// coupled meshes' nodal forces enter the window sum with `weight`, and `ends_step` counts
+    /// one window substep.
+    fn resolve_forces(&mut self, dt: f64, weight: f64, ends_step: bool) {
         let s = &mut self.state;
         let ctx = ForceContext {
             materials: &self.materials,
@@ -827,7 +939,8 @@ impl Engine {
                 &s.lists,
                 self.planes.len(),
                 &s.records,
-                dt > 0.0,
+                if dt > 0.0 { weight } else { 0.0 },
+                dt > 0.0 && ends_step,
             );
         }
     }

@@ -574,12 +574,15 @@ fn wall_forces(
 }
 
 /// Distributes the recorded forces on coupled meshes to their nodes, f_K = N_K f
-/// (Wellmann eqs. 4.3–4.4), in particle order, and updates the window accumulators.
+/// (Wellmann eqs. 4.3–4.4), in particle order, and updates the window accumulators: the
+/// nodal forces are added to the window sum with `weight` (1 per step; 1/N per impact
+/// sub-step; 0 for a pure evaluation), and `count_step` counts one more window substep.
 pub fn accumulate_nodal_forces(
     meshes: &mut [Mesh],
     lists: &NeighbourLists,
     n_planes: usize,
     records: &[MeshForceRecord],
+    weight: f64,
     count_step: bool,
 ) {
     for m in meshes.iter_mut().filter(|m| m.coupled) {
@@ -601,10 +604,13 @@ pub fn accumulate_nodal_forces(
     }
     for m in meshes.iter_mut().filter(|m| m.coupled) {
         m.nodal_force_last.clone_from(&m.nodal_force_step);
-        if count_step {
+        if weight != 0.0 {
+            // weight 1 adds f exactly (x · 1 = x), as before impact sub-steps existed
             for (s, f) in m.nodal_force_sum.iter_mut().zip(&m.nodal_force_step) {
-                *s += f;
+                *s += f * weight;
             }
+        }
+        if count_step {
             m.window_substeps += 1;
         }
     }

@@ -167,6 +167,56 @@ fn averaged_interface_forces_are_the_mean_of_substep_forces() {
     assert_eq!(e.interface_forces(m, true), e.interface_forces(m, false));
 }
 
+/// With impact refinement (every step here has contacts, so every step runs as N sub-steps)
+/// the window average weights each sub-step's nodal forces by its duration, so it equals the
+/// plain average at Δt/N; the last forces, the mesh's window clock and the particles agree too.
+#[test]
+fn impact_substeps_average_interface_forces_over_time() {
+    let run = |dt: f64, substeps: usize, steps: usize| {
+        let scene = SCENE.replace(
+            "time_step = 2e-5",
+            &format!("time_step = {dt:e}\nimpact_substeps = {substeps}"),
+        );
+        let mut e = engine(&scene);
+        let (pos, tris) = plate();
+        let m = e.add_coupled_mesh("plate", &pos, &tris).unwrap();
+        let v: Vec<f64> = (0..pos.len()).map(|k| 0.01 * (k % 3) as f64).collect();
+        let zero = vec![0.0; pos.len()];
+        e.set_mesh_kinematics(m, &pos, &v, &zero, MotionRule::Linear)
+            .unwrap();
+        e.advance(steps).unwrap();
+        let x: Vec<f64> = (0..4).flat_map(|id| state_of(&e, id).0).collect();
+        (
+            e.interface_forces(m, true),
+            e.interface_forces(m, false),
+            e.mesh_positions(m),
+            x,
+            e.refined_steps(),
+        )
+    };
+    let (avg_r, last_r, mesh_r, x_r, refined) = run(2e-5, 4, 25);
+    let (avg_p, last_p, mesh_p, x_p, _) = run(5e-6, 1, 100);
+    assert_eq!(refined, 25, "every step has contacts");
+    let max_abs = |a: &[f64]| a.iter().map(|x| x.abs()).fold(0.0, f64::max);
+    let rel = |a: &[f64], b: &[f64]| {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f64::max)
+            / max_abs(b).max(1e-300)
+    };
+    let (e_avg, e_last, e_mesh, e_x) = (
+        rel(&avg_r, &avg_p),
+        rel(&last_r, &last_p),
+        rel(&mesh_r, &mesh_p),
+        rel(&x_r, &x_p),
+    );
+    println!("refined vs plain at dt/4: average {e_avg:e}, last {e_last:e}, mesh {e_mesh:e}, particles {e_x:e}");
+    assert!(max_abs(&avg_p) > 0.0);
+    assert!(rel(&avg_p, &last_p) > 1e-3, "forces vary over the window");
+    assert!(e_avg <= 1e-12 && e_last <= 1e-12 && e_mesh <= 1e-15 && e_x <= 1e-14);
+}
+
 /// Mesh nodes follow x = P + Vτ + ½Aτ² (Quadratic, JIT) or x = P + Vτ (Linear, predictive).
 #[test]
 fn coupled_mesh_positions_follow_the_motion_rule() {

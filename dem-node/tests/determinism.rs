@@ -4,6 +4,10 @@ use common::*;
 use dem::MotionRule;
 
 fn scene(threads: Option<usize>) -> String {
+    scene_with(threads, 1)
+}
+
+fn scene_with(threads: Option<usize>, impact_substeps: usize) -> String {
     let t = threads
         .map(|n| format!("threads = {n}\n"))
         .unwrap_or_default();
@@ -13,6 +17,7 @@ fn scene(threads: Option<usize>) -> String {
 time_step = 5e-5
 gravity = [0.0, 0.0, -9.81]
 interface_material = "steel"
+impact_substeps = {impact_substeps}
 {t}
 [dem.materials.grain]
 youngs_modulus = 5e6
@@ -62,15 +67,27 @@ fn add_plate(e: &mut dem::Engine) -> usize {
 }
 
 fn run_in_pool(threads: usize, steps: usize) -> (Vec<u8>, Vec<f64>) {
+    run_in_pool_with(threads, steps, 1).0
+}
+
+/// (snapshot, averaged interface forces), refined steps.
+fn run_in_pool_with(
+    threads: usize,
+    steps: usize,
+    impact_substeps: usize,
+) -> ((Vec<u8>, Vec<f64>), u64) {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
         .unwrap();
     pool.install(|| {
-        let mut e = engine(&scene(None));
+        let mut e = engine(&scene_with(None, impact_substeps));
         let m = add_plate(&mut e);
         e.advance(steps).unwrap();
-        (e.snapshot(), e.interface_forces(m, true))
+        (
+            (e.snapshot(), e.interface_forces(m, true)),
+            e.refined_steps(),
+        )
     })
 }
 
@@ -113,4 +130,25 @@ fn snapshot_restore_continues_bitwise_identically() {
     assert!(f.snapshot() == end_a, "continuation after restore differs");
     assert_eq!(f.interface_forces(m, false), forces_a);
     assert!(f.restore(&snap[..snap.len() / 2]).is_err());
+}
+
+/// Impact refinement sub-steps the whole system, and its decision is a boolean over all
+/// contacts: 1 and 2 threads (and the engine's own pool) give the same bits, and the same
+/// refined steps.
+#[test]
+fn impact_refinement_gives_bitwise_equal_state_for_one_and_two_threads() {
+    let steps = 800;
+    let ((a, fa), ra) = run_in_pool_with(1, steps, 4);
+    let ((b, fb), rb) = run_in_pool_with(2, steps, 4);
+    println!("refined {ra} of {steps} steps");
+    assert!(ra > 0 && ra == rb);
+    assert!(fa.iter().any(|f| *f != 0.0), "particles reached the plate");
+    assert_eq!(fa, fb, "interface forces differ");
+    assert!(a == b, "engine state differs between 1 and 2 threads");
+    let mut e = engine(&scene_with(Some(2), 4));
+    add_plate(&mut e);
+    e.advance(steps).unwrap();
+    assert!(e.snapshot() == a);
+    let (plain, _) = run_in_pool(1, steps);
+    assert!(plain != a, "refinement changed the run");
 }
