@@ -56,13 +56,17 @@ fn predictive_allows_a_coupling_window_ten_times_the_just_in_time_one() {
         let s = std::fs::read_to_string(out.join(run).join("summary.json")).unwrap();
         assert!(s.contains("unstable at window"), "{s}");
     }
-    // the stable predictive runs agree with the finest run's settlement history within 10 %
-    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
-    let err = header.iter().position(|h| *h == "relative_error").unwrap();
-    for l in csv.lines().skip(1).filter(|l| l.contains(",predictive,completed,")) {
-        let e: f64 = l.split(',').nth(err).unwrap().parse().unwrap();
-        assert!(e < 0.1, "{l}");
-    }
+    // the sweep found the limits rather than stopping short of them: the next window of each
+    // schedule is not a stable run
+    let status = |schedule: &str, window: &str| -> String {
+        csv.lines()
+            .map(|l| l.split(',').collect::<Vec<_>>())
+            .find(|r| r[1] == window && r[2] == schedule)
+            .map(|r| r[3].to_string())
+            .unwrap()
+    };
+    assert_ne!(status("jit", "0.00001"), "completed", "{csv}");
+    assert_ne!(status("predictive", "0.0002"), "completed", "{csv}");
     for plot in ["error_vs_wall.png", "stability.png"] {
         assert!(out.join(plot).exists(), "{plot}");
     }
