@@ -1,0 +1,37 @@
+//! Every shipped scene passes `cosim check` (real nodes read their tables, build their models
+//! and report their limits), except the sleeper, which must name the bed file that
+//! scenes/sleeper-bed.toml writes when it has not been run yet. (plate-python.toml needs the
+//! Python node's packages and is run by python_node.rs.)
+
+use cosim_tests::{cosim, root, run};
+
+#[test]
+fn every_shipped_scene_checks() {
+    let mut names: Vec<String> = std::fs::read_dir(root().join("scenes"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().to_string())
+        .filter(|n| n.ends_with(".toml"))
+        // needs the Python node's packages: tests/tests/python_node.rs covers it
+        .filter(|n| n != "plate-python.toml")
+        .collect();
+    names.sort();
+    assert!(names.len() >= 10, "{names:?}");
+    let bed = root().join("out/sleeper-bed/dem/particles_final.csv");
+    for name in names {
+        let mut c = cosim();
+        c.arg("check").arg(format!("scenes/{name}"));
+        let o = run(c);
+        let stdout = String::from_utf8_lossy(&o.stdout);
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        if name == "sleeper.toml" && !bed.exists() {
+            assert!(!o.status.success(), "{name}");
+            assert!(
+                stderr.contains("particles_final.csv") && stderr.contains("dem.particles[0].path"),
+                "{stderr}"
+            );
+            continue;
+        }
+        assert!(o.status.success(), "{name}: {stderr}");
+        assert!(stdout.contains(": ok ("), "{name}: {stdout}");
+    }
+}
