@@ -234,8 +234,10 @@ for c in $CASES; do
             log "SKIP peer: $THREADS LIGGGHTS ranks need '$MPIRUN' (Debian: apt-get install openmpi-bin); measuring ours only"
             PEER_OK[dem]=0
         fi
-        # Open MPI in containers: no cross-memory attach
+        # Open MPI in containers: no cross-memory attach; on a shared machine, waiting ranks
+        # yield the core instead of spinning (a spinning rank steals time from its partner)
         export OMPI_MCA_btl_vader_single_copy_mechanism=${OMPI_MCA_btl_vader_single_copy_mechanism:-none}
+        export OMPI_MCA_mpi_yield_when_idle=${OMPI_MCA_mpi_yield_when_idle:-1}
         for ((i = 1; i <= N; i++)); do
             log "[dem $i/$N] $(date +%T) load $(cut -d' ' -f1-3 /proc/loadavg)"
             if ((PEER_OK[dem] && i % 2 == 1)); then dem_peer "$i"; fi
