@@ -51,7 +51,9 @@ pub const PREDICTIVE_WINDOW_FRACTION: f64 = 0.7;
 /// under a 1 m sphere.
 pub const REFUSE_BEYOND: f64 = 4.0;
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum Level {
     Info,
@@ -96,10 +98,7 @@ impl From<&Scene> for SceneFacts {
 }
 
 /// The interface contact period T_c = 2π √(M_node / k_c) (s), when both numbers are known.
-pub fn contact_period(
-    dem: &BTreeMap<String, f64>,
-    fem: &BTreeMap<String, f64>,
-) -> Option<f64> {
+pub fn contact_period(dem: &BTreeMap<String, f64>, fem: &BTreeMap<String, f64>) -> Option<f64> {
     let k = *dem.get("contact_stiffness_max")?;
     let m = *fem.get("interface_node_mass_min")?;
     (k > 0.0 && m > 0.0 && k.is_finite() && m.is_finite())
@@ -142,7 +141,10 @@ pub fn assess(
         push(
             Level::Info,
             "DEM Rayleigh step",
-            format!("Δt^D = {dt:.3e} s = {:.3} Δt_R (Δt_R = {dt_r:.3e} s)", dt / dt_r),
+            format!(
+                "Δt^D = {dt:.3e} s = {:.3} Δt_R (Δt_R = {dt_r:.3e} s)",
+                dt / dt_r
+            ),
         );
         if let Some(&tc) = d.get("contact_duration_min") {
             let steps = tc / dt;
@@ -258,18 +260,42 @@ mod tests {
         let f = m(&[("interface_node_mass_min", 1.0)]);
         let tc = 2.0 * std::f64::consts::PI / 2000.0;
         let jit_limit = JIT_WINDOW_FRACTION * tc;
-        let ok = assess(&facts(ScheduleKind::Jit, 0.9 * jit_limit), Some(&d), Some(&f));
+        let ok = assess(
+            &facts(ScheduleKind::Jit, 0.9 * jit_limit),
+            Some(&d),
+            Some(&f),
+        );
         assert!(ok.iter().all(|x| x.level != Level::Refuse), "{ok:?}");
-        let warned = assess(&facts(ScheduleKind::Jit, 1.1 * jit_limit), Some(&d), Some(&f));
-        assert!(warned.iter().any(|x| x.level == Level::Warn && x.limit == "coupling window"));
-        assert!(warned.iter().all(|x| x.level != Level::Refuse), "{warned:?}");
-        let bad = assess(&facts(ScheduleKind::Jit, 5.0 * jit_limit), Some(&d), Some(&f));
-        let r = bad.iter().find(|x| x.level == Level::Refuse).expect("refused");
+        let warned = assess(
+            &facts(ScheduleKind::Jit, 1.1 * jit_limit),
+            Some(&d),
+            Some(&f),
+        );
+        assert!(warned
+            .iter()
+            .any(|x| x.level == Level::Warn && x.limit == "coupling window"));
+        assert!(
+            warned.iter().all(|x| x.level != Level::Refuse),
+            "{warned:?}"
+        );
+        let bad = assess(
+            &facts(ScheduleKind::Jit, 5.0 * jit_limit),
+            Some(&d),
+            Some(&f),
+        );
+        let r = bad
+            .iter()
+            .find(|x| x.level == Level::Refuse)
+            .expect("refused");
         assert_eq!(r.limit, "coupling window");
         assert!(r.message.contains(&format!("{jit_limit:.3e}")), "{r}");
         assert!(r.message.contains("predictive schedule allows"), "{r}");
         // the same window is fine for the predictive schedule
-        let p = assess(&facts(ScheduleKind::Predictive, 5.0 * jit_limit), Some(&d), Some(&f));
+        let p = assess(
+            &facts(ScheduleKind::Predictive, 5.0 * jit_limit),
+            Some(&d),
+            Some(&f),
+        );
         assert!(p.iter().all(|x| x.level != Level::Refuse), "{p:?}");
         // one-way coupling has no window limit
         let o = assess(&facts(ScheduleKind::OneWay, 1.0), Some(&d), Some(&f));

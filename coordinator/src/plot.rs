@@ -224,7 +224,11 @@ fn stability_png(path: &Path, outcomes: &[Outcome], vars: &[Variation]) -> anyho
     for (i, r) in rows.iter().enumerate() {
         let y = top + rh * i as i32;
         root.draw(&Text::new(
-            if r.is_empty() { "runs".into() } else { r.clone() },
+            if r.is_empty() {
+                "runs".into()
+            } else {
+                r.clone()
+            },
             (10, y + 9),
             font(14),
         ))

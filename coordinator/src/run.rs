@@ -325,7 +325,9 @@ impl Run<'_> {
             return Ok(());
         }
         if !check_only {
-            let _ = self.stop("the scene is beyond a stability limit", false).await;
+            let _ = self
+                .stop("the scene is beyond a stability limit", false)
+                .await;
         }
         bail!(
             "{}: the scene is beyond a stability limit (set coupling.allow_beyond_limits = true to run anyway):\n  {}",

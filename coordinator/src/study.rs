@@ -154,7 +154,9 @@ pub struct StudyOptions {
 pub fn parse_series(text: &str) -> anyhow::Result<(String, String)> {
     match text.rsplit_once(':') {
         Some((f, c)) if !f.is_empty() && !c.is_empty() => Ok((f.to_string(), c.to_string())),
-        _ => bail!("--series `{text}`: expected `file:column`, e.g. `fem/fem_probes.csv:probe.centre.uz`"),
+        _ => bail!(
+            "--series `{text}`: expected `file:column`, e.g. `fem/fem_probes.csv:probe.centre.uz`"
+        ),
     }
 }
 
@@ -168,20 +170,30 @@ pub fn read_series(path: &Path, column: &str) -> anyhow::Result<Vec<(f64, f64)>>
         .ok_or_else(|| anyhow!("{}: empty file", path.display()))?
         .split(',')
         .collect();
-    let col = header.iter().position(|h| h.trim() == column).ok_or_else(|| {
-        anyhow!(
-            "{}: no column `{column}` (columns: {})",
-            path.display(),
-            header.join(", ")
-        )
-    })?;
+    let col = header
+        .iter()
+        .position(|h| h.trim() == column)
+        .ok_or_else(|| {
+            anyhow!(
+                "{}: no column `{column}` (columns: {})",
+                path.display(),
+                header.join(", ")
+            )
+        })?;
     let mut out = Vec::new();
     for (i, l) in lines.enumerate() {
         let f: Vec<&str> = l.split(',').collect();
         let num = |k: usize| -> anyhow::Result<f64> {
             f.get(k)
                 .and_then(|x| x.trim().parse::<f64>().ok())
-                .ok_or_else(|| anyhow!("{}:{}: not a number in column {}", path.display(), i + 2, k + 1))
+                .ok_or_else(|| {
+                    anyhow!(
+                        "{}:{}: not a number in column {}",
+                        path.display(),
+                        i + 2,
+                        k + 1
+                    )
+                })
         };
         out.push((num(0)?, num(col)?));
     }
@@ -229,7 +241,11 @@ pub async fn run_study(
     if !vars.iter().any(|v| v.key == "coupling.allow_beyond_limits") {
         for v in &mut variants {
             let mut t: toml::Table = toml::from_str(&v.text)?;
-            set_path(&mut t, "coupling.allow_beyond_limits", toml::Value::Boolean(true))?;
+            set_path(
+                &mut t,
+                "coupling.allow_beyond_limits",
+                toml::Value::Boolean(true),
+            )?;
             v.text = toml::to_string(&t)?;
         }
     }
@@ -368,7 +384,12 @@ pub async fn run_study(
     if let Some((file, column)) = &opts.series {
         let name = &outcomes
             .get(reference)
-            .ok_or_else(|| anyhow!("--reference {reference}: the study has {} runs", outcomes.len()))?
+            .ok_or_else(|| {
+                anyhow!(
+                    "--reference {reference}: the study has {} runs",
+                    outcomes.len()
+                )
+            })?
             .variant
             .name;
         let r = read_series(&out_dir.join(name).join(file), column)?;

@@ -85,7 +85,10 @@ fn dem_time_step_at_half_one_and_two_rayleigh_steps_is_refused_with_the_limit() 
         let text = plate()
             .replace("time_step = 1e-5", &format!("time_step = {dt:e}"))
             .replace("window = \"0.1 ms\"", &format!("window = {:e}", 10.0 * dt))
-            .replace("end_time = \"5 ms\"", &format!("end_time = {:e}", 40.0 * dt));
+            .replace(
+                "end_time = \"5 ms\"",
+                &format!("end_time = {:e}", 40.0 * dt),
+            );
         let v = attempt(dir.path(), &format!("dt{f}.toml"), &text);
         refused_naming(&v, &["Rayleigh"]);
     }
@@ -95,7 +98,10 @@ fn dem_time_step_at_half_one_and_two_rayleigh_steps_is_refused_with_the_limit() 
 fn particle_stiffness_from_1_mpa_to_1_tpa_runs_or_is_refused() {
     let dir = tempfile::tempdir().unwrap();
     let soft = plate().replace("youngs_modulus = 5e7", "youngs_modulus = 1e6");
-    assert!(matches!(attempt(dir.path(), "soft.toml", &soft), Verdict::Ran));
+    assert!(matches!(
+        attempt(dir.path(), "soft.toml", &soft),
+        Verdict::Ran
+    ));
     let stiff = plate().replace("youngs_modulus = 5e7", "youngs_modulus = 1e12");
     refused_naming(&attempt(dir.path(), "stiff.toml", &stiff), &["Rayleigh"]);
 }
@@ -133,13 +139,13 @@ fn tiny_and_huge_particles_run_or_are_refused() {
         let b = text.find("[fem]").unwrap();
         format!("{}{list}\n{}", &text[..a], &text[b..])
     };
-    refused_naming(
-        &attempt(dir.path(), "tiny.toml", &one(1e-5)),
-        &["Rayleigh"],
-    );
+    refused_naming(&attempt(dir.path(), "tiny.toml", &one(1e-5)), &["Rayleigh"]);
     let v = attempt(dir.path(), "huge.toml", &one(1.0));
     if let Verdict::Refused(e) = &v {
-        assert!(e.contains("coupling window") || e.contains("Rayleigh"), "{e}");
+        assert!(
+            e.contains("coupling window") || e.contains("Rayleigh"),
+            "{e}"
+        );
     }
 }
 
@@ -148,14 +154,13 @@ fn particle_to_structure_mass_ratios_of_1e6_and_1e_minus_6_run_or_are_refused() 
     let dir = tempfile::tempdir().unwrap();
     // the beads (5.4e-4 kg) and the plate's nodes (~4.6e-4 kg) weigh about the same
     for (name, density) in [("heavy.toml", 2000.0 * 1e6), ("light.toml", 2000.0 * 1e-6)] {
-        let text = plate().replacen(
-            "density = 2000.0",
-            &format!("density = {density:e}"),
-            1,
-        );
+        let text = plate().replacen("density = 2000.0", &format!("density = {density:e}"), 1);
         let v = attempt(dir.path(), name, &text);
         if let Verdict::Refused(e) = &v {
-            assert!(e.contains("Rayleigh") || e.contains("coupling window"), "{e}");
+            assert!(
+                e.contains("Rayleigh") || e.contains("coupling window"),
+                "{e}"
+            );
         }
     }
 }
@@ -168,5 +173,8 @@ fn coupling_windows_of_one_and_ten_thousand_dem_steps_run_or_are_refused() {
     let many = plate()
         .replace("window = \"0.1 ms\"", "window = \"0.1 s\"")
         .replace("end_time = \"5 ms\"", "end_time = \"0.1 s\"");
-    refused_naming(&attempt(dir.path(), "w1e4.toml", &many), &["coupling window"]);
+    refused_naming(
+        &attempt(dir.path(), "w1e4.toml", &many),
+        &["coupling window"],
+    );
 }

@@ -13,7 +13,9 @@ fn plate_scene(dir: &Path, schedule: &str) -> std::path::PathBuf {
         .replace(
             "schedule = \"predictive\"",
             // JIT's window limit here is 14 µs: this test is about resuming, at 100 µs
-            &format!("schedule = \"{schedule}\"\nforce_averaging = true\nallow_beyond_limits = true"),
+            &format!(
+                "schedule = \"{schedule}\"\nforce_averaging = true\nallow_beyond_limits = true"
+            ),
         )
         .replace(
             "end_time = \"30 ms\"",
