@@ -174,9 +174,10 @@ pub struct Material {
 }
 
 /// Analysis type and its parameters.
-#[derive(Clone, Debug, Serialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, PartialEq, Default)]
 pub enum Analysis {
     /// K u = F(t) at each `advance` (2.28).
+    #[default]
     Static,
     /// Bossak–Newmark (Wood–Bossak–Zienkiewicz, REFERENCE A6).
     Dynamic {
@@ -194,12 +195,6 @@ pub enum Analysis {
         rayleigh_a: f64,
         rayleigh_b: f64,
     },
-}
-
-impl Default for Analysis {
-    fn default() -> Self {
-        Analysis::Static
-    }
 }
 
 #[derive(Deserialize)]
@@ -561,7 +556,7 @@ impl FemConfig {
                         }
                     }
                     (None, Some(d)) => {
-                        if d.iter().any(|&k| k == 0) {
+                        if d.contains(&0) {
                             return Err((
                                 "fem.mesh.divisions".into(),
                                 "must be ≥ 1 in every direction".into(),
@@ -824,10 +819,10 @@ mod spans {
             } else {
                 format!("{prefix}.{}", k.get_ref())
             };
-            if k.span().contains(&offset) || v.span().contains(&offset) {
-                if best.as_ref().is_none_or(|(d, _)| depth >= *d) {
-                    *best = Some((depth, path.clone()));
-                }
+            if (k.span().contains(&offset) || v.span().contains(&offset))
+                && best.as_ref().is_none_or(|(d, _)| depth >= *d)
+            {
+                *best = Some((depth, path.clone()));
             }
             walk_value(v, offset, &path, depth + 1, best);
         }

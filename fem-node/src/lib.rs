@@ -17,6 +17,9 @@
 //! # let _ = (p, v, a);
 //! ```
 
+// `!(a <= b)` checks deliberately reject NaN; index loops mirror the element equations.
+#![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
+
 pub mod assembly;
 pub mod config;
 pub mod element;

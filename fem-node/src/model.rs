@@ -183,7 +183,7 @@ impl Model {
                 Load::Pressure { on, value, history } => {
                     let faces = surface::select_faces(&mesh, &boundary, on, &what)?;
                     let mut fx = Vec::new();
-                    let mut out = vec![[0.0; 3]; 8];
+                    let mut out = [[0.0; 3]; 8];
                     for fc in faces {
                         let nodes = boundary.face(fc);
                         fx.clear();
@@ -863,22 +863,27 @@ impl Model {
             .map(|d| if self.is_fixed(d) { fi[d] - fe[d] } else { 0.0 })
             .collect()
     }
+    /// Node coordinates and displacements of element `e`.
+    fn element_state(&self, e: usize) -> (Vec<[f64; 3]>, Vec<[f64; 3]>) {
+        let mut x = Vec::new();
+        self.mesh.element_coords(e, &mut x);
+        let u = self
+            .mesh
+            .element_nodes(e)
+            .iter()
+            .map(|&n| {
+                let d = 3 * n as usize;
+                [self.st.u[d], self.st.u[d + 1], self.st.u[d + 2]]
+            })
+            .collect();
+        (x, u)
+    }
     /// Element-mean stress (Voigt xx, yy, zz, xy, yz, zx) [Pa].
     pub fn element_stresses(&self) -> Vec<[f64; 6]> {
         (0..self.mesh.num_elements())
             .into_par_iter()
             .map(|e| {
-                let mut x = Vec::new();
-                self.mesh.element_coords(e, &mut x);
-                let u: Vec<[f64; 3]> = self
-                    .mesh
-                    .element_nodes(e)
-                    .iter()
-                    .map(|&n| {
-                        let d = 3 * n as usize;
-                        [self.st.u[d], self.st.u[d + 1], self.st.u[d + 2]]
-                    })
-                    .collect();
+                let (x, u) = self.element_state(e);
                 element::mean_stress(self.mesh.kinds[e], &x, &u, self.mat).unwrap_or([f64::NAN; 6])
             })
             .collect()
@@ -900,17 +905,7 @@ impl Model {
             .par_iter()
             .map(|&e| {
                 let e = e as usize;
-                let mut x = Vec::new();
-                self.mesh.element_coords(e, &mut x);
-                let u: Vec<[f64; 3]> = self
-                    .mesh
-                    .element_nodes(e)
-                    .iter()
-                    .map(|&n| {
-                        let d = 3 * n as usize;
-                        [self.st.u[d], self.st.u[d + 1], self.st.u[d + 2]]
-                    })
-                    .collect();
+                let (x, u) = self.element_state(e);
                 match element::point_strains(self.mesh.kinds[e], &x, &u, self.mat) {
                     Ok(eps) => eps.iter().fold(NO_PEAK, |acc, ep| {
                         let p = element::principal_values(ep);

@@ -1,5 +1,10 @@
 //! Beams: the fixed-fixed steel beam of Ullrich ch. 4 (REFERENCE A3) and a cantilever against
 //! Timoshenko / Euler–Bernoulli theory.
+#![allow(
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::needless_range_loop,
+    clippy::nonminimal_bool
+)]
 
 mod common;
 use common::*;

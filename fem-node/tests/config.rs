@@ -1,4 +1,9 @@
 //! The `[fem]` scene table: errors name line, column and field; histories.
+#![allow(
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::needless_range_loop,
+    clippy::nonminimal_bool
+)]
 
 mod common;
 use common::*;

@@ -1,5 +1,10 @@
 //! The coupling interface: exterior surface extraction (Ullrich 3.3.1) and force transfer
 //! (3.3.2: interface forces applied 1:1 as nodal forces).
+#![allow(
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::needless_range_loop,
+    clippy::nonminimal_bool
+)]
 
 mod common;
 use common::*;

@@ -1,5 +1,10 @@
 //! The `limits` a FEM node reports for the coordinator's up-front checks: interface node
 //! masses, structure mass, lowest and highest natural frequency; and the locking warnings.
+#![allow(
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::needless_range_loop,
+    clippy::nonminimal_bool
+)]
 
 mod common;
 use common::*;

@@ -1,5 +1,10 @@
 //! Constant-strain patch tests (form B: boundary displacements prescribed from a linear field,
 //! interior solved) on distorted meshes, for every element formulation.
+#![allow(
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::needless_range_loop,
+    clippy::nonminimal_bool
+)]
 
 mod common;
 use common::*;

@@ -1,4 +1,9 @@
 //! Snapshot / restore: continuation after restore is bitwise identical.
+#![allow(
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::needless_range_loop,
+    clippy::nonminimal_bool
+)]
 
 mod common;
 use common::*;

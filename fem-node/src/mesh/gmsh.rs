@@ -107,8 +107,7 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
     let mut seen_format = false;
     let mut elements_seen = false;
     let mut elem_id_seen: HashMap<u64, usize> = HashMap::new();
-    loop {
-        let Some((i, l)) = ls.it.next() else { break };
+    while let Some((i, l)) = ls.it.next() {
         let ln = i + 1;
         ls.line = ln;
         let l = l.trim();
