@@ -109,6 +109,17 @@ pub fn variants(base_text: &str, vars: &[Variation]) -> anyhow::Result<Vec<Varia
         .collect()
 }
 
+impl Variant {
+    /// `key=value key=value …` of the variant's settings.
+    pub fn label(&self) -> String {
+        self.settings
+            .iter()
+            .map(|(k, x)| format!("{k}={}", value_text(x)))
+            .collect::<Vec<_>>()
+            .join(" ")
+    }
+}
+
 /// What one run gave.
 #[derive(Debug, Clone)]
 pub struct Outcome {
@@ -258,13 +269,6 @@ pub async fn run_study(
         .expect("valid template")
         .progress_chars("=> "),
     );
-    let label_of = |v: &Variant| -> String {
-        v.settings
-            .iter()
-            .map(|(k, x)| format!("{k}={}", value_text(x)))
-            .collect::<Vec<_>>()
-            .join(" ")
-    };
     // run what is missing, `jobs` at a time
     let jobs = opts.jobs.max(1);
     let mut pending = variants
@@ -278,7 +282,7 @@ pub async fn run_study(
         while running.len() < jobs {
             let Some(v) = pending.pop_front() else { break };
             let dir = out_dir.join(&v.name);
-            let label = label_of(&v);
+            let label = v.label();
             bar.set_message(label.clone());
             // each variant is a scene of its own, next to the original (relative paths hold)
             let path = scene
@@ -633,17 +637,11 @@ pub fn table(outcomes: &[Outcome]) -> BTreeMap<String, String> {
     outcomes
         .iter()
         .map(|o| {
-            let label: Vec<String> = o
-                .variant
-                .settings
-                .iter()
-                .map(|(k, v)| format!("{k}={}", value_text(v)))
-                .collect();
             (
                 o.variant.name.clone(),
                 format!(
                     "{:<50} {:>10} {:>9.2} s  error {}",
-                    label.join(" "),
+                    o.variant.label(),
                     o.status,
                     o.wall_s,
                     o.error
