@@ -17,9 +17,10 @@
 #                       ccx (spooles), rayon threads of ours
 #   DEM_SETTLE [40000]  settling steps before the timed ones (0.4 s), both codes
 #   DEM_STEPS [10000]   timed DEM steps, both codes
-#   DEM_JITTER [0]      random horizontal displacement (m) of LIGGGHTS' lattice sites; 0 is
-#                       REFERENCE D's exact lattice, which LIGGGHTS keeps as 441 static columns
-#                       (see README.md: ours breaks that symmetry by itself, later)
+#   DEM_JITTER [0]      random horizontal displacement (m) of the lattice sites, both codes; 0
+#                       is REFERENCE D's exact lattice, which LIGGGHTS keeps as 441 static
+#                       columns while ours breaks that symmetry by itself, later (README.md);
+#                       1e-9 makes both settle into a random packing: like-for-like work
 #   TRANSPORT_ROUNDS [200]
 #   BENCH_WORK [mktemp] folder for the decks, logs and raw records (kept; printed at the end)
 #   COSIM_TARGET_DIR    cargo target folder holding release/deps/{dense_bed,static_beam,transport}-*
@@ -140,7 +141,7 @@ dem_peer() { # run index
 dem_ours() {
     local d="$WORK/dem" tag="ours.$1"
     run_timed "$d" "$tag" env DENSE_BED_THREADS="$THREADS" DENSE_BED_SETTLE="$DEM_SETTLE" \
-        DENSE_BED_STEPS="$DEM_STEPS" DENSE_BED_SCALING_MAX=0 "$DENSE_BED"
+        DENSE_BED_JITTER="$DEM_JITTER" DENSE_BED_STEPS="$DEM_STEPS" DENSE_BED_SCALING_MAX=0 "$DENSE_BED"
     timefile "$d/$tag.time"
     local t n ke contacts builds
     t=$(sed -n 's/^timed [0-9]* steps: \([0-9.]*\) s wall.*/\1/p' "$d/$tag.log")
@@ -278,7 +279,7 @@ UPTIME_AFTER=$(uptime)
 peer_prog() { case $1 in dem) echo liggghts ;; *) echo ccx ;; esac; }
 describe() {
     case $1 in
-    dem) echo "DEM dense bed, 24,696 spheres, $DEM_STEPS steps after $DEM_SETTLE settling$( [[ $DEM_JITTER == 0 ]] || echo ", LIGGGHTS lattice jitter $DEM_JITTER m")" ;;
+    dem) echo "DEM dense bed, 24,696 spheres, $DEM_STEPS steps after $DEM_SETTLE settling$( [[ $DEM_JITTER == 0 ]] || echo ", lattice jitter $DEM_JITTER m (both)")" ;;
     fem10) echo "FEM static beam C3D8 10 mm (36,663 dof)" ;;
     fem5) echo "FEM static beam C3D8 5 mm (265,923 dof)" ;;
     esac

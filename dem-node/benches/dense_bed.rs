@@ -8,7 +8,10 @@
 //! DENSE_BED_CACHE (file: the settled state is restored from it when it holds a snapshot of
 //! this engine version, else written there after settling), DENSE_BED_SCALING_MAX (largest
 //! scaling size exponent: 5 (default) runs 1e3, 1e4, 1e5; 6 adds 1e6; 0 skips the scaling),
-//! DENSE_BED_SCALING_SPACING (lattice spacing of the scaling runs, default 0.004 m: resting).
+//! DENSE_BED_SCALING_SPACING (lattice spacing of the scaling runs, default 0.004 m: resting),
+//! DENSE_BED_JITTER (m, default 0: REFERENCE D's exact lattice): the dense bed's lattice sites
+//! displaced at random by up to this much in x and y, as LIGGGHTS' `displace_atoms random`
+//! in bench/liggghts/dense_bed.in; any jitter turns the lattice into a random packing.
 
 use dem::{parse_scene_section, Engine};
 use std::time::Instant;
@@ -22,7 +25,7 @@ fn env(name: &str, default: usize) -> usize {
 
 /// Lattice of `n` spheres (r = 2 mm) with `spacing`, the first centre at 4.25 mm from the
 /// walls and at `z0` above the floor, in a box of at least 0.1 × 0.1 × 0.26 m.
-fn scene(n: [usize; 3], spacing: f64, z0: f64) -> String {
+fn scene(n: [usize; 3], spacing: f64, z0: f64, jitter: f64) -> String {
     let s = spacing;
     let (lx, ly, lz) = (
         0.1f64.max(n[0] as f64 * s + 0.0055),
@@ -53,13 +56,14 @@ radius = 0.002
 first = [0.00425, 0.00425, {z0}]
 spacing = {s}
 count = [{}, {}, {}]
+jitter = {jitter}
 "#,
         n[0], n[1], n[2]
     )
 }
 
-fn build(n: [usize; 3], spacing: f64, z0: f64) -> Engine {
-    let cfg = parse_scene_section(&scene(n, spacing, z0))
+fn build(n: [usize; 3], spacing: f64, z0: f64, jitter: f64) -> Engine {
+    let cfg = parse_scene_section(&scene(n, spacing, z0, jitter))
         .expect("scene")
         .expect("dem table");
     Engine::from_config(&cfg, std::path::Path::new(".")).expect("engine")
@@ -94,9 +98,13 @@ fn main() {
     pool.install(|| {
         let steps = env("DENSE_BED_STEPS", 10_000);
         let settle = env("DENSE_BED_SETTLE", 40_000);
-        let mut e = build([21, 21, 56], 0.0045, 0.00425);
+        let jitter: f64 = std::env::var("DENSE_BED_JITTER")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(0.0);
+        let mut e = build([21, 21, 56], 0.0045, 0.00425, jitter);
         let n = e.num_particles();
-        println!("dense bed: {n} particles, {} threads, dt = {} s (Rayleigh {:.3e} s)", rayon::current_num_threads(), e.time_step(), e.rayleigh_time_step());
+        println!("dense bed: {n} particles, {} threads, dt = {} s (Rayleigh {:.3e} s), lattice jitter {jitter} m", rayon::current_num_threads(), e.time_step(), e.rayleigh_time_step());
         let cache = std::env::var("DENSE_BED_CACHE").ok();
         let cached = cache
             .as_ref()
@@ -154,7 +162,7 @@ fn main() {
             .unwrap_or(0.004);
         let z0 = if spacing <= 0.004 { 0.002 } else { 0.00425 };
         for &dims in sizes {
-            let mut e = build(dims, spacing, z0);
+            let mut e = build(dims, spacing, z0, 0.0);
             e.advance(200).expect("advance");
             let n = e.num_particles();
             let cpu0 = cpu_seconds();

@@ -184,6 +184,9 @@ pub enum ParticleSource {
         spheres: Vec<SphereConfig>,
     },
     /// Simple-cubic lattice: centres `first + (i,j,k)·spacing`, `count = [nx, ny, nz]`.
+    /// `jitter` (m, default 0) displaces every centre at random by up to ± jitter in x and y
+    /// (seeded by `seed`, like LIGGGHTS' `displace_atoms random`): an exact lattice can stand as
+    /// static columns, a jittered one buckles into a random packing.
     Lattice {
         material: String,
         radius: f64,
@@ -192,6 +195,10 @@ pub enum ParticleSource {
         count: [usize; 3],
         #[serde(default)]
         velocity: [f64; 3],
+        #[serde(default)]
+        jitter: f64,
+        #[serde(default = "default_seed")]
+        seed: u64,
     },
     /// Random non-overlapping spheres inside the box [min, max] (whole spheres inside), until
     /// `count` particles or `mass` kg are placed (exactly one of them).
@@ -212,12 +219,44 @@ pub enum ParticleSource {
     },
     /// Spheres from a CSV file (`path` relative to the scene folder) with the header
     /// `x,y,z,radius` and optionally `vx,vy,vz` (columns in any order), e.g. a settled bed
-    /// written by `[dem.output] final_particles = true`.
-    File { material: String, path: String },
+    /// written by `[dem.output] final_particles = true`. `keep` (optional) keeps only the
+    /// spheres whose centre lies in the box {min = [..], max = [..]}, e.g. a settled bed cut at
+    /// its nominal height (Ullrich ch. 6: particles with a centre above 0.8 m are removed).
+    File {
+        material: String,
+        path: String,
+        #[serde(default)]
+        keep: Option<KeepBox>,
+    },
 }
 
 fn default_seed() -> u64 {
     1
+}
+
+/// The box of centres a particle file source keeps (`keep = { min = [..], max = [..] }`);
+/// either bound may be left out (unbounded on that side).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct KeepBox {
+    #[serde(default = "neg_inf3")]
+    pub min: [f64; 3],
+    #[serde(default = "pos_inf3")]
+    pub max: [f64; 3],
+}
+
+fn neg_inf3() -> [f64; 3] {
+    [f64::NEG_INFINITY; 3]
+}
+fn pos_inf3() -> [f64; 3] {
+    [f64::INFINITY; 3]
+}
+
+impl KeepBox {
+    /// Whether the centre `x` lies in the box (bounds included).
+    pub fn contains(&self, x: [f64; 3]) -> bool {
+        (0..3).all(|a| x[a] >= self.min[a] && x[a] <= self.max[a])
+    }
 }
 
 /// `[[dem.walls]]`: a static wall.
@@ -554,15 +593,28 @@ impl DemConfig {
                     spacing,
                     count,
                     velocity,
+                    jitter,
+                    ..
                 } => {
                     c.material(f("material"), material, self);
                     c.positive(f("radius"), *radius);
                     c.finite3(f("first"), first);
                     c.finite3(f("velocity"), velocity);
+                    c.non_negative(f("jitter"), *jitter);
                     if !(spacing.is_finite() && *spacing >= 2.0 * radius) {
                         c.fail(
                             f("spacing"),
                             format!("must be >= 2 * radius = {}, got {spacing}", 2.0 * radius),
+                        );
+                    } else if *jitter > 0.0 && 2.0 * jitter > spacing - 2.0 * radius {
+                        // neighbours along x or y may approach each other by 2·jitter
+                        c.fail(
+                            f("jitter"),
+                            format!(
+                                "must be <= (spacing - 2 * radius) / 2 = {} so that jittered \
+                                 spheres cannot overlap, got {jitter}",
+                                (spacing - 2.0 * radius) / 2.0
+                            ),
                         );
                     }
                     if count.contains(&0) {
@@ -646,10 +698,22 @@ impl DemConfig {
                         }
                     }
                 }
-                ParticleSource::File { material, path } => {
+                ParticleSource::File {
+                    material,
+                    path,
+                    keep,
+                } => {
                     c.material(f("material"), material, self);
                     if path.is_empty() {
                         c.fail(f("path"), "must name a CSV file".into());
+                    }
+                    if let Some(k) = keep {
+                        if (0..3).any(|a| k.min[a].is_nan() || k.max[a].is_nan() || k.max[a] < k.min[a]) {
+                            c.fail(
+                                f("keep"),
+                                format!("max must be >= min on every axis, got min {:?} max {:?}", k.min, k.max),
+                            );
+                        }
                     }
                 }
             }

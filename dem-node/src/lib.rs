@@ -263,10 +263,19 @@ impl Engine {
                     spacing,
                     count,
                     velocity,
+                    jitter,
+                    seed,
                 } => {
                     let m = mat(material, field)?;
                     let rho = materials.materials[m as usize].density;
-                    for x in generate::lattice(v3(first), *spacing, *count) {
+                    let mut rng = generate::SplitMix64::new(
+                        seed.wrapping_mul(0x2545_F491_4F6C_DD1D) ^ 0x5A5A,
+                    );
+                    for mut x in generate::lattice(v3(first), *spacing, *count) {
+                        if *jitter > 0.0 {
+                            x.x += jitter * (2.0 * rng.uniform() - 1.0);
+                            x.y += jitter * (2.0 * rng.uniform() - 1.0);
+                        }
                         particles.push(x, v3(velocity), V3::zeros(), *radius, rho, m);
                     }
                 }
@@ -323,7 +332,11 @@ impl Engine {
                         particles.push(x, v3(velocity), V3::zeros(), r, rho, m);
                     }
                 }
-                ParticleSource::File { material, path } => {
+                ParticleSource::File {
+                    material,
+                    path,
+                    keep,
+                } => {
                     let m = mat(material, field)?;
                     let rho = materials.materials[m as usize].density;
                     let full = base_dir.join(path);
@@ -334,8 +347,25 @@ impl Engine {
                             line: e.line,
                             message: e.message,
                         })?;
+                    let read = spheres.len();
+                    let before = particles.len();
                     for s in spheres {
+                        let p = s.position;
+                        if keep.as_ref().is_some_and(|b| !b.contains([p.x, p.y, p.z])) {
+                            continue;
+                        }
                         particles.push(s.position, s.velocity, V3::zeros(), s.radius, rho, m);
+                    }
+                    if let Some(b) = keep.as_ref().filter(|_| particles.len() == before) {
+                        return Err(DemError::Generation {
+                            source_index: k,
+                            message: format!(
+                                "`keep` (min {:?}, max {:?}) removed all {read} spheres of {}",
+                                b.min,
+                                b.max,
+                                full.display()
+                            ),
+                        });
                     }
                 }
             }

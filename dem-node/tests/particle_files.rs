@@ -127,3 +127,91 @@ fn bad_particle_files_name_the_field_file_and_line() {
     println!("{err}");
     assert!(err.message.contains("dem.particles[0].material"), "{err}");
 }
+
+#[test]
+fn keep_cuts_a_bed_file_at_a_height_like_the_seeds_bed_levelling() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut csv = String::from("x,y,z,radius\n");
+    for k in 0..10 {
+        csv += &format!("0.025,0.025,{},0.002\n", 0.005 + 0.01 * k as f64);
+    }
+    std::fs::write(dir.path().join("bed.csv"), csv).unwrap();
+    let src = |keep: &str| {
+        scene(
+            &format!(
+                "[[dem.particles]]\nkind = \"file\"\nmaterial = \"grain\"\npath = \"bed.csv\"\n{keep}"
+            ),
+            "",
+        )
+    };
+    let all = build(&src(""), dir.path()).unwrap();
+    assert_eq!(all.num_particles(), 10);
+    // centres at 0.005 … 0.095: those at or below 0.05 are 0.005 … 0.045 (5 spheres)
+    let cut = build(&src("keep = { max = [1.0, 1.0, 0.05] }"), dir.path()).unwrap();
+    assert_eq!(cut.num_particles(), 5);
+    assert!(cut.particles().position.iter().all(|x| x.z <= 0.05));
+    let band = build(
+        &src("keep = { min = [0.0, 0.0, 0.02], max = [1.0, 1.0, 0.06] }"),
+        dir.path(),
+    )
+    .unwrap();
+    assert_eq!(band.num_particles(), 4);
+    // a box that keeps nothing is an error naming the source, not an empty run
+    let err = build(&src("keep = { min = [0.0, 0.0, 0.5] }"), dir.path())
+        .err()
+        .unwrap()
+        .to_string();
+    println!("{err}");
+    assert!(err.contains("removed all 10 spheres") && err.contains("bed.csv"), "{err}");
+    // an inverted box is refused when the scene is read, naming the field
+    let err = parse_scene_section(&src("keep = { min = [0.0, 0.0, 0.5], max = [1.0, 1.0, 0.1] }"))
+        .unwrap_err();
+    println!("{err}");
+    assert!(err.message.contains("dem.particles[0].keep"), "{err}");
+}
+
+fn lattice(extra: &str) -> String {
+    scene(
+        &format!(
+            "[[dem.particles]]\nkind = \"lattice\"\nmaterial = \"grain\"\nradius = 0.002\n\
+             first = [0.005, 0.005, 0.005]\nspacing = 0.005\ncount = [8, 8, 4]\n{extra}"
+        ),
+        "",
+    )
+}
+
+#[test]
+fn lattice_jitter_moves_centres_sideways_within_the_bound_and_is_seeded() {
+    let dir = tempfile::tempdir().unwrap();
+    let exact = by_id(&build(&lattice(""), dir.path()).unwrap());
+    let a = by_id(&build(&lattice("jitter = 4e-4"), dir.path()).unwrap());
+    let b = by_id(&build(&lattice("jitter = 4e-4"), dir.path()).unwrap());
+    let c = by_id(&build(&lattice("jitter = 4e-4\nseed = 7"), dir.path()).unwrap());
+    assert_eq!(exact.len(), 256);
+    assert!(a == b, "same seed, same lattice");
+    assert!(a != c, "another seed, another lattice");
+    let mut max_d: f64 = 0.0;
+    for (e, j) in exact.iter().zip(&a) {
+        assert_eq!(e.0[2], j.0[2], "z is not jittered");
+        for ax in 0..2 {
+            let d = (e.0[ax] - j.0[ax]).abs();
+            assert!(d <= 4e-4, "displacement {d} beyond the jitter");
+            max_d = max_d.max(d);
+        }
+    }
+    assert!(max_d > 3e-4, "jitter used most of its range ({max_d})");
+    // no two jittered spheres overlap
+    for (i, p) in a.iter().enumerate() {
+        for q in &a[i + 1..] {
+            let d2: f64 = (0..3).map(|k| (p.0[k] - q.0[k]).powi(2)).sum();
+            assert!(d2.sqrt() >= 0.004 - 1e-12);
+        }
+    }
+    // a jitter that could make neighbours overlap is refused, naming the field and the bound
+    let err = parse_scene_section(&lattice("jitter = 6e-4")).unwrap_err();
+    println!("{err}");
+    assert!(
+        err.message.contains("dem.particles[0].jitter") && err.message.contains("0.0005"),
+        "{err}"
+    );
+}
