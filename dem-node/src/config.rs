@@ -708,10 +708,15 @@ impl DemConfig {
                         c.fail(f("path"), "must name a CSV file".into());
                     }
                     if let Some(k) = keep {
-                        if (0..3).any(|a| k.min[a].is_nan() || k.max[a].is_nan() || k.max[a] < k.min[a]) {
+                        if (0..3)
+                            .any(|a| k.min[a].is_nan() || k.max[a].is_nan() || k.max[a] < k.min[a])
+                        {
                             c.fail(
                                 f("keep"),
-                                format!("max must be >= min on every axis, got min {:?} max {:?}", k.min, k.max),
+                                format!(
+                                    "max must be >= min on every axis, got min {:?} max {:?}",
+                                    k.min, k.max
+                                ),
                             );
                         }
                     }

@@ -162,10 +162,15 @@ fn keep_cuts_a_bed_file_at_a_height_like_the_seeds_bed_levelling() {
         .unwrap()
         .to_string();
     println!("{err}");
-    assert!(err.contains("removed all 10 spheres") && err.contains("bed.csv"), "{err}");
+    assert!(
+        err.contains("removed all 10 spheres") && err.contains("bed.csv"),
+        "{err}"
+    );
     // an inverted box is refused when the scene is read, naming the field
-    let err = parse_scene_section(&src("keep = { min = [0.0, 0.0, 0.5], max = [1.0, 1.0, 0.1] }"))
-        .unwrap_err();
+    let err = parse_scene_section(&src(
+        "keep = { min = [0.0, 0.0, 0.5], max = [1.0, 1.0, 0.1] }",
+    ))
+    .unwrap_err();
     println!("{err}");
     assert!(err.message.contains("dem.particles[0].keep"), "{err}");
 }

@@ -3,6 +3,10 @@
 //! (assembly) and solve, peak memory (VmHWM), and time per Bossak step at 10 mm.
 //! CalculiX 2.20 reference on this machine: ~1.5 s and ~45 s (2.35 GB). Run with
 //! `cargo bench -p fem-node --no-default-features --bench static_beam [-- 10]` (sizes in mm).
+//! STATIC_BEAM_SOLVER = auto (default) | direct | mixed sets `[fem] solver` (auto: the f32
+//! factor with f64 conjugate gradients from 100k equations, the f64 factor below).
+//! `RUST_LOG=fem=debug` adds the cost split: element matrices vs scatter, ordering fill
+//! (nnz of L), symbolic vs numeric factorisation.
 
 use std::path::Path;
 use std::time::Instant;
@@ -26,9 +30,11 @@ fn scene(h_mm: f64, dynamic: bool) -> String {
     } else {
         ""
     };
+    let solver = std::env::var("STATIC_BEAM_SOLVER").unwrap_or_else(|_| "auto".into());
     format!(
         r#"
 [fem]
+solver = "{solver}"
 mesh = {{ size = [1.0, 0.1, 0.1], element_size = {h}, element = "hex8" }}
 [fem.material]
 youngs_modulus = 210e9
@@ -52,6 +58,12 @@ point = [0.5, 0.05, 0.05]
 }
 
 fn main() {
+    if std::env::var_os("RUST_LOG").is_some() {
+        tracing_subscriber::fmt()
+            .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
+            .with_writer(std::io::stderr)
+            .init();
+    }
     let args: Vec<String> = std::env::args()
         .skip(1)
         .filter(|a| !a.starts_with('-'))
@@ -73,9 +85,16 @@ fn main() {
         let t2 = Instant::now();
         m.solve_static().unwrap();
         let t_resolve = t2.elapsed().as_secs_f64();
+        let solver = match m.last_mixed_solve() {
+            Some(s) => format!(
+                "f32 factor + f64 CG, {} iterations, relative residual {:.1e}",
+                s.iterations, s.relative_residual
+            ),
+            None => "f64 factor".into(),
+        };
         println!(
             "static hex8 {h} mm: {} dof, build+assembly {t_build:.3} s, factorise+solve {t_solve:.3} s, total {:.3} s, \
-             re-solve with cached factor {t_resolve:.3} s, midspan uz {:.4e} m, VmHWM {:.0} MB",
+             re-solve with cached factor {t_resolve:.3} s, midspan uz {:.7e} m, VmHWM {:.0} MB, solver: {solver}",
             m.num_dofs(),
             t_build + t_solve,
             m.probe_displacement("midspan").unwrap()[2],

@@ -446,6 +446,61 @@ fn timing() -> bool {
     tracing::enabled!(tracing::Level::DEBUG)
 }
 
+/// The symbolic analysis of `pattern` (computed once, then reused): our nested-dissection
+/// ordering, or faer's AMD when that gives less fill (AMD is tried up to 100k equations).
+fn ensure_symbolic(
+    pattern: &Pattern,
+    symbolic: &mut Option<Symbolic>,
+) -> Result<Arc<SymbolicCholesky<u32>>, FemError> {
+    if symbolic.is_none() {
+        let sym_err = |e: faer::sparse::FaerError| {
+            FemError::Solver(format!("symbolic Cholesky failed: {e:?}"))
+        };
+        let inv = {
+            let mut inv = vec![0u32; pattern.n];
+            for (i, &e) in pattern.order.iter().enumerate() {
+                inv[e as usize] = i as u32;
+            }
+            inv
+        };
+        let nd = factorize_symbolic_cholesky(
+            pattern.symbolic(),
+            Side::Lower,
+            SymmetricOrdering::Custom(PermRef::new_checked(&pattern.order, &inv, pattern.n)),
+            CholeskySymbolicParams::default(),
+        )
+        .map_err(sym_err)?;
+        // AMD as a safeguard for meshes where coordinate bisection is poor (skipped for
+        // large systems, where its analysis time matters and bisection is reliable)
+        let amd = if pattern.n <= 100_000 {
+            Some(
+                factorize_symbolic_cholesky(
+                    pattern.symbolic(),
+                    Side::Lower,
+                    SymmetricOrdering::Amd,
+                    CholeskySymbolicParams::default(),
+                )
+                .map_err(sym_err)?,
+            )
+        } else {
+            None
+        };
+        if timing() {
+            tracing::debug!(
+                "  ordering: nested dissection nnz(L) = {}, AMD nnz(L) = {:?}",
+                nd.len_val(),
+                amd.as_ref().map(|a| a.len_val())
+            );
+        }
+        let best = match amd {
+            Some(a) if a.len_val() < nd.len_val() => a,
+            _ => nd,
+        };
+        *symbolic = Some(Arc::new(best));
+    }
+    Ok(symbolic.clone().expect("set above"))
+}
+
 impl Factor {
     /// Factorises the symmetric positive definite matrix; the symbolic analysis is computed
     /// once per pattern and reused.
@@ -455,53 +510,7 @@ impl Factor {
         symbolic: &mut Option<Symbolic>,
     ) -> Result<Factor, FemError> {
         let t0 = std::time::Instant::now();
-        if symbolic.is_none() {
-            let sym_err = |e: faer::sparse::FaerError| {
-                FemError::Solver(format!("symbolic Cholesky failed: {e:?}"))
-            };
-            let inv = {
-                let mut inv = vec![0u32; pattern.n];
-                for (i, &e) in pattern.order.iter().enumerate() {
-                    inv[e as usize] = i as u32;
-                }
-                inv
-            };
-            let nd = factorize_symbolic_cholesky(
-                pattern.symbolic(),
-                Side::Lower,
-                SymmetricOrdering::Custom(PermRef::new_checked(&pattern.order, &inv, pattern.n)),
-                CholeskySymbolicParams::default(),
-            )
-            .map_err(sym_err)?;
-            // AMD as a safeguard for meshes where coordinate bisection is poor (skipped for
-            // large systems, where its analysis time matters and bisection is reliable)
-            let amd = if pattern.n <= 100_000 {
-                Some(
-                    factorize_symbolic_cholesky(
-                        pattern.symbolic(),
-                        Side::Lower,
-                        SymmetricOrdering::Amd,
-                        CholeskySymbolicParams::default(),
-                    )
-                    .map_err(sym_err)?,
-                )
-            } else {
-                None
-            };
-            if timing() {
-                tracing::debug!(
-                    "  ordering: nested dissection nnz(L) = {}, AMD nnz(L) = {:?}",
-                    nd.len_val(),
-                    amd.as_ref().map(|a| a.len_val())
-                );
-            }
-            let best = match amd {
-                Some(a) if a.len_val() < nd.len_val() => a,
-                _ => nd,
-            };
-            *symbolic = Some(Arc::new(best));
-        }
-        let sym = symbolic.clone().expect("set above");
+        let sym = ensure_symbolic(pattern, symbolic)?;
         let t_sym = t0.elapsed();
         let par = faer::get_global_parallelism();
         let mut values = Vec::new();
@@ -556,5 +565,246 @@ impl Factor {
             par,
             MemStack::new(&mut buf),
         );
+    }
+}
+
+/// Dot product in fixed 4096-element chunks: the same sum for any thread count.
+fn dot(x: &[f64], y: &[f64]) -> f64 {
+    x.par_chunks(4096)
+        .zip(y.par_chunks(4096))
+        .map(|(a, c)| a.iter().zip(c).map(|(p, q)| p * q).sum::<f64>())
+        .collect::<Vec<f64>>()
+        .iter()
+        .sum()
+}
+
+/// Outcome of a [`MixedFactor::solve`]: PCG iterations and the final relative residual.
+#[derive(Clone, Copy, Debug)]
+pub struct RefinedSolve {
+    pub iterations: usize,
+    pub relative_residual: f64,
+}
+
+/// Mixed-precision solver for large static systems: faer's sparse Cholesky factor computed
+/// and stored in f32 (half the memory and about half the time of the f64 factor) used as the
+/// preconditioner of conjugate gradients on the f64 system, which restores full accuracy in a
+/// few iterations while κ(A)·ε_f32 ≪ 1 (Higham, *Accuracy and Stability*, ch. 12). Shares the
+/// symbolic analysis with [`Factor`].
+pub struct MixedFactor {
+    symbolic: Arc<SymbolicCholesky<u32>>,
+    values: Vec<f32>,
+}
+
+impl MixedFactor {
+    /// Factorises A in f32. Fails (and the caller falls back to [`Factor`]) when A is not
+    /// positive definite in single precision or memory runs out.
+    pub fn new(
+        pattern: &Pattern,
+        vals: &[f64],
+        symbolic: &mut Option<Symbolic>,
+    ) -> Result<MixedFactor, FemError> {
+        let sym = ensure_symbolic(pattern, symbolic)?;
+        let t0 = std::time::Instant::now();
+        let par = faer::get_global_parallelism();
+        let a32: Vec<f32> = vals.iter().map(|&v| v as f32).collect();
+        let mut values = Vec::new();
+        values
+            .try_reserve_exact(sym.len_val())
+            .map_err(|_| FemError::Solver("out of memory for the f32 Cholesky factor".into()))?;
+        values.resize(sym.len_val(), 0.0f32);
+        let mut buf =
+            MemBuffer::try_new(sym.factorize_numeric_llt_scratch::<f32>(par, Default::default()))
+                .map_err(|_| FemError::Solver("out of memory for the Cholesky workspace".into()))?;
+        sym.factorize_numeric_llt::<f32>(
+            &mut values,
+            SparseColMatRef::new(pattern.symbolic(), &a32),
+            Side::Lower,
+            Default::default(),
+            par,
+            MemStack::new(&mut buf),
+            Default::default(),
+        )
+        .map_err(|e| {
+            FemError::Solver(format!(
+                "f32 Cholesky factorisation failed ({e:?}): not positive definite in single \
+                 precision"
+            ))
+        })?;
+        if timing() {
+            tracing::debug!(
+                "  f32 cholesky n={} nnz(L)={}: numeric {:?}",
+                pattern.n,
+                sym.len_val(),
+                t0.elapsed()
+            );
+        }
+        Ok(MixedFactor {
+            symbolic: sym,
+            values,
+        })
+    }
+
+    /// z = (L Lᵀ)⁻¹ r in single precision.
+    fn precondition(&self, r: &[f64], z: &mut [f64], work: &mut [f32], buf: &mut MemBuffer) {
+        for (w, &v) in work.iter_mut().zip(r) {
+            *w = v as f32;
+        }
+        let n = work.len();
+        let rhs = faer::MatMut::from_column_major_slice_mut(work, n, 1);
+        LltRef::new(&self.symbolic, &self.values).solve_in_place_with_conj(
+            Conj::No,
+            rhs,
+            faer::get_global_parallelism(),
+            MemStack::new(buf),
+        );
+        for (zi, &w) in z.iter_mut().zip(work.iter()) {
+            *zi = w as f64;
+        }
+    }
+
+    /// Solves A x = b in place (b in, x out) by preconditioned conjugate gradients in f64 with
+    /// A = (`pattern`, `vals`), the matrix this factor was computed from. The CG recurrence's
+    /// residual drifts from the true b − A x, so CG restarts from the true residual (up to
+    /// three rounds) until ‖b − A x‖/‖b‖ ≤ `tol` or a round no longer halves it; fails when it is still above `accept` after
+    /// `max_iter` iterations in all.
+    pub fn solve(
+        &self,
+        pattern: &Pattern,
+        vals: &[f64],
+        b: &mut [f64],
+        tol: f64,
+        accept: f64,
+        max_iter: usize,
+    ) -> Result<RefinedSolve, FemError> {
+        let n = b.len();
+        let bnorm = dot(b, b).sqrt();
+        if bnorm == 0.0 {
+            return Ok(RefinedSolve {
+                iterations: 0,
+                relative_residual: 0.0,
+            });
+        }
+        let mut buf = MemBuffer::new(
+            self.symbolic
+                .solve_in_place_scratch::<f32>(1, faer::get_global_parallelism()),
+        );
+        let mut work = vec![0.0f32; n];
+        let mut x = vec![0.0; n];
+        let mut r = b.to_vec();
+        let mut q = vec![0.0; n];
+        let mut dx = vec![0.0; n];
+        let mut it = 0;
+        let mut rel = 1.0;
+        for _round in 0..3 {
+            it += self.pcg(
+                pattern,
+                vals,
+                &mut r,
+                &mut dx,
+                &mut q,
+                &mut work,
+                &mut buf,
+                1e-3 * tol,
+                max_iter - it.min(max_iter),
+            );
+            for (xi, d) in x.iter_mut().zip(&dx) {
+                *xi += d;
+            }
+            pattern.mul(vals, &x, &mut q);
+            for ((ri, bi), ax) in r.iter_mut().zip(b.iter()).zip(&q) {
+                *ri = bi - ax;
+            }
+            let before = rel;
+            rel = dot(&r, &r).sqrt() / bnorm;
+            // LAPACK's mixed-precision refinement rule: stop at the tolerance, or when a
+            // round no longer halves the residual (the f64 round-off floor of b − A x)
+            if rel <= tol || rel > 0.5 * before || it >= max_iter {
+                break;
+            }
+        }
+        if timing() {
+            tracing::debug!("  mixed-precision PCG: {it} iterations, relative residual {rel:.2e}");
+        }
+        if !(rel <= accept) {
+            return Err(FemError::Solver(format!(
+                "mixed-precision solve did not converge: relative residual {rel:.2e} after \
+                 {it} iterations (wanted {accept:.0e})"
+            )));
+        }
+        b.copy_from_slice(&x);
+        Ok(RefinedSolve {
+            iterations: it,
+            relative_residual: rel,
+        })
+    }
+
+    /// Preconditioned CG for A dx = r from dx = 0 (r is overwritten by the recurrence's
+    /// residual). Stops at ‖r‖ ≤ `tol`·‖r₀‖, when the residual stops falling, or after
+    /// `max_iter` iterations; returns the iterations done.
+    #[allow(clippy::too_many_arguments)]
+    fn pcg(
+        &self,
+        pattern: &Pattern,
+        vals: &[f64],
+        r: &mut [f64],
+        x: &mut [f64],
+        q: &mut [f64],
+        work: &mut [f32],
+        buf: &mut MemBuffer,
+        tol: f64,
+        max_iter: usize,
+    ) -> usize {
+        let n = r.len();
+        x.fill(0.0);
+        let r0 = dot(r, r).sqrt();
+        let mut z = vec![0.0; n];
+        self.precondition(r, &mut z, work, buf);
+        let mut p = z.clone();
+        let mut rz = dot(r, &z);
+        let mut best = f64::INFINITY;
+        let mut since_best = 0;
+        let mut it = 0;
+        while it < max_iter && r0 > 0.0 {
+            it += 1;
+            pattern.mul(vals, &p, q);
+            let pq = dot(&p, q);
+            if !(pq > 0.0) {
+                break; // breakdown: converged to round-off, or A not SPD in f64 arithmetic
+            }
+            let alpha = rz / pq;
+            x.par_iter_mut()
+                .zip(r.par_iter_mut())
+                .zip(p.par_iter().zip(q.par_iter()))
+                .for_each(|((xi, ri), (pi, qi))| {
+                    *xi += alpha * pi;
+                    *ri -= alpha * qi;
+                });
+            let rel = dot(r, r).sqrt() / r0;
+            if rel <= tol {
+                break;
+            }
+            if rel < 0.5 * best {
+                best = rel;
+                since_best = 0;
+            } else {
+                since_best += 1;
+                if since_best >= 8 {
+                    break; // stagnated
+                }
+            }
+            self.precondition(r, &mut z, work, buf);
+            let rz_new = dot(r, &z);
+            let beta = rz_new / rz;
+            rz = rz_new;
+            p.par_iter_mut()
+                .zip(z.par_iter())
+                .for_each(|(pi, zi)| *pi = zi + beta * *pi);
+        }
+        it
+    }
+
+    /// Bytes held by the factor values.
+    pub fn bytes(&self) -> usize {
+        self.values.len() * 4
     }
 }

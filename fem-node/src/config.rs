@@ -58,6 +58,36 @@ pub struct FemConfig {
     pub strain_gauges: Vec<StrainGauge>,
     #[serde(default)]
     pub output: Output,
+    /// Linear solver of static analyses (`solver = "auto" | "direct" | "mixed"`).
+    #[serde(default)]
+    pub solver: LinearSolver,
+}
+
+/// How static analyses solve K u = F.
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum LinearSolver {
+    /// `mixed` from [`LinearSolver::AUTO_MIXED_FROM`] free equations on, `direct` below.
+    #[default]
+    Auto,
+    /// Sparse Cholesky in f64 (faer).
+    Direct,
+    /// Sparse Cholesky in f32 as the preconditioner of f64 conjugate gradients: half the
+    /// factor's memory, the f64 answer; falls back to `direct` when it does not converge.
+    Mixed,
+}
+
+impl LinearSolver {
+    /// Size from which `auto` picks `mixed`: where the factor's memory starts to matter.
+    pub const AUTO_MIXED_FROM: usize = 100_000;
+    /// Whether a static solve of `n_eq` equations uses the mixed-precision solver.
+    pub fn mixed_for(self, n_eq: usize) -> bool {
+        match self {
+            LinearSolver::Auto => n_eq >= Self::AUTO_MIXED_FROM,
+            LinearSolver::Direct => false,
+            LinearSolver::Mixed => true,
+        }
+    }
 }
 
 /// Mesh source.

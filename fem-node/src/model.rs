@@ -1,8 +1,8 @@
 //! The FEM model: mesh + material + boundary conditions + solvers, behind the small
 //! solver-facing API the `fem-node` adapter calls (set forces → advance → read kinematics).
 
-use crate::assembly::{self, DofMap, Factor, Operator, Pattern, FIXED};
-use crate::config::{Analysis, FemConfig, Load, MeshSpec, Output};
+use crate::assembly::{self, DofMap, Factor, MixedFactor, Operator, Pattern, RefinedSolve, FIXED};
+use crate::config::{Analysis, FemConfig, LinearSolver, Load, MeshSpec, Output};
 use crate::element::{self, Lame};
 use crate::history::History;
 use crate::mesh::{box_mesh, Mesh};
@@ -62,6 +62,12 @@ pub struct Model {
     diag_pos: Vec<usize>,
     symbolic: Option<assembly::Symbolic>,
     k_factor: Option<Factor>,
+    /// Static solves: the linear solver asked for, its f32 factor, whether it failed (then
+    /// the f64 factor is used from there on) and the last solve's PCG figures.
+    solver: LinearSolver,
+    k_mixed: Option<MixedFactor>,
+    mixed_failed: bool,
+    last_refined: Option<RefinedSolve>,
     eff_factor: Option<(u64, Factor)>,
     m_factor: Option<Factor>,
     loads: Vec<LoadVector>,
@@ -305,6 +311,10 @@ impl Model {
             diag_pos,
             symbolic: None,
             k_factor: None,
+            solver: cfg.solver,
+            k_mixed: None,
+            mixed_failed: false,
+            last_refined: None,
             eff_factor: None,
             m_factor: None,
             loads,
@@ -533,6 +543,12 @@ impl Model {
             .iter()
             .map(|&n| self.m_lumped[3 * n as usize])
             .collect()
+    }
+
+    /// PCG iterations and relative residual of the last static solve when it used the
+    /// mixed-precision solver (None: the f64 factor solved it).
+    pub fn last_mixed_solve(&self) -> Option<RefinedSolve> {
+        self.last_refined
     }
 
     /// Lowest natural frequency f₁ = ω₁/2π [Hz] of K φ = ω² M φ with the analysis' mass
@@ -1038,15 +1054,47 @@ impl Model {
     }
 
     /// K u = F (2.28) with the cached Cholesky factor of K.
+    /// With the mixed-precision solver (`[fem] solver`), an f32 factor preconditions f64
+    /// conjugate gradients; when that fails the f64 factor takes over (logged once).
     fn static_solve_at(&mut self, t: f64) -> Result<(), FemError> {
-        if self.k_factor.is_none() {
-            self.k_factor = Some(Factor::new(&self.pattern, &self.k, &mut self.symbolic)?);
-        }
         let mut rhs = self.free_rhs(t);
-        self.k_factor
-            .as_ref()
-            .expect("set")
-            .solve_in_place(&mut rhs);
+        let mut solved = false;
+        if self.k_factor.is_none() && !self.mixed_failed && self.solver.mixed_for(self.dofs.n_eq) {
+            if self.k_mixed.is_none() {
+                match MixedFactor::new(&self.pattern, &self.k, &mut self.symbolic) {
+                    Ok(f) => self.k_mixed = Some(f),
+                    Err(e) => {
+                        tracing::warn!("{e}; solving with the f64 factor instead");
+                        self.mixed_failed = true;
+                    }
+                }
+            }
+            if let Some(f) = &self.k_mixed {
+                let mut x = rhs.clone();
+                match f.solve(&self.pattern, &self.k, &mut x, 1e-11, 1e-9, 200) {
+                    Ok(info) => {
+                        rhs = x;
+                        self.last_refined = Some(info);
+                        solved = true;
+                    }
+                    Err(e) => {
+                        tracing::warn!("{e}; solving with the f64 factor instead");
+                        self.k_mixed = None;
+                        self.mixed_failed = true;
+                    }
+                }
+            }
+        }
+        if !solved {
+            if self.k_factor.is_none() {
+                self.k_factor = Some(Factor::new(&self.pattern, &self.k, &mut self.symbolic)?);
+            }
+            self.last_refined = None;
+            self.k_factor
+                .as_ref()
+                .expect("set")
+                .solve_in_place(&mut rhs);
+        }
         check_finite(&rhs, "static displacement")?;
         self.set_free(0, &rhs);
         self.st.v.fill(0.0);
