@@ -381,7 +381,9 @@ pub enum SensorConfig {
     },
     /// Angle of repose (degrees) of a heap around the vertical (z) axis through `centre`:
     /// highest particle top per radial bin of width `bin_width` (default: the mean particle
-    /// diameter), least-squares line over `r_min` ≤ ρ ≤ `r_max`.
+    /// diameter), least-squares line over `r_min` ≤ ρ ≤ `r_max`. With `along = "x"` (or "y")
+    /// ρ is the distance |x − centre_x| along that axis instead: the slope of a wedge-shaped
+    /// pile across the whole width, e.g. the pile left on a hand-slide after draining.
     Repose {
         name: String,
         centre: [f64; 2],
@@ -389,6 +391,8 @@ pub enum SensorConfig {
         r_max: f64,
         #[serde(default)]
         bin_width: Option<f64>,
+        #[serde(default)]
+        along: Option<Axis>,
     },
 }
 
@@ -849,6 +853,7 @@ impl DemConfig {
                     r_min,
                     r_max,
                     bin_width,
+                    along,
                     ..
                 } => {
                     if centre.iter().any(|x| !x.is_finite()) {
@@ -863,6 +868,12 @@ impl DemConfig {
                     }
                     if let Some(w) = bin_width {
                         c.positive(f("bin_width"), *w);
+                    }
+                    if *along == Some(Axis::Z) {
+                        c.fail(
+                            f("along"),
+                            "must be a horizontal axis, \"x\" or \"y\", got \"z\"".into(),
+                        );
                     }
                 }
             }

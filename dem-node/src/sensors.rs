@@ -279,11 +279,12 @@ fn current_value(
             r_min,
             r_max,
             bin_width,
+            along,
             ..
         } => {
             let w = bin_width
                 .unwrap_or_else(|| 2.0 * p.radius.iter().sum::<f64>() / p.len().max(1) as f64);
-            angle_of_repose(p, *centre, *r_min, *r_max, w)
+            angle_of_repose(p, *centre, *r_min, *r_max, w, *along)
         }
     }
 }
@@ -363,11 +364,16 @@ pub fn angle_of_repose(
     r_min: f64,
     r_max: f64,
     bin_width: f64,
+    along: Option<Axis>,
 ) -> f64 {
     let bins = (((r_max - r_min) / bin_width).ceil() as usize).max(1);
     let mut top: Vec<Option<(f64, f64)>> = vec![None; bins];
     for (x, r) in p.position.iter().zip(&p.radius) {
-        let rho = (x.x - centre[0]).hypot(x.y - centre[1]);
+        let rho = match along {
+            Some(Axis::X) => (x.x - centre[0]).abs(),
+            Some(Axis::Y) => (x.y - centre[1]).abs(),
+            _ => (x.x - centre[0]).hypot(x.y - centre[1]),
+        };
         if !(rho >= r_min && rho <= r_max) {
             continue;
         }

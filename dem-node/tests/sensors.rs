@@ -255,6 +255,55 @@ r_max = 0.6
 }
 
 #[test]
+fn synthetic_wedge_gives_its_slope_along_an_axis() {
+    // a pile on a hand-slide: tops on z = 0.05 − (0.2 − x) tan 26° for x ∈ [0.12, 0.2],
+    // filling the width y ∈ [0, 0.03]; the outlet edge is at x = 0.2
+    let (r, tan) = (0.002, 26f64.to_radians().tan());
+    let mut spheres = Vec::new();
+    for k in 0..20 {
+        let x = 0.122 + 0.004 * k as f64;
+        for j in 0..7 {
+            let y = 0.002 + 0.004 * j as f64;
+            let z = 0.05 - (0.2 - x) * tan - r - 0.001 * j as f64;
+            spheres.push(format!("{{ position = [{x}, {y}, {z}], radius = {r} }}"));
+        }
+    }
+    let sensor = |along: &str| {
+        format!(
+            r#"
+[dem]
+time_step = 1e-5
+gravity = [0.0, 0.0, 0.0]
+{GRAIN}
+[[dem.particles]]
+kind = "list"
+material = "grain"
+spheres = [{}]
+[[dem.sensors]]
+name = "slide"
+kind = "repose"
+centre = [0.2, 0.0]
+r_min = 0.005
+r_max = 0.08
+bin_width = 0.004
+{along}
+"#,
+            spheres.join(",\n")
+        )
+    };
+    let angle = result(&engine(&sensor("along = \"x\"")), "sensor.slide.last");
+    println!("wedge slope along x: {angle}°");
+    assert!((angle - 26.0).abs() < 1e-9, "{angle}");
+    // the radial (cone) measure mixes in the y offsets and reads a different angle
+    let radial = result(&engine(&sensor("")), "sensor.slide.last");
+    println!("radial measure of the same wedge: {radial}°");
+    assert!((radial - 26.0).abs() > 0.1, "{radial}");
+    let err = dem::parse_scene_section(&sensor("along = \"z\"")).unwrap_err();
+    println!("{err}");
+    assert!(err.message.contains("dem.sensors[0].along"), "{err}");
+}
+
+#[test]
 fn bad_sensor_definitions_name_the_field() {
     let base = format!(
         "[dem]\ntime_step = 1e-5\n{GRAIN}\n[[dem.sensors]]\nname = \"p\"\nkind = \"pressure\"\n\
