@@ -197,7 +197,7 @@ transport_ours() {
     run_timed "$d" "$tag" env COSIM_BENCH_ROUNDS="$TRANSPORT_ROUNDS" "$TRANSPORT"
     timefile "$d/$tag.time"
     local a
-    a=$(awk '$1 ~ /^[0-9]+$/ && NF == 6 {printf "%s%s=%s", sep, $1, $3; sep=" "}' "$d/$tag.log")
+    a=$(awk '$1 ~ /^[0-9]+$/ && NF >= 6 {printf "%s%s=%s", sep, $1, $3; sep=" "}' "$d/$tag.log")
     record transport ours "$1" "" "$W" "$CPU" "$((M / 1024))" $a
 }
 

@@ -53,6 +53,29 @@ enum Command {
         #[arg(long)]
         no_progress: bool,
     },
+    /// Plot columns of a CSV time series (e.g. out/sleeper/dem/dem_sensors.csv) against its
+    /// first column as a PNG.
+    Plot {
+        csv: PathBuf,
+        /// Columns to plot, comma-separated (default: all but the x column).
+        #[arg(long, value_delimiter = ',')]
+        columns: Vec<String>,
+        /// The x column (default: the first).
+        #[arg(long)]
+        x: Option<String>,
+        /// Factor applied to every y value (e.g. -1e3: a downward displacement in mm).
+        #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
+        scale: f64,
+        /// y-axis label (default: the column names).
+        #[arg(long)]
+        ylabel: Option<String>,
+        /// Title (default: the file name).
+        #[arg(long)]
+        title: Option<String>,
+        /// Output PNG (default: the CSV's path with the extension .png).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
     /// Measure the speed–accuracy trade: run the scene for every combination of values,
     /// e.g. `--vary coupling.window=1e-4,5e-5 --vary coupling.schedule=jit,predictive`;
     /// writes study.csv and error_vs_wall / stability plots (PNG and SVG); a half-done sweep resumes.
@@ -255,6 +278,25 @@ fn main() -> ExitCode {
                 };
                 let s = run_scene(&scene, &opts).await?;
                 report(&scene, &s, &out_dir);
+                Ok(())
+            }
+            Command::Plot {
+                csv,
+                columns,
+                x,
+                scale,
+                ylabel,
+                title,
+                out,
+            } => {
+                let (xname, series) =
+                    coordinator::plot::read_series(&csv, x.as_deref(), &columns, scale)?;
+                let out = out.unwrap_or_else(|| csv.with_extension("png"));
+                let names: Vec<&str> = series.iter().map(|(n, _)| n.as_str()).collect();
+                let ylabel = ylabel.unwrap_or_else(|| names.join(", "));
+                let title = title.unwrap_or_else(|| csv.display().to_string());
+                coordinator::plot::series_png(&out, &title, &xname, &ylabel, &series)?;
+                println!("wrote {}", out.display());
                 Ok(())
             }
             Command::Check { scene, out } => {

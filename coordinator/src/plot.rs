@@ -80,6 +80,152 @@ pub fn study_pngs(
     stability_png(&out_dir.join("stability.png"), outcomes, vars).context("stability.png")
 }
 
+/// Columns of a CSV time series: the x column's name and, per selected column, its
+/// (x, y · scale) points (empty and non-finite cells skipped). `x` defaults to the first
+/// column, `columns` to every other one. Errors name the file, line and column.
+pub fn read_series(
+    csv: &Path,
+    x: Option<&str>,
+    columns: &[String],
+    scale: f64,
+) -> anyhow::Result<(String, Vec<(String, Vec<(f64, f64)>)>)> {
+    let text =
+        std::fs::read_to_string(csv).with_context(|| format!("cannot read {}", csv.display()))?;
+    let mut lines = text.lines().enumerate();
+    let header: Vec<&str> = lines
+        .next()
+        .map(|(_, h)| h.split(',').map(str::trim).collect())
+        .filter(|h: &Vec<&str>| h.len() >= 2)
+        .ok_or_else(|| {
+            anyhow!(
+                "{}: needs a header line with at least two columns",
+                csv.display()
+            )
+        })?;
+    let find = |name: &str| {
+        header.iter().position(|h| *h == name).ok_or_else(|| {
+            anyhow!(
+                "{}: no column `{name}`; the columns are: {}",
+                csv.display(),
+                header.join(", ")
+            )
+        })
+    };
+    let xi = match x {
+        Some(name) => find(name)?,
+        None => 0,
+    };
+    let ys: Vec<usize> = if columns.is_empty() {
+        (0..header.len()).filter(|&i| i != xi).collect()
+    } else {
+        columns
+            .iter()
+            .map(|c| find(c))
+            .collect::<anyhow::Result<_>>()?
+    };
+    let mut out: Vec<(String, Vec<(f64, f64)>)> = ys
+        .iter()
+        .map(|&i| (header[i].to_string(), Vec::new()))
+        .collect();
+    for (ln, line) in lines {
+        if line.trim().is_empty() {
+            continue;
+        }
+        let cells: Vec<&str> = line.split(',').map(str::trim).collect();
+        let num = |i: usize| -> anyhow::Result<Option<f64>> {
+            match cells.get(i) {
+                None | Some(&"") => Ok(None),
+                Some(c) => c.parse::<f64>().map(Some).map_err(|_| {
+                    anyhow!(
+                        "{} line {}, column `{}`: `{c}` is not a number",
+                        csv.display(),
+                        ln + 1,
+                        header[i]
+                    )
+                }),
+            }
+        };
+        let Some(xv) = num(xi)?.filter(|v| v.is_finite()) else {
+            continue;
+        };
+        for (k, &i) in ys.iter().enumerate() {
+            if let Some(y) = num(i)?.map(|y| y * scale).filter(|y| y.is_finite()) {
+                out[k].1.push((xv, y));
+            }
+        }
+    }
+    if out.iter().all(|(_, pts)| pts.is_empty()) {
+        return Err(anyhow!("{}: no numeric rows to plot", csv.display()));
+    }
+    Ok((header[xi].to_string(), out))
+}
+
+/// A line plot of time series (one colour per series, legend) as a PNG.
+pub fn series_png(
+    path: &Path,
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    series: &[(String, Vec<(f64, f64)>)],
+) -> anyhow::Result<()> {
+    ensure_font()?;
+    let all = series.iter().flat_map(|(_, p)| p.iter());
+    let (mut xlo, mut xhi, mut ylo, mut yhi) = (
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    );
+    for &(x, y) in all {
+        xlo = xlo.min(x);
+        xhi = xhi.max(x);
+        ylo = ylo.min(y);
+        yhi = yhi.max(y);
+    }
+    if !(xhi > xlo) {
+        xhi = xlo + 1.0;
+    }
+    let pad = if yhi > ylo {
+        0.05 * (yhi - ylo)
+    } else {
+        0.5 * yhi.abs().max(1e-12)
+    };
+    let (ylo, yhi) = (ylo - pad, yhi + pad);
+    let root = BitMapBackend::new(path, (1000, 600)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 20))
+        .margin(16)
+        .x_label_area_size(48)
+        .y_label_area_size(80)
+        .build_cartesian_2d(xlo..xhi, ylo..yhi)
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc(x_label)
+        .y_desc(y_label)
+        .y_label_formatter(&|y| format!("{y:.3e}"))
+        .draw()
+        .map_err(err)?;
+    for (i, (name, pts)) in series.iter().enumerate() {
+        let c = PALETTE[i % PALETTE.len()];
+        chart
+            .draw_series(LineSeries::new(pts.iter().cloned(), c.stroke_width(2)))
+            .map_err(err)?
+            .label(name.as_str())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], c.stroke_width(2)));
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 16))
+        .draw()
+        .map_err(err)?;
+    root.present().map_err(err)?;
+    Ok(())
+}
+
 /// The points of `pts` (x, y) not dominated by another (smaller x and smaller y), by x.
 pub fn pareto_front(pts: &[(f64, f64)]) -> Vec<(f64, f64)> {
     let mut p: Vec<(f64, f64)> = pts.to_vec();
@@ -261,6 +407,40 @@ fn stability_png(path: &Path, outcomes: &[Outcome], vars: &[Variation]) -> anyho
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn time_series_columns_are_read_and_plotted_with_clear_errors() {
+        let dir = tempfile::tempdir().unwrap();
+        let csv = dir.path().join("probes.csv");
+        std::fs::write(&csv, "time,a,b\n0.0,1.0,\n0.1,2.0,5.0\n0.2,NaN,6.0\n").unwrap();
+        let (x, s) = read_series(&csv, None, &[], -2.0).unwrap();
+        assert_eq!(x, "time");
+        assert_eq!(s[0], ("a".to_string(), vec![(0.0, -2.0), (0.1, -4.0)]));
+        assert_eq!(s[1], ("b".to_string(), vec![(0.1, -10.0), (0.2, -12.0)]));
+        let (_, s) = read_series(&csv, Some("a"), &["b".to_string()], 1.0).unwrap();
+        assert_eq!(s[0].1, vec![(2.0, 5.0)]);
+        let e = read_series(&csv, None, &["c".to_string()], 1.0)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("no column `c`") && e.contains("time, a, b"),
+            "{e}"
+        );
+        std::fs::write(&csv, "time,a\n0.0,1.0\n0.1,oops\n").unwrap();
+        let e = read_series(&csv, None, &[], 1.0).unwrap_err().to_string();
+        assert!(
+            e.contains("line 3") && e.contains("`a`") && e.contains("oops"),
+            "{e}"
+        );
+        // a PNG with the series (fonts: see find_font; this machine has DejaVu)
+        let png = dir.path().join("p.png");
+        let e = read_series(&csv.with_file_name("none.csv"), None, &[], 1.0).unwrap_err();
+        assert!(e.to_string().contains("cannot read"), "{e}");
+        let s = vec![("a".to_string(), vec![(0.0, 1.0), (1.0, 2.0)])];
+        series_png(&png, "test", "time (s)", "a", &s).unwrap();
+        let bytes = std::fs::read(&png).unwrap();
+        assert_eq!(&bytes[..4], b"\x89PNG");
+    }
 
     #[test]
     fn the_pareto_front_keeps_only_undominated_points() {

@@ -94,8 +94,8 @@ async fn main() {
     fem.wait_for_peers(Duration::from_secs(30)).await.unwrap();
     println!("interface kinematics round trip between two processes on loopback (zenoh peers, TCP), {rounds} rounds after 10 warm-up");
     println!(
-        "{:>8} {:>10} {:>12} {:>12} {:>12} {:>12}",
-        "nodes", "bytes", "median_us", "p90_us", "MB/s", "memcpy_us"
+        "{:>8} {:>10} {:>12} {:>12} {:>12} {:>12} {:>12} {:>12}",
+        "nodes", "bytes", "median_us", "p90_us", "MB/s", "memcpy_us", "encode_us", "decode_us"
     );
     for (&n, name) in sizes.iter().zip(&ifaces) {
         let bytes = 72 * n; // P, V, A as f64
@@ -137,9 +137,44 @@ async fn main() {
             mc.push(t.elapsed().as_secs_f64() * 1e6);
         }
         let mcm = median(&mut mc);
+        // the codec's share: encode the kinematics and the forces, decode and validate both
+        // (what the round trip does besides moving bytes)
+        let kin = InterfaceKinematics {
+            version: PROTOCOL_VERSION,
+            run_id: RUN.into(),
+            interface: name.clone(),
+            window: 0,
+            time: 0.0,
+            positions: vec![1.0; 3 * n].into(),
+            velocities: vec![1.0; 3 * n].into(),
+            accelerations: vec![2.0; 3 * n].into(),
+        };
+        let forces = InterfaceForces {
+            version: PROTOCOL_VERSION,
+            run_id: RUN.into(),
+            interface: name.clone(),
+            window: 0,
+            time: 0.0,
+            forces: vec![1.0; 3 * n].into(),
+            averaged: false,
+            substeps: 1,
+        };
+        let (mut enc, mut dec) = (Vec::new(), Vec::new());
+        for _ in 0..50 {
+            let t = Instant::now();
+            let a = proto::encode(std::hint::black_box(&kin)).unwrap();
+            let b = proto::encode(std::hint::black_box(&forces)).unwrap();
+            enc.push(t.elapsed().as_secs_f64() * 1e6);
+            let t = Instant::now();
+            let k2: InterfaceKinematics = proto::decode(&a, RUN).unwrap();
+            let f2: InterfaceForces = proto::decode(&b, RUN).unwrap();
+            dec.push(t.elapsed().as_secs_f64() * 1e6);
+            std::hint::black_box((k2, f2));
+        }
+        let (encm, decm) = (median(&mut enc), median(&mut dec));
         // bytes moved per round trip: kinematics out (72 B/node) + forces back (24 B/node)
         let mbps = (96 * n) as f64 / (med * 1e-6) / 1e6;
-        println!("{n:>8} {bytes:>10} {med:>12.1} {p90:>12.1} {mbps:>12.1} {mcm:>12.1}");
+        println!("{n:>8} {bytes:>10} {med:>12.1} {p90:>12.1} {mbps:>12.1} {mcm:>12.1} {encm:>12.1} {decm:>12.1}");
     }
     let _ = child.wait();
     fem.finish().await.ok();
