@@ -142,6 +142,17 @@ fn report(scene: &Scene, s: &coordinator::run::Summary, out_dir: &std::path::Pat
         println!("  {k} = {v:.6e}");
     }
     println!("summary: {}", out_dir.join("summary.json").display());
+    match coordinator::plot::run_plots(out_dir) {
+        Ok(files) if !files.is_empty() => {
+            println!(
+                "plots: {} ({} PNG)",
+                out_dir.join("plots").display(),
+                files.len()
+            )
+        }
+        Ok(_) => {}
+        Err(e) => tracing::warn!("no plots: {e:#}"),
+    }
 }
 
 fn main() -> ExitCode {
@@ -295,7 +306,12 @@ fn main() -> ExitCode {
                 let names: Vec<&str> = series.iter().map(|(n, _)| n.as_str()).collect();
                 let ylabel = ylabel.unwrap_or_else(|| names.join(", "));
                 let title = title.unwrap_or_else(|| csv.display().to_string());
-                coordinator::plot::series_png(&out, &title, &xname, &ylabel, &series)?;
+                let xlabel = if xname == "time" {
+                    "time (s)".to_string()
+                } else {
+                    xname
+                };
+                coordinator::plot::series_png(&out, &title, &xlabel, &ylabel, &series)?;
                 println!("wrote {}", out.display());
                 Ok(())
             }

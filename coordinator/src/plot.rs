@@ -160,6 +160,19 @@ pub fn read_series(
     Ok((header[xi].to_string(), out))
 }
 
+/// An axis label: plain decimals between 1e-3 and 1e5, else scientific notation.
+fn tick(y: f64) -> String {
+    let a = y.abs();
+    if a == 0.0 {
+        "0".into()
+    } else if (1e-3..1e5).contains(&a) {
+        let digits = (3 - a.log10().floor() as i32).clamp(0, 6) as usize;
+        format!("{y:.digits$}")
+    } else {
+        format!("{y:.2e}")
+    }
+}
+
 /// A line plot of time series (one colour per series, legend) as a PNG.
 pub fn series_png(
     path: &Path,
@@ -204,7 +217,7 @@ pub fn series_png(
         .configure_mesh()
         .x_desc(x_label)
         .y_desc(y_label)
-        .y_label_formatter(&|y| format!("{y:.3e}"))
+        .y_label_formatter(&|y| tick(*y))
         .draw()
         .map_err(err)?;
     for (i, (name, pts)) in series.iter().enumerate() {
@@ -224,6 +237,69 @@ pub fn series_png(
         .map_err(err)?;
     root.present().map_err(err)?;
     Ok(())
+}
+
+/// After a run: PNGs of the nodes' time series in `<out>/plots/`. `fem/fem_probes.csv`
+/// gives one plot per probe (ux, uy, uz) and per strain gauge (its three strain measures),
+/// `dem/dem_sensors.csv` one plot per sensor (their units differ). Returns the files written.
+pub fn run_plots(out_dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
+    let mut written = Vec::new();
+    let dir = out_dir.join("plots");
+    for (csv, grouped) in [
+        (out_dir.join("fem").join("fem_probes.csv"), true),
+        (out_dir.join("dem").join("dem_sensors.csv"), false),
+    ] {
+        if !csv.exists() {
+            continue;
+        }
+        let (xname, series) = read_series(&csv, None, &[], 1.0)?;
+        // groups of columns: `probe.seat.uz` → `probe.seat`; ungrouped: each column alone
+        let mut groups: Vec<(String, Vec<(String, Vec<(f64, f64)>)>)> = Vec::new();
+        for (name, pts) in series {
+            let key = match (grouped, name.rsplit_once('.')) {
+                (true, Some((g, _))) => g.to_string(),
+                _ => name.clone(),
+            };
+            match groups.iter_mut().find(|(g, _)| *g == key) {
+                Some((_, v)) => v.push((name, pts)),
+                None => groups.push((key, vec![(name, pts)])),
+            }
+        }
+        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+        let xlabel = if xname == "time" {
+            "time (s)".to_string()
+        } else {
+            xname.clone()
+        };
+        for (key, series) in groups {
+            if series.iter().all(|(_, p)| p.is_empty()) {
+                continue;
+            }
+            let ylabel = if key.starts_with("probe.") {
+                "displacement (m)".to_string()
+            } else if key.starts_with("strain.") {
+                "strain".to_string()
+            } else {
+                key.clone()
+            };
+            let file = dir.join(format!("{key}.png"));
+            let source = csv
+                .strip_prefix(out_dir)
+                .unwrap_or(&csv)
+                .display()
+                .to_string();
+            series_png(
+                &file,
+                &format!("{key} ({source})"),
+                &xlabel,
+                &ylabel,
+                &series,
+            )
+            .with_context(|| format!("writing {}", file.display()))?;
+            written.push(file);
+        }
+    }
+    Ok(written)
 }
 
 /// The points of `pts` (x, y) not dominated by another (smaller x and smaller y), by x.
@@ -440,6 +516,44 @@ mod tests {
         series_png(&png, "test", "time (s)", "a", &s).unwrap();
         let bytes = std::fs::read(&png).unwrap();
         assert_eq!(&bytes[..4], b"\x89PNG");
+    }
+
+    #[test]
+    fn a_run_gets_one_plot_per_probe_gauge_and_sensor() {
+        let out = tempfile::tempdir().unwrap();
+        std::fs::create_dir_all(out.path().join("fem")).unwrap();
+        std::fs::create_dir_all(out.path().join("dem")).unwrap();
+        std::fs::write(
+            out.path().join("fem/fem_probes.csv"),
+            "time,probe.a.ux,probe.a.uy,probe.a.uz,probe.b.ux,probe.b.uy,probe.b.uz,\
+             strain.g.max_principal,strain.g.min_principal,strain.g.von_mises\n\
+             0.1,0,0,-1e-6,0,0,-2e-6,1e-4,-1e-4,1e-4\n0.2,0,0,-2e-6,0,0,-3e-6,2e-4,-2e-4,2e-4\n",
+        )
+        .unwrap();
+        std::fs::write(
+            out.path().join("dem/dem_sensors.csv"),
+            "time,p1,flow\n0.1,1e5,0.0\n0.2,2e5,0.01\n",
+        )
+        .unwrap();
+        let mut names: Vec<String> = run_plots(out.path())
+            .unwrap()
+            .iter()
+            .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        assert_eq!(
+            names,
+            [
+                "flow.png",
+                "p1.png",
+                "probe.a.png",
+                "probe.b.png",
+                "strain.g.png"
+            ]
+        );
+        // nothing to plot: no files, no error
+        let empty = tempfile::tempdir().unwrap();
+        assert!(run_plots(empty.path()).unwrap().is_empty());
     }
 
     #[test]

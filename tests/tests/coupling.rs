@@ -27,6 +27,10 @@ fn beam_coupled_vs_pure_fem(mass: f64) -> (f64, f64) {
     );
     let coupled = run_scene(dir.path(), "beam.toml", &text);
     assert_eq!(coupled["status"], "completed");
+    // the run drew its probe's time series next to the summary
+    let png = dir.path().join("out-beam.toml/plots/probe.midspan.png");
+    let bytes = std::fs::read(&png).unwrap_or_else(|e| panic!("{}: {e}", png.display()));
+    assert_eq!(&bytes[..4], b"\x89PNG");
     let fz = f(&coupled, "fem.interface_force.z");
     assert!(
         (fz + mass * 9.81).abs() < 1e-3 * mass * 9.81,
