@@ -80,6 +80,9 @@ pub fn study_pngs(
     stability_png(&out_dir.join("stability.png"), outcomes, vars).context("stability.png")
 }
 
+/// A named series of (x, y) points.
+pub type Series = (String, Vec<(f64, f64)>);
+
 /// Columns of a CSV time series: the x column's name and, per selected column, its
 /// (x, y · scale) points (empty and non-finite cells skipped). `x` defaults to the first
 /// column, `columns` to every other one. Errors name the file, line and column.
@@ -88,7 +91,7 @@ pub fn read_series(
     x: Option<&str>,
     columns: &[String],
     scale: f64,
-) -> anyhow::Result<(String, Vec<(String, Vec<(f64, f64)>)>)> {
+) -> anyhow::Result<(String, Vec<Series>)> {
     let text =
         std::fs::read_to_string(csv).with_context(|| format!("cannot read {}", csv.display()))?;
     let mut lines = text.lines().enumerate();
@@ -123,7 +126,7 @@ pub fn read_series(
             .map(|c| find(c))
             .collect::<anyhow::Result<_>>()?
     };
-    let mut out: Vec<(String, Vec<(f64, f64)>)> = ys
+    let mut out: Vec<Series> = ys
         .iter()
         .map(|&i| (header[i].to_string(), Vec::new()))
         .collect();
@@ -179,7 +182,7 @@ pub fn series_png(
     title: &str,
     x_label: &str,
     y_label: &str,
-    series: &[(String, Vec<(f64, f64)>)],
+    series: &[Series],
 ) -> anyhow::Result<()> {
     ensure_font()?;
     let all = series.iter().flat_map(|(_, p)| p.iter());
@@ -195,7 +198,7 @@ pub fn series_png(
         ylo = ylo.min(y);
         yhi = yhi.max(y);
     }
-    if !(xhi > xlo) {
+    if xhi.partial_cmp(&xlo) != Some(std::cmp::Ordering::Greater) {
         xhi = xlo + 1.0;
     }
     let pad = if yhi > ylo {
@@ -254,7 +257,7 @@ pub fn run_plots(out_dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
         }
         let (xname, series) = read_series(&csv, None, &[], 1.0)?;
         // groups of columns: `probe.seat.uz` → `probe.seat`; ungrouped: each column alone
-        let mut groups: Vec<(String, Vec<(String, Vec<(f64, f64)>)>)> = Vec::new();
+        let mut groups: Vec<(String, Vec<Series>)> = Vec::new();
         for (name, pts) in series {
             let key = match (grouped, name.rsplit_once('.')) {
                 (true, Some((g, _))) => g.to_string(),
