@@ -1,6 +1,7 @@
 //! Stage "update particle states" (Ullrich Algorithm 1, line 5): velocity Verlet for
 //! translation (second order, symplectic: with e = 1 the rebound error of fig. 2.5 falls as
-//! Δt²) and the same kick–drift–kick for rotation with an exact quaternion update.
+//! Δt²) and the same kick–drift–kick for the angular velocity (spheres carry no orientation:
+//! it would change none of their contacts).
 //!
 //! Each half of the update is one pass over the particles that also does the bookkeeping
 //! needing the same data: the drift checks the Verlet-skin displacement (Wellmann B4), the
@@ -8,7 +9,6 @@
 
 use crate::hertz_mindlin::V3;
 use crate::particles::Particles;
-use nalgebra::Quaternion;
 use rayon::prelude::*;
 
 /// Particles per parallel chunk (the passes are element-wise: the result does not depend on
@@ -16,11 +16,11 @@ use rayon::prelude::*;
 const CHUNK: usize = 2048;
 
 /// What a pass over the particles does.
-const DRIFT: u8 = 1; // first half kick and drift (x, orientation), skin check
+const DRIFT: u8 = 1; // first half kick and drift (x), skin check
 const KICK: u8 = 2; // second half kick, finiteness check
 const KICK_DRIFT: u8 = 3; // second half kick of one step, then first half kick and drift of the next
 
-/// First half kick and drift: v ← v + ½Δt F/m, x ← x + Δt v (same for ω and orientation).
+/// First half kick and drift: v ← v + ½Δt F/m, x ← x + Δt v, ω ← ω + ½Δt T/I.
 /// Returns true if some particle is now farther than `half_skin` from `position_at_build`
 /// (or the lengths differ).
 pub fn kick_drift(
@@ -67,21 +67,19 @@ fn pass<const MODE: u8>(
         p.velocity.par_chunks_mut(CHUNK),
         p.force.par_chunks(CHUNK),
         p.mass.par_chunks(CHUNK),
-        p.orientation.par_chunks_mut(CHUNK),
         p.angular_velocity.par_chunks_mut(CHUNK),
         p.torque.par_chunks(CHUNK),
         p.inertia.par_chunks(CHUNK),
     )
         .into_par_iter()
         .enumerate()
-        .map(|(c, (x, v, f, m, q, w, t, inertia))| {
+        .map(|(c, (x, v, f, m, w, t, inertia))| {
             let x0 = build.get(c * CHUNK..c * CHUNK + x.len()).unwrap_or(&[]);
             let s = Chunk {
                 x,
                 v,
                 f,
                 m,
-                q,
                 w,
                 t,
                 inertia,
@@ -105,7 +103,6 @@ struct Chunk<'a> {
     v: &'a mut [V3],
     f: &'a [V3],
     m: &'a [f64],
-    q: &'a mut [Quaternion<f64>],
     w: &'a mut [V3],
     t: &'a [V3],
     inertia: &'a [f64],
@@ -132,7 +129,6 @@ fn chunk<const MODE: u8>(s: Chunk, dt: f64, half2: f64, rotation: bool) -> (bool
         v,
         f,
         m,
-        q,
         w,
         t,
         inertia,
@@ -160,65 +156,8 @@ fn chunk<const MODE: u8>(s: Chunk, dt: f64, half2: f64, rotation: bool) -> (bool
             }
             if rotation {
                 w[k] += half_turn;
-                q[k] = rotate(&q[k], &w[k], dt);
             }
         }
     }
     (ok, moved)
-}
-
-/// Orientation after rotating by the world-frame angular velocity ω over Δt:
-/// q ← (cos θ/2, sin(θ/2) ω/|ω|) q with θ = |ω|Δt, renormalised (q is a unit quaternion).
-#[inline(always)]
-fn rotate(q: &Quaternion<f64>, w: &V3, dt: f64) -> Quaternion<f64> {
-    let wdt = w * dt;
-    let theta2 = wdt.norm_squared();
-    if theta2 == 0.0 {
-        return *q;
-    }
-    let h2 = 0.25 * theta2; // (θ/2)²
-                            // cos(θ/2) and sin(θ/2)/θ; for θ/2 < 0.01 (all but violent spins: |ω| < 2000 rad/s at
-                            // Δt = 1e-5 s) by their Taylor series, whose first omitted terms (< 3e-21) lie far below
-                            // the rounding of the result
-    let (c, s_over_theta) = if h2 < 1e-4 {
-        (
-            1.0 - h2 * (1.0 / 2.0 - h2 * (1.0 / 24.0 - h2 * (1.0 / 720.0))),
-            0.5 * (1.0 - h2 * (1.0 / 6.0 - h2 * (1.0 / 120.0 - h2 * (1.0 / 5040.0)))),
-        )
-    } else {
-        let theta = theta2.sqrt();
-        let (s, c) = (0.5 * theta).sin_cos();
-        (c, s / theta)
-    };
-    let dq = Quaternion::new(
-        c,
-        wdt.x * s_over_theta,
-        wdt.y * s_over_theta,
-        wdt.z * s_over_theta,
-    );
-    let r = dq * q;
-    // renormalise; |r|² = 1 + ε with ε at rounding level, so one Newton step for 1/|r|,
-    // (3 − |r|²)/2, is exact to rounding (error O(ε²)) without a square root or division
-    r * (1.5 - 0.5 * r.norm_squared())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use nalgebra::UnitQuaternion;
-
-    /// The series branch and the sin/cos branch agree with nalgebra's exact rotation to
-    /// rounding, on both sides of the switch.
-    #[test]
-    fn quaternion_update_matches_exact_rotation() {
-        let q0 = UnitQuaternion::from_euler_angles(0.3, -1.1, 2.0).into_inner();
-        for &speed in &[1e-3, 1.0, 150.0, 1999.0, 2001.0, 5e4] {
-            let w = V3::new(0.3, -0.5, 0.8).normalize() * speed;
-            let dt = 1e-5;
-            let exact = UnitQuaternion::from_scaled_axis(w * dt).into_inner() * q0;
-            let got = rotate(&q0, &w, dt);
-            let err = (got - exact).norm();
-            assert!(err < 4e-16, "|ω| = {speed}: error {err:e}");
-        }
-    }
 }

@@ -553,7 +553,6 @@ impl Engine {
         b(&p.id)
             + b(&p.position)
             + b(&p.velocity)
-            + b(&p.orientation)
             + b(&p.angular_velocity)
             + b(&p.radius)
             + b(&p.mass)

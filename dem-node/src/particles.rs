@@ -1,7 +1,8 @@
-//! Particles as structure-of-arrays (spheres).
+//! Particles as structure-of-arrays (spheres). A sphere's orientation changes nothing in its
+//! contacts, so none is stored or integrated (shapes that need one will carry it); the angular
+//! velocity is, for the tangential and rolling contact terms.
 
 use crate::hertz_mindlin::V3;
-use nalgebra::Quaternion;
 use serde::{Deserialize, Serialize};
 
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
@@ -11,8 +12,6 @@ pub struct Particles {
     pub id: Vec<u32>,
     pub position: Vec<V3>,
     pub velocity: Vec<V3>,
-    /// Unit quaternion (w, x, y, z) body → world.
-    pub orientation: Vec<Quaternion<f64>>,
     pub angular_velocity: Vec<V3>,
     pub radius: Vec<f64>,
     pub mass: Vec<f64>,
@@ -46,7 +45,6 @@ impl Particles {
         self.id.push(self.position.len() as u32);
         self.position.push(position);
         self.velocity.push(velocity);
-        self.orientation.push(Quaternion::identity());
         self.angular_velocity.push(omega);
         self.radius.push(radius);
         self.mass.push(mass);
@@ -65,7 +63,6 @@ impl Particles {
         apply(&mut self.id, perm);
         apply(&mut self.position, perm);
         apply(&mut self.velocity, perm);
-        apply(&mut self.orientation, perm);
         apply(&mut self.angular_velocity, perm);
         apply(&mut self.radius, perm);
         apply(&mut self.mass, perm);

@@ -12,7 +12,7 @@ use serde::{Deserialize, Serialize};
 /// 2: pair lists as partner CSR with histories, wall histories per candidate group.
 /// 3: moving/removable static walls (mesh `active`, wall displacements at the list build),
 /// sensor state.
-pub const SNAPSHOT_VERSION: u32 = 3;
+pub const SNAPSHOT_VERSION: u32 = 4;
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct EngineState {
