@@ -319,12 +319,15 @@ impl WallConfig {
     }
 }
 
-/// Prescribed rigid translation of a wall: constant `velocity` during [`start`, `end`], at
-/// rest before and after (`end` absent: moves until the end of the run).
+/// Prescribed rigid translation of a wall during [`start`, `end`], at rest before and after
+/// (`end` absent: moves until the end of the run): constant `velocity` plus an optional
+/// oscillation, displacement u(τ) = velocity·τ + amplitude·sin(2π·frequency·τ), τ = t − start
+/// (e.g. the seed's compaction plate, moving down onto the bed with a sine, fig. 6.5).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct WallMotion {
     /// Velocity in m/s.
+    #[serde(default)]
     pub velocity: [f64; 3],
     /// Start time in s, default 0.
     #[serde(default)]
@@ -332,6 +335,12 @@ pub struct WallMotion {
     /// End time in s (> start), default: never stops.
     #[serde(default)]
     pub end: Option<f64>,
+    /// Oscillation amplitude in m (a vector: the direction of the oscillation), default 0.
+    #[serde(default)]
+    pub amplitude: [f64; 3],
+    /// Oscillation frequency in Hz (> 0 when an amplitude is given).
+    #[serde(default)]
+    pub frequency: f64,
 }
 
 /// A coordinate axis (the normal of a sensor plane).
@@ -786,6 +795,17 @@ impl DemConfig {
             if let Some(m) = motion {
                 let g = |field: &str| pi(&["dem", "walls"], k, &["motion", field]);
                 c.finite3(g("velocity"), &m.velocity);
+                c.finite3(g("amplitude"), &m.amplitude);
+                c.non_negative(g("frequency"), m.frequency);
+                if m.amplitude.iter().any(|a| *a != 0.0) && !(m.frequency > 0.0) {
+                    c.fail(
+                        g("frequency"),
+                        format!(
+                            "must be > 0 (Hz) with an amplitude {:?}, got {}",
+                            m.amplitude, m.frequency
+                        ),
+                    );
+                }
                 c.non_negative(g("start"), m.start);
                 if let Some(end) = m.end {
                     if !(end.is_finite() && end > m.start) {

@@ -231,6 +231,8 @@ impl Engine {
                 wall_motions.push(PrescribedMotion {
                     wall,
                     velocity: motion.map_or(V3::zeros(), |m| v3(&m.velocity)),
+                    amplitude: motion.map_or(V3::zeros(), |m| v3(&m.amplitude)),
+                    omega: motion.map_or(0.0, |m| 2.0 * std::f64::consts::PI * m.frequency),
                     start: motion.map_or(0.0, |m| m.start),
                     end: motion.and_then(|m| m.end).unwrap_or(f64::INFINITY),
                     remove_at: remove_at.unwrap_or(f64::INFINITY),

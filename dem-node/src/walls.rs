@@ -33,13 +33,16 @@ pub enum WallRef {
 }
 
 /// Prescribed rigid translation of a static wall (`[[dem.walls]] motion` and `remove_at`):
-/// velocity v during [start, end), at rest otherwise, so the displacement at time t is
-/// v · (min(t, end) − start)⁺; the wall is absent from `remove_at` on. A pure function of the
-/// time, so a restored snapshot puts the walls back exactly.
+/// during [start, end) the displacement is u(τ) = v τ + A sin(ωτ), τ = t − start, ω = 2πf;
+/// at rest before and frozen at u(end − start) after; the wall is absent from `remove_at` on.
+/// A pure function of the time, so a restored snapshot puts the walls back exactly.
 #[derive(Debug, Clone)]
 pub struct PrescribedMotion {
     pub wall: WallRef,
     pub velocity: V3,
+    /// Oscillation amplitude A (m) and angular frequency ω (rad/s).
+    pub amplitude: V3,
+    pub omega: f64,
     pub start: f64,
     /// +∞ when the motion never stops.
     pub end: f64,
@@ -51,12 +54,21 @@ pub struct PrescribedMotion {
 
 impl PrescribedMotion {
     pub fn displacement(&self, t: f64) -> V3 {
-        self.velocity * (t.min(self.end) - self.start).max(0.0)
+        let tau = (t.min(self.end) - self.start).max(0.0);
+        let mut u = self.velocity * tau;
+        if self.omega > 0.0 {
+            u += self.amplitude * (self.omega * tau).sin();
+        }
+        u
     }
 
     pub fn velocity_at(&self, t: f64) -> V3 {
         if t >= self.start && t < self.end {
-            self.velocity
+            let mut v = self.velocity;
+            if self.omega > 0.0 {
+                v += self.amplitude * (self.omega * (self.omega * (t - self.start)).cos());
+            }
+            v
         } else {
             V3::zeros()
         }

@@ -302,3 +302,65 @@ fn bad_motion_and_remove_at_name_the_field_and_line() {
     assert!(err.message.contains("dem.walls[0].remove_at"), "{err}");
     assert_eq!(err.line, line_of(&text, "remove_at"), "{err}");
 }
+
+/// A floor oscillating vertically (A = 0.1 mm, 20 Hz: peak acceleration A ω² = 1.6 m/s² < g)
+/// carries a resting sphere with it: the sphere's height follows u(τ) = A sin(ωτ), and from
+/// `end` on the floor stands still where the sine left it.
+#[test]
+fn oscillating_floor_carries_a_resting_sphere_and_stops_at_end() {
+    let text = format!(
+        r#"
+[dem]
+time_step = 1e-5
+gravity = [0.0, 0.0, -9.81]
+{MATERIALS}
+[[dem.walls]]
+kind = "plane"
+material = "steel"
+point = [0.0, 0.0, 0.0]
+normal = [0.0, 0.0, 1.0]
+motion = {{ amplitude = [0.0, 0.0, 1e-4], frequency = 20.0, start = 0.05, end = 0.1625 }}
+[[dem.particles]]
+kind = "list"
+material = "grain"
+spheres = [{{ position = [0.05, 0.05, 0.00999], radius = 0.01 }}]
+"#
+    );
+    let mut e = engine(&text);
+    e.advance(5000).unwrap(); // 0.05 s: at rest on the floor
+    let (z_rest, _) = state_of(&e, 0);
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    let mut worst: f64 = 0.0;
+    for k in 1..=10_000 {
+        e.advance(1).unwrap(); // 0.1 s = two periods
+        let t = 0.05 + k as f64 * 1e-5;
+        let (z, _) = state_of(&e, 0);
+        let floor = 1e-4 * (2.0 * std::f64::consts::PI * 20.0 * (t - 0.05)).sin();
+        worst = worst.max((z[2] - z_rest[2] - floor).abs());
+        lo = lo.min(z[2]);
+        hi = hi.max(z[2]);
+    }
+    println!(
+        "sphere swing {:.4e} m (2A = 2e-4), worst lag {worst:.2e} m",
+        hi - lo
+    );
+    assert!(((hi - lo) / 2e-4 - 1.0).abs() < 0.1, "{}", hi - lo);
+    assert!(worst < 2e-5, "{worst}");
+    // end = 0.1625 s: 2.25 periods, the sine at its crest; the floor stays at +A
+    e.advance(5000).unwrap();
+    let (z_end, v_end) = state_of(&e, 0);
+    println!("after the end: z − z_rest = {:.4e}", z_end[2] - z_rest[2]);
+    assert!(
+        (z_end[2] - z_rest[2] - 1e-4).abs() < 2e-6,
+        "{}",
+        z_end[2] - z_rest[2]
+    );
+    assert!(v_end[2].abs() < 1e-3);
+    // an amplitude needs a frequency
+    let err = dem::parse_scene_section(&text.replace("frequency = 20.0, ", "")).unwrap_err();
+    println!("{err}");
+    assert!(
+        err.message.contains("dem.walls[0].motion.frequency"),
+        "{err}"
+    );
+}
