@@ -84,7 +84,7 @@ impl Particles {
 
     /// Bytes of per-particle state (for the benchmark's memory figure).
     pub fn bytes_per_particle() -> usize {
-        // id, 5 vectors (x, v, ω, F, T), quaternion, r, m, I, material
-        4 + 5 * 24 + 32 + 3 * 8 + 2
+        // id, 5 vectors (x, v, ω, F, T), r, m, I, material
+        4 + 5 * 24 + 3 * 8 + 2
     }
 }
