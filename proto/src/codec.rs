@@ -309,7 +309,22 @@ mod tests {
         let bytes = encode(&kin).unwrap();
         // `positions` is a bin 8 (0xc4) of 72 bytes: 9 doubles.
         let needle = [0xc4u8, 72];
-        assert!(bytes.windows(2).any(|w| w == needle));
+        let at = bytes.windows(2).position(|w| w == needle).unwrap() + 2;
+        // … whose content is the doubles' little-endian bytes, value after value
+        let want: Vec<u8> = kin
+            .positions
+            .as_slice()
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        assert_eq!(&bytes[at..at + 72], &want[..]);
+        // decoding reads them back from wherever the bin lies (no alignment needed)
+        let mut shifted = vec![0u8];
+        shifted.extend_from_slice(&bytes);
+        assert_eq!(
+            decode::<InterfaceKinematics>(&shifted[1..], RUN).unwrap(),
+            kin
+        );
         // A hand-written message with plain float arrays decodes too.
         #[derive(Serialize)]
         struct Plain {

@@ -43,6 +43,10 @@ impl From<Vec<f64>> for F64Array {
 
 impl Serialize for F64Array {
     fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        // on little-endian machines the doubles' memory is already the wire format: one copy
+        if cfg!(target_endian = "little") {
+            return s.serialize_bytes(bytemuck::cast_slice::<f64, u8>(&self.0));
+        }
         let mut bytes = Vec::with_capacity(self.0.len() * 8);
         for v in &self.0 {
             bytes.extend_from_slice(&v.to_le_bytes());
@@ -67,6 +71,12 @@ impl<'de> Deserialize<'de> for F64Array {
                         "f64 bin of {} bytes is not a multiple of 8",
                         b.len()
                     )));
+                }
+                if cfg!(target_endian = "little") {
+                    // one copy into aligned doubles (the bin itself need not be aligned)
+                    let mut v = vec![0.0f64; b.len() / 8];
+                    bytemuck::cast_slice_mut::<f64, u8>(&mut v).copy_from_slice(b);
+                    return Ok(F64Array(v));
                 }
                 Ok(F64Array(
                     b.chunks_exact(8)
