@@ -16,10 +16,14 @@ pub trait Message: Serialize + DeserializeOwned {
     const WHAT: &'static str;
     fn version(&self) -> u32;
     fn run_id(&self) -> &str;
+    /// Bytes of the bulk arrays, so that encoding allocates its buffer once.
+    fn bulk_bytes(&self) -> usize {
+        0
+    }
 }
 
 macro_rules! message {
-    ($t:ty, $what:literal) => {
+    ($t:ty, $what:literal $(, $array:ident)*) => {
         impl Message for $t {
             const WHAT: &'static str = $what;
             fn version(&self) -> u32 {
@@ -28,21 +32,32 @@ macro_rules! message {
             fn run_id(&self) -> &str {
                 &self.run_id
             }
+            fn bulk_bytes(&self) -> usize {
+                0 $(+ 8 * self.$array.len())*
+            }
         }
     };
 }
 message!(Command, "command");
 message!(Status, "status");
-message!(InterfaceMesh, "interface mesh");
-message!(InterfaceKinematics, "interface kinematics");
-message!(InterfaceForces, "interface forces");
+message!(InterfaceMesh, "interface mesh", positions);
+message!(
+    InterfaceKinematics,
+    "interface kinematics",
+    positions,
+    velocities,
+    accelerations
+);
+message!(InterfaceForces, "interface forces", forces);
 
 /// Encodes a message as a MessagePack map with named fields.
 pub fn encode<M: Message>(msg: &M) -> Result<Vec<u8>, ProtoError> {
-    rmp_serde::to_vec_named(msg).map_err(|e| ProtoError::Encode {
+    let mut buf = Vec::with_capacity(msg.bulk_bytes() + 256);
+    rmp_serde::encode::write_named(&mut buf, msg).map_err(|e| ProtoError::Encode {
         what: M::WHAT,
         reason: e.to_string(),
-    })
+    })?;
+    Ok(buf)
 }
 
 #[derive(Deserialize)]
