@@ -797,7 +797,9 @@ impl DemConfig {
                 c.finite3(g("velocity"), &m.velocity);
                 c.finite3(g("amplitude"), &m.amplitude);
                 c.non_negative(g("frequency"), m.frequency);
-                if m.amplitude.iter().any(|a| *a != 0.0) && !(m.frequency > 0.0) {
+                if m.amplitude.iter().any(|a| *a != 0.0)
+                    && m.frequency.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
+                {
                     c.fail(
                         g("frequency"),
                         format!(
