@@ -156,6 +156,7 @@ fn report(scene: &Scene, s: &coordinator::run::Summary, out_dir: &std::path::Pat
 }
 
 fn main() -> ExitCode {
+    proto::alloc::keep_message_buffers();
     let cli = Cli::parse();
     tracing_subscriber::fmt()
         .with_env_filter(

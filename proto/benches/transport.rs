@@ -64,8 +64,20 @@ fn median(v: &mut [f64]) -> f64 {
     v[v.len() / 2]
 }
 
-#[tokio::main(flavor = "multi_thread", worker_threads = 2)]
-async fn main() {
+fn main() {
+    // COSIM_BENCH_DEFAULT_MALLOC=1 measures without the nodes' allocator tuning
+    if std::env::var_os("COSIM_BENCH_DEFAULT_MALLOC").is_none() {
+        proto::alloc::keep_message_buffers();
+    }
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .expect("tokio runtime")
+        .block_on(bench());
+}
+
+async fn bench() {
     let sizes = [1_000usize, 10_000, 100_000];
     let rounds: usize = std::env::var("COSIM_BENCH_ROUNDS")
         .ok()

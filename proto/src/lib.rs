@@ -5,6 +5,7 @@
 //! session that carries them ([`link`], [`participant`]). No other crate builds a key expression
 //! or encodes a message. The contract for implementers in other languages is `PROTOCOL.md`.
 
+pub mod alloc;
 pub mod cli;
 pub mod codec;
 pub mod error;

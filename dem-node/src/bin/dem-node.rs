@@ -241,6 +241,7 @@ impl Solver for DemNode {
 }
 
 fn main() -> std::process::ExitCode {
+    proto::alloc::keep_message_buffers();
     let args = Args::parse();
     proto::node::init_logging();
     let hello = Hello {
