@@ -501,6 +501,36 @@ fn ensure_symbolic(
     Ok(symbolic.clone().expect("set above"))
 }
 
+/// Numeric LLᵀ factorisation of (`pattern`, `vals`) on the symbolic analysis `sym`, in the
+/// precision of `T` (f64 for [`Factor`], f32 for [`MixedFactor`]). The error says what failed;
+/// the caller says why it may have.
+fn numeric_llt<T: faer::traits::ComplexField + Copy>(
+    sym: &SymbolicCholesky<u32>,
+    pattern: &Pattern,
+    vals: &[T],
+) -> Result<Vec<T>, String> {
+    let par = faer::get_global_parallelism();
+    let mut values = Vec::new();
+    values
+        .try_reserve_exact(sym.len_val())
+        .map_err(|_| "out of memory for the Cholesky factor".to_string())?;
+    values.resize(sym.len_val(), T::zero_impl());
+    let mut buf =
+        MemBuffer::try_new(sym.factorize_numeric_llt_scratch::<T>(par, Default::default()))
+            .map_err(|_| "out of memory for the Cholesky workspace".to_string())?;
+    sym.factorize_numeric_llt::<T>(
+        &mut values,
+        SparseColMatRef::new(pattern.symbolic(), vals),
+        Side::Lower,
+        Default::default(),
+        par,
+        MemStack::new(&mut buf),
+        Default::default(),
+    )
+    .map_err(|e| format!("Cholesky factorisation failed ({e:?})"))?;
+    Ok(values)
+}
+
 impl Factor {
     /// Factorises the symmetric positive definite matrix; the symbolic analysis is computed
     /// once per pattern and reused.
@@ -512,29 +542,10 @@ impl Factor {
         let t0 = std::time::Instant::now();
         let sym = ensure_symbolic(pattern, symbolic)?;
         let t_sym = t0.elapsed();
-        let par = faer::get_global_parallelism();
-        let mut values = Vec::new();
-        values
-            .try_reserve_exact(sym.len_val())
-            .map_err(|_| FemError::Solver("out of memory for the Cholesky factor".into()))?;
-        values.resize(sym.len_val(), 0.0);
-        let mut buf =
-            MemBuffer::try_new(sym.factorize_numeric_llt_scratch::<f64>(par, Default::default()))
-                .map_err(|_| FemError::Solver("out of memory for the Cholesky workspace".into()))?;
-        let a = SparseColMatRef::new(pattern.symbolic(), vals);
-        sym.factorize_numeric_llt::<f64>(
-            &mut values,
-            a,
-            Side::Lower,
-            Default::default(),
-            par,
-            MemStack::new(&mut buf),
-            Default::default(),
-        )
-        .map_err(|e| {
+        let values = numeric_llt(&sym, pattern, vals).map_err(|e| {
             FemError::Solver(format!(
-                "Cholesky factorisation failed ({e:?}): the matrix is not positive definite — \
-                 check that the supports remove all rigid-body motions"
+                "{e}: the matrix is not positive definite — check that the supports remove all \
+                 rigid-body motions"
             ))
         })?;
         if timing() {
@@ -605,30 +616,9 @@ impl MixedFactor {
     ) -> Result<MixedFactor, FemError> {
         let sym = ensure_symbolic(pattern, symbolic)?;
         let t0 = std::time::Instant::now();
-        let par = faer::get_global_parallelism();
         let a32: Vec<f32> = vals.iter().map(|&v| v as f32).collect();
-        let mut values = Vec::new();
-        values
-            .try_reserve_exact(sym.len_val())
-            .map_err(|_| FemError::Solver("out of memory for the f32 Cholesky factor".into()))?;
-        values.resize(sym.len_val(), 0.0f32);
-        let mut buf =
-            MemBuffer::try_new(sym.factorize_numeric_llt_scratch::<f32>(par, Default::default()))
-                .map_err(|_| FemError::Solver("out of memory for the Cholesky workspace".into()))?;
-        sym.factorize_numeric_llt::<f32>(
-            &mut values,
-            SparseColMatRef::new(pattern.symbolic(), &a32),
-            Side::Lower,
-            Default::default(),
-            par,
-            MemStack::new(&mut buf),
-            Default::default(),
-        )
-        .map_err(|e| {
-            FemError::Solver(format!(
-                "f32 Cholesky factorisation failed ({e:?}): not positive definite in single \
-                 precision"
-            ))
+        let values = numeric_llt(&sym, pattern, &a32).map_err(|e| {
+            FemError::Solver(format!("{e}: not positive definite in single precision"))
         })?;
         if timing() {
             tracing::debug!(
@@ -801,10 +791,5 @@ impl MixedFactor {
                 .for_each(|(pi, zi)| *pi = zi + beta * *pi);
         }
         it
-    }
-
-    /// Bytes held by the factor values.
-    pub fn bytes(&self) -> usize {
-        self.values.len() * 4
     }
 }

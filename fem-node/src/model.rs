@@ -1070,10 +1070,9 @@ impl Model {
                 }
             }
             if let Some(f) = &self.k_mixed {
-                let mut x = rhs.clone();
-                match f.solve(&self.pattern, &self.k, &mut x, 1e-11, 1e-9, 200) {
+                // on failure `solve` leaves the right-hand side as it was
+                match f.solve(&self.pattern, &self.k, &mut rhs, 1e-11, 1e-9, 200) {
                     Ok(info) => {
-                        rhs = x;
                         self.last_refined = Some(info);
                         solved = true;
                     }
