@@ -788,18 +788,8 @@ impl Engine {
 
     /// Does a contact touch during the next step (see [`impact_refinement`])?
     fn contact_during_step(&mut self) -> bool {
+        let wall_shift_at_step_end = self.wall_shift_since_build(self.state.time + self.dt);
         let s = &self.state;
-        let t1 = s.time + self.dt;
-        let wall_shift_at_step_end = if s.lists.wall_shift_at_build.len() == self.wall_motions.len()
-        {
-            self.wall_motions
-                .iter()
-                .zip(&s.lists.wall_shift_at_build)
-                .map(|(m, d0)| (m.displacement(t1) - d0).norm())
-                .fold(0.0, f64::max)
-        } else {
-            f64::INFINITY
-        };
         let walls = impact_refinement::WallsView {
             planes: &self.planes,
             meshes: &s.meshes,
@@ -923,18 +913,26 @@ impl Engine {
         s.sensors.track_flow(&self.cfg.sensors, &s.particles);
     }
 
+    /// The farthest a prescribed-motion wall is at time `t` from where it was at the last list
+    /// build (∞ when the lists predate the walls).
+    fn wall_shift_since_build(&self, t: f64) -> f64 {
+        let at_build = &self.state.lists.wall_shift_at_build;
+        if at_build.len() != self.wall_motions.len() {
+            return f64::INFINITY;
+        }
+        self.wall_motions
+            .iter()
+            .zip(at_build)
+            .map(|(m, d0)| (m.displacement(t) - d0).norm())
+            .fold(0.0, f64::max)
+    }
+
     /// Algorithm 1, line 3. Prescribed-motion walls are rigid translations: the lists are
     /// rebuilt when one moved d_V/2 since the last build (eq. 4.10), like coupled meshes.
     fn detect_contacts(&mut self, particles_moved: bool) {
+        let t = self.state.time;
+        let walls_moved = self.wall_shift_since_build(t) > 0.5 * self.state.lists.skin;
         let s = &mut self.state;
-        let t = s.time;
-        let half_skin = 0.5 * s.lists.skin;
-        let walls_moved = s.lists.wall_shift_at_build.len() != self.wall_motions.len()
-            || self
-                .wall_motions
-                .iter()
-                .zip(&s.lists.wall_shift_at_build)
-                .any(|(m, d0)| (m.displacement(t) - d0).norm() > half_skin);
         let rebuilt = contact_detection::detect(
             &mut s.lists,
             &mut s.particles,
