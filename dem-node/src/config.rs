@@ -271,6 +271,8 @@ pub enum WallConfig {
         #[serde(default)]
         motion: Option<WallMotion>,
         #[serde(default)]
+        load: Option<WallLoad>,
+        #[serde(default)]
         remove_at: Option<f64>,
     },
     /// Axis-aligned box [min, max] as a triangle mesh with inward normals; `open` lists the
@@ -283,6 +285,8 @@ pub enum WallConfig {
         open: Vec<String>,
         #[serde(default)]
         motion: Option<WallMotion>,
+        #[serde(default)]
+        load: Option<WallLoad>,
         #[serde(default)]
         remove_at: Option<f64>,
     },
@@ -298,23 +302,34 @@ pub enum WallConfig {
         #[serde(default)]
         motion: Option<WallMotion>,
         #[serde(default)]
+        load: Option<WallLoad>,
+        #[serde(default)]
         remove_at: Option<f64>,
     },
 }
 
 impl WallConfig {
-    /// The wall's prescribed motion and removal time (`motion`, `remove_at`).
-    pub fn kinematics(&self) -> (Option<&WallMotion>, Option<f64>) {
+    /// The wall's prescribed motion, load and removal time (`motion`, `load`, `remove_at`).
+    pub fn kinematics(&self) -> (Option<&WallMotion>, Option<&WallLoad>, Option<f64>) {
         match self {
             WallConfig::Plane {
-                motion, remove_at, ..
+                motion,
+                load,
+                remove_at,
+                ..
             }
             | WallConfig::Box {
-                motion, remove_at, ..
+                motion,
+                load,
+                remove_at,
+                ..
             }
             | WallConfig::Stl {
-                motion, remove_at, ..
-            } => (motion.as_ref(), *remove_at),
+                motion,
+                load,
+                remove_at,
+                ..
+            } => (motion.as_ref(), load.as_ref(), *remove_at),
         }
     }
 }
@@ -341,6 +356,52 @@ pub struct WallMotion {
     /// Oscillation frequency in Hz (> 0 when an amplitude is given).
     #[serde(default)]
     pub frequency: f64,
+}
+
+/// Force-controlled rigid translation of a wall along one axis (`[[dem.walls]] load`): the wall
+/// is a body of `mass` that moves under the particles' contact forces, its weight and the
+/// applied force F(τ) = force + amplitude·sin(2π·frequency·τ), τ = t − start. A compaction
+/// plate run like the experiment's vibratory compactor (Ullrich §6.2, fig. 6.5): the plate
+/// sinks as far as the bed gives way under the load instead of being pushed to a prescribed
+/// depth, so the bed stores no more elastic energy than the load puts in. Held at rest before
+/// `start`; from `end` on the applied force and the weight ramp linearly to zero over
+/// `release` seconds (the plate is lifted off gently, the bed unloads), after which only the
+/// contact forces act on the wall until it is removed (`remove_at`).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct WallLoad {
+    /// Name of the wall's columns in dem_timeseries.csv (`<name>.displacement`, `.velocity`,
+    /// `.contact_force`), default `wall<k>`.
+    #[serde(default)]
+    pub name: Option<String>,
+    /// The axis the wall moves along (default z); forces are signed along +axis.
+    #[serde(default = "default_axis_z")]
+    pub axis: Axis,
+    /// Mass in kg (> 0); gravity acts on it.
+    pub mass: f64,
+    /// Static applied force in N along +axis (e.g. negative to press down along z).
+    #[serde(default)]
+    pub force: f64,
+    /// Amplitude of the harmonic force in N, default 0.
+    #[serde(default)]
+    pub amplitude: f64,
+    /// Frequency of the harmonic force in Hz (> 0 when an amplitude is given).
+    #[serde(default)]
+    pub frequency: f64,
+    /// Time the wall is released (s), default 0.
+    #[serde(default)]
+    pub start: f64,
+    /// Time the applied force and the weight start to ramp down (s, > start), default: never.
+    #[serde(default)]
+    pub end: Option<f64>,
+    /// Duration of the ramp-down of the applied force and the weight (s), default 0 (off at
+    /// once).
+    #[serde(default)]
+    pub release: f64,
+}
+
+fn default_axis_z() -> Axis {
+    Axis::Z
 }
 
 /// A coordinate axis (the normal of a sensor plane).
@@ -791,7 +852,56 @@ impl DemConfig {
                     c.finite3(f("offset"), offset);
                 }
             }
-            let (motion, remove_at) = w.kinematics();
+            let (motion, load, remove_at) = w.kinematics();
+            if let Some(l) = load {
+                let g = |field: &str| pi(&["dem", "walls"], k, &["load", field]);
+                if motion.is_some() {
+                    c.fail(
+                        f("load"),
+                        "a wall has either a prescribed `motion` or a `load`, not both".into(),
+                    );
+                }
+                c.positive(g("mass"), l.mass);
+                for (field, v) in [("force", l.force), ("amplitude", l.amplitude)] {
+                    if !v.is_finite() {
+                        c.fail(g(field), format!("must be finite (N), got {v}"));
+                    }
+                }
+                c.non_negative(g("frequency"), l.frequency);
+                if l.amplitude != 0.0
+                    && l.frequency.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
+                {
+                    c.fail(
+                        g("frequency"),
+                        format!(
+                            "must be > 0 (Hz) with an amplitude {}, got {}",
+                            l.amplitude, l.frequency
+                        ),
+                    );
+                }
+                c.non_negative(g("start"), l.start);
+                c.non_negative(g("release"), l.release);
+                if let Some(end) = l.end {
+                    if !(end.is_finite() && end > l.start) {
+                        c.fail(
+                            g("end"),
+                            format!("must be finite and > start = {}, got {end}", l.start),
+                        );
+                    }
+                }
+                if let Some(name) = &l.name {
+                    if name.is_empty()
+                        || !name
+                            .chars()
+                            .all(|ch| ch.is_ascii_alphanumeric() || ch == '_' || ch == '-')
+                    {
+                        c.fail(
+                            g("name"),
+                            format!("must be non-empty letters, digits, `_` or `-`, got `{name}`"),
+                        );
+                    }
+                }
+            }
             if let Some(m) = motion {
                 let g = |field: &str| pi(&["dem", "walls"], k, &["motion", field]);
                 c.finite3(g("velocity"), &m.velocity);

@@ -9,7 +9,8 @@ use crate::resolve_forces::MeshForceRecord;
 use crate::walls::{Mesh, Plane};
 
 /// `particles_moved`: some particle moved more than half the skin since the last build (the
-/// drift checks this). Returns true if the lists were rebuilt (particles may have been
+/// drift checks this). `keep_records`: the force records are sized for the new lists (a
+/// coupled mesh or loaded wall needs them), else emptied. Returns true if the lists were rebuilt (particles may have been
 /// reordered).
 pub fn detect(
     lists: &mut NeighbourLists,
@@ -18,13 +19,14 @@ pub fn detect(
     planes: &[Plane],
     meshes: &mut [Mesh],
     records: &mut Vec<MeshForceRecord>,
+    keep_records: bool,
 ) -> bool {
     if !particles_moved && !needs_rebuild(lists, particles, meshes) {
         return false;
     }
     rebuild(lists, particles, planes, meshes);
     records.clear();
-    if meshes.iter().any(|m| m.coupled) {
+    if keep_records {
         records.resize(lists.walls.len(), MeshForceRecord::default());
     }
     true

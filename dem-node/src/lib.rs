@@ -39,7 +39,7 @@ use particles::Particles;
 use resolve_forces::ForceContext;
 use snapshot::EngineState;
 use std::path::Path;
-use walls::{Mesh, Plane, PrescribedMotion, WallRef};
+use walls::{LoadedWall, LoadedWallState, Mesh, Plane, PrescribedMotion, WallRef};
 
 pub use config::{parse_scene_section, SceneError};
 pub use walls::MotionRule;
@@ -94,6 +94,11 @@ pub enum DemError {
         quantity: &'static str,
         rayleigh: f64,
     },
+    #[error(
+        "instability at t = {time:e} s (step {step}): the loaded wall `{wall}` has a non-finite \
+         displacement or velocity; give it more mass or reduce dem.time_step"
+    )]
+    UnstableWall { time: f64, step: u64, wall: String },
     #[error("snapshot: {0}")]
     Snapshot(String),
     #[error("output {path}: {message}")]
@@ -130,6 +135,8 @@ pub struct Engine {
     box_region: Option<(V3, V3)>,
     /// Static walls with a prescribed motion or removal time.
     wall_motions: Vec<PrescribedMotion>,
+    /// Walls moved by a load (their state is `state.loaded_walls`).
+    loaded_walls: Vec<LoadedWall>,
     /// Steps run as `impact_substeps` sub-steps (not part of snapshots).
     refined_steps: u64,
     /// Scratch: the positions the next unrefined step would reach.
@@ -161,6 +168,7 @@ impl Engine {
         let mut meshes: Vec<Mesh> = Vec::new();
         let mut box_region = None;
         let mut wall_motions = Vec::new();
+        let mut loaded_walls = Vec::new();
         for (k, w) in cfg.walls.iter().enumerate() {
             let field = format!("dem.walls[{k}].material");
             match w {
@@ -216,8 +224,8 @@ impl Engine {
                     ));
                 }
             }
-            let (motion, remove_at) = w.kinematics();
-            if motion.is_some() || remove_at.is_some() {
+            let (motion, load, remove_at) = w.kinematics();
+            if motion.is_some() || load.is_some() || remove_at.is_some() {
                 let (wall, base) = match w {
                     WallConfig::Plane { .. } => {
                         let k = planes.len() - 1;
@@ -228,16 +236,36 @@ impl Engine {
                         (WallRef::Mesh(k), meshes[k].positions.clone())
                     }
                 };
-                wall_motions.push(PrescribedMotion {
-                    wall,
-                    velocity: motion.map_or(V3::zeros(), |m| v3(&m.velocity)),
-                    amplitude: motion.map_or(V3::zeros(), |m| v3(&m.amplitude)),
-                    omega: motion.map_or(0.0, |m| 2.0 * std::f64::consts::PI * m.frequency),
-                    start: motion.map_or(0.0, |m| m.start),
-                    end: motion.and_then(|m| m.end).unwrap_or(f64::INFINITY),
-                    remove_at: remove_at.unwrap_or(f64::INFINITY),
-                    base,
-                });
+                let remove_at = remove_at.unwrap_or(f64::INFINITY);
+                if let Some(l) = load {
+                    let mut axis = V3::zeros();
+                    axis[l.axis.indices().0] = 1.0;
+                    loaded_walls.push(LoadedWall {
+                        name: l.name.clone().unwrap_or_else(|| format!("wall{k}")),
+                        wall,
+                        axis,
+                        mass: l.mass,
+                        force: l.force,
+                        amplitude: l.amplitude,
+                        omega: 2.0 * std::f64::consts::PI * l.frequency,
+                        start: l.start,
+                        end: l.end.unwrap_or(f64::INFINITY),
+                        release: l.release,
+                        remove_at,
+                        base,
+                    });
+                } else {
+                    wall_motions.push(PrescribedMotion {
+                        wall,
+                        velocity: motion.map_or(V3::zeros(), |m| v3(&m.velocity)),
+                        amplitude: motion.map_or(V3::zeros(), |m| v3(&m.amplitude)),
+                        omega: motion.map_or(0.0, |m| 2.0 * std::f64::consts::PI * m.frequency),
+                        start: motion.map_or(0.0, |m| m.start),
+                        end: motion.and_then(|m| m.end).unwrap_or(f64::INFINITY),
+                        remove_at,
+                        base,
+                    });
+                }
             }
         }
         let mut particles = Particles::default();
@@ -411,6 +439,7 @@ impl Engine {
                 records: Vec::new(),
                 meshes,
                 sensors,
+                loaded_walls: vec![LoadedWallState::default(); loaded_walls.len()],
             },
             pool,
             output: OutputState {
@@ -419,6 +448,7 @@ impl Engine {
             },
             box_region,
             wall_motions,
+            loaded_walls,
             refined_steps: 0,
             predicted: Vec::new(),
         };
@@ -733,6 +763,7 @@ impl Engine {
             for s in 0..substeps {
                 e.detect_contacts(moved);
                 e.resolve_forces(dt, 1.0, true);
+                let walls_finite = e.loaded_walls_kick(dt);
                 let p = &mut e.state.particles;
                 let finite = if s + 1 < substeps {
                     let l = &e.state.lists;
@@ -748,10 +779,11 @@ impl Engine {
                 } else {
                     integrate::kick(p, dt, rotation)
                 };
-                if !finite {
+                if !(finite && walls_finite) {
                     return Err(e.instability());
                 }
                 if s + 1 < substeps {
+                    e.loaded_walls_kick_drift(dt);
                     e.advance_clock();
                     e.track_flow();
                 }
@@ -779,7 +811,8 @@ impl Engine {
         self.track_flow();
         self.detect_contacts(moved);
         self.resolve_forces(self.dt, 1.0, true);
-        if integrate::kick(&mut self.state.particles, self.dt, self.cfg.rotation) {
+        let walls_finite = self.loaded_walls_kick(self.dt);
+        if integrate::kick(&mut self.state.particles, self.dt, self.cfg.rotation) && walls_finite {
             Ok(())
         } else {
             Err(self.instability())
@@ -822,6 +855,7 @@ impl Engine {
                 h,
                 rotation,
             );
+            self.loaded_walls_kick_drift(h);
             if k < n {
                 self.set_substep_clock(t0, k as f64 / n as f64);
             } else {
@@ -832,7 +866,8 @@ impl Engine {
             self.track_flow();
             self.detect_contacts(moved);
             self.resolve_forces(h, 1.0 / n as f64, k == n);
-            if !integrate::kick(&mut self.state.particles, h, rotation) {
+            let walls_finite = self.loaded_walls_kick(h);
+            if !(integrate::kick(&mut self.state.particles, h, rotation) && walls_finite) {
                 return Err(self.instability());
             }
         }
@@ -875,8 +910,64 @@ impl Engine {
             self.dt,
             self.cfg.rotation,
         );
+        self.loaded_walls_kick_drift(self.dt);
         self.advance_clock();
         moved
+    }
+
+    /// First half kick and drift of the loaded walls over `h`, with the acceleration of the
+    /// last force evaluation (velocity Verlet, as the particles).
+    fn loaded_walls_kick_drift(&mut self, h: f64) {
+        for st in &mut self.state.loaded_walls {
+            st.v += 0.5 * h * st.acceleration;
+            st.u += h * st.v;
+        }
+    }
+
+    /// Second half kick of the loaded walls over `h`. Returns false if a state is non-finite.
+    fn loaded_walls_kick(&mut self, h: f64) -> bool {
+        let mut finite = true;
+        for st in &mut self.state.loaded_walls {
+            st.v += 0.5 * h * st.acceleration;
+            finite &= st.u.is_finite() && st.v.is_finite();
+        }
+        finite
+    }
+
+    /// The axis components of the particles' contact forces on the loaded walls (from the
+    /// force records of the touching wall contacts, in list order) and their accelerations at
+    /// the current time; a wall that is held or removed is at rest.
+    fn loaded_wall_forces(&mut self) {
+        if self.loaded_walls.is_empty() {
+            return;
+        }
+        let n_planes = self.planes.len();
+        let s = &mut self.state;
+        let index = |w: &LoadedWall| match w.wall {
+            WallRef::Plane(k) => k,
+            WallRef::Mesh(k) => n_planes + k,
+        };
+        for st in &mut s.loaded_walls {
+            st.contact_force = 0.0;
+        }
+        for (k, rec) in s.records.iter().enumerate() {
+            if !s.lists.wall_contacts[k].touching() {
+                continue;
+            }
+            let w = s.lists.walls[k].wall as usize;
+            for (lw, st) in self.loaded_walls.iter().zip(&mut s.loaded_walls) {
+                if index(lw) == w {
+                    st.contact_force += rec.force.dot(&lw.axis);
+                }
+            }
+        }
+        let t = s.time;
+        for (lw, st) in self.loaded_walls.iter().zip(&mut s.loaded_walls) {
+            st.acceleration = lw.acceleration(t, st.contact_force, &self.gravity);
+            if !lw.free(t) {
+                st.v = 0.0;
+            }
+        }
     }
 
     fn advance_clock(&mut self) {
@@ -897,10 +988,16 @@ impl Engine {
     /// (not on restore: the restored lists already match the restored time).
     fn place_walls(&mut self, invalidate: bool) {
         let t = self.state.time;
+        let s = &mut self.state;
+        let mut changed = false;
         for m in &self.wall_motions {
-            if m.apply(t, &mut self.planes, &mut self.state.meshes) && invalidate {
-                self.state.lists.valid = false;
-            }
+            changed |= m.apply(t, &mut self.planes, &mut s.meshes);
+        }
+        for (w, st) in self.loaded_walls.iter().zip(&s.loaded_walls) {
+            changed |= w.apply(t, st, &mut self.planes, &mut s.meshes);
+        }
+        if changed && invalidate {
+            s.lists.valid = false;
         }
     }
 
@@ -913,17 +1010,26 @@ impl Engine {
         s.sensors.track_flow(&self.cfg.sensors, &s.particles);
     }
 
-    /// The farthest a prescribed-motion wall is at time `t` from where it was at the last list
+    /// The displacements of the prescribed-motion walls, then of the loaded walls, at time `t`
+    /// (a loaded wall extrapolated from the current time with its velocity).
+    fn wall_displacements(&self, t: f64) -> impl Iterator<Item = V3> + '_ {
+        let now = self.state.time;
+        let prescribed = self.wall_motions.iter().map(move |m| m.displacement(t));
+        let loaded = (self.loaded_walls.iter().zip(&self.state.loaded_walls))
+            .map(move |(w, st)| w.axis * (st.u + st.v * (t - now)));
+        prescribed.chain(loaded)
+    }
+
+    /// The farthest a moving static wall is at time `t` from where it was at the last list
     /// build (∞ when the lists predate the walls).
     fn wall_shift_since_build(&self, t: f64) -> f64 {
         let at_build = &self.state.lists.wall_shift_at_build;
-        if at_build.len() != self.wall_motions.len() {
+        if at_build.len() != self.wall_motions.len() + self.loaded_walls.len() {
             return f64::INFINITY;
         }
-        self.wall_motions
-            .iter()
+        self.wall_displacements(t)
             .zip(at_build)
-            .map(|(m, d0)| (m.displacement(t) - d0).norm())
+            .map(|(d, d0)| (d - d0).norm())
             .fold(0.0, f64::max)
     }
 
@@ -932,6 +1038,8 @@ impl Engine {
     fn detect_contacts(&mut self, particles_moved: bool) {
         let t = self.state.time;
         let walls_moved = self.wall_shift_since_build(t) > 0.5 * self.state.lists.skin;
+        let keep_records =
+            !self.loaded_walls.is_empty() || self.state.meshes.iter().any(|m| m.coupled);
         let s = &mut self.state;
         let rebuilt = contact_detection::detect(
             &mut s.lists,
@@ -940,12 +1048,13 @@ impl Engine {
             &self.planes,
             &mut s.meshes,
             &mut s.records,
+            keep_records,
         );
         if rebuilt {
+            let shifts: Vec<V3> = self.wall_displacements(t).collect();
+            let s = &mut self.state;
             s.lists.wall_shift_at_build.clear();
-            s.lists
-                .wall_shift_at_build
-                .extend(self.wall_motions.iter().map(|m| m.displacement(t)));
+            s.lists.wall_shift_at_build.extend(shifts);
         }
     }
 
@@ -972,10 +1081,20 @@ impl Engine {
                 dt > 0.0 && ends_step,
             );
         }
+        self.loaded_wall_forces();
     }
 
-    /// The error naming the first particle with a non-finite state.
+    /// The error naming the first loaded wall or particle with a non-finite state.
     fn instability(&self) -> DemError {
+        let wall = (self.loaded_walls.iter().zip(&self.state.loaded_walls))
+            .find(|(_, st)| !(st.u.is_finite() && st.v.is_finite()));
+        if let Some((w, _)) = wall {
+            return DemError::UnstableWall {
+                time: self.state.time,
+                step: self.state.steps,
+                wall: w.name.clone(),
+            };
+        }
         let p = &self.state.particles;
         let bad = |v: &V3| !(v.x.is_finite() && v.y.is_finite() && v.z.is_finite());
         let (particle, quantity) = (0..p.len())
@@ -1083,6 +1202,13 @@ impl Engine {
                 "snapshot does not match this scene's materials/particles".into(),
             ));
         }
+        if s.loaded_walls.len() != self.loaded_walls.len() {
+            return Err(DemError::Snapshot(format!(
+                "snapshot has {} loaded walls, this scene defines {}",
+                s.loaded_walls.len(),
+                self.loaded_walls.len()
+            )));
+        }
         if s.sensors.sensors.len() != self.cfg.sensors.len() {
             return Err(DemError::Snapshot(format!(
                 "snapshot has {} sensors, this scene defines {}",
@@ -1136,10 +1262,10 @@ impl Engine {
                 self.time(),
             )?;
             for (k, m) in self.state.meshes.iter().enumerate() {
-                let moving = self
-                    .wall_motions
-                    .iter()
-                    .any(|w| w.wall == WallRef::Mesh(k) && w.velocity != V3::zeros());
+                let moving = self.wall_motions.iter().any(|w| {
+                    w.wall == WallRef::Mesh(k)
+                        && (w.velocity != V3::zeros() || w.amplitude != V3::zeros())
+                }) || self.loaded_walls.iter().any(|w| w.wall == WallRef::Mesh(k));
                 if !m.active {
                     continue;
                 }
@@ -1288,6 +1414,11 @@ impl Engine {
         ];
         if let Some(phi) = self.packing_fraction() {
             r.push(("packing_fraction".to_string(), phi));
+        }
+        for (w, st) in self.loaded_walls.iter().zip(&self.state.loaded_walls) {
+            r.push((format!("{}.displacement", w.name), st.u));
+            r.push((format!("{}.velocity", w.name), st.v));
+            r.push((format!("{}.contact_force", w.name), st.contact_force));
         }
         r
     }

@@ -17,8 +17,9 @@ use crate::walls::{Mesh, Plane};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-/// A force on a coupled mesh at a point of triangle `triangle` with barycentric weights,
-/// stored per wall candidate group (valid while the group's contact is touching).
+/// A force on a wall, stored per wall candidate group (valid while the group's contact is
+/// touching) when a coupled mesh or a loaded wall needs it: on a coupled mesh at the point of
+/// triangle `triangle` with barycentric weights `bary` (zero on other walls).
 #[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
 pub struct MeshForceRecord {
     pub triangle: u32,
@@ -55,8 +56,8 @@ struct BlockSlices<'a> {
 
 /// Evaluates all contact forces and gravity into `p.force` and `p.torque`: pair forces
 /// (Hertz–Mindlin, eqs. 2.6–2.19) and wall contacts, with history updates when `ctx.dt` > 0.
-/// `records` (one per wall candidate, or empty without coupled meshes) receive the forces on
-/// coupled meshes.
+/// `records` (one per wall candidate, or empty without coupled meshes and loaded walls)
+/// receive the forces on the walls.
 pub fn contact_forces(
     lists: &mut NeighbourLists,
     p: &mut Particles,
@@ -562,7 +563,8 @@ fn wall_forces(
             shear,
             overlap: geo.delta,
         };
-        if let (Some((tri, bary)), Some(rec)) = (geo.mesh_ref, records.as_deref_mut()) {
+        if let Some(rec) = records.as_deref_mut() {
+            let (tri, bary) = geo.mesh_ref.unwrap_or_default();
             rec[first] = MeshForceRecord {
                 triangle: tri,
                 bary,

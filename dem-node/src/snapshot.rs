@@ -6,13 +6,13 @@ use crate::broad_phase::NeighbourLists;
 use crate::particles::Particles;
 use crate::resolve_forces::MeshForceRecord;
 use crate::sensors::SensorState;
-use crate::walls::Mesh;
+use crate::walls::{LoadedWallState, Mesh};
 use serde::{Deserialize, Serialize};
 
 /// 2: pair lists as partner CSR with histories, wall histories per candidate group.
 /// 3: moving/removable static walls (mesh `active`, wall displacements at the list build),
-/// sensor state.
-pub const SNAPSHOT_VERSION: u32 = 4;
+/// sensor state. 4: spheres without orientation. 5: loaded walls' state.
+pub const SNAPSHOT_VERSION: u32 = 5;
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct EngineState {
@@ -26,6 +26,8 @@ pub struct EngineState {
     pub meshes: Vec<Mesh>,
     /// Flow sensors' particle sides and cumulative masses, sensor statistics.
     pub sensors: SensorState,
+    /// Displacement, velocity and forces of the loaded walls (`load`), in scene order.
+    pub loaded_walls: Vec<LoadedWallState>,
 }
 
 pub fn encode(state: &EngineState) -> Vec<u8> {

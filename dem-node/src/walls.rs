@@ -80,28 +80,136 @@ impl PrescribedMotion {
 
     /// Puts the wall where it is at time t. Returns true if it appeared or disappeared.
     pub fn apply(&self, t: f64, planes: &mut [Plane], meshes: &mut [Mesh]) -> bool {
-        let (d, v, present) = (self.displacement(t), self.velocity_at(t), self.present(t));
-        match self.wall {
-            WallRef::Plane(k) => {
-                let pl = &mut planes[k];
-                pl.point = self.base[0] + d;
-                pl.velocity = v;
-                std::mem::replace(&mut pl.active, present) != present
-            }
-            WallRef::Mesh(k) => {
-                let m = &mut meshes[k];
-                for ((x, x0), u) in m
-                    .positions
-                    .iter_mut()
-                    .zip(&self.base)
-                    .zip(&mut m.velocities)
-                {
-                    *x = x0 + d;
-                    *u = v;
-                }
-                std::mem::replace(&mut m.active, present) != present
-            }
+        let (d, v) = (self.displacement(t), self.velocity_at(t));
+        place_wall(self.wall, &self.base, d, v, self.present(t), planes, meshes)
+    }
+}
+
+/// Puts a rigidly translated wall at `base + d` with velocity `v` and presence `present`.
+/// Returns true if it appeared or disappeared.
+fn place_wall(
+    wall: WallRef,
+    base: &[V3],
+    d: V3,
+    v: V3,
+    present: bool,
+    planes: &mut [Plane],
+    meshes: &mut [Mesh],
+) -> bool {
+    match wall {
+        WallRef::Plane(k) => {
+            let pl = &mut planes[k];
+            pl.point = base[0] + d;
+            pl.velocity = v;
+            std::mem::replace(&mut pl.active, present) != present
         }
+        WallRef::Mesh(k) => {
+            let m = &mut meshes[k];
+            for ((x, x0), u) in m.positions.iter_mut().zip(base).zip(&mut m.velocities) {
+                *x = x0 + d;
+                *u = v;
+            }
+            std::mem::replace(&mut m.active, present) != present
+        }
+    }
+}
+
+/// A wall moved by forces along one axis (`[[dem.walls]] load`, see
+/// [`crate::config::WallLoad`]): a rigid body of mass m with m ü = F_c + m g·e + F(t), F_c the
+/// axis component of the particles' contact forces on it, integrated by the same velocity
+/// Verlet as the particles (Ullrich Algorithm 1).
+#[derive(Debug, Clone)]
+pub struct LoadedWall {
+    pub name: String,
+    pub wall: WallRef,
+    /// Unit vector of the axis, e.
+    pub axis: V3,
+    pub mass: f64,
+    pub force: f64,
+    pub amplitude: f64,
+    /// Angular frequency ω = 2πf of the harmonic force.
+    pub omega: f64,
+    pub start: f64,
+    /// +∞ when the load is never released.
+    pub end: f64,
+    pub release: f64,
+    pub remove_at: f64,
+    /// Plane point or mesh node positions at rest before `start`.
+    pub base: Vec<V3>,
+}
+
+/// Dynamic state of a loaded wall (part of snapshots): displacement u and velocity v along
+/// the axis, the axis component of the contact force on it and its acceleration from the
+/// last force evaluation.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct LoadedWallState {
+    pub u: f64,
+    pub v: f64,
+    pub contact_force: f64,
+    pub acceleration: f64,
+}
+
+impl LoadedWall {
+    /// The factor of the load and weight at time t: 1 until `end`, then down linearly to 0
+    /// over `release` (0 at once without one).
+    fn load_scale(&self, t: f64) -> f64 {
+        if t < self.end {
+            1.0
+        } else if self.release > 0.0 {
+            (1.0 - (t - self.end) / self.release).max(0.0)
+        } else {
+            0.0
+        }
+    }
+
+    /// The applied force F(t) along the axis: 0 before `start`, force + amplitude·sin(ωτ)
+    /// until `end`, then scaled down to 0 over `release`.
+    pub fn applied_force(&self, t: f64) -> f64 {
+        let scale = self.load_scale(t);
+        if t < self.start || scale == 0.0 {
+            return 0.0;
+        }
+        let mut f = self.force;
+        if self.omega > 0.0 {
+            f += self.amplitude * (self.omega * (t - self.start)).sin();
+        }
+        f * scale
+    }
+
+    /// Whether the wall moves freely at time t (released and present).
+    pub fn free(&self, t: f64) -> bool {
+        t >= self.start && t < self.remove_at
+    }
+
+    /// Acceleration along the axis at time t with contact force `contact` (0 while held).
+    /// The weight is released with the load (the plate is lifted off gently): after
+    /// `end + release` only the contact forces act.
+    pub fn acceleration(&self, t: f64, contact: f64, gravity: &V3) -> f64 {
+        if !self.free(t) {
+            return 0.0;
+        }
+        let weight = gravity.dot(&self.axis) * self.load_scale(t);
+        (contact + self.applied_force(t)) / self.mass + weight
+    }
+
+    /// Puts the wall at its state's displacement. Returns true if it appeared or disappeared.
+    pub fn apply(
+        &self,
+        t: f64,
+        st: &LoadedWallState,
+        planes: &mut [Plane],
+        meshes: &mut [Mesh],
+    ) -> bool {
+        let (d, v) = (self.axis * st.u, self.axis * st.v);
+        place_wall(
+            self.wall,
+            &self.base,
+            d,
+            v,
+            t < self.remove_at,
+            planes,
+            meshes,
+        )
     }
 }
 
