@@ -1,7 +1,8 @@
 //! Every shipped scene passes `cosim check` (real nodes read their tables, build their models
-//! and report their limits), except the sleeper, which must name the bed file that
-//! scenes/sleeper-bed.toml writes when it has not been run yet. (plate-python.toml needs the
-//! Python node's packages and is run by python_node.rs.)
+//! and report their limits), except the sleeper's later steps, which must name the bed file
+//! the step before writes when it has not been run yet (sleeper-compact.toml reads
+//! sleeper-bed's, sleeper.toml sleeper-compact's). (plate-python.toml needs the Python node's
+//! packages and is run by python_node.rs.)
 
 use cosim_tests::{cosim, root, run};
 
@@ -16,18 +17,25 @@ fn every_shipped_scene_checks() {
         .collect();
     names.sort();
     assert!(names.len() >= 10, "{names:?}");
-    let bed = root().join("out/sleeper-bed/dem/particles_final.csv");
+    let needs = |name: &str| match name {
+        "sleeper-compact.toml" => Some("out/sleeper-bed/dem/particles_final.csv"),
+        "sleeper.toml" => Some("out/sleeper-compact/dem/particles_final.csv"),
+        _ => None,
+    };
     for name in names {
         let mut c = cosim();
         c.arg("check").arg(format!("scenes/{name}"));
         let o = run(c);
         let stdout = String::from_utf8_lossy(&o.stdout);
         let stderr = String::from_utf8_lossy(&o.stderr);
-        if name == "sleeper.toml" && !bed.exists() {
+        if let Some(bed) = needs(&name).filter(|b| !root().join(b).exists()) {
             assert!(!o.status.success(), "{name}");
+            let dir = bed.split('/').nth(1).unwrap();
             assert!(
-                stderr.contains("particles_final.csv") && stderr.contains("dem.particles[0].path"),
-                "{stderr}"
+                stderr.contains(dir)
+                    && stderr.contains("particles_final.csv")
+                    && stderr.contains("dem.particles[0].path"),
+                "{name}: {stderr}"
             );
             continue;
         }
