@@ -249,25 +249,74 @@ pub fn series_png(
     Ok(())
 }
 
+/// How the columns of one output CSV become plots.
+#[derive(Clone, Copy, PartialEq)]
+enum Layout {
+    /// One plot per group `probe.seat.*` / `strain.g.*` (fem_probes.csv).
+    Grouped,
+    /// One plot per column (dem_sensors.csv: the sensors' units differ).
+    EachColumn,
+    /// dem_timeseries.csv: the kinetic energy and each loaded wall's columns
+    /// (`<wall>.displacement`, `.velocity`, `.contact_force`), one plot per column.
+    DemTimeSeries,
+}
+
+/// The y-axis label of a plotted column or group.
+fn ylabel_of(key: &str) -> String {
+    let unit = |suffix: &str| key.ends_with(suffix);
+    if key.starts_with("probe.") {
+        "displacement (m)".into()
+    } else if key.starts_with("strain.") {
+        "strain".into()
+    } else if key == "kinetic_energy" {
+        "kinetic energy (J)".into()
+    } else if unit(".displacement") {
+        format!("{key} (m)")
+    } else if unit(".velocity") {
+        format!("{key} (m/s)")
+    } else if unit(".contact_force") {
+        format!("{key} (N)")
+    } else {
+        key.to_string()
+    }
+}
+
 /// After a run: PNGs of the nodes' time series in `<out>/plots/`. `fem/fem_probes.csv`
 /// gives one plot per probe (ux, uy, uz) and per strain gauge (its three strain measures),
-/// `dem/dem_sensors.csv` one plot per sensor (their units differ). Returns the files written.
+/// `dem/dem_sensors.csv` one plot per sensor (their units differ), `dem/dem_timeseries.csv`
+/// the particles' kinetic energy and each loaded wall's displacement, velocity and contact
+/// force. Returns the files written.
 pub fn run_plots(out_dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
     let mut written = Vec::new();
     let dir = out_dir.join("plots");
-    for (csv, grouped) in [
-        (out_dir.join("fem").join("fem_probes.csv"), true),
-        (out_dir.join("dem").join("dem_sensors.csv"), false),
+    for (csv, layout) in [
+        (out_dir.join("fem").join("fem_probes.csv"), Layout::Grouped),
+        (
+            out_dir.join("dem").join("dem_sensors.csv"),
+            Layout::EachColumn,
+        ),
+        (
+            out_dir.join("dem").join("dem_timeseries.csv"),
+            Layout::DemTimeSeries,
+        ),
     ] {
         if !csv.exists() {
             continue;
         }
         let (xname, series) = read_series(&csv, None, &[], 1.0)?;
-        // groups of columns: `probe.seat.uz` → `probe.seat`; ungrouped: each column alone
+        // groups of columns: `probe.seat.uz` → `probe.seat`; otherwise each column alone
         let mut groups: Vec<(String, Vec<Series>)> = Vec::new();
         for (name, pts) in series {
-            let key = match (grouped, name.rsplit_once('.')) {
-                (true, Some((g, _))) => g.to_string(),
+            let key = match (layout, name.rsplit_once('.')) {
+                (Layout::Grouped, Some((g, _))) => g.to_string(),
+                (Layout::DemTimeSeries, _)
+                    if !(name == "kinetic_energy"
+                        || [".displacement", ".velocity", ".contact_force"]
+                            .iter()
+                            .any(|s| name.ends_with(s))) =>
+                {
+                    continue
+                }
                 _ => name.clone(),
             };
             match groups.iter_mut().find(|(g, _)| *g == key) {
@@ -285,13 +334,6 @@ pub fn run_plots(out_dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
             if series.iter().all(|(_, p)| p.is_empty()) {
                 continue;
             }
-            let ylabel = if key.starts_with("probe.") {
-                "displacement (m)".to_string()
-            } else if key.starts_with("strain.") {
-                "strain".to_string()
-            } else {
-                key.clone()
-            };
             let file = dir.join(format!("{key}.png"));
             let source = csv
                 .strip_prefix(out_dir)
@@ -302,7 +344,7 @@ pub fn run_plots(out_dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
                 &file,
                 &format!("{key} ({source})"),
                 &xlabel,
-                &ylabel,
+                &ylabel_of(&key),
                 &series,
             )
             .with_context(|| format!("writing {}", file.display()))?;
@@ -523,7 +565,7 @@ mod tests {
     }
 
     #[test]
-    fn a_run_gets_one_plot_per_probe_gauge_and_sensor() {
+    fn a_run_gets_one_plot_per_probe_gauge_sensor_and_wall_quantity() {
         let out = tempfile::tempdir().unwrap();
         std::fs::create_dir_all(out.path().join("fem")).unwrap();
         std::fs::create_dir_all(out.path().join("dem")).unwrap();
@@ -539,6 +581,12 @@ mod tests {
             "time,p1,flow\n0.1,1e5,0.0\n0.2,2e5,0.01\n",
         )
         .unwrap();
+        std::fs::write(
+            out.path().join("dem/dem_timeseries.csv"),
+            "time,step,particles,kinetic_energy,contacts,plate.displacement,plate.velocity,\
+             plate.contact_force\n0.1,10,5,1.0,3,-0.01,-0.1,100\n0.2,20,5,0.5,4,-0.02,0,200\n",
+        )
+        .unwrap();
         let mut names: Vec<String> = run_plots(out.path())
             .unwrap()
             .iter()
@@ -549,7 +597,11 @@ mod tests {
             names,
             [
                 "flow.png",
+                "kinetic_energy.png",
                 "p1.png",
+                "plate.contact_force.png",
+                "plate.displacement.png",
+                "plate.velocity.png",
                 "probe.a.png",
                 "probe.b.png",
                 "strain.g.png"
