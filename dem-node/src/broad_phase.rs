@@ -13,6 +13,7 @@
 //! one tangential history ξ per pair (24 bytes; zero when not touching); wall candidates are a
 //! CSR per particle with one history per (wall, patch) group. Nothing per step is allocated.
 
+use crate::config::SinkConfig;
 use crate::hertz_mindlin::V3;
 use crate::particles::Particles;
 use crate::triangle_contact::distance_squared;
@@ -302,8 +303,8 @@ pub fn rebuild(
     particles: &mut Particles,
     planes: &[Plane],
     meshes: &mut [Mesh],
-) {
-    let n = particles.len();
+    sinks: &[SinkConfig],
+) -> Removed {
     let r_max = particles.radius.iter().cloned().fold(0.0, f64::max);
     let cutoff = 2.0 * r_max + lists.skin;
     let grid = Grid::new(&particles.position, cutoff);
@@ -316,13 +317,28 @@ pub fn rebuild(
         .map(|(k, x)| (grid.order_key(grid.coord(x)), k as u32))
         .collect();
     keys.par_sort_unstable();
-    let perm: Vec<u32> = keys.iter().map(|&(_, k)| k).collect();
+    // particles in a sink leave here: the permutation skips them
+    let mut removed = Removed::default();
+    let perm: Vec<u32> = keys
+        .iter()
+        .map(|&(_, k)| k)
+        .filter(|&k| {
+            let x = &particles.position[k as usize];
+            let gone = sinks.iter().any(|s| s.contains(x));
+            if gone {
+                removed.count += 1;
+                removed.mass += particles.mass[k as usize];
+            }
+            !gone
+        })
+        .collect();
     drop(keys);
-    let mut inverse = vec![0u32; n];
+    let mut inverse = vec![u32::MAX; particles.len()];
     for (new, &old) in perm.iter().enumerate() {
         inverse[old as usize] = new as u32;
     }
     particles.permute(&perm);
+    let n = particles.len();
 
     // cell table: particles of a cell are contiguous after the sort
     let nc = grid.num_cells();
@@ -343,10 +359,13 @@ pub fn rebuild(
         for i in 0..n_old {
             for k in lists.first_pair[i] as usize..lists.first_pair[i + 1] as usize {
                 let (j, s) = (lists.partner[k] as usize, lists.shear[k]);
-                if s == V3::zeros() || i >= n || j >= n {
+                if s == V3::zeros() || i >= inverse.len() || j >= inverse.len() {
                     continue;
                 }
                 let (a, b) = (inverse[i], inverse[j]);
+                if a == u32::MAX || b == u32::MAX {
+                    continue; // removed by a sink
+                }
                 // ξ is the displacement of the first particle relative to the second: it
                 // changes sign when the reordering swaps the pair
                 old_pairs.push(if a < b { (a, b, s) } else { (b, a, -s) });
@@ -358,6 +377,9 @@ pub fn rebuild(
     if lists.wall_start.len() >= 2 {
         let n_old = lists.wall_start.len() - 1;
         for (i, &new) in inverse.iter().enumerate().take(n_old) {
+            if new == u32::MAX {
+                continue; // removed by a sink
+            }
             for k in lists.wall_start[i] as usize..lists.wall_start[i + 1] as usize {
                 let c = &lists.wall_contacts[k];
                 if c.touching() {
@@ -587,4 +609,12 @@ pub fn rebuild(
     lists.builds += 1;
     lists.valid = true;
     lists.index_blocks();
+    removed
+}
+
+/// Particles a list build removed because their centre lay in a sink.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Removed {
+    pub count: u64,
+    pub mass: f64,
 }

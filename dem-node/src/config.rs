@@ -59,6 +59,9 @@ pub struct DemConfig {
     /// Measurements, `[[dem.sensors]]`.
     #[serde(default)]
     pub sensors: Vec<SensorConfig>,
+    /// Boxes that remove the particles whose centre enters them, `[[dem.sinks]]`.
+    #[serde(default)]
+    pub sinks: Vec<SinkConfig>,
     /// Material of coupled (FEM interface) meshes; required when a coupled mesh is added.
     #[serde(default)]
     pub interface_material: Option<String>,
@@ -402,6 +405,24 @@ pub struct WallLoad {
 
 fn default_axis_z() -> Axis {
     Axis::Z
+}
+
+/// `[[dem.sinks]]`: particles whose centre lies in the box [min, max] are removed at the next
+/// neighbour-list build (a collecting container, an outlet: grains that left the part of the
+/// scene that matters stop costing time). Results count them (`removed_particles`,
+/// `removed_mass`).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SinkConfig {
+    pub min: [f64; 3],
+    pub max: [f64; 3],
+}
+
+impl SinkConfig {
+    /// Whether the centre `x` lies in the box (bounds included).
+    pub fn contains(&self, x: &crate::hertz_mindlin::V3) -> bool {
+        (0..3).all(|a| x[a] >= self.min[a] && x[a] <= self.max[a])
+    }
 }
 
 /// A coordinate axis (the normal of a sensor plane).
@@ -933,6 +954,16 @@ impl DemConfig {
             }
         }
         let mut names: Vec<&str> = Vec::new();
+        for (k, s) in self.sinks.iter().enumerate() {
+            let f = |field: &str| pi(&["dem", "sinks"], k, &[field]);
+            if (0..3).any(|a| s.max[a].partial_cmp(&s.min[a]) != Some(std::cmp::Ordering::Greater))
+            {
+                c.fail(
+                    f("max"),
+                    format!("must exceed min {:?} on every axis, got {:?}", s.min, s.max),
+                );
+            }
+        }
         for (k, s) in self.sensors.iter().enumerate() {
             let f = |field: &str| pi(&["dem", "sensors"], k, &[field]);
             let name = s.name();

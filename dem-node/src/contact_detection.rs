@@ -3,15 +3,18 @@
 //! node moved half the skin (Wellmann B4, eq. 4.10). The exact overlap test runs inside the
 //! force stage on these lists.
 
-use crate::broad_phase::{needs_rebuild, rebuild, NeighbourLists};
+use crate::broad_phase::{needs_rebuild, rebuild, NeighbourLists, Removed};
+use crate::config::SinkConfig;
 use crate::particles::Particles;
 use crate::resolve_forces::MeshForceRecord;
 use crate::walls::{Mesh, Plane};
 
 /// `particles_moved`: some particle moved more than half the skin since the last build (the
 /// drift checks this). `keep_records`: the force records are sized for the new lists (a
-/// coupled mesh or loaded wall needs them), else emptied. Returns true if the lists were rebuilt (particles may have been
-/// reordered).
+/// coupled mesh or loaded wall needs them), else emptied. A build removes the particles in a
+/// sink. Returns what was removed if the lists were rebuilt (particles may have been
+/// reordered), `None` if they stayed.
+#[allow(clippy::too_many_arguments)]
 pub fn detect(
     lists: &mut NeighbourLists,
     particles: &mut Particles,
@@ -20,14 +23,15 @@ pub fn detect(
     meshes: &mut [Mesh],
     records: &mut Vec<MeshForceRecord>,
     keep_records: bool,
-) -> bool {
+    sinks: &[SinkConfig],
+) -> Option<Removed> {
     if !particles_moved && !needs_rebuild(lists, particles, meshes) {
-        return false;
+        return None;
     }
-    rebuild(lists, particles, planes, meshes);
+    let removed = rebuild(lists, particles, planes, meshes, sinks);
     records.clear();
     if keep_records {
         records.resize(lists.walls.len(), MeshForceRecord::default());
     }
-    true
+    Some(removed)
 }

@@ -440,6 +440,8 @@ impl Engine {
                 meshes,
                 sensors,
                 loaded_walls: vec![LoadedWallState::default(); loaded_walls.len()],
+                removed_particles: 0,
+                removed_mass: 0.0,
             },
             pool,
             output: OutputState {
@@ -1049,8 +1051,11 @@ impl Engine {
             &mut s.meshes,
             &mut s.records,
             keep_records,
+            &self.cfg.sinks,
         );
-        if rebuilt {
+        if let Some(removed) = rebuilt {
+            s.removed_particles += removed.count;
+            s.removed_mass += removed.mass;
             let shifts: Vec<V3> = self.wall_displacements(t).collect();
             let s = &mut self.state;
             s.lists.wall_shift_at_build.clear();
@@ -1414,6 +1419,13 @@ impl Engine {
         ];
         if let Some(phi) = self.packing_fraction() {
             r.push(("packing_fraction".to_string(), phi));
+        }
+        if !self.cfg.sinks.is_empty() {
+            r.push((
+                "removed_particles".to_string(),
+                self.state.removed_particles as f64,
+            ));
+            r.push(("removed_mass".to_string(), self.state.removed_mass));
         }
         for (w, st) in self.loaded_walls.iter().zip(&self.state.loaded_walls) {
             r.push((format!("{}.displacement", w.name), st.u));
