@@ -7,6 +7,7 @@ use anyhow::Context;
 use clap::{Parser, Subcommand};
 use coordinator::run::{run_scene, schedule_name, RunOptions};
 use coordinator::scene::Scene;
+use coordinator::units::format_seconds;
 
 #[derive(Parser)]
 #[command(
@@ -126,10 +127,10 @@ enum Command {
 
 fn report(scene: &Scene, s: &coordinator::run::Summary, out_dir: &std::path::Path) {
     println!(
-        "{}: {} windows of {} s ({}), {:.3} s simulated in {:.2} s wall (DEM {:.2} s, FEM {:.2} s, coupling {:.2} s = {:.1} %)",
+        "{}: {} windows of {} ({}), {:.3} s simulated in {:.2} s wall (DEM {:.2} s, FEM {:.2} s, coupling {:.2} s = {:.1} %)",
         s.scene,
         s.windows_done,
-        s.coupling_window_s,
+        format_seconds(s.coupling_window_s),
         schedule_name(scene.schedule),
         s.simulated_time_s,
         s.timing.total_wall_s,
@@ -331,11 +332,11 @@ fn main() -> ExitCode {
                 let _ = std::fs::remove_dir_all(&dir);
                 let s = s?;
                 println!(
-                    "{}: ok ({}, {} windows of {} s)",
+                    "{}: ok ({}, {} windows of {})",
                     scene.path.display(),
                     schedule_name(scene.schedule),
                     scene.windows,
-                    scene.window
+                    format_seconds(scene.window)
                 );
                 if s.dem_substeps > 0 {
                     println!(

@@ -142,6 +142,28 @@ macro_rules! quantity {
     };
 }
 
+/// A duration for people: s, ms, µs or ns with up to 6 significant digits, trailing zeros
+/// dropped (1e-4 → "100 µs", 0.00009999999999999999 → "100 µs", 5 → "5 s").
+pub fn format_seconds(t: f64) -> String {
+    if !t.is_finite() || t == 0.0 {
+        return format!("{t} s");
+    }
+    let (value, unit) = match t.abs() {
+        a if a >= 1.0 => (t, "s"),
+        a if a >= 1e-3 => (t * 1e3, "ms"),
+        a if a >= 1e-6 => (t * 1e6, "µs"),
+        _ => (t * 1e9, "ns"),
+    };
+    let digits = (5 - value.abs().log10().floor() as i32).max(0) as usize;
+    let text = format!("{value:.digits$}");
+    let text = if text.contains('.') {
+        text.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        text
+    };
+    format!("{text} {unit}")
+}
+
 quantity!(Seconds, Dim::Time);
 quantity!(Meters, Dim::Length);
 quantity!(Joules, Dim::Energy);
@@ -157,6 +179,17 @@ mod tests {
         assert_eq!(parse_quantity("2e-3s", Dim::Time).unwrap(), 2e-3);
         assert!((parse_quantity("50 mm", Dim::Length).unwrap() - 0.05).abs() < 1e-15);
         assert_eq!(parse_quantity("210 GPa", Dim::Pressure).unwrap(), 210e9);
+    }
+
+    #[test]
+    fn durations_print_in_a_readable_unit() {
+        assert_eq!(format_seconds(1e-4), "100 µs");
+        assert_eq!(format_seconds(0.00009999999999999999), "100 µs");
+        assert_eq!(format_seconds(5.0), "5 s");
+        assert_eq!(format_seconds(0.17), "170 ms");
+        assert_eq!(format_seconds(2.5e-5), "25 µs");
+        assert_eq!(format_seconds(1.234567e-9), "1.23457 ns");
+        assert_eq!(format_seconds(1234.5), "1234.5 s");
     }
 
     #[test]
