@@ -67,7 +67,7 @@ pub enum DemError {
         limit: f64,
         particle: u32,
     },
-    #[error("{field}: particle file {file}, line {line}: {message}")]
+    #[error("{field}: particle file {file}{}: {message}", line_part(.line))]
     ParticleFile {
         field: String,
         file: String,
@@ -103,6 +103,15 @@ pub enum DemError {
     Snapshot(String),
     #[error("output {path}: {message}")]
     Output { path: String, message: String },
+}
+
+/// ", line N" for a file error on line N, nothing for one about the whole file (line 0).
+fn line_part(line: &usize) -> String {
+    if *line > 0 {
+        format!(", line {line}")
+    } else {
+        String::new()
+    }
 }
 
 /// Rayleigh time step of one particle, Ullrich eq. (2.27).

@@ -117,7 +117,7 @@ fn bad_particle_files_name_the_field_file_and_line() {
         .to_string();
     println!("{err}");
     assert!(
-        err.contains("missing.csv") && err.contains("cannot read"),
+        err.contains("missing.csv: cannot read") && !err.contains("line"),
         "{err}"
     );
     let err = parse_scene_section(
