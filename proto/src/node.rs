@@ -96,6 +96,52 @@ pub trait Solver {
     fn finish(&mut self) -> Result<BTreeMap<String, f64>, NodeError>;
 }
 
+/// After a restore to simulation time `t`: every CSV time series in `dir` (a `.csv` file
+/// whose header starts with `time`) loses the rows after `t`, which the interrupted run wrote
+/// after the checkpoint and the resumed run writes again. Rows at `t` stay (within 1e-8
+/// relative: the files print 10 significant digits; windows are far longer), as does a file
+/// that is not such a time series. Returns the files shortened.
+pub fn truncate_time_series_after(dir: &Path, t: f64) -> std::io::Result<Vec<PathBuf>> {
+    let mut shortened = Vec::new();
+    let entries = match std::fs::read_dir(dir) {
+        Ok(e) => e,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(shortened),
+        Err(e) => return Err(e),
+    };
+    let limit = t + 1e-8 * t.abs();
+    let mut paths: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "csv"))
+        .collect();
+    paths.sort();
+    for path in paths {
+        let text = std::fs::read_to_string(&path)?;
+        let mut lines = text.split_inclusive('\n');
+        let Some(header) = lines.next() else { continue };
+        if header.split(',').next().map(str::trim) != Some("time") {
+            continue;
+        }
+        let mut kept = String::with_capacity(text.len());
+        kept.push_str(header);
+        for line in lines {
+            // a row cut short by the kill (no newline) or after t goes
+            let time = line
+                .split(',')
+                .next()
+                .and_then(|v| v.trim().parse::<f64>().ok());
+            if !line.ends_with('\n') || time.is_none_or(|x| x > limit) {
+                break;
+            }
+            kept.push_str(line);
+        }
+        if kept.len() < text.len() {
+            write_atomically(&path, kept.as_bytes())?;
+            shortened.push(path);
+        }
+    }
+    Ok(shortened)
+}
+
 /// Writes `bytes` to `path` atomically (temporary file, fsync, rename).
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     use std::io::Write;
@@ -334,5 +380,55 @@ impl Init {
             NodeError::new(ErrorCode::Io, format!("creating {}: {e}", dir.display()))
         })?;
         Ok(dir)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn time_series_lose_the_rows_after_the_restored_time_and_nothing_else() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = |name: &str| dir.path().join(name);
+        // the FEM prints 10 significant digits: 3e-4 may read back a little above t
+        std::fs::write(
+            p("probes.csv"),
+            "time,u\n1.000000000e-4,1\n2.000000000e-4,2\n3.000000000e-4,3\n4.000000000e-4,4\n5.0e-4,5",
+        )
+        .unwrap();
+        std::fs::write(p("other.csv"), "x,y\n9,9\n").unwrap();
+        std::fs::write(p("notes.txt"), "time,u\n9,9\n").unwrap();
+        std::fs::write(p("short.csv"), "time,u\n1e-4,1\n").unwrap();
+        let t = 3.0e-4 * (1.0 - 1e-12);
+        let changed = truncate_time_series_after(dir.path(), t).unwrap();
+        assert_eq!(changed, vec![p("probes.csv")]);
+        assert_eq!(
+            std::fs::read_to_string(p("probes.csv")).unwrap(),
+            "time,u\n1.000000000e-4,1\n2.000000000e-4,2\n3.000000000e-4,3\n"
+        );
+        assert_eq!(
+            std::fs::read_to_string(p("other.csv")).unwrap(),
+            "x,y\n9,9\n"
+        );
+        assert_eq!(
+            std::fs::read_to_string(p("notes.txt")).unwrap(),
+            "time,u\n9,9\n"
+        );
+        assert_eq!(
+            std::fs::read_to_string(p("short.csv")).unwrap(),
+            "time,u\n1e-4,1\n"
+        );
+        // a row cut short by a kill goes even if its time is early
+        std::fs::write(p("cut.csv"), "time,u\n1e-4,1\n2e-4,2").unwrap();
+        truncate_time_series_after(dir.path(), 1.0).unwrap();
+        assert_eq!(
+            std::fs::read_to_string(p("cut.csv")).unwrap(),
+            "time,u\n1e-4,1\n"
+        );
+        // no folder: nothing to do
+        assert!(truncate_time_series_after(&p("missing"), 1.0)
+            .unwrap()
+            .is_empty());
     }
 }

@@ -129,6 +129,17 @@ fn killed_and_resumed_equals_uninterrupted(schedule: &str, victim: &str) {
         summary(&whole)["results"]["fem.probe.centre.uz"],
         s["results"]["fem.probe.centre.uz"]
     );
+    // the nodes' time series continue from the checkpoint: the rows the interrupted run wrote
+    // after it are not there twice, so the files equal the uninterrupted run's
+    for csv in ["dem/dem_timeseries.csv", "fem/fem_probes.csv"] {
+        let a = String::from_utf8(read(&whole.join(csv))).unwrap();
+        let b = String::from_utf8(read(&broken.join(csv))).unwrap();
+        assert!(a.lines().count() > 100, "{csv}: {} rows", a.lines().count());
+        assert!(
+            a == b,
+            "{csv}: the resumed run's rows differ from the uninterrupted run's"
+        );
+    }
 }
 
 #[test]

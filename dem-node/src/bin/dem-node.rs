@@ -221,9 +221,23 @@ impl Solver for DemNode {
     }
 
     fn restore(&mut self, bytes: &[u8]) -> Result<(), NodeError> {
-        self.engine()?
+        let engine = self.engine()?;
+        engine
             .restore(bytes)
-            .map_err(|e| NodeError::new(ErrorCode::Io, format!("restoring the DEM state: {e}")))
+            .map_err(|e| NodeError::new(ErrorCode::Io, format!("restoring the DEM state: {e}")))?;
+        let t = engine.time();
+        // the time series continue from the checkpoint: rows the interrupted run wrote after
+        // it would otherwise appear twice
+        proto::node::truncate_time_series_after(&self.out_dir, t).map_err(|e| {
+            NodeError::new(
+                ErrorCode::Io,
+                format!(
+                    "shortening the time series in {}: {e}",
+                    self.out_dir.display()
+                ),
+            )
+        })?;
+        Ok(())
     }
 
     fn finish(&mut self) -> Result<BTreeMap<String, f64>, NodeError> {

@@ -329,9 +329,23 @@ impl Solver for FemNode {
     }
 
     fn restore(&mut self, bytes: &[u8]) -> Result<(), NodeError> {
-        self.model()?
+        let model = self.model()?;
+        model
             .restore(bytes)
-            .map_err(|e| fem_error(ErrorCode::Io, format!("restoring the FEM state: {e}")))
+            .map_err(|e| fem_error(ErrorCode::Io, format!("restoring the FEM state: {e}")))?;
+        let t = model.time();
+        // the time series continue from the checkpoint: rows the interrupted run wrote after
+        // it would otherwise appear twice
+        proto::node::truncate_time_series_after(&self.out_dir, t).map_err(|e| {
+            fem_error(
+                ErrorCode::Io,
+                format!(
+                    "shortening the time series in {}: {e}",
+                    self.out_dir.display()
+                ),
+            )
+        })?;
+        Ok(())
     }
 
     fn finish(&mut self) -> Result<BTreeMap<String, f64>, NodeError> {
