@@ -195,6 +195,34 @@ def write_atomically(path, data):
     os.replace(tmp, path)
 
 
+def truncate_time_series_after(out_dir, t):
+    """After a restore to time t: every CSV time series in out_dir (header starting with
+    `time`) loses the rows after t, which the interrupted run wrote after the checkpoint and
+    the resumed run writes again (as fem-node and dem-node do; within 1e-8 relative)."""
+    if not os.path.isdir(out_dir):
+        return
+    limit = t + 1e-8 * abs(t)
+    for name in sorted(os.listdir(out_dir)):
+        path = os.path.join(out_dir, name)
+        if not name.endswith(".csv"):
+            continue
+        with open(path) as f:
+            lines = f.read().splitlines(keepends=True)
+        if not lines or lines[0].split(",")[0].strip() != "time":
+            continue
+        kept = [lines[0]]
+        for line in lines[1:]:
+            try:
+                time = float(line.split(",")[0])
+            except ValueError:
+                break
+            if not line.endswith("\n") or time > limit:
+                break
+            kept.append(line)
+        if len(kept) < len(lines):
+            write_atomically(path, "".join(kept).encode())
+
+
 class Trace:
     """Per-window interface traces (`init.trace`), in fem-node's CSV format."""
 
@@ -340,6 +368,10 @@ class FemNode:
                     model.restore(state)
                 except (OSError, pickle.UnpicklingError, ValueError, EOFError) as e:
                     raise NodeError("io", f"restoring the FEM state from {c['path']}: {e}") from None
+                try:
+                    truncate_time_series_after(self.out_dir, model.time)
+                except OSError as e:
+                    raise NodeError("io", f"shortening the time series in {self.out_dir}: {e}") from None
                 self.p.report({"type": "restored", "window": c["window"]})
             elif kind == "stop":
                 log.info("stop: %s", c["reason"])
