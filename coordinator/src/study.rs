@@ -374,51 +374,21 @@ pub async fn run_study(
             get("dem.time_step").unwrap_or(f64::INFINITY),
         )
     };
-    let reference = match reference {
-        Some(i) => i,
-        None => (0..outcomes.len())
+    // the reference: as given, else the finest completed run; with none completed (every run
+    // diverged) the table and the stability map are still written, without errors
+    let reference = reference.or_else(|| {
+        (0..outcomes.len())
             .filter(|&i| outcomes[i].status == "completed")
             .min_by(|&a, &b| {
                 finest(&outcomes[a])
                     .partial_cmp(&finest(&outcomes[b]))
                     .unwrap_or(std::cmp::Ordering::Equal)
             })
-            .ok_or_else(|| anyhow!("no run of the study completed: nothing to compare with"))?,
-    };
-    if let Some((file, column)) = &opts.series {
-        let name = &outcomes
-            .get(reference)
-            .ok_or_else(|| {
-                anyhow!(
-                    "--reference {reference}: the study has {} runs",
-                    outcomes.len()
-                )
-            })?
-            .variant
-            .name;
-        let r = read_series(&out_dir.join(name).join(file), column)?;
-        for (i, o) in outcomes.iter_mut().enumerate() {
-            if o.status == "completed" {
-                let y = read_series(&out_dir.join(&o.variant.name).join(file), column)?;
-                o.error = if i == reference {
-                    Some(0.0)
-                } else {
-                    series_error(&y, &r)
-                };
-                o.metric = y.last().map(|p| p.1);
-            }
-        }
+    });
+    if let Some(reference) = reference {
+        set_errors(out_dir, opts, metric, reference, &mut outcomes)?;
     } else {
-        let ref_value = outcomes
-            .get(reference)
-            .and_then(|o| o.metric)
-            .ok_or_else(|| anyhow!("the reference run has no result `{metric}`"))?;
-        for o in &mut outcomes {
-            o.error = o
-                .metric
-                .filter(|_| o.status == "completed")
-                .map(|m| (m - ref_value).abs() / ref_value.abs().max(f64::MIN_POSITIVE));
-        }
+        tracing::warn!("no run of the study completed: no errors to compare, only stability");
     }
     let threshold = opts.inaccurate_above.unwrap_or(1.0);
     for o in &mut outcomes {
@@ -447,12 +417,59 @@ pub async fn run_study(
     Ok((metric.to_string(), outcomes))
 }
 
+/// The relative error of every completed run against run `reference`: of the time series
+/// `opts.series`, else of the result `metric`.
+fn set_errors(
+    out_dir: &Path,
+    opts: &StudyOptions,
+    metric: &str,
+    reference: usize,
+    outcomes: &mut [Outcome],
+) -> anyhow::Result<()> {
+    if let Some((file, column)) = &opts.series {
+        let name = &outcomes
+            .get(reference)
+            .ok_or_else(|| {
+                anyhow!(
+                    "--reference {reference}: the study has {} runs",
+                    outcomes.len()
+                )
+            })?
+            .variant
+            .name;
+        let r = read_series(&out_dir.join(name).join(file), column)?;
+        for (i, o) in outcomes.iter_mut().enumerate() {
+            if o.status == "completed" {
+                let y = read_series(&out_dir.join(&o.variant.name).join(file), column)?;
+                o.error = if i == reference {
+                    Some(0.0)
+                } else {
+                    series_error(&y, &r)
+                };
+                o.metric = y.last().map(|p| p.1);
+            }
+        }
+    } else {
+        let ref_value = outcomes
+            .get(reference)
+            .and_then(|o| o.metric)
+            .ok_or_else(|| anyhow!("the reference run has no result `{metric}`"))?;
+        for o in outcomes.iter_mut() {
+            o.error = o
+                .metric
+                .filter(|_| o.status == "completed")
+                .map(|m| (m - ref_value).abs() / ref_value.abs().max(f64::MIN_POSITIVE));
+        }
+    }
+    Ok(())
+}
+
 fn write_csv(
     path: &Path,
     vars: &[Variation],
     metric: &str,
     outcomes: &[Outcome],
-    reference: usize,
+    reference: Option<usize>,
 ) -> anyhow::Result<()> {
     let mut s = String::from("run");
     for v in vars {
@@ -475,7 +492,7 @@ fn write_csv(
             o.overhead_s,
             opt(o.metric),
             opt(o.error),
-            i == reference
+            Some(i) == reference
         )?;
     }
     std::fs::write(path, s).with_context(|| format!("writing {}", path.display()))

@@ -58,3 +58,39 @@ fn study_sweeps_marks_failures_and_resumes() {
         .unwrap();
     assert_eq!(before, after);
 }
+
+#[test]
+fn a_study_where_no_run_completes_still_writes_its_table_and_stability_map() {
+    // 10 ms windows are not whole multiples of 3e-5 s or 7e-5 s DEM steps: both runs fail
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("study");
+    let mut c = cosim();
+    c.args([
+        "study",
+        "scenes/minimal.toml",
+        "--vary",
+        "dem.time_step=3e-5,7e-5",
+        "--metric",
+        "dem.kinetic_energy",
+        "--out",
+    ])
+    .arg(&out);
+    let o = run(c);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    assert!(stderr.contains("no run of the study completed"), "{stderr}");
+    let csv = std::fs::read_to_string(out.join("study.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
+    assert_eq!(rows.len(), 2);
+    for r in &rows {
+        assert_eq!(r[2], "failed", "{csv}");
+        assert_eq!(r.last(), Some(&"false"), "no reference: {csv}");
+    }
+    assert!(std::fs::read_to_string(out.join("stability.svg"))
+        .unwrap()
+        .starts_with("<svg"));
+}
