@@ -99,9 +99,9 @@ impl SensorState {
                 continue;
             };
             let (a, plane) = axis.indices();
-            // ids are 0..n (insertion order)
-            if rec.side_by_id.len() != p.len() {
-                // particles were added or replaced: start over from where they are
+            // ids are 0..n (insertion order); sinks remove particles, so fewer than n may be left
+            if p.len() > rec.side_by_id.len() {
+                // particles were added: start over from where they are
                 init_sides(rec, p, a, *value);
                 continue;
             }
@@ -116,7 +116,8 @@ impl SensorState {
                     let mut out = Vec::new();
                     for ((x, &id), &m) in xs.iter().zip(ids).zip(ms) {
                         let s = side(x, a, *value);
-                        if s != sides[id as usize] {
+                        // an id beyond the table cannot occur (checked above); skip, not panic
+                        if sides.get(id as usize).is_some_and(|&old| s != old) {
                             let counted = match (min, max) {
                                 (Some(lo), Some(hi)) => inside(x, plane, lo, hi),
                                 _ => true,

@@ -116,3 +116,39 @@ fn an_empty_sink_box_is_refused_with_its_field() {
     let err = dem::parse_scene_section(&text).unwrap_err();
     assert!(err.message.contains("low"), "{err}");
 }
+
+#[test]
+fn a_flow_sensor_keeps_counting_while_a_sink_removes_particles() {
+    // the lower layer reaches the sink (z < −0.1) while the upper one, 12.5 mm higher, has yet
+    // to cross the sensor plane at z = −0.095: every crossing must count, removals or not
+    let sensor = r#"
+[[dem.sensors]]
+name = "down"
+kind = "flow"
+axis = "z"
+value = -0.095
+"#;
+    let mut e = engine(&table_scene("", &format!("{SINK}{sensor}")));
+    let m = e.particles().mass[0];
+    let dir = tempfile::tempdir().unwrap();
+    let mut removed_before_last_crossing = false;
+    for _ in 0..60 {
+        e.advance(100).unwrap(); // 5 ms
+        e.write_outputs(dir.path()).unwrap();
+        let crossed = result(&e, "sensor.down.mass");
+        if result(&e, "removed_particles") > 0.0 && crossed < 64.0 * m * (1.0 - 1e-9) {
+            removed_before_last_crossing = true;
+        }
+    }
+    assert!(
+        removed_before_last_crossing,
+        "the test needs removals before the last crossing"
+    );
+    assert_eq!(result(&e, "removed_particles"), 64.0);
+    let crossed = result(&e, "sensor.down.mass");
+    assert!(
+        (crossed - 64.0 * m).abs() < 1e-9 * m,
+        "{crossed} kg vs {} kg",
+        64.0 * m
+    );
+}
