@@ -4,29 +4,6 @@
 mod common;
 use common::*;
 
-const MATERIALS: &str = r#"
-[dem.materials.grain]
-youngs_modulus = 1e7
-poisson_ratio = 0.3
-density = 1000.0
-restitution = 0.5
-friction = 0.5
-[dem.materials.steel]
-youngs_modulus = 1e7
-poisson_ratio = 0.3
-density = 7800.0
-restitution = 0.5
-friction = 0.5
-"#;
-
-fn result(e: &dem::Engine, key: &str) -> f64 {
-    e.results()
-        .into_iter()
-        .find(|(k, _)| k == key)
-        .unwrap_or_else(|| panic!("no result {key}"))
-        .1
-}
-
 /// A plane plate facing down (normal −z) at z = `z`, with the given `load` table, over an
 /// optional floor and `particles`.
 fn plate_scene(gravity: f64, z: f64, load: &str, particles: &str) -> String {
@@ -35,7 +12,7 @@ fn plate_scene(gravity: f64, z: f64, load: &str, particles: &str) -> String {
 [dem]
 time_step = 1e-4
 gravity = [0.0, 0.0, {gravity}]
-{MATERIALS}
+{GRAIN}{STEEL}
 [[dem.walls]]
 kind = "plane"
 material = "steel"
@@ -172,7 +149,7 @@ fn bed_scene(load: &str, extra: &str) -> String {
 time_step = 5e-5
 gravity = [0.0, 0.0, -9.81]
 {extra}
-{MATERIALS}
+{GRAIN}{STEEL}
 [[dem.walls]]
 kind = "box"
 material = "steel"

@@ -3,21 +3,6 @@
 mod common;
 use common::*;
 
-const MATERIALS: &str = r#"
-[dem.materials.grain]
-youngs_modulus = 1e7
-poisson_ratio = 0.3
-density = 1000.0
-restitution = 0.5
-friction = 0.5
-[dem.materials.steel]
-youngs_modulus = 1e7
-poisson_ratio = 0.3
-density = 7800.0
-restitution = 0.5
-friction = 0.5
-"#;
-
 /// A 10 mm sphere resting at x = 0.05 on a 0.2 m plate that slides +x at 1 m/s from
 /// t = 0.05 s to 0.45 s.
 fn plate_scene() -> String {
@@ -26,7 +11,7 @@ fn plate_scene() -> String {
 [dem]
 time_step = 1e-4
 gravity = [0.0, 0.0, -9.81]
-{MATERIALS}
+{GRAIN}{STEEL}
 [[dem.walls]]
 kind = "box"
 material = "steel"
@@ -120,7 +105,7 @@ fn floor_removed_at_t_lets_the_sphere_fall_freely() {
         r#"
 [dem]
 time_step = 1e-4
-{MATERIALS}
+{GRAIN}{STEEL}
 [[dem.walls]]
 kind = "plane"
 material = "steel"
@@ -162,7 +147,7 @@ fn gate_scene_with(extra: &str, count: &str, spacing: f64) -> String {
 time_step = 5e-5
 gravity = [0.0, 0.0, -9.81]
 {extra}
-{MATERIALS}
+{GRAIN}{STEEL}
 [[dem.walls]]
 kind = "box"
 material = "steel"
@@ -229,14 +214,6 @@ fn gate_sliding_over_the_outlet_lets_particles_out_only_after_it_opened() {
         "the opened chamber empties: {passed} of {total}"
     );
     assert!(passed <= total * (1.0 + 1e-12));
-}
-
-fn result(e: &dem::Engine, key: &str) -> f64 {
-    e.results()
-        .into_iter()
-        .find(|(k, _)| k == key)
-        .unwrap_or_else(|| panic!("no result {key}"))
-        .1
 }
 
 #[test]
@@ -313,7 +290,7 @@ fn oscillating_floor_carries_a_resting_sphere_and_stops_at_end() {
 [dem]
 time_step = 1e-5
 gravity = [0.0, 0.0, -9.81]
-{MATERIALS}
+{GRAIN}{STEEL}
 [[dem.walls]]
 kind = "plane"
 material = "steel"

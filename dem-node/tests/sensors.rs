@@ -3,23 +3,6 @@
 mod common;
 use common::*;
 
-const GRAIN: &str = r#"
-[dem.materials.grain]
-youngs_modulus = 1e7
-poisson_ratio = 0.3
-density = 1000.0
-restitution = 0.5
-friction = 0.5
-"#;
-
-fn result(e: &dem::Engine, key: &str) -> f64 {
-    e.results()
-        .into_iter()
-        .find(|(k, _)| k == key)
-        .unwrap_or_else(|| panic!("no result {key}"))
-        .1
-}
-
 fn sphere_mass(r: f64) -> f64 {
     1000.0 * 4.0 / 3.0 * std::f64::consts::PI * r.powi(3)
 }

@@ -3,14 +3,6 @@
 mod common;
 use common::*;
 
-fn result(e: &dem::Engine, key: &str) -> f64 {
-    e.results()
-        .into_iter()
-        .find(|(k, _)| k == key)
-        .unwrap_or_else(|| panic!("no result {key}"))
-        .1
-}
-
 /// 128 spheres over a table that covers half of them: 64 land on it, 64 fall past it into the
 /// sink 0.1 m below.
 fn table_scene(extra: &str, sink: &str) -> String {
@@ -20,12 +12,7 @@ fn table_scene(extra: &str, sink: &str) -> String {
 time_step = 5e-5
 gravity = [0.0, 0.0, -9.81]
 {extra}
-[dem.materials.grain]
-youngs_modulus = 1e7
-poisson_ratio = 0.3
-density = 1000.0
-restitution = 0.5
-friction = 0.5
+{GRAIN}
 [[dem.walls]]
 kind = "box"
 material = "grain"

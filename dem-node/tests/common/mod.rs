@@ -8,6 +8,35 @@ pub fn engine(toml: &str) -> Engine {
     Engine::from_config(&cfg, std::path::Path::new(".")).expect("engine builds")
 }
 
+/// A soft test grain (E = 10 MPa, ρ = 1000) as a `[dem.materials.grain]` table.
+pub const GRAIN: &str = r#"
+[dem.materials.grain]
+youngs_modulus = 1e7
+poisson_ratio = 0.3
+density = 1000.0
+restitution = 0.5
+friction = 0.5
+"#;
+
+/// A wall material as soft as [`GRAIN`] (`[dem.materials.steel]`, ρ = 7800).
+pub const STEEL: &str = r#"
+[dem.materials.steel]
+youngs_modulus = 1e7
+poisson_ratio = 0.3
+density = 7800.0
+restitution = 0.5
+friction = 0.5
+"#;
+
+/// The engine's result `key` (panics naming it when absent).
+pub fn result(e: &Engine, key: &str) -> f64 {
+    e.results()
+        .into_iter()
+        .find(|(k, _)| k == key)
+        .unwrap_or_else(|| panic!("no result {key}"))
+        .1
+}
+
 /// Position and velocity of the particle with identity `id`.
 pub fn state_of(e: &Engine, id: u32) -> ([f64; 3], [f64; 3]) {
     let p = e.particles();
