@@ -13,7 +13,7 @@
 //! one tangential history ξ per pair (24 bytes; zero when not touching); wall candidates are a
 //! CSR per particle with one history per (wall, patch) group. Nothing per step is allocated.
 
-use crate::config::SinkConfig;
+use crate::config::CentreBox;
 use crate::hertz_mindlin::V3;
 use crate::particles::Particles;
 use crate::triangle_contact::distance_squared;
@@ -303,7 +303,7 @@ pub fn rebuild(
     particles: &mut Particles,
     planes: &[Plane],
     meshes: &mut [Mesh],
-    sinks: &[SinkConfig],
+    sinks: &[CentreBox],
 ) -> Removed {
     let r_max = particles.radius.iter().cloned().fold(0.0, f64::max);
     let cutoff = 2.0 * r_max + lists.skin;
@@ -324,7 +324,7 @@ pub fn rebuild(
         .map(|&(_, k)| k)
         .filter(|&k| {
             let x = &particles.position[k as usize];
-            let gone = sinks.iter().any(|s| s.contains(x));
+            let gone = sinks.iter().any(|s| s.contains([x.x, x.y, x.z]));
             if gone {
                 removed.count += 1;
                 removed.mass += particles.mass[k as usize];

@@ -59,9 +59,12 @@ pub struct DemConfig {
     /// Measurements, `[[dem.sensors]]`.
     #[serde(default)]
     pub sensors: Vec<SensorConfig>,
-    /// Boxes that remove the particles whose centre enters them, `[[dem.sinks]]`.
+    /// `[[dem.sinks]]`: boxes of centres; a particle whose centre enters one is removed at the
+    /// next neighbour-list build (a collecting container, an outlet: grains that left the part
+    /// of the scene that matters stop costing time). Results count them
+    /// (`removed_particles`, `removed_mass`).
     #[serde(default)]
-    pub sinks: Vec<SinkConfig>,
+    pub sinks: Vec<CentreBox>,
     /// Material of coupled (FEM interface) meshes; required when a coupled mesh is added.
     #[serde(default)]
     pub interface_material: Option<String>,
@@ -229,7 +232,7 @@ pub enum ParticleSource {
         material: String,
         path: String,
         #[serde(default)]
-        keep: Option<KeepBox>,
+        keep: Option<CentreBox>,
     },
 }
 
@@ -237,11 +240,12 @@ fn default_seed() -> u64 {
     1
 }
 
-/// The box of centres a particle file source keeps (`keep = { min = [..], max = [..] }`);
-/// either bound may be left out (unbounded on that side).
+/// A box of particle centres, `{ min = [..], max = [..] }`, either bound optional (unbounded
+/// on that side): what a particle file source keeps (`keep`), where a sink removes
+/// (`[[dem.sinks]]`).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
-pub struct KeepBox {
+pub struct CentreBox {
     #[serde(default = "neg_inf3")]
     pub min: [f64; 3],
     #[serde(default = "pos_inf3")]
@@ -255,7 +259,7 @@ fn pos_inf3() -> [f64; 3] {
     [f64::INFINITY; 3]
 }
 
-impl KeepBox {
+impl CentreBox {
     /// Whether the centre `x` lies in the box (bounds included).
     pub fn contains(&self, x: [f64; 3]) -> bool {
         (0..3).all(|a| x[a] >= self.min[a] && x[a] <= self.max[a])
@@ -407,24 +411,6 @@ fn default_axis_z() -> Axis {
     Axis::Z
 }
 
-/// `[[dem.sinks]]`: particles whose centre lies in the box [min, max] are removed at the next
-/// neighbour-list build (a collecting container, an outlet: grains that left the part of the
-/// scene that matters stop costing time). Results count them (`removed_particles`,
-/// `removed_mass`).
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct SinkConfig {
-    pub min: [f64; 3],
-    pub max: [f64; 3],
-}
-
-impl SinkConfig {
-    /// Whether the centre `x` lies in the box (bounds included).
-    pub fn contains(&self, x: &crate::hertz_mindlin::V3) -> bool {
-        (0..3).all(|a| x[a] >= self.min[a] && x[a] <= self.max[a])
-    }
-}
-
 /// A coordinate axis (the normal of a sensor plane).
 #[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "lowercase")]
@@ -568,6 +554,42 @@ impl Check {
     fn non_negative(&mut self, path: Vec<Seg>, v: f64) {
         if !(v.is_finite() && v >= 0.0) {
             self.fail(path, format!("must be a finite number >= 0, got {v}"));
+        }
+    }
+    /// A box's `max` exceeds its `min` on every axis (NaN fails too).
+    fn box_max(&mut self, path: Vec<Seg>, min: &[f64; 3], max: &[f64; 3]) {
+        if (0..3).any(|a| max[a].partial_cmp(&min[a]) != Some(std::cmp::Ordering::Greater)) {
+            self.fail(
+                path,
+                format!("must exceed min {min:?} on every axis, got {max:?}"),
+            );
+        }
+    }
+    /// A name that becomes a CSV column / result key: letters, digits, `_`, `-`. Returns
+    /// whether it is one.
+    fn column_name(&mut self, path: Vec<Seg>, name: &str) -> bool {
+        let ok = !name.is_empty()
+            && name
+                .chars()
+                .all(|ch| ch.is_ascii_alphanumeric() || ch == '_' || ch == '-');
+        if !ok {
+            self.fail(
+                path,
+                format!("must be non-empty letters, digits, `_` or `-`, got `{name}`"),
+            );
+        }
+        ok
+    }
+    /// An oscillation's frequency: ≥ 0, and > 0 when it has an amplitude (`amplitude` as
+    /// written in the message).
+    fn frequency(&mut self, path: Vec<Seg>, frequency: f64, oscillates: bool, amplitude: &str) {
+        if oscillates && frequency.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+            self.fail(
+                path,
+                format!("must be > 0 (Hz) with an amplitude {amplitude}, got {frequency}"),
+            );
+        } else {
+            self.non_negative(path, frequency);
         }
     }
     fn finite3(&mut self, path: Vec<Seg>, v: &[f64; 3]) {
@@ -733,12 +755,7 @@ impl DemConfig {
                     c.finite3(f("min"), min);
                     c.finite3(f("max"), max);
                     c.finite3(f("velocity"), velocity);
-                    if (0..3).any(|a| max[a] <= min[a]) {
-                        c.fail(
-                            f("max"),
-                            format!("must exceed min {min:?} on every axis, got {max:?}"),
-                        );
-                    }
+                    c.box_max(f("max"), min, max);
                     match (count, mass) {
                         (Some(_), None) => {}
                         (None, Some(m)) => c.positive(f("mass"), *m),
@@ -803,17 +820,7 @@ impl DemConfig {
                         c.fail(f("path"), "must name a CSV file".into());
                     }
                     if let Some(k) = keep {
-                        if (0..3)
-                            .any(|a| k.min[a].is_nan() || k.max[a].is_nan() || k.max[a] < k.min[a])
-                        {
-                            c.fail(
-                                f("keep"),
-                                format!(
-                                    "max must be >= min on every axis, got min {:?} max {:?}",
-                                    k.min, k.max
-                                ),
-                            );
-                        }
+                        c.box_max(f("keep"), &k.min, &k.max);
                     }
                 }
             }
@@ -845,14 +852,7 @@ impl DemConfig {
                     ..
                 } => {
                     c.material(f("material"), material, self);
-                    if (0..3)
-                        .any(|a| max[a].partial_cmp(&min[a]) != Some(std::cmp::Ordering::Greater))
-                    {
-                        c.fail(
-                            f("max"),
-                            format!("must exceed min {min:?} on every axis, got {max:?}"),
-                        );
-                    }
+                    c.box_max(f("max"), min, max);
                     for o in open {
                         if !["-x", "+x", "-y", "+y", "-z", "+z"].contains(&o.as_str()) {
                             c.fail(
@@ -888,18 +888,8 @@ impl DemConfig {
                         c.fail(g(field), format!("must be finite (N), got {v}"));
                     }
                 }
-                c.non_negative(g("frequency"), l.frequency);
-                if l.amplitude != 0.0
-                    && l.frequency.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
-                {
-                    c.fail(
-                        g("frequency"),
-                        format!(
-                            "must be > 0 (Hz) with an amplitude {}, got {}",
-                            l.amplitude, l.frequency
-                        ),
-                    );
-                }
+                let amplitude = l.amplitude.to_string();
+                c.frequency(g("frequency"), l.frequency, l.amplitude != 0.0, &amplitude);
                 c.non_negative(g("start"), l.start);
                 c.non_negative(g("release"), l.release);
                 if let Some(end) = l.end {
@@ -911,34 +901,16 @@ impl DemConfig {
                     }
                 }
                 if let Some(name) = &l.name {
-                    if name.is_empty()
-                        || !name
-                            .chars()
-                            .all(|ch| ch.is_ascii_alphanumeric() || ch == '_' || ch == '-')
-                    {
-                        c.fail(
-                            g("name"),
-                            format!("must be non-empty letters, digits, `_` or `-`, got `{name}`"),
-                        );
-                    }
+                    c.column_name(g("name"), name);
                 }
             }
             if let Some(m) = motion {
                 let g = |field: &str| pi(&["dem", "walls"], k, &["motion", field]);
                 c.finite3(g("velocity"), &m.velocity);
                 c.finite3(g("amplitude"), &m.amplitude);
-                c.non_negative(g("frequency"), m.frequency);
-                if m.amplitude.iter().any(|a| *a != 0.0)
-                    && m.frequency.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
-                {
-                    c.fail(
-                        g("frequency"),
-                        format!(
-                            "must be > 0 (Hz) with an amplitude {:?}, got {}",
-                            m.amplitude, m.frequency
-                        ),
-                    );
-                }
+                let amplitude = format!("{:?}", m.amplitude);
+                let oscillates = m.amplitude.iter().any(|a| *a != 0.0);
+                c.frequency(g("frequency"), m.frequency, oscillates, &amplitude);
                 c.non_negative(g("start"), m.start);
                 if let Some(end) = m.end {
                     if !(end.is_finite() && end > m.start) {
@@ -955,28 +927,19 @@ impl DemConfig {
         }
         let mut names: Vec<&str> = Vec::new();
         for (k, s) in self.sinks.iter().enumerate() {
-            let f = |field: &str| pi(&["dem", "sinks"], k, &[field]);
-            if (0..3).any(|a| s.max[a].partial_cmp(&s.min[a]) != Some(std::cmp::Ordering::Greater))
-            {
+            c.box_max(pi(&["dem", "sinks"], k, &["max"]), &s.min, &s.max);
+            if s.min.iter().chain(&s.max).all(|x| x.is_infinite()) {
                 c.fail(
-                    f("max"),
-                    format!("must exceed min {:?} on every axis, got {:?}", s.min, s.max),
+                    pi(&["dem", "sinks"], k, &[]),
+                    "a sink needs a bound (`min` or `max`): without one it removes every particle"
+                        .into(),
                 );
             }
         }
         for (k, s) in self.sensors.iter().enumerate() {
             let f = |field: &str| pi(&["dem", "sensors"], k, &[field]);
             let name = s.name();
-            if name.is_empty()
-                || !name
-                    .chars()
-                    .all(|ch| ch.is_ascii_alphanumeric() || ch == '_' || ch == '-')
-            {
-                c.fail(
-                    f("name"),
-                    format!("must be non-empty letters, digits, `_` or `-`, got `{name}`"),
-                );
-            } else if names.contains(&name) {
+            if c.column_name(f("name"), name) && names.contains(&name) {
                 c.fail(f("name"), format!("duplicate sensor name `{name}`"));
             }
             names.push(name);

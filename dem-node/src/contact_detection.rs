@@ -4,7 +4,7 @@
 //! force stage on these lists.
 
 use crate::broad_phase::{needs_rebuild, rebuild, NeighbourLists, Removed};
-use crate::config::SinkConfig;
+use crate::config::CentreBox;
 use crate::particles::Particles;
 use crate::resolve_forces::MeshForceRecord;
 use crate::walls::{Mesh, Plane};
@@ -23,7 +23,7 @@ pub fn detect(
     meshes: &mut [Mesh],
     records: &mut Vec<MeshForceRecord>,
     keep_records: bool,
-    sinks: &[SinkConfig],
+    sinks: &[CentreBox],
 ) -> Option<Removed> {
     if !particles_moved && !needs_rebuild(lists, particles, meshes) {
         return None;
