@@ -926,28 +926,31 @@ impl Engine {
         moved
     }
 
-    /// First half kick and drift of the loaded walls over `h`, with the acceleration of the
-    /// last force evaluation (velocity Verlet, as the particles).
+    /// First half kick and drift of the loaded walls over `h`, with the forces of the last
+    /// evaluation (velocity Verlet, as the particles; the clock still shows that evaluation's
+    /// time).
     fn loaded_walls_kick_drift(&mut self, h: f64) {
-        for st in &mut self.state.loaded_walls {
-            st.v += 0.5 * h * st.acceleration;
+        let t = self.state.time;
+        for (w, st) in self.loaded_walls.iter().zip(&mut self.state.loaded_walls) {
+            st.v += 0.5 * h * w.acceleration(t, st.contact_force, &self.gravity);
             st.u += h * st.v;
         }
     }
 
     /// Second half kick of the loaded walls over `h`. Returns false if a state is non-finite.
     fn loaded_walls_kick(&mut self, h: f64) -> bool {
+        let t = self.state.time;
         let mut finite = true;
-        for st in &mut self.state.loaded_walls {
-            st.v += 0.5 * h * st.acceleration;
+        for (w, st) in self.loaded_walls.iter().zip(&mut self.state.loaded_walls) {
+            st.v += 0.5 * h * w.acceleration(t, st.contact_force, &self.gravity);
             finite &= st.u.is_finite() && st.v.is_finite();
         }
         finite
     }
 
     /// The axis components of the particles' contact forces on the loaded walls (from the
-    /// force records of the touching wall contacts, in list order) and their accelerations at
-    /// the current time; a wall that is held or removed is at rest.
+    /// force records of the touching wall contacts, in list order); a wall that is held or
+    /// removed is at rest.
     fn loaded_wall_forces(&mut self) {
         if self.loaded_walls.is_empty() {
             return;
@@ -974,7 +977,6 @@ impl Engine {
         }
         let t = s.time;
         for (lw, st) in self.loaded_walls.iter().zip(&mut s.loaded_walls) {
-            st.acceleration = lw.acceleration(t, st.contact_force, &self.gravity);
             if !lw.free(t) {
                 st.v = 0.0;
             }
@@ -1065,10 +1067,11 @@ impl Engine {
         if let Some(removed) = rebuilt {
             s.removed_particles += removed.count;
             s.removed_mass += removed.mass;
-            let shifts: Vec<V3> = self.wall_displacements(t).collect();
-            let s = &mut self.state;
-            s.lists.wall_shift_at_build.clear();
-            s.lists.wall_shift_at_build.extend(shifts);
+            // refill the list's own buffer (no allocation per build)
+            let mut shifts = std::mem::take(&mut s.lists.wall_shift_at_build);
+            shifts.clear();
+            shifts.extend(self.wall_displacements(t));
+            self.state.lists.wall_shift_at_build = shifts;
         }
     }
 

@@ -139,14 +139,13 @@ pub struct LoadedWall {
 }
 
 /// Dynamic state of a loaded wall (part of snapshots): displacement u and velocity v along
-/// the axis, the axis component of the contact force on it and its acceleration from the
-/// last force evaluation.
+/// the axis, and the axis component of the contact force on it from the last force
+/// evaluation (its acceleration follows, [`LoadedWall::acceleration`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct LoadedWallState {
     pub u: f64,
     pub v: f64,
     pub contact_force: f64,
-    pub acceleration: f64,
 }
 
 impl LoadedWall {
