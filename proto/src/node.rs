@@ -91,7 +91,14 @@ pub trait Solver {
         force_averaging: bool,
     ) -> Result<(), NodeError>;
     fn snapshot(&self) -> Result<Vec<u8>, NodeError>;
+    /// Puts the state of a snapshot back. The loop then cuts the node's CSV time series back
+    /// to the restored time ([`Solver::time_series`]).
     fn restore(&mut self, bytes: &[u8]) -> Result<(), NodeError>;
+    /// The folder of the node's CSV time series and the simulation time they have reached
+    /// (`None`: the node writes none).
+    fn time_series(&self) -> Option<(&Path, f64)> {
+        None
+    }
     /// Final outputs; the scene's result quantities for `summary.json`.
     fn finish(&mut self) -> Result<BTreeMap<String, f64>, NodeError>;
 }
@@ -211,6 +218,15 @@ pub async fn serve<S: Solver>(
                         NodeError::new(ErrorCode::Io, format!("reading snapshot {path}: {e}"))
                     })?;
                     solver.restore(&bytes)?;
+                    // rows the interrupted run wrote after the checkpoint would appear twice
+                    if let Some((dir, t)) = solver.time_series() {
+                        truncate_time_series_after(dir, t).map_err(|e| {
+                            NodeError::new(
+                                ErrorCode::Io,
+                                format!("shortening the time series in {}: {e}", dir.display()),
+                            )
+                        })?;
+                    }
                     p.report(StatusBody::Restored { window: k }).await?;
                 }
                 CommandBody::Stop { reason } => {

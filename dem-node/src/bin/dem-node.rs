@@ -2,7 +2,7 @@
 //! `proto` over zenoh and calls the `dem` engine; all physics is in the library.
 
 use std::collections::BTreeMap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use clap::Parser;
@@ -221,23 +221,14 @@ impl Solver for DemNode {
     }
 
     fn restore(&mut self, bytes: &[u8]) -> Result<(), NodeError> {
-        let engine = self.engine()?;
-        engine
+        self.engine()?
             .restore(bytes)
-            .map_err(|e| NodeError::new(ErrorCode::Io, format!("restoring the DEM state: {e}")))?;
-        let t = engine.time();
-        // the time series continue from the checkpoint: rows the interrupted run wrote after
-        // it would otherwise appear twice
-        proto::node::truncate_time_series_after(&self.out_dir, t).map_err(|e| {
-            NodeError::new(
-                ErrorCode::Io,
-                format!(
-                    "shortening the time series in {}: {e}",
-                    self.out_dir.display()
-                ),
-            )
-        })?;
-        Ok(())
+            .map_err(|e| NodeError::new(ErrorCode::Io, format!("restoring the DEM state: {e}")))
+    }
+
+    fn time_series(&self) -> Option<(&Path, f64)> {
+        let e = self.engine.as_ref()?;
+        Some((&self.out_dir, e.time()))
     }
 
     fn finish(&mut self) -> Result<BTreeMap<String, f64>, NodeError> {

@@ -329,23 +329,14 @@ impl Solver for FemNode {
     }
 
     fn restore(&mut self, bytes: &[u8]) -> Result<(), NodeError> {
-        let model = self.model()?;
-        model
+        self.model()?
             .restore(bytes)
-            .map_err(|e| fem_error(ErrorCode::Io, format!("restoring the FEM state: {e}")))?;
-        let t = model.time();
-        // the time series continue from the checkpoint: rows the interrupted run wrote after
-        // it would otherwise appear twice
-        proto::node::truncate_time_series_after(&self.out_dir, t).map_err(|e| {
-            fem_error(
-                ErrorCode::Io,
-                format!(
-                    "shortening the time series in {}: {e}",
-                    self.out_dir.display()
-                ),
-            )
-        })?;
-        Ok(())
+            .map_err(|e| fem_error(ErrorCode::Io, format!("restoring the FEM state: {e}")))
+    }
+
+    fn time_series(&self) -> Option<(&Path, f64)> {
+        let m = self.model.as_ref()?;
+        Some((&self.out_dir, m.time()))
     }
 
     fn finish(&mut self) -> Result<BTreeMap<String, f64>, NodeError> {
