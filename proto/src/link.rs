@@ -143,10 +143,54 @@ impl LinkConfig {
     }
 }
 
-/// A free TCP port on 127.0.0.1 (bind to port 0, read it, release it).
+/// A free TCP port on 127.0.0.1 for a process started next to listen on.
+///
+/// The port is released before the process binds it, so it must not be one the kernel hands to
+/// outgoing connections in between: with many runs at once (`cosim study --jobs`, the test
+/// suite) a zenoh session connecting elsewhere could take an ephemeral port and the node would
+/// fail to listen. Ports are therefore picked below the ephemeral range
+/// (`/proc/sys/net/ipv4/ip_local_port_range`, default 32768–60999), from a per-process random
+/// start, and each candidate is checked by binding it. Only when none of those is free does the
+/// kernel choose (port 0).
 pub fn free_loopback_port() -> std::io::Result<u16> {
+    use std::sync::atomic::{AtomicU32, Ordering};
+    static NEXT: AtomicU32 = AtomicU32::new(0);
+    let (lo, hi) = picking_range();
+    let span = u32::from(hi - lo);
+    let start = *PICK_START.get_or_init(|| random_u32() % span);
+    for _ in 0..256 {
+        let k = NEXT.fetch_add(1, Ordering::Relaxed);
+        let port = lo + ((start + k.wrapping_mul(7919)) % span) as u16;
+        if let Ok(l) = std::net::TcpListener::bind(("127.0.0.1", port)) {
+            return Ok(l.local_addr()?.port());
+        }
+    }
     let l = std::net::TcpListener::bind(("127.0.0.1", 0))?;
     Ok(l.local_addr()?.port())
+}
+
+static PICK_START: std::sync::OnceLock<u32> = std::sync::OnceLock::new();
+
+/// Ports `[lo, hi)` [`free_loopback_port`] picks from: up to 16,384 ports just below the
+/// kernel's ephemeral range, never below 1024.
+fn picking_range() -> (u16, u16) {
+    let ephemeral_lo = std::fs::read_to_string("/proc/sys/net/ipv4/ip_local_port_range")
+        .ok()
+        .and_then(|s| s.split_whitespace().next()?.parse::<u16>().ok())
+        .unwrap_or(32768);
+    let hi = ephemeral_lo.max(1024 + 256);
+    (hi.saturating_sub(16384).max(1024), hi)
+}
+
+/// A per-process random number (std's randomly keyed hasher, the clock and the pid).
+fn random_u32() -> u32 {
+    use std::hash::{BuildHasher, Hasher};
+    let mut h = std::collections::hash_map::RandomState::new().build_hasher();
+    h.write_u32(std::process::id());
+    if let Ok(d) = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH) {
+        h.write_u128(d.as_nanos());
+    }
+    h.finish() as u32
 }
 
 #[cfg(test)]
@@ -178,6 +222,22 @@ mod tests {
             .unwrap();
         let v: serde_json::Value = serde_json::from_str(&format!("{c}")).unwrap();
         assert_eq!(v["listen"]["endpoints"], serde_json::json!([]));
+    }
+
+    #[test]
+    fn free_ports_lie_below_the_ephemeral_range_and_are_free() {
+        let (lo, hi) = picking_range();
+        assert!(1024 <= lo && lo < hi, "{lo}..{hi}");
+        let mut seen = std::collections::BTreeSet::new();
+        let mut held = Vec::new();
+        for _ in 0..20 {
+            let p = free_loopback_port().unwrap();
+            assert!((lo..hi).contains(&p), "{p} outside {lo}..{hi}");
+            assert!(seen.insert(p), "{p} handed out twice");
+            // the port is really free: it can be bound (and is kept bound, so the next pick
+            // must skip it)
+            held.push(std::net::TcpListener::bind(("127.0.0.1", p)).unwrap());
+        }
     }
 
     #[test]
