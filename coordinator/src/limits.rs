@@ -6,12 +6,17 @@
 //! | DEM Rayleigh step (Ullrich 2.27) | `dem.time_step`, `dem.rayleigh_time_step` | the DEM node refuses Δt^D above its `rayleigh_fraction` itself; here only reported |
 //! | impact resolution (Ullrich fig. 2.5) | `dem.contact_duration_min` | a 1 m/s impact of the smallest, stiffest particle must last ≥ [`MIN_STEPS_PER_CONTACT`] steps (warn below [`GOOD_STEPS_PER_CONTACT`]) |
 //! | FEM explicit critical step | `fem.critical_time_step`, `fem.explicit` | reported: the node sub-steps each window below it |
-//! | coupling window (two-way) | `dem.contact_stiffness_max`, `fem.interface_node_mass_min` | Δt^C ≤ C_schedule · T_c, T_c = 2π √(M_node / k_c) |
+//! | coupling window (two-way) | `dem.contact_stiffness_typical` (else `_max`), `fem.interface_node_mass_min` | Δt^C ≤ C_schedule · T_c, T_c = 2π √(M_node / k_c) |
 //!
 //! The coupling window limit: the interface forces reach the structure one window late (JIT:
 //! computed with extrapolated mesh motion; predictive: the forces of the previous window), so
 //! the contact spring k_c acting on an interface node of mass M is integrated explicitly with
-//! step Δt^C. Its period T_c = 2π √(M/k_c) sets the scale; the constants per schedule were
+//! step Δt^C. Its period T_c = 2π √(M/k_c) sets the scale, with k_c the Hertz stiffness of a
+//! particle of the mean radius (the DEM's `contact_stiffness_typical`; a DEM node that reports
+//! only `contact_stiffness_max` gets the stiffest contact instead, more conservative). The
+//! mean radius makes the JIT limit carry over from the sleeper's one-size CI bed to the
+//! polydisperse full-size bed (stable at 0.034 T_c, diverging at 0.068 T_c on both), the
+//! largest stone (one of thousands) does not. The constants per schedule were
 //! measured with `cosim study` on the sleeper scene's CI variant (docs/speed-accuracy.md):
 //! the largest stable window was [`JIT_WINDOW_FRACTION`] · T_c for JIT and
 //! [`PREDICTIVE_WINDOW_FRACTION`] · T_c for predictive. Above the limit the run starts
@@ -97,9 +102,20 @@ impl From<&Scene> for SceneFacts {
     }
 }
 
+/// The contact stiffness k_c of the window limit (N/m) and which DEM number it is: the
+/// stiffness at the mean particle radius when the DEM reports it, else the stiffest contact.
+pub fn contact_stiffness(dem: &BTreeMap<String, f64>) -> Option<(f64, &'static str)> {
+    dem.get("contact_stiffness_typical")
+        .map(|&k| (k, "typical contact (mean radius)"))
+        .or_else(|| {
+            dem.get("contact_stiffness_max")
+                .map(|&k| (k, "stiffest contact"))
+        })
+}
+
 /// The interface contact period T_c = 2π √(M_node / k_c) (s), when both numbers are known.
 pub fn contact_period(dem: &BTreeMap<String, f64>, fem: &BTreeMap<String, f64>) -> Option<f64> {
-    let k = *dem.get("contact_stiffness_max")?;
+    let (k, _) = contact_stiffness(dem)?;
     let m = *fem.get("interface_node_mass_min")?;
     (k > 0.0 && m > 0.0 && k.is_finite() && m.is_finite())
         .then(|| 2.0 * std::f64::consts::PI * (m / k).sqrt())
@@ -175,14 +191,14 @@ pub fn assess(
     // two-way coupling window
     if scene.has_dem && scene.has_fem {
         if let Some(tc) = contact_period(d, f) {
-            let k = d["contact_stiffness_max"];
+            let (k, which) = contact_stiffness(d).expect("contact_period found it");
             let m = f["interface_node_mass_min"];
             let name = crate::run::schedule_name(scene.schedule);
             match window_limit(scene.schedule, d, f) {
                 Some(limit) => {
                     let w = scene.window;
                     let basis = format!(
-                        "interface contact period T_c = 2π√(M/k) = {tc:.3e} s (lightest interface node M = {m:.3e} kg, stiffest contact k = {k:.3e} N/m)"
+                        "interface contact period T_c = 2π√(M/k) = {tc:.3e} s (lightest interface node M = {m:.3e} kg, {which} k = {k:.3e} N/m)"
                     );
                     if w > limit {
                         let level = if w > REFUSE_BEYOND * limit {
@@ -252,6 +268,21 @@ mod tests {
         .unwrap();
         assert!((t - 2.0 * std::f64::consts::PI / 2000.0).abs() < 1e-15);
         assert!(contact_period(&m(&[]), &m(&[("interface_node_mass_min", 1.0)])).is_none());
+        // the stiffness at the mean radius is preferred to the stiffest contact
+        let both = m(&[
+            ("contact_stiffness_max", 16e6),
+            ("contact_stiffness_typical", 4e6),
+        ]);
+        let f = m(&[("interface_node_mass_min", 1.0)]);
+        assert_eq!(contact_period(&both, &f), Some(t));
+        let facts = facts(ScheduleKind::Predictive, 1e-4);
+        let found = assess(&facts, Some(&both), Some(&f));
+        let w = found.iter().find(|x| x.limit == "coupling window").unwrap();
+        assert!(
+            w.message
+                .contains("typical contact (mean radius) k = 4.000e6"),
+            "{w}"
+        );
     }
 
     #[test]
