@@ -11,8 +11,9 @@ use serde::{Deserialize, Serialize};
 
 /// 2: pair lists as partner CSR with histories, wall histories per candidate group.
 /// 3: moving/removable static walls (mesh `active`, wall displacements at the list build),
-/// sensor state. 4: spheres without orientation. 5: loaded walls' state, particles removed
-/// by sinks (a version 4 snapshot reads as one without loaded walls and removals).
+/// sensor state. 4: spheres without orientation. 5: loaded walls' state (first written with
+/// each wall's acceleration as a fourth number, which reading skips), particles removed by
+/// sinks (a version 4 snapshot reads as one without loaded walls and removals).
 pub const SNAPSHOT_VERSION: u32 = 5;
 /// The oldest version [`decode`] reads.
 pub const OLDEST_READABLE_VERSION: u32 = 4;
@@ -30,13 +31,34 @@ pub struct EngineState {
     /// Flow sensors' particle sides and cumulative masses, sensor statistics.
     pub sensors: SensorState,
     /// Displacement, velocity and forces of the loaded walls (`load`), in scene order.
-    #[serde(default)]
+    #[serde(default, deserialize_with = "read_loaded_walls")]
     pub loaded_walls: Vec<LoadedWallState>,
     /// Particles removed by sinks so far, and their mass.
     #[serde(default)]
     pub removed_particles: u64,
     #[serde(default)]
     pub removed_mass: f64,
+}
+
+/// Loaded walls' states as written (`[u, v, contact_force]`), or as the first version 5
+/// snapshots wrote them, with the acceleration (derived from the force) as a fourth number.
+fn read_loaded_walls<'de, D: serde::Deserializer<'de>>(
+    d: D,
+) -> Result<Vec<LoadedWallState>, D::Error> {
+    Vec::<Vec<f64>>::deserialize(d)?
+        .into_iter()
+        .map(|w| match w[..] {
+            [u, v, contact_force] | [u, v, contact_force, _] => Ok(LoadedWallState {
+                u,
+                v,
+                contact_force,
+            }),
+            _ => Err(serde::de::Error::custom(format!(
+                "a loaded wall's state has 3 numbers, got {}",
+                w.len()
+            ))),
+        })
+        .collect()
 }
 
 pub fn encode(state: &EngineState) -> Vec<u8> {
@@ -109,5 +131,79 @@ mod tests {
         let too_old = V4 { version: 3, ..old };
         let err = decode(&rmp_serde::to_vec(&too_old).unwrap()).unwrap_err();
         assert!(err.contains("version 3"), "{err}");
+    }
+
+    #[test]
+    fn a_first_version_5_snapshot_reads_with_its_loaded_walls_accelerations_skipped() {
+        /// The fields of a version 5 snapshot as first written: each loaded wall as
+        /// [u, v, contact_force, acceleration].
+        #[derive(Serialize)]
+        struct V5First {
+            version: u32,
+            time: f64,
+            steps: u64,
+            particles: Particles,
+            lists: NeighbourLists,
+            records: Vec<MeshForceRecord>,
+            meshes: Vec<Mesh>,
+            sensors: SensorState,
+            loaded_walls: Vec<[f64; 4]>,
+            removed_particles: u64,
+            removed_mass: f64,
+        }
+        let old = V5First {
+            version: 5,
+            time: 0.5,
+            steps: 9,
+            particles: Particles::default(),
+            lists: NeighbourLists::default(),
+            records: Vec::new(),
+            meshes: Vec::new(),
+            sensors: SensorState::default(),
+            loaded_walls: vec![[-0.01, -0.2, 150.0, -3.0], [0.0, 0.0, 0.0, 0.0]],
+            removed_particles: 3,
+            removed_mass: 0.25,
+        };
+        let s = decode(&rmp_serde::to_vec(&old).unwrap()).unwrap();
+        assert_eq!(
+            s.loaded_walls,
+            vec![
+                LoadedWallState {
+                    u: -0.01,
+                    v: -0.2,
+                    contact_force: 150.0
+                },
+                LoadedWallState::default()
+            ]
+        );
+        assert_eq!((s.removed_particles, s.removed_mass), (3, 0.25));
+        // and as written now, three numbers each
+        assert_eq!(decode(&encode(&s)).unwrap().loaded_walls, s.loaded_walls);
+        // anything else is named
+        #[derive(Serialize)]
+        struct Two {
+            version: u32,
+            time: f64,
+            steps: u64,
+            particles: Particles,
+            lists: NeighbourLists,
+            records: Vec<MeshForceRecord>,
+            meshes: Vec<Mesh>,
+            sensors: SensorState,
+            loaded_walls: Vec<[f64; 2]>,
+        }
+        let two = Two {
+            version: 5,
+            time: 0.0,
+            steps: 0,
+            particles: Particles::default(),
+            lists: NeighbourLists::default(),
+            records: Vec::new(),
+            meshes: Vec::new(),
+            sensors: SensorState::default(),
+            loaded_walls: vec![[1.0, 2.0]],
+        };
+        let err = decode(&rmp_serde::to_vec(&two).unwrap()).unwrap_err();
+        assert!(err.contains("3 numbers, got 2"), "{err}");
     }
 }
