@@ -190,8 +190,7 @@ pub fn assess(
     }
     // two-way coupling window
     if scene.has_dem && scene.has_fem {
-        if let Some(tc) = contact_period(d, f) {
-            let (k, which) = contact_stiffness(d).expect("contact_period found it");
+        if let (Some(tc), Some((k, which))) = (contact_period(d, f), contact_stiffness(d)) {
             let m = f["interface_node_mass_min"];
             let name = crate::run::schedule_name(scene.schedule);
             match window_limit(scene.schedule, d, f) {

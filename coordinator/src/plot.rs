@@ -261,21 +261,31 @@ enum Layout {
     DemTimeSeries,
 }
 
+/// The columns dem_timeseries.csv has for each loaded wall (`<wall><suffix>`) and their units.
+const LOADED_WALL_COLUMNS: [(&str, &str); 3] = [
+    (".displacement", "m"),
+    (".velocity", "m/s"),
+    (".contact_force", "N"),
+];
+
+/// The unit of a loaded wall's column, `None` for any other column.
+fn loaded_wall_unit(column: &str) -> Option<&'static str> {
+    LOADED_WALL_COLUMNS
+        .iter()
+        .find(|(suffix, _)| column.ends_with(suffix))
+        .map(|&(_, unit)| unit)
+}
+
 /// The y-axis label of a plotted column or group.
 fn ylabel_of(key: &str) -> String {
-    let unit = |suffix: &str| key.ends_with(suffix);
     if key.starts_with("probe.") {
         "displacement (m)".into()
     } else if key.starts_with("strain.") {
         "strain".into()
     } else if key == "kinetic_energy" {
         "kinetic energy (J)".into()
-    } else if unit(".displacement") {
-        format!("{key} (m)")
-    } else if unit(".velocity") {
-        format!("{key} (m/s)")
-    } else if unit(".contact_force") {
-        format!("{key} (N)")
+    } else if let Some(unit) = loaded_wall_unit(key) {
+        format!("{key} ({unit})")
     } else {
         key.to_string()
     }
@@ -310,10 +320,7 @@ pub fn run_plots(out_dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
             let key = match (layout, name.rsplit_once('.')) {
                 (Layout::Grouped, Some((g, _))) => g.to_string(),
                 (Layout::DemTimeSeries, _)
-                    if !(name == "kinetic_energy"
-                        || [".displacement", ".velocity", ".contact_force"]
-                            .iter()
-                            .any(|s| name.ends_with(s))) =>
+                    if name != "kinetic_energy" && loaded_wall_unit(&name).is_none() =>
                 {
                     continue
                 }
