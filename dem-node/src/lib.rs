@@ -1394,8 +1394,8 @@ impl Engine {
 
     /// Physics limits for the coordinator's up-front checks: `time_step`,
     /// `rayleigh_time_step`, `particles`, and with particles `particle_mass_min/max`,
-    /// `particle_radius_min/max`, `contact_stiffness_max`, `contact_stiffness_typical`, `contact_duration_min` (see
-    /// [`limits`]).
+    /// `particle_radius_min/max`, `contact_stiffness_max`, `contact_stiffness_typical`,
+    /// `contact_duration_min` (see [`limits`]).
     pub fn limits(&self) -> Vec<(String, f64)> {
         let mut l = vec![
             ("time_step".to_string(), self.time_step()),
