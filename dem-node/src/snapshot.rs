@@ -135,10 +135,10 @@ mod tests {
 
     #[test]
     fn a_first_version_5_snapshot_reads_with_its_loaded_walls_accelerations_skipped() {
-        /// The fields of a version 5 snapshot as first written: each loaded wall as
+        /// The fields of a version 5 snapshot with loaded walls written as `W`: first as
         /// [u, v, contact_force, acceleration].
         #[derive(Serialize)]
-        struct V5First {
+        struct V5<W> {
             version: u32,
             time: f64,
             steps: u64,
@@ -147,23 +147,26 @@ mod tests {
             records: Vec<MeshForceRecord>,
             meshes: Vec<Mesh>,
             sensors: SensorState,
-            loaded_walls: Vec<[f64; 4]>,
+            loaded_walls: Vec<W>,
             removed_particles: u64,
             removed_mass: f64,
         }
-        let old = V5First {
-            version: 5,
-            time: 0.5,
-            steps: 9,
-            particles: Particles::default(),
-            lists: NeighbourLists::default(),
-            records: Vec::new(),
-            meshes: Vec::new(),
-            sensors: SensorState::default(),
-            loaded_walls: vec![[-0.01, -0.2, 150.0, -3.0], [0.0, 0.0, 0.0, 0.0]],
-            removed_particles: 3,
-            removed_mass: 0.25,
-        };
+        fn v5<W>(loaded_walls: Vec<W>) -> V5<W> {
+            V5 {
+                version: 5,
+                time: 0.5,
+                steps: 9,
+                particles: Particles::default(),
+                lists: NeighbourLists::default(),
+                records: Vec::new(),
+                meshes: Vec::new(),
+                sensors: SensorState::default(),
+                loaded_walls,
+                removed_particles: 3,
+                removed_mass: 0.25,
+            }
+        }
+        let old = v5(vec![[-0.01, -0.2, 150.0, -3.0], [0.0; 4]]);
         let s = decode(&rmp_serde::to_vec(&old).unwrap()).unwrap();
         assert_eq!(
             s.loaded_walls,
@@ -180,29 +183,7 @@ mod tests {
         // and as written now, three numbers each
         assert_eq!(decode(&encode(&s)).unwrap().loaded_walls, s.loaded_walls);
         // anything else is named
-        #[derive(Serialize)]
-        struct Two {
-            version: u32,
-            time: f64,
-            steps: u64,
-            particles: Particles,
-            lists: NeighbourLists,
-            records: Vec<MeshForceRecord>,
-            meshes: Vec<Mesh>,
-            sensors: SensorState,
-            loaded_walls: Vec<[f64; 2]>,
-        }
-        let two = Two {
-            version: 5,
-            time: 0.0,
-            steps: 0,
-            particles: Particles::default(),
-            lists: NeighbourLists::default(),
-            records: Vec::new(),
-            meshes: Vec::new(),
-            sensors: SensorState::default(),
-            loaded_walls: vec![[1.0, 2.0]],
-        };
+        let two = v5(vec![[1.0, 2.0]]);
         let err = decode(&rmp_serde::to_vec(&two).unwrap()).unwrap_err();
         assert!(err.contains("3 numbers, got 2"), "{err}");
     }
