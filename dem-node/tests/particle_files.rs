@@ -1,5 +1,7 @@
 //! Particle files: `[[dem.particles]] kind = "file"` and `[dem.output] final_particles`, so a
 //! settled bed from one run starts the next.
+mod common;
+use common::GRAIN;
 use dem::{parse_scene_section, Engine};
 use std::path::Path;
 
@@ -8,12 +10,7 @@ fn scene(particles: &str, output: &str) -> String {
         r#"
 [dem]
 time_step = 2e-5
-[dem.materials.grain]
-youngs_modulus = 1e7
-poisson_ratio = 0.3
-density = 1000.0
-restitution = 0.5
-friction = 0.5
+{GRAIN}
 [[dem.walls]]
 kind = "box"
 material = "grain"
