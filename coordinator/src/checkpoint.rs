@@ -30,6 +30,45 @@ pub struct CheckpointState {
     pub scheduler: Scheduler,
     pub stability: StabilityMonitor,
     pub summary: Summary,
+    /// Fingerprint of the scene text the run was started with ([`scene_fingerprint`]);
+    /// `cosim resume` refuses a folder whose scene.toml no longer matches.
+    #[serde(default)]
+    pub scene_fingerprint: Option<String>,
+}
+
+/// FNV-1a (64 bit) of the scene text, as 16 hex digits: a stable fingerprint to tell whether
+/// a checkpoint belongs to a scene (not a security measure).
+pub fn scene_fingerprint(text: &str) -> String {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in text.as_bytes() {
+        h ^= u64::from(*b);
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    format!("{h:016x}")
+}
+
+/// Refuses to resume from a checkpoint that another scene wrote: its scene name and, when
+/// recorded, its scene text must be those of the folder's `scene.toml`. Touches nothing.
+pub fn check_belongs(
+    dir: &Path,
+    state: &CheckpointState,
+    scene_name: &str,
+    scene_text: &str,
+) -> anyhow::Result<()> {
+    let other = state.summary.scene != scene_name
+        || state
+            .scene_fingerprint
+            .as_deref()
+            .is_some_and(|f| f != scene_fingerprint(scene_text));
+    if other {
+        anyhow::bail!(
+            "{}: this checkpoint was written by a run of scene `{}` ({}), not by the scene in the folder's scene.toml (`{scene_name}`): refusing to resume a different scene; start it anew with `cosim run <scene> --out <folder> --overwrite`",
+            dir.display(),
+            state.summary.scene,
+            state.summary.scene_file
+        );
+    }
+    Ok(())
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize)]

@@ -5,8 +5,10 @@
 //! messages, so an external node takes part in checks like a built-in one.
 
 pub mod checkpoint;
+pub mod interrupt;
 pub mod launch;
 pub mod limits;
+pub mod outdir;
 pub mod plot;
 pub mod run;
 pub mod scene;

@@ -53,6 +53,9 @@ enum Command {
         /// No progress bar.
         #[arg(long)]
         no_progress: bool,
+        /// Replace an earlier run in the output folder (its files are deleted first).
+        #[arg(long)]
+        overwrite: bool,
     },
     /// Plot columns of a CSV time series (e.g. out/sleeper/dem/dem_sensors.csv) against its
     /// first column as a PNG.
@@ -154,6 +157,21 @@ fn report(scene: &Scene, s: &coordinator::run::Summary, out_dir: &std::path::Pat
         Ok(_) => {}
         Err(e) => tracing::warn!("no plots: {e:#}"),
     }
+    // the last line says where to look
+    let pvd: Vec<String> = ["dem", "fem"]
+        .iter()
+        .filter_map(|node| std::fs::read_dir(out_dir.join(node)).ok())
+        .flat_map(|d| d.flatten().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "pvd"))
+        .map(|p| p.display().to_string())
+        .collect::<std::collections::BTreeSet<_>>()
+        .into_iter()
+        .collect();
+    let mut look = vec![format!("{}/", out_dir.join("plots").display())];
+    if !pvd.is_empty() {
+        look.push(format!("in ParaView: {}", pvd.join(" ")));
+    }
+    println!("look at: {}", look.join("; "));
 }
 
 fn main() -> ExitCode {
@@ -188,9 +206,12 @@ fn main() -> ExitCode {
                 listen,
                 external,
                 no_progress,
+                overwrite,
             } => {
                 let scene = Scene::load(&scene)?;
+                coordinator::interrupt::install()?;
                 let opts = RunOptions {
+                    overwrite,
                     out_dir: out,
                     zenoh_config: config,
                     run_id,
@@ -223,6 +244,7 @@ fn main() -> ExitCode {
                     .map(|v| coordinator::study::parse_variation(v))
                     .collect::<anyhow::Result<Vec<_>>>()?;
                 let out = out.unwrap_or_else(|| coordinator::study::default_out(&scene));
+                coordinator::interrupt::install()?;
                 let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
                 let study = coordinator::study::StudyOptions {
                     metric,
@@ -276,6 +298,8 @@ fn main() -> ExitCode {
                 // the scene as it was (its own path resolves the files it names)
                 let scene = Scene::parse(&record.scene_file, text)?;
                 let (dir, state) = coordinator::checkpoint::latest(&out_dir)?;
+                coordinator::checkpoint::check_belongs(&dir, &state, &scene.name, &scene.text)?;
+                coordinator::interrupt::install()?;
                 eprintln!(
                     "resuming {} after window {} from {}",
                     scene.name,
@@ -319,9 +343,12 @@ fn main() -> ExitCode {
             }
             Command::Check { scene, out } => {
                 let scene = Scene::load(&scene)?;
+                // the nodes' outputs of a check go to a scratch folder, removed afterwards
+                // only if the check made it (an existing --out must be empty)
                 let dir = out.unwrap_or_else(|| {
                     std::env::temp_dir().join(format!("cosim-check-{}", std::process::id()))
                 });
+                let made = !dir.exists();
                 let opts = RunOptions {
                     check_only: true,
                     out_dir: Some(dir.clone()),
@@ -329,7 +356,9 @@ fn main() -> ExitCode {
                     ..Default::default()
                 };
                 let s = run_scene(&scene, &opts).await;
-                let _ = std::fs::remove_dir_all(&dir);
+                if made {
+                    let _ = std::fs::remove_dir_all(&dir);
+                }
                 let s = s?;
                 println!(
                     "{}: ok ({}, {} windows of {})",
@@ -367,6 +396,10 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
+            if let Some(i) = e.downcast_ref::<coordinator::interrupt::Interrupted>() {
+                eprintln!("{e:#}: the nodes were stopped, summary.json says `interrupted`");
+                return ExitCode::from(i.exit_code());
+            }
             eprintln!("error: {e:#}");
             ExitCode::FAILURE
         }

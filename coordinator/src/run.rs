@@ -38,6 +38,9 @@ pub struct RunOptions {
     pub external: Vec<String>,
     /// Continue from this checkpoint (its folder and the coordinator's state there).
     pub resume: Option<(PathBuf, crate::checkpoint::CheckpointState)>,
+    /// A new run into a folder that holds an earlier run's files clears it first (else it
+    /// is refused).
+    pub overwrite: bool,
 }
 
 impl Default for RunOptions {
@@ -52,6 +55,7 @@ impl Default for RunOptions {
             listen: None,
             external: Vec::new(),
             resume: None,
+            overwrite: false,
         }
     }
 }
@@ -87,7 +91,8 @@ pub struct Summary {
     pub scene: String,
     pub scene_file: String,
     pub run_id: String,
-    /// `completed`, `checked`, `unstable` or `failed`.
+    /// `running` (while it runs, or a run that died without a word), `completed`, `checked`,
+    /// `unstable`, `interrupted` or `failed`.
     pub status: String,
     pub error: Option<String>,
     pub schedule: String,
@@ -106,6 +111,10 @@ pub struct Summary {
     pub checks: Vec<crate::limits::Finding>,
     /// The run continued from the checkpoint after this window (`cosim resume`).
     pub resumed_after_window: Option<u64>,
+    /// How many times the run was resumed; the timing adds up every part's time that
+    /// counts (up to the checkpoint each part was resumed from).
+    #[serde(default)]
+    pub resumes: u32,
 }
 
 fn make_run_id(name: &str) -> String {
@@ -140,6 +149,16 @@ struct Run<'a> {
     /// before a resume.
     windows_started: Instant,
     windows_wall_base: f64,
+    /// When this process began the run, and the total and start-up wall time of the parts
+    /// before a resume.
+    started: Instant,
+    total_wall_base: f64,
+    startup_base: f64,
+    /// SIGINT / SIGTERM (crate::interrupt).
+    signals: crate::interrupt::Watch,
+    /// While windows run, the first signal is kept here and acted on at the window's end.
+    defer_interrupt: bool,
+    pending_interrupt: Option<i32>,
 }
 
 impl Run<'_> {
@@ -158,6 +177,22 @@ impl Run<'_> {
     ) -> anyhow::Result<Event> {
         const GRACE: Duration = Duration::from_millis(300);
         loop {
+            if let Some(sig) = self.signals.poll() {
+                if self.defer_interrupt && self.pending_interrupt.is_none() {
+                    eprintln!(
+                        "\n{}: stopping at the end of this window{} (again to stop at once)",
+                        crate::interrupt::signal_name(sig),
+                        if self.scene.checkpoint_every > 0 {
+                            ", after a checkpoint"
+                        } else {
+                            ""
+                        }
+                    );
+                    self.pending_interrupt = Some(sig);
+                } else {
+                    return Err(crate::interrupt::Interrupted { signal: sig }.into());
+                }
+            }
             for n in &mut self.nodes {
                 if !self.stopped.contains(&n.name) && !self.gone.contains_key(&n.name) {
                     if let Some(msg) = n.exited() {
@@ -221,6 +256,9 @@ impl Run<'_> {
                             .or(window)
                             .map(|w| format!(" at window {w}"))
                             .unwrap_or_default();
+                        if *code == proto::ErrorCode::Unstable {
+                            self.summary.status = "unstable".into();
+                        }
                         bail!(
                             "node `{}` reported a {code:?} error{at}: {message}",
                             st.node
@@ -437,6 +475,7 @@ impl Run<'_> {
                 (scheduler, state.stability, actions, kept)
             }
         };
+        self.defer_interrupt = true;
         let bar = progress_bar(progress, scene.windows);
         bar.set_position(self.summary.windows_done);
         let mut csv = std::io::BufWriter::new(
@@ -472,6 +511,18 @@ impl Run<'_> {
             for d in monitor.drain() {
                 match d {
                     Ok(d) => {
+                        // data from outside a solver is checked at the boundary: a NaN that
+                        // arrives is the sender's invalid data, not an instability of the run
+                        // (the Rust nodes refuse to publish their own NaNs: proto::participant)
+                        if let Some((field, index)) = d.non_finite {
+                            bail!(
+                                "invalid interface data from the {} node: the {} of interface `{}` for window {} carry a non-finite value ({field}, value {index})",
+                                if d.kind == "forces" { "dem" } else { "fem" },
+                                d.kind,
+                                d.interface,
+                                d.window
+                            );
+                        }
                         if let Some(bad) = stability.observe(&d) {
                             self.summary.status = "unstable".into();
                             bail!("{bad}");
@@ -481,7 +532,10 @@ impl Run<'_> {
                     Err((key, e @ proto::ProtoError::WrongRun { .. })) => {
                         tracing::warn!("refused a message on `{key}`: {e}")
                     }
-                    Err((key, e)) => bail!("invalid interface data on `{key}` at window {k}: {e}"),
+                    Err((key, e)) => bail!(
+                        "invalid interface data from the {} node on `{key}` at window {k}: {e}",
+                        sender_of(&key)
+                    ),
                 }
             }
             let Event::Status(st) = ev else { continue };
@@ -539,8 +593,23 @@ impl Run<'_> {
                 self.summary.simulated_time_s = t_end;
                 bar.set_position(window + 1);
                 bar.set_message(format!("t = {t_end:.4e} s"));
+                let finishing = actions.iter().any(|a| matches!(a, Action::Finish { .. }));
                 let due = scene.checkpoint_every > 0 && (window + 1) % scene.checkpoint_every == 0;
-                if due && !actions.iter().any(|a| matches!(a, Action::Finish { .. })) {
+                if let Some(sig) = self.pending_interrupt.filter(|_| !finishing) {
+                    // a second signal now stops at once, without the checkpoint
+                    self.defer_interrupt = false;
+                    bar.finish_and_clear();
+                    if scene.checkpoint_every > 0 {
+                        self.checkpoint(window, &scheduler, &stability, timeout)
+                            .await?;
+                        eprintln!(
+                            "checkpoint after window {window}: `cosim resume {}` continues the run",
+                            self.out_dir.display()
+                        );
+                    }
+                    return Err(crate::interrupt::Interrupted { signal: sig }.into());
+                }
+                if due && !finishing {
                     self.checkpoint(window, &scheduler, &stability, timeout)
                         .await?;
                 }
@@ -583,11 +652,13 @@ impl Run<'_> {
         let dir = crate::checkpoint::checkpoint_dir(&self.out_dir, window);
         self.snapshot_all(window, &dir, timeout).await?;
         self.summary.timing.windows_wall_s = self.windows_wall();
+        self.summary.timing.total_wall_s = self.total_wall_base + self.started.elapsed().as_secs_f64();
         let state = crate::checkpoint::CheckpointState {
             window,
             scheduler: scheduler.clone(),
             stability: stability.clone(),
             summary: self.summary.clone(),
+            scene_fingerprint: Some(crate::checkpoint::scene_fingerprint(&self.scene.text)),
         };
         crate::checkpoint::commit(&self.out_dir, &state)?;
         tracing::debug!("checkpoint after window {window}");
@@ -666,6 +737,18 @@ fn progress_bar(show: bool, windows: u64) -> indicatif::ProgressBar {
     bar
 }
 
+/// The node that publishes on an interface data key: forces come from the DEM, kinematics
+/// from the FEM.
+fn sender_of(key: &str) -> &'static str {
+    if key.ends_with("/forces") {
+        "dem"
+    } else if key.ends_with("/kinematics") {
+        "fem"
+    } else {
+        "unknown"
+    }
+}
+
 fn write_summary(out_dir: &Path, summary: &Summary) -> anyhow::Result<PathBuf> {
     let path = out_dir.join("summary.json");
     let tmp = out_dir.join(".summary.json.tmp");
@@ -683,8 +766,18 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
         .out_dir
         .clone()
         .unwrap_or_else(|| scene.out_dir.clone());
-    std::fs::create_dir_all(&out_dir)
-        .with_context(|| format!("creating the output folder {}", out_dir.display()))?;
+    let what = if opts.check_only {
+        "check"
+    } else if opts.resume.is_some() {
+        "resume"
+    } else {
+        "run"
+    };
+    // held until this function returns: no other run writes into the folder meanwhile
+    let lock = crate::outdir::lock(&out_dir, &format!("{what} of scene `{}`", scene.name))?;
+    if opts.resume.is_none() {
+        crate::outdir::prepare_new(&lock, opts.overwrite)?;
+    }
     let run_id = opts
         .run_id
         .clone()
@@ -728,7 +821,7 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
         scene: scene.name.clone(),
         scene_file: scene.path.display().to_string(),
         run_id: run_id.clone(),
-        status: "failed".into(),
+        status: "running".into(),
         schedule: schedule_name(scene.schedule),
         coupling_window_s: scene.window,
         windows_planned: scene.windows,
@@ -774,6 +867,7 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
         ) {
             Ok(n) => n,
             Err(e) => {
+                summary.status = "failed".into();
                 summary.error = Some(format!("{e:#}"));
                 write_summary(&out_dir, &summary)?;
                 return Err(e);
@@ -798,14 +892,28 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
         stopped: Default::default(),
         windows_started: Instant::now(),
         windows_wall_base: 0.0,
+        started: t0,
+        total_wall_base: 0.0,
+        startup_base: 0.0,
+        signals: crate::interrupt::Watch::new(),
+        defer_interrupt: false,
+        pending_interrupt: None,
     };
     if let Some((_, state)) = &opts.resume {
         // the run continues: its summary so far comes from the checkpoint
         let mut restored = state.summary.clone();
         restored.run_id = run_id.clone();
-        restored.status = "failed".into();
+        restored.status = "running".into();
+        restored.error = None;
         restored.resumed_after_window = Some(state.window);
+        restored.resumes += 1;
         run.windows_wall_base = restored.timing.windows_wall_s;
+        // checkpoints written before the total was recorded there: at least the windows
+        run.total_wall_base = restored
+            .timing
+            .total_wall_s
+            .max(restored.timing.startup_s + restored.timing.windows_wall_s);
+        run.startup_base = restored.timing.startup_s;
         for (name, n) in &run.summary.nodes {
             restored.nodes.entry(name.clone()).or_default().software = n.software.clone();
         }
@@ -823,9 +931,13 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
             },
         )?;
     }
+    if !opts.check_only {
+        // `running` until the run ends: a folder never shows an earlier run's status
+        write_summary(&out_dir, &run.summary)?;
+    }
     let result: anyhow::Result<()> = async {
         run.start(opts.check_only, opts.startup_timeout).await?;
-        run.summary.timing.startup_s = t0.elapsed().as_secs_f64();
+        run.summary.timing.startup_s = run.startup_base + t0.elapsed().as_secs_f64();
         run.check_limits(opts.check_only).await?;
         if opts.check_only {
             if scene.has_dem {
@@ -858,7 +970,9 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
     }
     .await;
     if let Err(e) = &result {
-        if run.summary.status != "unstable" {
+        if e.downcast_ref::<crate::interrupt::Interrupted>().is_some() {
+            run.summary.status = "interrupted".into();
+        } else if run.summary.status != "unstable" {
             run.summary.status = "failed".into();
         }
         run.summary.error = Some(format!("{e:#}"));
@@ -875,7 +989,7 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
     let dem = summary.nodes.get("dem").map(|n| n.compute_s).unwrap_or(0.0);
     let fem = summary.nodes.get("fem").map(|n| n.compute_s).unwrap_or(0.0);
     let t = &mut summary.timing;
-    t.total_wall_s = t0.elapsed().as_secs_f64();
+    t.total_wall_s = run.total_wall_base + t0.elapsed().as_secs_f64();
     t.dem_compute_s = dem;
     t.fem_compute_s = fem;
     t.coupling_overhead_s = (t.windows_wall_s - dem - fem).max(0.0);
@@ -886,6 +1000,7 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
     };
     let _ = run.link.close().await;
     write_summary(&out_dir, &summary)?;
+    drop(lock);
     result.map(|_| summary)
 }
 

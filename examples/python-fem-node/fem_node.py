@@ -398,6 +398,38 @@ def error_code(e):
     return "internal"
 
 
+def exit_with_coordinator():
+    """Ends this process soon after the coordinator that started it is gone (it sets
+    COSIM_COORDINATOR_PID, PROTOCOL.md §7), whatever the network says."""
+    try:
+        pid = int(os.environ.get("COSIM_COORDINATOR_PID", ""))
+    except ValueError:
+        return
+    if pid <= 1:
+        return
+    direct_child = os.getppid() == pid
+
+    def alive():
+        if direct_child:
+            return os.getppid() == pid
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        except PermissionError:
+            pass
+        return True
+
+    def watch():
+        while alive():
+            time.sleep(0.25)
+        print(f"error: the coordinator (process {pid}) is gone: this node stops", file=sys.stderr)
+        os._exit(3)
+
+    import threading
+    threading.Thread(target=watch, name="coordinator-watch", daemon=True).start()
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description="FEM solver node of a cosim run (Python, scikit-fem)")
     ap.add_argument("--run-id", required=True, help="run to join (the coordinator prints it)")
@@ -409,6 +441,7 @@ def main(argv=None):
     ap.add_argument("--data-timeout", type=float, default=600.0,
                     help="longest wait for the other solver's interface data in one window (s)")
     args = ap.parse_args(argv)
+    exit_with_coordinator()
     logging.basicConfig(level=os.environ.get("COSIM_PY_LOG", "INFO"), stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(message)s")
     try:

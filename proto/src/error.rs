@@ -44,6 +44,17 @@ pub enum ProtoError {
         index: usize,
         value: f64,
     },
+    #[error(
+        "the solver diverged: its own {what} for interface `{interface}` at window {window} are not finite (`{field}` value {index} = {value}); not published"
+    )]
+    Diverged {
+        what: &'static str,
+        interface: String,
+        window: u64,
+        field: &'static str,
+        index: usize,
+        value: f64,
+    },
     #[error("{what}: {reason}")]
     Invalid { what: &'static str, reason: String },
     #[error("invalid name `{name}` for {what}: use 1-64 characters of A-Z a-z 0-9 _ -")]

@@ -43,6 +43,7 @@ impl From<ProtoError> for NodeError {
     fn from(e: ProtoError) -> Self {
         let code = match &e {
             ProtoError::Timeout { .. } => ErrorCode::Timeout,
+            ProtoError::Diverged { .. } => ErrorCode::Unstable,
             _ => ErrorCode::Protocol,
         };
         let stopped = matches!(e, ProtoError::Stopped { .. });
@@ -276,8 +277,57 @@ pub async fn serve<S: Solver>(
     }
 }
 
+/// The coordinator that starts a node puts its process id here; the node ends when that
+/// process is gone (killed, crashed), whatever the network says. Nodes started by hand (other
+/// machines) do not have it and rely on zenoh liveliness.
+pub const COORDINATOR_PID_ENV: &str = "COSIM_COORDINATOR_PID";
+
+/// Whether process `pid` exists (a zombie counts as gone only once reaped).
+fn process_alive(pid: i32) -> bool {
+    // SAFETY: signal 0 only checks that the process exists and may be signalled.
+    let rc = unsafe { libc::kill(pid, 0) };
+    rc == 0 || std::io::Error::last_os_error().raw_os_error() == Some(libc::EPERM)
+}
+
+/// When `COSIM_COORDINATOR_PID` names a process: a thread that ends this process (exit code
+/// 3, after one line in the log) soon after that process is gone. The check looks at the
+/// parent first (a node whose coordinator died is adopted by another process at once), then
+/// at the process itself (a node started through a wrapper).
+pub fn exit_with_coordinator() {
+    let Some(pid) = std::env::var(COORDINATOR_PID_ENV)
+        .ok()
+        .and_then(|v| v.trim().parse::<i32>().ok())
+        .filter(|&p| p > 1)
+    else {
+        return;
+    };
+    // SAFETY: getppid has no preconditions.
+    let direct_child = unsafe { libc::getppid() } == pid;
+    let spawned = std::thread::Builder::new()
+        .name("coordinator-watch".into())
+        .spawn(move || loop {
+            std::thread::sleep(std::time::Duration::from_millis(250));
+            // SAFETY: as above.
+            let gone = if direct_child {
+                (unsafe { libc::getppid() }) != pid
+            } else {
+                !process_alive(pid)
+            };
+            if gone {
+                eprintln!(
+                    "error: the coordinator (process {pid}) is gone: this node stops (its state since the last checkpoint is lost)"
+                );
+                std::process::exit(3);
+            }
+        });
+    if let Err(e) = spawned {
+        tracing::warn!("cannot watch the coordinator's process: {e}");
+    }
+}
+
 /// Runs `serve` on a fresh runtime and turns the outcome into an exit code; for `main`.
 pub fn main_with<S: Solver>(args: NodeArgs, hello: Hello, solver: S) -> std::process::ExitCode {
+    exit_with_coordinator();
     let rt = match tokio::runtime::Builder::new_multi_thread()
         .worker_threads(1)
         .enable_all()

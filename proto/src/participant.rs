@@ -308,13 +308,28 @@ impl Participant {
         fetch_mesh(&self.session, &self.keys, interface, timeout).await
     }
 
-    /// Publishes interface kinematics (FEM side).
+    /// Publishes interface kinematics (FEM side). Non-finite values are never sent: they
+    /// mean this node's solver diverged ([`ProtoError::Diverged`]).
     pub async fn write_kinematics(&self, k: &InterfaceKinematics) -> Result<(), ProtoError> {
+        for (field, a) in [
+            ("positions", &k.positions),
+            ("velocities", &k.velocities),
+            ("accelerations", &k.accelerations),
+        ] {
+            own_finite(InterfaceKinematics::WHAT, &k.interface, k.window, field, a)?;
+        }
         self.write(&self.keys.kinematics(&k.interface), k).await
     }
 
-    /// Publishes interface forces (DEM side).
+    /// Publishes interface forces (DEM side); non-finite forces are refused as for kinematics.
     pub async fn write_forces(&self, f: &InterfaceForces) -> Result<(), ProtoError> {
+        own_finite(
+            InterfaceForces::WHAT,
+            &f.interface,
+            f.window,
+            "forces",
+            &f.forces,
+        )?;
         self.write(&self.keys.forces(&f.interface), f).await
     }
 
@@ -599,6 +614,27 @@ impl CoordinatorLink {
 
     pub async fn close(self) -> Result<(), ProtoError> {
         self.session.close().await.map_err(ProtoError::zenoh)
+    }
+}
+
+/// This node's own output must be finite before it is published.
+fn own_finite(
+    what: &'static str,
+    interface: &str,
+    window: u64,
+    field: &'static str,
+    a: &F64Array,
+) -> Result<(), ProtoError> {
+    match a.first_non_finite() {
+        None => Ok(()),
+        Some((index, value)) => Err(ProtoError::Diverged {
+            what,
+            interface: interface.to_string(),
+            window,
+            field,
+            index,
+            value,
+        }),
     }
 }
 

@@ -179,12 +179,15 @@ async fn nan_forces_stop_the_run_cleanly_naming_the_field() {
     let e = sum["error"].as_str().unwrap();
     // The injected message is wrong twice (NaN, and a window index the FEM is not at). The
     // coordinator's monitor refuses the NaN, the FEM node refuses the window index — whoever
-    // sees it first stops the run, naming the interface forces and what is wrong with them.
+    // sees it first stops the run, naming the interface forces and what is wrong with them:
+    // invalid data from the node that sends forces, not an instability of the run.
     assert!(e.contains("forces"), "{e}");
     assert!(
-        e.contains("non-finite forces") || e.contains("expected window"),
+        e.contains("invalid interface data from the dem node") && e.contains("non-finite")
+            || e.contains("expected window"),
         "{e}"
     );
+    assert_eq!(sum["status"], "failed", "{sum}");
     // nothing non-finite reached the summary
     for (k, v) in sum["results"].as_object().into_iter().flatten() {
         assert!(v.as_f64().is_some_and(f64::is_finite), "{k} = {v}");
