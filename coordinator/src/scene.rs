@@ -8,11 +8,15 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 use toml::Spanned;
 
-use crate::units::{Joules, Seconds};
+use crate::units::{format_seconds, Joules, Seconds};
 
-/// A scene error with its place in the file.
+/// Most coupling windows a scene may have: each is a row of windows.csv and a round of
+/// messages; beyond this the scene is almost certainly a typo (a window in s meant as ms).
+pub const MAX_WINDOWS: f64 = 1e8;
+
+/// A scene error with its place in the file (line 0: the file as a whole, e.g. unreadable).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{file}:{line}:{column}: {field}{sep}{message}", sep = if field.is_empty() { "" } else { ": " })]
+#[error("{file}{place}: {field}{sep}{message}", place = if *line == 0 { String::new() } else { format!(":{line}:{column}") }, sep = if field.is_empty() { "" } else { ": " })]
 pub struct SceneError {
     pub file: String,
     pub line: usize,
@@ -261,7 +265,7 @@ impl Scene {
             return Err(err_at(
                 raw.scene.end_time.span().start,
                 "scene.end_time",
-                format!("must be positive, got {end_time} s"),
+                format!("must be positive, got {}", format_seconds(end_time)),
             ));
         }
         let c = &raw.coupling;
@@ -300,7 +304,11 @@ impl Scene {
                     return Err(err_at(
                         w.span().start,
                         "coupling.window",
-                        format!("must lie in (0, end_time = {end_time} s], got {v} s"),
+                        format!(
+                            "must lie in (0, end_time = {}], got {}",
+                            format_seconds(end_time),
+                            format_seconds(v)
+                        ),
                     ));
                 }
                 v
@@ -314,8 +322,22 @@ impl Scene {
         if (ratio - windows).abs() > 1e-9 * ratio.max(1.0) {
             let w = c.window.as_ref().expect("checked above");
             return Err(err_at(w.span().start, "coupling.window", format!(
-                "end_time / window = {end_time} / {window} = {ratio} is not a whole number of windows"
+                "end_time / window = {} / {} = {ratio:.6} is not a whole number of windows",
+                format_seconds(end_time),
+                format_seconds(window)
             )));
+        }
+        if windows > MAX_WINDOWS {
+            let w = c.window.as_ref().expect("checked above");
+            return Err(err_at(
+                w.span().start,
+                "coupling.window",
+                format!(
+                    "end_time / window = {} / {} = {windows:.3e} windows, more than the {MAX_WINDOWS:.0e} a scene may have (each is a row of windows.csv and a round of messages): is the window's unit right?",
+                    format_seconds(end_time),
+                    format_seconds(window)
+                ),
+            ));
         }
         let mut interfaces = Vec::new();
         for i in c.interfaces.clone() {
@@ -340,6 +362,23 @@ impl Scene {
             Some(s) => Some(s.get_ref().0),
             None => None,
         };
+        if !(c.max_force_growth.is_finite() && c.max_force_growth > 1.0) {
+            return Err(err_at(
+                text.find("max_force_growth").unwrap_or(0),
+                "coupling.max_force_growth",
+                format!(
+                    "must be a finite factor above 1 (the growth of the interface force in one window that stops the run; default 1e3), got {}",
+                    c.max_force_growth
+                ),
+            ));
+        }
+        if c.steady_windows == 0 {
+            return Err(err_at(
+                text.find("steady_windows").unwrap_or(0),
+                "coupling.steady_windows",
+                "must be at least 1 (consecutive windows below steady_kinetic_energy)".into(),
+            ));
+        }
         if c.window_timeout.0 <= 0.0 {
             return Err(err_at(
                 text.find("window_timeout").unwrap_or(0),
@@ -365,7 +404,7 @@ impl Scene {
             interfaces,
             window_timeout: c.window_timeout.0,
             steady_kinetic_energy: steady,
-            steady_windows: c.steady_windows.max(1),
+            steady_windows: c.steady_windows,
             max_force_growth: c.max_force_growth,
             allow_beyond_limits: c.allow_beyond_limits,
             out_dir,
@@ -431,6 +470,44 @@ mod tests {
             parse("[scene]\nend_time = 1\n[coupling]\nschedule = \"jit\"\nwindow = 0.1\n[dem]\n")
                 .unwrap_err();
         assert!(e.message.contains("only a [dem]"), "{e}");
+    }
+
+    #[test]
+    fn monitor_thresholds_must_be_meaningful() {
+        for (line, what) in [
+            ("max_force_growth = 0", "got 0"),
+            ("max_force_growth = -5.0", "got -5"),
+            ("max_force_growth = nan", "got NaN"),
+            ("max_force_growth = inf", "got inf"),
+            ("steady_windows = 0", "at least 1"),
+            ("steady_kinetic_energy = 0", "must be positive"),
+            ("steady_kinetic_energy = nan", "not a finite"),
+            ("window_timeout = -1", "must be positive"),
+            ("window_timeout = inf", "not a finite"),
+        ] {
+            let e = parse(&format!(
+                "[scene]\nend_time = 1\n[coupling]\nwindow = 0.1\n{line}\n[dem]\n"
+            ))
+            .unwrap_err();
+            assert_eq!(e.line, 5, "{line}: {e}");
+            assert!(e.to_string().contains(what), "{line}: {e}");
+        }
+    }
+
+    #[test]
+    fn numbers_in_messages_are_readable_and_absurd_window_counts_are_refused() {
+        let e = parse("[scene]\nend_time = 1\n[coupling]\nwindow = 0.000099\n[dem]\n").unwrap_err();
+        assert!(e.message.contains("1 s / 99 µs = 10101.010101"), "{e}");
+        let e = parse("[scene]\nend_time = 100\n[coupling]\nwindow = 1e-9\n[dem]\n").unwrap_err();
+        assert!(e.message.contains("1.000e11 windows"), "{e}");
+        let e = parse("[scene]\nend_time = -2e-5\n[coupling]\nwindow = 1\n[dem]\n").unwrap_err();
+        assert!(e.message.contains("got -20 µs"), "{e}");
+    }
+
+    #[test]
+    fn an_unreadable_file_is_named_without_a_line() {
+        let e = Scene::load(Path::new("/nonexistent/s.toml")).unwrap_err();
+        assert!(e.to_string().starts_with("/nonexistent/s.toml: cannot read"), "{e}");
     }
 
     #[test]

@@ -20,25 +20,29 @@ use std::collections::BTreeSet;
 use proto::{AdvanceWindow, CommandBody, MotionRule, Role};
 
 use crate::scene::ScheduleKind;
+use crate::units::format_seconds;
 
 /// Integer number of DEM substeps in a coupling window: Δt^C = n^D Δt^D (Ullrich ch. 3.3).
 pub fn substeps(window: f64, dem_time_step: f64) -> Result<u32, String> {
     if !(dem_time_step > 0.0 && dem_time_step.is_finite()) {
         return Err(format!(
-            "the DEM time step must be positive, got {dem_time_step} s"
+            "the DEM time step must be positive, got {}",
+            format_seconds(dem_time_step)
         ));
     }
     let ratio = window / dem_time_step;
     let n = ratio.round();
     if n < 1.0 || (ratio - n).abs() > 1e-6 * ratio.max(1.0) {
         return Err(format!(
-            "the coupling window Δt^C = {window} s is not a whole multiple of the DEM time step Δt^D = {dem_time_step} s (ratio {ratio}); choose Δt^C = n·Δt^D, e.g. {} s or {} s",
-            n.max(1.0) * dem_time_step,
-            (n + 1.0) * dem_time_step
+            "the coupling window Δt^C = {} is not a whole multiple of the DEM time step Δt^D = {} (ratio {ratio:.4}); choose Δt^C = n·Δt^D, e.g. {} or {}",
+            format_seconds(window),
+            format_seconds(dem_time_step),
+            format_seconds(n.max(1.0) * dem_time_step),
+            format_seconds((n + 1.0) * dem_time_step)
         ));
     }
     if n > u32::MAX as f64 {
-        return Err(format!("{n} substeps per window is too many"));
+        return Err(format!("{n:.3e} substeps per window is too many"));
     }
     Ok(n as u32)
 }
@@ -352,7 +356,7 @@ mod tests {
         assert_eq!(substeps(1e-5, 1e-6).unwrap(), 10);
         let e = substeps(1e-4, 3e-6).unwrap_err();
         assert!(
-            e.contains("0.0001 s") && e.contains("3e-6 s") || e.contains("0.000003"),
+            e.contains("Δt^C = 100 µs") && e.contains("Δt^D = 3 µs (ratio 33.3333)"),
             "{e}"
         );
         assert!(e.contains("not a whole multiple"), "{e}");

@@ -64,6 +64,10 @@ fn set_path(table: &mut toml::Table, key: &str, value: toml::Value) -> anyhow::R
 pub(crate) fn value_text(v: &toml::Value) -> String {
     match v {
         toml::Value::String(s) => s.clone(),
+        // 1e-5, not 0.00001
+        toml::Value::Float(x) if *x != 0.0 && (x.abs() < 1e-3 || x.abs() >= 1e6) => {
+            format!("{x:e}")
+        }
         other => other.to_string(),
     }
 }
@@ -159,6 +163,153 @@ pub struct StudyOptions {
     /// its history has little to do with the reference's (a slow divergence the monitor did not
     /// stop, or a window far too long for the physics).
     pub inaccurate_above: Option<f64>,
+}
+
+/// A run folder whose summary says the run ended (`completed`, `unstable` or `failed`): a
+/// resumed study does not run it again. `running` (a run that died with the study) and
+/// `interrupted` runs are run again.
+fn run_is_done(dir: &Path) -> bool {
+    std::fs::read_to_string(dir.join("summary.json"))
+        .ok()
+        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+        .is_some_and(|s| matches!(s["status"].as_str(), Some("completed" | "unstable" | "failed")))
+}
+
+/// The message of an error found in a variant's scene text, in the user's terms: the
+/// variant's temporary file (and its line, which is of the rewritten text) becomes the user's
+/// scene and the variant's settings.
+fn in_user_terms(message: &str, tmp: &Path, scene: &Path, label: &str) -> String {
+    let tmp = tmp.display().to_string();
+    let user = format!("{} with --vary {label}", scene.display());
+    let mut out = String::new();
+    let mut rest = message;
+    while let Some(i) = rest.find(&tmp) {
+        out.push_str(&rest[..i]);
+        out.push_str(&user);
+        rest = &rest[i + tmp.len()..];
+        // drop `:line:column` of the rewritten text
+        let mut chars = rest.char_indices().peekable();
+        let mut end = 0;
+        for _ in 0..2 {
+            match chars.next() {
+                Some((_, ':')) => {}
+                _ => break,
+            }
+            let mut digits = false;
+            while let Some(&(j, c)) = chars.peek() {
+                if !c.is_ascii_digit() {
+                    break;
+                }
+                digits = true;
+                end = j + 1;
+                chars.next();
+            }
+            if !digits {
+                break;
+            }
+        }
+        rest = &rest[end..];
+        // the nodes' form: `: line 8, column 1`
+        if let Some(after) = strip_line_column(rest) {
+            rest = after;
+        }
+    }
+    out.push_str(rest);
+    out
+}
+
+/// `rest` without a leading `: line <n>, column <m>` (keeping what follows the place).
+fn strip_line_column(rest: &str) -> Option<&str> {
+    let digits = |t: &str| t.len() - t.trim_start_matches(|c: char| c.is_ascii_digit()).len();
+    let t = rest.strip_prefix(": line ")?;
+    let n = digits(t);
+    let t = t[n..].strip_prefix(", column ").filter(|_| n > 0)?;
+    let m = digits(t);
+    (m > 0).then(|| &rest[rest.len() - t.len() + m..])
+}
+
+/// Every variant is checked before any runs (`cosim check` of each: the coordinator's tables
+/// here, the nodes' tables and limits by the nodes); one invalid variant refuses the study,
+/// naming the user's scene and the settings. Variants whose node tables are the same are
+/// checked by the nodes once.
+async fn validate_variants(
+    scene: &Scene,
+    variants: &[Variant],
+    jobs: usize,
+    out_dir: &Path,
+) -> anyhow::Result<()> {
+    let mut errors = Vec::new();
+    let mut node_checks: Vec<(Variant, Scene)> = Vec::new();
+    let mut seen = std::collections::BTreeSet::new();
+    for v in variants {
+        let tmp = scene
+            .path
+            .with_file_name(format!(".study-{}-{}.toml", scene.name, v.name));
+        match Scene::parse(&tmp, v.text.clone()) {
+            Err(e) => errors.push(in_user_terms(
+                &e.to_string(),
+                &tmp,
+                &scene.path,
+                &v.label(),
+            )),
+            Ok(s) => {
+                let t: toml::Table = toml::from_str(&v.text)?;
+                let key = format!(
+                    "{:?}{:?}{}",
+                    t.get("dem"),
+                    t.get("fem"),
+                    s.window.to_bits()
+                );
+                if seen.insert(key) {
+                    node_checks.push((v.clone(), s));
+                }
+            }
+        }
+    }
+    let mut pending = node_checks.into_iter().collect::<std::collections::VecDeque<_>>();
+    let mut running = tokio::task::JoinSet::new();
+    while !pending.is_empty() || !running.is_empty() {
+        while running.len() < jobs {
+            let Some((v, s)) = pending.pop_front() else { break };
+            let dir = out_dir.join(format!(".check-{}", v.name));
+            let _ = std::fs::remove_dir_all(&dir);
+            let user_scene = scene.path.clone();
+            running.spawn(async move {
+                std::fs::write(&s.path, &s.text)
+                    .with_context(|| format!("writing {}", s.path.display()))?;
+                let opts = RunOptions {
+                    check_only: true,
+                    out_dir: Some(dir.clone()),
+                    progress: false,
+                    ..Default::default()
+                };
+                let r = run_scene(&s, &opts).await;
+                let _ = std::fs::remove_file(&s.path);
+                let _ = std::fs::remove_dir_all(&dir);
+                anyhow::Ok(
+                    r.err()
+                        .map(|e| in_user_terms(&format!("{e:#}"), &s.path, &user_scene, &v.label())),
+                )
+            });
+        }
+        if let Some(done) = running.join_next().await {
+            if let Some(e) = done.map_err(|e| anyhow!("a study check panicked: {e}"))?? {
+                errors.push(e);
+            }
+        }
+    }
+    if !errors.is_empty() {
+        errors.sort();
+        errors.dedup();
+        bail!(
+            "the study of {} has {} invalid variant{} (nothing was run):\n  {}",
+            scene.path.display(),
+            errors.len(),
+            if errors.len() == 1 { "" } else { "s" },
+            errors.join("\n  ")
+        );
+    }
+    Ok(())
 }
 
 /// Parses `--series file:column`.
@@ -261,6 +412,8 @@ pub async fn run_study(
         }
     }
     std::fs::create_dir_all(out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
+    validate_variants(scene, &variants, opts.jobs.max(1), out_dir).await?;
+    let mut signals = crate::interrupt::Watch::new();
     let bar = indicatif::ProgressBar::new(variants.len() as u64);
     bar.set_style(
         indicatif::ProgressStyle::with_template(
@@ -269,16 +422,22 @@ pub async fn run_study(
         .expect("valid template")
         .progress_chars("=> "),
     );
-    // run what is missing, `jobs` at a time
+    // run what is missing (or was interrupted), `jobs` at a time
     let jobs = opts.jobs.max(1);
     let mut pending = variants
         .iter()
-        .filter(|v| !out_dir.join(&v.name).join("summary.json").exists())
+        .filter(|v| !run_is_done(&out_dir.join(&v.name)))
         .cloned()
         .collect::<std::collections::VecDeque<_>>();
     bar.inc((variants.len() - pending.len()) as u64);
     let mut running = tokio::task::JoinSet::new();
+    let mut interrupted = None;
     while !pending.is_empty() || !running.is_empty() {
+        if let Some(sig) = signals.poll() {
+            // the runs under way stop too (each watches the signals); start no more
+            pending.clear();
+            interrupted = Some(crate::interrupt::Interrupted { signal: sig });
+        }
         while running.len() < jobs {
             let Some(v) = pending.pop_front() else { break };
             let dir = out_dir.join(&v.name);
@@ -289,32 +448,46 @@ pub async fn run_study(
                 .path
                 .with_file_name(format!(".study-{}-{}.toml", scene.name, v.name));
             running.spawn(async move {
-                match Scene::parse(&path, v.text.clone()) {
-                    Ok(s) => {
-                        std::fs::write(&path, &v.text)?;
-                        let opts = RunOptions {
-                            out_dir: Some(dir.clone()),
-                            progress: false,
-                            ..Default::default()
-                        };
-                        if let Err(e) = run_scene(&s, &opts).await {
-                            tracing::info!("{label}: {e:#}");
-                        }
-                        let _ = std::fs::remove_file(&path);
-                    }
-                    Err(e) => {
-                        std::fs::create_dir_all(&dir)?;
-                        let refused = serde_json::json!({ "status": "refused", "error": format!("{label}: {e}") });
-                        std::fs::write(dir.join("summary.json"), serde_json::to_string_pretty(&refused)?)?;
-                    }
+                // validated above: every variant parses
+                let s = Scene::parse(&path, v.text.clone())?;
+                std::fs::write(&path, &v.text)
+                    .with_context(|| format!("writing {}", path.display()))?;
+                let opts = RunOptions {
+                    out_dir: Some(dir.clone()),
+                    progress: false,
+                    // a run that was interrupted or died half-way starts again
+                    overwrite: true,
+                    ..Default::default()
+                };
+                let r = run_scene(&s, &opts).await;
+                let _ = std::fs::remove_file(&path);
+                if let Err(e) = &r {
+                    tracing::info!("{label}: {e:#}");
                 }
-                anyhow::Ok(())
+                anyhow::Ok(r.err().and_then(|e| {
+                    e.downcast_ref::<crate::interrupt::Interrupted>().copied()
+                }))
             });
         }
-        if let Some(done) = running.join_next().await {
-            done.map_err(|e| anyhow!("a study run panicked: {e}"))??;
-            bar.inc(1);
+        tokio::select! {
+            done = running.join_next(), if !running.is_empty() => {
+                if let Some(done) = done {
+                    if let Some(i) = done.map_err(|e| anyhow!("a study run panicked: {e}"))?? {
+                        pending.clear();
+                        interrupted = Some(i);
+                    }
+                    bar.inc(1);
+                }
+            }
+            _ = tokio::time::sleep(std::time::Duration::from_millis(200)) => {}
         }
+    }
+    if let Some(i) = interrupted {
+        bar.finish_and_clear();
+        return Err(anyhow::Error::new(i).context(format!(
+            "the study in {} stopped; `cosim study` with the same arguments continues it",
+            out_dir.display()
+        )));
     }
     let mut outcomes = Vec::new();
     let mut summaries = Vec::new();
@@ -673,6 +846,30 @@ pub fn table(outcomes: &[Outcome]) -> BTreeMap<String, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn errors_in_a_variant_name_the_users_scene_and_settings_not_the_temporary_file() {
+        let tmp = Path::new("scenes/.study-m-run001.toml");
+        let user = Path::new("scenes/m.toml");
+        let label = "dem.time_step=3e-5";
+        // the coordinator's form (file:line:column) and the nodes' (file: line n, column m)
+        assert_eq!(
+            in_user_terms("scenes/.study-m-run001.toml:7:3: coupling.window: bad", tmp, user, label),
+            "scenes/m.toml with --vary dem.time_step=3e-5: coupling.window: bad"
+        );
+        assert_eq!(
+            in_user_terms(
+                "node `dem` reported a Scene error: scenes/.study-m-run001.toml: line 8, column 1: unknown field `x`",
+                tmp,
+                user,
+                label
+            ),
+            "node `dem` reported a Scene error: scenes/m.toml with --vary dem.time_step=3e-5: unknown field `x`"
+        );
+        assert_eq!(in_user_terms("no path here", tmp, user, label), "no path here");
+        assert_eq!(value_text(&toml::Value::Float(3e-5)), "3e-5");
+        assert_eq!(value_text(&toml::Value::Float(0.5)), "0.5");
+    }
 
     #[test]
     fn variations_multiply_and_set_dotted_keys() {
