@@ -198,21 +198,52 @@ pub fn series_png(
     series: &[Series],
 ) -> anyhow::Result<()> {
     ensure_font()?;
-    let all = series.iter().flat_map(|(_, p)| p.iter());
+    let root = BitMapBackend::new(path, (1000, 600)).into_drawing_area();
+    series_chart(&root, title, x_label, y_label, series)?;
+    root.present().map_err(err)?;
+    Ok(())
+}
+
+/// Draws [`series_png`]'s chart on any backend.
+fn series_chart<DB: DrawingBackend>(
+    root: &DrawingArea<DB, plotters::coord::Shift>,
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    series: &[Series],
+) -> anyhow::Result<()> {
+    // positive values spanning more than three decades (a kinetic energy settling) are drawn
+    // on a log axis: log10 of the values on a linear axis, labelled with the values
+    let log_y = uses_log_axis(series);
+    let series: Vec<Series> = if log_y {
+        series
+            .iter()
+            .map(|(n, p)| (n.clone(), p.iter().map(|&(x, y)| (x, y.log10())).collect()))
+            .collect()
+    } else {
+        series.to_vec()
+    };
+    let y_label = if log_y {
+        format!("{y_label} (log scale)")
+    } else {
+        y_label.to_string()
+    };
     let (mut xlo, mut xhi, mut ylo, mut yhi) = (
         f64::INFINITY,
         f64::NEG_INFINITY,
         f64::INFINITY,
         f64::NEG_INFINITY,
     );
-    for &(x, y) in all {
+    for &(x, y) in series.iter().flat_map(|(_, p)| p.iter()) {
         xlo = xlo.min(x);
         xhi = xhi.max(x);
         ylo = ylo.min(y);
         yhi = yhi.max(y);
     }
     if xhi.partial_cmp(&xlo) != Some(std::cmp::Ordering::Greater) {
-        xhi = xlo + 1.0;
+        // one point (or all at one x): centre it
+        let half = 0.5 * xlo.abs().max(1e-12);
+        (xlo, xhi) = (xlo - half, xlo + half);
     }
     let pad = if yhi > ylo {
         0.05 * (yhi - ylo)
@@ -220,20 +251,26 @@ pub fn series_png(
         0.5 * yhi.abs().max(1e-12)
     };
     let (ylo, yhi) = (ylo - pad, yhi + pad);
-    let root = BitMapBackend::new(path, (1000, 600)).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;
-    let mut chart = ChartBuilder::on(&root)
+    let mut chart = ChartBuilder::on(root)
         .caption(title, ("sans-serif", 20))
         .margin(16)
         .x_label_area_size(48)
         .y_label_area_size(80)
         .build_cartesian_2d(xlo..xhi, ylo..yhi)
         .map_err(err)?;
+    let y_tick = |y: &f64| {
+        if log_y {
+            format!("{:.0e}", 10f64.powf(*y))
+        } else {
+            tick(*y)
+        }
+    };
     chart
         .configure_mesh()
         .x_desc(x_label)
         .y_desc(y_label)
-        .y_label_formatter(&|y| tick(*y))
+        .y_label_formatter(&y_tick)
         .draw()
         .map_err(err)?;
     for (i, (name, pts)) in series.iter().enumerate() {
@@ -243,10 +280,27 @@ pub fn series_png(
             .map_err(err)?
             .label(name.as_str())
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], c.stroke_width(2)));
+        // few points: each is marked (a single one draws no line)
+        if pts.len() <= MARKED_POINTS {
+            chart
+                .draw_series(pts.iter().map(|&p| Circle::new(p, 4, c.filled())))
+                .map_err(err)?;
+        }
     }
     legend(&mut chart)?;
-    root.present().map_err(err)?;
     Ok(())
+}
+
+/// Series of at most this many points get a marker on each point.
+const MARKED_POINTS: usize = 30;
+
+/// Whether [`series_png`] draws `series` on a log y axis (for tests and captions).
+pub fn uses_log_axis(series: &[Series]) -> bool {
+    let mut pts = series.iter().flat_map(|(_, p)| p.iter());
+    let (lo, hi) = pts
+        .clone()
+        .fold((f64::INFINITY, 0.0f64), |(l, h), p| (l.min(p.1), h.max(p.1)));
+    pts.all(|p| p.1 > 0.0) && hi / lo > 1e3
 }
 
 /// How the columns of one output CSV become plots.
@@ -617,6 +671,43 @@ mod tests {
         // nothing to plot: no files, no error
         let empty = tempfile::tempdir().unwrap();
         assert!(run_plots(empty.path()).unwrap().is_empty());
+    }
+
+    /// Pixels of the first series' colour in the middle of a 1000×600 rendering of `series`.
+    fn drawn_in_the_middle(series: &[Series]) -> usize {
+        ensure_font().unwrap();
+        let mut buf = vec![0u8; 1000 * 600 * 3];
+        {
+            let root = BitMapBackend::with_buffer(&mut buf, (1000, 600)).into_drawing_area();
+            series_chart(&root, "t", "time (s)", "y", series).unwrap();
+            root.present().unwrap();
+        }
+        let c = PALETTE[0];
+        (200..450)
+            .flat_map(|y| (300..700).map(move |x| (x, y)))
+            .filter(|&(x, y)| {
+                let i = 3 * (y * 1000 + x);
+                buf[i..i + 3] == [c.0, c.1, c.2]
+            })
+            .count()
+    }
+
+    #[test]
+    fn a_single_point_is_drawn_and_decades_go_on_a_log_axis() {
+        // one row (a one-way run's single window) used to draw nothing at all
+        let one = vec![("uz".to_string(), vec![(0.5, -7.0e-7)])];
+        assert!(drawn_in_the_middle(&one) > 20);
+        // a settling kinetic energy over eight decades: log axis; a sign change: linear
+        let ke = vec![(
+            "ke".to_string(),
+            (0..50).map(|i| (i as f64, 10f64.powi(-(i as i32) / 6))).collect(),
+        )];
+        assert!(uses_log_axis(&ke));
+        assert!(drawn_in_the_middle(&ke) > 20);
+        let signed = vec![("u".to_string(), vec![(0.0, -1.0), (1.0, 1e-6)])];
+        assert!(!uses_log_axis(&signed));
+        let flat = vec![("u".to_string(), vec![(0.0, 1.0), (1.0, 2.0)])];
+        assert!(!uses_log_axis(&flat));
     }
 
     #[test]
