@@ -241,8 +241,8 @@ fn series_chart<DB: DrawingBackend>(
         yhi = yhi.max(y);
     }
     if xhi.partial_cmp(&xlo) != Some(std::cmp::Ordering::Greater) {
-        // one point (or all at one x): centre it
-        let half = 0.5 * xlo.abs().max(1e-12);
+        // one point (or all at one x): centre it (a static solve at t = 0: ±1)
+        let half = if xlo == 0.0 { 1.0 } else { 0.5 * xlo.abs() };
         (xlo, xhi) = (xlo - half, xlo + half);
     }
     let pad = if yhi > ylo {
@@ -271,6 +271,7 @@ fn series_chart<DB: DrawingBackend>(
         .x_desc(x_label)
         .y_desc(y_label)
         .y_label_formatter(&y_tick)
+        .x_label_formatter(&|x| tick(*x))
         .draw()
         .map_err(err)?;
     for (i, (name, pts)) in series.iter().enumerate() {

@@ -492,6 +492,17 @@ impl Run<'_> {
                     Action::Send(role, body) => self.link.send(&role.to_string(), body).await?,
                     Action::Finish { reason } => {
                         tracing::info!("{reason}");
+                        if let (Some(e), Some(limit)) =
+                            (scheduler.unsettled_kinetic_energy, scene.steady_kinetic_energy)
+                        {
+                            let w = format!(
+                                "one-way: the DEM had not settled by end_time = {} (kinetic energy {e:.3e} J, steady below {limit:.3e} J for {} windows): the static FEM solve used the forces of a moving bed; give it a longer end_time",
+                                crate::units::format_seconds(scene.end_time),
+                                scene.steady_windows
+                            );
+                            tracing::warn!("{w}");
+                            self.summary.warnings.push(w);
+                        }
                         bar.finish_and_clear();
                         csv.flush()?;
                         return Ok(());

@@ -90,6 +90,10 @@ pub struct Scheduler {
     pending: BTreeSet<Role>,
     /// Consecutive windows with the DEM below the steady kinetic energy.
     calm_windows: u32,
+    /// One-way: the DEM was still moving when the end time forced the static solve (its
+    /// kinetic energy then, J): the run says so instead of passing the forces off as settled.
+    #[serde(default)]
+    pub unsettled_kinetic_energy: Option<f64>,
 }
 
 impl Scheduler {
@@ -117,6 +121,7 @@ impl Scheduler {
             window: 0,
             pending: BTreeSet::new(),
             calm_windows: 0,
+            unsettled_kinetic_energy: None,
         })
     }
 
@@ -299,6 +304,9 @@ impl Scheduler {
             self.calm_windows = if calm { self.calm_windows + 1 } else { 0 };
             let steady = self.calm_windows >= self.cfg.steady_windows;
             if steady || last {
+                if !steady && self.cfg.steady_kinetic_energy.is_some() {
+                    self.unsettled_kinetic_energy = Some(kinetic_energy.unwrap_or(f64::NAN));
+                }
                 // Ullrich ch. 4: the settled DEM forces load a static FEM solve.
                 self.phase = Phase::OneWaySolve;
                 self.pending = [Role::Fem].into();
@@ -462,6 +470,23 @@ mod tests {
         );
         let a = s.on_window_done(Role::Fem, 4, None).unwrap();
         assert!(matches!(a[0], Action::Finish { .. }));
+    }
+
+    #[test]
+    fn one_way_says_when_the_end_time_forced_the_solve_on_a_moving_bed() {
+        let mut s = Scheduler::new(cfg(ScheduleKind::OneWay, 3)).unwrap();
+        s.start();
+        s.on_window_done(Role::Dem, 0, Some(1.0)).unwrap();
+        s.on_window_done(Role::Dem, 1, Some(1e-7)).unwrap();
+        let a = s.on_window_done(Role::Dem, 2, Some(1e-3)).unwrap();
+        assert_eq!(advance(&a[1]).1.static_solve, true);
+        assert_eq!(s.unsettled_kinetic_energy, Some(1e-3));
+        // settled in time: nothing to say
+        let mut s = Scheduler::new(cfg(ScheduleKind::OneWay, 100)).unwrap();
+        s.start();
+        s.on_window_done(Role::Dem, 0, Some(1e-7)).unwrap();
+        s.on_window_done(Role::Dem, 1, Some(1e-7)).unwrap();
+        assert_eq!(s.unsettled_kinetic_energy, None);
     }
 
     #[test]

@@ -21,7 +21,7 @@ fn beam_coupled_vs_pure_fem(mass: f64) -> (f64, f64) {
     let dir = tempfile::tempdir().unwrap();
     // one layer of 640 spheres r = 6.25 mm: density for the requested total mass
     let volume = 640.0 * 4.0 / 3.0 * std::f64::consts::PI * 0.00625f64.powi(3);
-    let text = scene_text("beam.toml").replace(
+    let text = scene_text("beam-layer.toml").replace(
         "density = 77922.26",
         &format!("density = {}", mass / volume),
     );
@@ -83,6 +83,48 @@ fn beam_72_kg_coupled_within_1_percent_of_pure_fem() {
         "pure FEM {pure}"
     );
     assert!(rel < 0.01, "{rel}");
+}
+
+/// The default scene (the README's first command): a random bed of 51 kg settles in several
+/// layers, loads the beam, and the summary holds a real coupled-vs-pressure difference (not
+/// round-off); the plots show data and ParaView gets a time series of every output.
+#[test]
+fn the_default_scene_settles_a_random_bed_and_shows_the_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("beam");
+    let mut c = cosim();
+    c.args(["run", "scenes/beam.toml", "--no-progress", "--out"])
+        .arg(&out);
+    let o = run(c);
+    assert!(o.status.success());
+    let s = cosim_tests::summary(&out);
+    assert_eq!(s["status"], "completed");
+    assert!(
+        s["warnings"].as_array().unwrap().is_empty(),
+        "settled in time, no warning: {s}"
+    );
+    let fz = f(&s, "fem.interface_force.z");
+    assert!((fz + 51.0 * 9.81).abs() < 0.005 * 51.0 * 9.81, "{fz} N");
+    // several layers, randomly packed
+    assert!(f(&s, "dem.particles") > 1000.0);
+    let pure = f(&s, "fem.pressure_equivalent.probe.midspan.uz");
+    assert!((pure + 7.05e-7).abs() < 0.005 * 7.05e-7, "pure FEM {pure}");
+    let rel = f(&s, "fem.coupled_vs_pressure.probe.midspan.uz");
+    eprintln!("default beam: coupled vs pressure {:.3} % (seed 0.38 %)", 100.0 * rel);
+    assert!(rel.abs() > 1e-4 && rel.abs() < 0.03, "{rel}");
+    for png in ["plots/probe.midspan.png", "plots/kinetic_energy.png"] {
+        let bytes = std::fs::read(out.join(png)).unwrap();
+        assert_eq!(&bytes[..4], b"\x89PNG", "{png}");
+    }
+    let pvd = std::fs::read_to_string(out.join("dem/particles.pvd")).unwrap();
+    assert!(pvd.matches("<DataSet").count() >= 5, "{pvd}");
+    assert!(out.join("fem/fem.pvd").exists());
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let last = stdout.lines().last().unwrap_or_default();
+    assert!(
+        last.starts_with("look at:") && last.contains("particles.pvd"),
+        "{stdout}"
+    );
 }
 
 /// Rows of a trace CSV: window index → values.

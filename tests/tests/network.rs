@@ -314,7 +314,7 @@ fn beam_over_three_network_namespaces_matches_the_local_run_bitwise() {
         &net,
         dir.path(),
         &format!("beam-netns-{tag}"),
-        &root().join("scenes/beam.toml"),
+        &root().join("scenes/beam-layer.toml"),
         &out,
     );
     let o = coordinator.wait_with_output().unwrap();
@@ -323,7 +323,7 @@ fn beam_over_three_network_namespaces_matches_the_local_run_bitwise() {
 
     let local = dir.path().join("local");
     let mut c = cosim();
-    c.args(["run", "scenes/beam.toml", "--no-progress", "--out"])
+    c.args(["run", "scenes/beam-layer.toml", "--no-progress", "--out"])
         .arg(&local);
     assert!(run(c).status.success());
     let (a, b) = (summary(&out), summary(&local));
