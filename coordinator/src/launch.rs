@@ -94,7 +94,10 @@ impl NodeProcess {
         let child = tokio::process::Command::new(&program)
             .args(&args)
             // the node ends when this process is gone, whatever the network says
-            .env(proto::node::COORDINATOR_PID_ENV, std::process::id().to_string())
+            .env(
+                proto::node::COORDINATOR_PID_ENV,
+                std::process::id().to_string(),
+            )
             // its own process group: a Ctrl-C in the terminal reaches the coordinator only,
             // which then stops the node cleanly (crate::interrupt)
             .process_group(0)

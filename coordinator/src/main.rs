@@ -299,6 +299,18 @@ fn main() -> ExitCode {
                 let scene = Scene::parse(&record.scene_file, text)?;
                 let (dir, state) = coordinator::checkpoint::latest(&out_dir)?;
                 coordinator::checkpoint::check_belongs(&dir, &state, &scene.name, &scene.text)?;
+                if let Some(done) = std::fs::read_to_string(out_dir.join("summary.json"))
+                    .ok()
+                    .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+                    .filter(|s| s["status"] == "completed")
+                {
+                    anyhow::bail!(
+                        "{}: the run of scene `{}` completed; there is nothing to resume (run it again with `cosim run <scene> --out {} --overwrite`)",
+                        out_dir.display(),
+                        done["scene"].as_str().unwrap_or("?"),
+                        out_dir.display()
+                    );
+                }
                 coordinator::interrupt::install()?;
                 eprintln!(
                     "resuming {} after window {} from {}",

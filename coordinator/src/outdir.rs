@@ -105,9 +105,8 @@ pub fn prepare_new(lock: &FolderLock, overwrite: bool) -> anyhow::Result<()> {
     if found.is_empty() {
         return Ok(());
     }
-    let is_run_folder = dir.join("run.json").exists()
-        || dir.join("summary.json").exists()
-        || lock.was_used;
+    let is_run_folder =
+        dir.join("run.json").exists() || dir.join("summary.json").exists() || lock.was_used;
     if !is_run_folder {
         bail!(
             "the output folder {} holds files that are not a cosim run's (e.g. {}): choose an empty or new folder with --out",
@@ -147,7 +146,10 @@ mod tests {
         // conflicts like another process would
         let e = lock(d.path(), "run of scene b").unwrap_err().to_string();
         assert!(e.contains("in use by another cosim process"), "{e}");
-        assert!(e.contains(&format!("{} (run of scene a)", std::process::id())), "{e}");
+        assert!(
+            e.contains(&format!("{} (run of scene a)", std::process::id())),
+            "{e}"
+        );
         drop(first);
         lock(d.path(), "run of scene b").unwrap();
     }

@@ -298,9 +298,9 @@ const MARKED_POINTS: usize = 30;
 /// Whether [`series_png`] draws `series` on a log y axis (for tests and captions).
 pub fn uses_log_axis(series: &[Series]) -> bool {
     let mut pts = series.iter().flat_map(|(_, p)| p.iter());
-    let (lo, hi) = pts
-        .clone()
-        .fold((f64::INFINITY, 0.0f64), |(l, h), p| (l.min(p.1), h.max(p.1)));
+    let (lo, hi) = pts.clone().fold((f64::INFINITY, 0.0f64), |(l, h), p| {
+        (l.min(p.1), h.max(p.1))
+    });
     pts.all(|p| p.1 > 0.0) && hi / lo > 1e3
 }
 
@@ -701,7 +701,9 @@ mod tests {
         // a settling kinetic energy over eight decades: log axis; a sign change: linear
         let ke = vec![(
             "ke".to_string(),
-            (0..50).map(|i| (i as f64, 10f64.powi(-(i as i32) / 6))).collect(),
+            (0..50i32)
+                .map(|i| (f64::from(i), 10f64.powi(-i / 6)))
+                .collect(),
         )];
         assert!(uses_log_axis(&ke));
         assert!(drawn_in_the_middle(&ke) > 20);

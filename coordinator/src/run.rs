@@ -492,9 +492,10 @@ impl Run<'_> {
                     Action::Send(role, body) => self.link.send(&role.to_string(), body).await?,
                     Action::Finish { reason } => {
                         tracing::info!("{reason}");
-                        if let (Some(e), Some(limit)) =
-                            (scheduler.unsettled_kinetic_energy, scene.steady_kinetic_energy)
-                        {
+                        if let (Some(e), Some(limit)) = (
+                            scheduler.unsettled_kinetic_energy,
+                            scene.steady_kinetic_energy,
+                        ) {
                             let w = format!(
                                 "one-way: the DEM had not settled by end_time = {} (kinetic energy {e:.3e} J, steady below {limit:.3e} J for {} windows): the static FEM solve used the forces of a moving bed; give it a longer end_time",
                                 crate::units::format_seconds(scene.end_time),
@@ -663,7 +664,8 @@ impl Run<'_> {
         let dir = crate::checkpoint::checkpoint_dir(&self.out_dir, window);
         self.snapshot_all(window, &dir, timeout).await?;
         self.summary.timing.windows_wall_s = self.windows_wall();
-        self.summary.timing.total_wall_s = self.total_wall_base + self.started.elapsed().as_secs_f64();
+        self.summary.timing.total_wall_s =
+            self.total_wall_base + self.started.elapsed().as_secs_f64();
         let state = crate::checkpoint::CheckpointState {
             window,
             scheduler: scheduler.clone(),

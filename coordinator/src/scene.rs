@@ -321,11 +321,15 @@ impl Scene {
         let windows = ratio.round();
         if (ratio - windows).abs() > 1e-9 * ratio.max(1.0) {
             let w = c.window.as_ref().expect("checked above");
-            return Err(err_at(w.span().start, "coupling.window", format!(
-                "end_time / window = {} / {} = {ratio:.6} is not a whole number of windows",
-                format_seconds(end_time),
-                format_seconds(window)
-            )));
+            return Err(err_at(
+                w.span().start,
+                "coupling.window",
+                format!(
+                    "end_time / window = {} / {} = {ratio:.6} is not a whole number of windows",
+                    format_seconds(end_time),
+                    format_seconds(window)
+                ),
+            ));
         }
         if windows > MAX_WINDOWS {
             let w = c.window.as_ref().expect("checked above");
@@ -507,7 +511,11 @@ mod tests {
     #[test]
     fn an_unreadable_file_is_named_without_a_line() {
         let e = Scene::load(Path::new("/nonexistent/s.toml")).unwrap_err();
-        assert!(e.to_string().starts_with("/nonexistent/s.toml: cannot read"), "{e}");
+        assert!(
+            e.to_string()
+                .starts_with("/nonexistent/s.toml: cannot read"),
+            "{e}"
+        );
     }
 
     #[test]

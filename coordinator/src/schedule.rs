@@ -479,7 +479,7 @@ mod tests {
         s.on_window_done(Role::Dem, 0, Some(1.0)).unwrap();
         s.on_window_done(Role::Dem, 1, Some(1e-7)).unwrap();
         let a = s.on_window_done(Role::Dem, 2, Some(1e-3)).unwrap();
-        assert_eq!(advance(&a[1]).1.static_solve, true);
+        assert!(advance(&a[1]).1.static_solve);
         assert_eq!(s.unsettled_kinetic_energy, Some(1e-3));
         // settled in time: nothing to say
         let mut s = Scheduler::new(cfg(ScheduleKind::OneWay, 100)).unwrap();

@@ -172,7 +172,12 @@ fn run_is_done(dir: &Path) -> bool {
     std::fs::read_to_string(dir.join("summary.json"))
         .ok()
         .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
-        .is_some_and(|s| matches!(s["status"].as_str(), Some("completed" | "unstable" | "failed")))
+        .is_some_and(|s| {
+            matches!(
+                s["status"].as_str(),
+                Some("completed" | "unstable" | "failed")
+            )
+        })
 }
 
 /// The message of an error found in a variant's scene text, in the user's terms: the
@@ -246,31 +251,25 @@ async fn validate_variants(
             .path
             .with_file_name(format!(".study-{}-{}.toml", scene.name, v.name));
         match Scene::parse(&tmp, v.text.clone()) {
-            Err(e) => errors.push(in_user_terms(
-                &e.to_string(),
-                &tmp,
-                &scene.path,
-                &v.label(),
-            )),
+            Err(e) => errors.push(in_user_terms(&e.to_string(), &tmp, &scene.path, &v.label())),
             Ok(s) => {
                 let t: toml::Table = toml::from_str(&v.text)?;
-                let key = format!(
-                    "{:?}{:?}{}",
-                    t.get("dem"),
-                    t.get("fem"),
-                    s.window.to_bits()
-                );
+                let key = format!("{:?}{:?}{}", t.get("dem"), t.get("fem"), s.window.to_bits());
                 if seen.insert(key) {
                     node_checks.push((v.clone(), s));
                 }
             }
         }
     }
-    let mut pending = node_checks.into_iter().collect::<std::collections::VecDeque<_>>();
+    let mut pending = node_checks
+        .into_iter()
+        .collect::<std::collections::VecDeque<_>>();
     let mut running = tokio::task::JoinSet::new();
     while !pending.is_empty() || !running.is_empty() {
         while running.len() < jobs {
-            let Some((v, s)) = pending.pop_front() else { break };
+            let Some((v, s)) = pending.pop_front() else {
+                break;
+            };
             let dir = out_dir.join(format!(".check-{}", v.name));
             let _ = std::fs::remove_dir_all(&dir);
             let user_scene = scene.path.clone();
@@ -287,8 +286,9 @@ async fn validate_variants(
                 let _ = std::fs::remove_file(&s.path);
                 let _ = std::fs::remove_dir_all(&dir);
                 anyhow::Ok(
-                    r.err()
-                        .map(|e| in_user_terms(&format!("{e:#}"), &s.path, &user_scene, &v.label())),
+                    r.err().map(|e| {
+                        in_user_terms(&format!("{e:#}"), &s.path, &user_scene, &v.label())
+                    }),
                 )
             });
         }
@@ -464,9 +464,10 @@ pub async fn run_study(
                 if let Err(e) = &r {
                     tracing::info!("{label}: {e:#}");
                 }
-                anyhow::Ok(r.err().and_then(|e| {
-                    e.downcast_ref::<crate::interrupt::Interrupted>().copied()
-                }))
+                anyhow::Ok(
+                    r.err()
+                        .and_then(|e| e.downcast_ref::<crate::interrupt::Interrupted>().copied()),
+                )
             });
         }
         tokio::select! {
@@ -854,7 +855,12 @@ mod tests {
         let label = "dem.time_step=3e-5";
         // the coordinator's form (file:line:column) and the nodes' (file: line n, column m)
         assert_eq!(
-            in_user_terms("scenes/.study-m-run001.toml:7:3: coupling.window: bad", tmp, user, label),
+            in_user_terms(
+                "scenes/.study-m-run001.toml:7:3: coupling.window: bad",
+                tmp,
+                user,
+                label
+            ),
             "scenes/m.toml with --vary dem.time_step=3e-5: coupling.window: bad"
         );
         assert_eq!(
@@ -866,7 +872,10 @@ mod tests {
             ),
             "node `dem` reported a Scene error: scenes/m.toml with --vary dem.time_step=3e-5: unknown field `x`"
         );
-        assert_eq!(in_user_terms("no path here", tmp, user, label), "no path here");
+        assert_eq!(
+            in_user_terms("no path here", tmp, user, label),
+            "no path here"
+        );
         assert_eq!(value_text(&toml::Value::Float(3e-5)), "3e-5");
         assert_eq!(value_text(&toml::Value::Float(0.5)), "0.5");
     }

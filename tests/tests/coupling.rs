@@ -110,7 +110,10 @@ fn the_default_scene_settles_a_random_bed_and_shows_the_run() {
     let pure = f(&s, "fem.pressure_equivalent.probe.midspan.uz");
     assert!((pure + 7.05e-7).abs() < 0.005 * 7.05e-7, "pure FEM {pure}");
     let rel = f(&s, "fem.coupled_vs_pressure.probe.midspan.uz");
-    eprintln!("default beam: coupled vs pressure {:.3} % (seed 0.38 %)", 100.0 * rel);
+    eprintln!(
+        "default beam: coupled vs pressure {:.3} % (seed 0.38 %)",
+        100.0 * rel
+    );
     assert!(rel.abs() > 1e-4 && rel.abs() < 0.03, "{rel}");
     for png in ["plots/probe.midspan.png", "plots/kinetic_energy.png"] {
         let bytes = std::fs::read(out.join(png)).unwrap();

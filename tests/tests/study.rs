@@ -69,7 +69,9 @@ fn study_sweeps_and_resumes() {
     let text = std::fs::read_to_string(&s).unwrap();
     std::fs::write(&s, text.replace("\"completed\"", "\"interrupted\"")).unwrap();
     assert!(study().status.success());
-    assert!(std::fs::read_to_string(&s).unwrap().contains("\"completed\""));
+    assert!(std::fs::read_to_string(&s)
+        .unwrap()
+        .contains("\"completed\""));
 }
 
 #[test]
@@ -85,7 +87,10 @@ fn an_invalid_variant_refuses_the_study_before_any_run() {
             && err.contains("not a whole multiple of the DEM time step Δt^D = 30 µs"),
         "{err}"
     );
-    assert!(!err.contains(".study-"), "no temporary file is named: {err}");
+    assert!(
+        !err.contains(".study-"),
+        "no temporary file is named: {err}"
+    );
     assert!(!out.join("run000").exists(), "nothing was run");
     // a misspelt key: every variant is invalid, the key is named
     let mut c = cosim();

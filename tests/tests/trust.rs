@@ -13,11 +13,11 @@ use cosim_tests::{bin, cosim, pid_of, root, run, summary, wait_for_windows, writ
 fn minimal(dir: &Path, name: &str, end_time: &str, output: &str) -> std::path::PathBuf {
     let text = std::fs::read_to_string(root().join("scenes/minimal.toml"))
         .unwrap()
-        .replace("end_time = \"0.2 s\"", &format!("end_time = \"{end_time}\""))
         .replace(
-            "[coupling]",
-            &format!("[output]\n{output}\n\n[coupling]"),
-        );
+            "end_time = \"0.2 s\"",
+            &format!("end_time = \"{end_time}\""),
+        )
+        .replace("[coupling]", &format!("[output]\n{output}\n\n[coupling]"));
     write_scene(dir, name, &text)
 }
 
@@ -90,15 +90,22 @@ fn a_second_run_into_a_folder_is_refused_until_overwrite_which_starts_it_fresh()
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(
-        err.contains("a run of scene `minimal` (status `completed`)") && err.contains("--overwrite"),
+        err.contains("a run of scene `minimal` (status `completed`)")
+            && err.contains("--overwrite"),
         "{err}"
     );
     // nothing was touched
-    assert_eq!(std::fs::read_to_string(out.join("summary.json")).unwrap(), first);
+    assert_eq!(
+        std::fs::read_to_string(out.join("summary.json")).unwrap(),
+        first
+    );
     assert!(out.join("fem/fem_probes.csv").exists());
 
     assert!(go(&["--overwrite"]).status.success());
-    assert!(!out.join("fem").exists(), "the earlier run's files are gone");
+    assert!(
+        !out.join("fem").exists(),
+        "the earlier run's files are gone"
+    );
     let csv = std::fs::read_to_string(out.join("dem/dem_timeseries.csv")).unwrap();
     assert_eq!(
         csv.lines().filter(|l| l.starts_with("time")).count(),
@@ -111,7 +118,10 @@ fn a_second_run_into_a_folder_is_refused_until_overwrite_which_starts_it_fresh()
         .map(|l| l.split(',').next().unwrap().parse().unwrap())
         .collect();
     assert_eq!(times.len(), 5, "one row per window: {csv}");
-    assert!(times.windows(2).all(|w| w[1] > w[0]), "time runs forward: {csv}");
+    assert!(
+        times.windows(2).all(|w| w[1] > w[0]),
+        "time runs forward: {csv}"
+    );
     assert_eq!(summary(&out)["status"], "completed");
 
     // a folder of the user's own files is never cleared
@@ -126,7 +136,10 @@ fn a_second_run_into_a_folder_is_refused_until_overwrite_which_starts_it_fresh()
     let o = run(c);
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("not a cosim run's"));
-    assert_eq!(std::fs::read_to_string(mine.join("notes.txt")).unwrap(), "keep");
+    assert_eq!(
+        std::fs::read_to_string(mine.join("notes.txt")).unwrap(),
+        "keep"
+    );
 }
 
 #[test]
@@ -170,7 +183,12 @@ fn a_run_holds_its_folder_and_sigterm_stops_it_cleanly() {
 #[test]
 fn ctrl_c_checkpoints_and_resume_continues_bitwise() {
     let dir = tempfile::tempdir().unwrap();
-    let scene = minimal(dir.path(), "ck.toml", "1 s", "checkpoint_every = 1000\nfinal_state = true");
+    let scene = minimal(
+        dir.path(),
+        "ck.toml",
+        "1 s",
+        "checkpoint_every = 1000\nfinal_state = true",
+    );
     let whole = dir.path().join("whole");
     let mut c = cosim();
     c.arg("run")
@@ -211,7 +229,10 @@ fn ctrl_c_checkpoints_and_resume_continues_bitwise() {
         "the resumed run's total wall time holds its parts: {t}"
     );
     let state = |d: &Path| std::fs::read(d.join("final/dem.state")).unwrap();
-    assert!(state(&whole) == state(&broken), "resumed final state differs");
+    assert!(
+        state(&whole) == state(&broken),
+        "resumed final state differs"
+    );
     for csv in ["windows.csv", "dem/dem_timeseries.csv"] {
         let rows = |d: &Path| {
             std::fs::read_to_string(d.join(csv))
@@ -239,7 +260,10 @@ fn resume_refuses_a_checkpoint_of_another_scene_and_touches_nothing() {
     let scene = minimal(dir.path(), "a.toml", "0.1 s", "checkpoint_every = 3");
     let out = dir.path().join("out");
     let mut c = cosim();
-    c.arg("run").arg(&scene).args(["--no-progress", "--out"]).arg(&out);
+    c.arg("run")
+        .arg(&scene)
+        .args(["--no-progress", "--out"])
+        .arg(&out);
     assert!(run(c).status.success());
     // the folder's scene is now another one (as an earlier version of cosim could leave it)
     let other = std::fs::read_to_string(&scene)
@@ -255,6 +279,18 @@ fn resume_refuses_a_checkpoint_of_another_scene_and_touches_nothing() {
     assert!(
         err.contains("written by a run of scene `minimal`") && err.contains("`other`"),
         "{err}"
+    );
+    assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), before);
+    // the folder's own scene: the run completed, nothing to resume
+    std::fs::write(out.join("scene.toml"), std::fs::read(&scene).unwrap()).unwrap();
+    let mut c = cosim();
+    c.arg("resume").arg(&out).arg("--no-progress");
+    let o = run(c);
+    assert!(!o.status.success());
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("completed; there is nothing to resume"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
     );
     assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), before);
     // the same name with another text is refused too
@@ -292,7 +328,10 @@ fn a_node_ends_when_its_coordinator_process_is_gone() {
     let (code, err) = exit_with(node, Duration::from_secs(10));
     assert_eq!(code, 3, "{err}");
     assert!(
-        err.contains(&format!("the coordinator (process {}) is gone", parent.id())),
+        err.contains(&format!(
+            "the coordinator (process {}) is gone",
+            parent.id()
+        )),
         "{err}"
     );
 }
