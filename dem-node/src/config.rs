@@ -5,6 +5,7 @@
 //! and column of the offending key or value, and value checks name the full field path, e.g.
 //! `dem.materials.wheat.poisson_ratio`.
 
+use crate::resources::format_number;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::fmt;
@@ -627,10 +628,16 @@ impl DemConfig {
         let mut c = Check { errors: Vec::new() };
         c.positive(p(&["dem", "time_step"]), self.time_step);
         c.finite3(p(&["dem", "gravity"]), &self.gravity);
-        if !(self.rayleigh_fraction > 0.0 && self.rayleigh_fraction.is_finite()) {
+        if !(self.rayleigh_fraction > 0.0 && self.rayleigh_fraction <= 1.0) {
+            // above 1 the check would pass time steps beyond the Rayleigh step itself; that
+            // is what `allow_large_time_step` is for
             c.fail(
                 p(&["dem", "rayleigh_fraction"]),
-                format!("must be > 0, got {}", self.rayleigh_fraction),
+                format!(
+                    "must satisfy 0 < fraction <= 1 (use allow_large_time_step to run beyond \
+                     the Rayleigh step), got {}",
+                    self.rayleigh_fraction
+                ),
             );
         }
         if let Some(s) = self.skin {
@@ -645,8 +652,19 @@ impl DemConfig {
                 ),
             );
         }
-        if self.threads == Some(0) {
-            c.fail(p(&["dem", "threads"]), "must be >= 1".into());
+        match self.threads {
+            Some(0) => c.fail(p(&["dem", "threads"]), "must be >= 1".into()),
+            Some(n) if n > crate::resources::max_threads() => c.fail(
+                p(&["dem", "threads"]),
+                format!(
+                    "{n} threads is more than this machine can use: at most {} (4 x the {} \
+                     cores available, never more than {})",
+                    crate::resources::max_threads(),
+                    std::thread::available_parallelism().map_or(1, |n| n.get()),
+                    crate::resources::MAX_THREADS
+                ),
+            ),
+            _ => {}
         }
         if self.materials.is_empty() {
             c.fail(
@@ -721,16 +739,21 @@ impl DemConfig {
                     if !(spacing.is_finite() && *spacing >= 2.0 * radius) {
                         c.fail(
                             f("spacing"),
-                            format!("must be >= 2 * radius = {}, got {spacing}", 2.0 * radius),
+                            format!(
+                                "must be >= 2 * radius = {} m, got {}",
+                                format_number(2.0 * radius),
+                                format_number(*spacing)
+                            ),
                         );
                     } else if *jitter > 0.0 && 2.0 * jitter > spacing - 2.0 * radius {
                         // neighbours along x or y may approach each other by 2·jitter
                         c.fail(
                             f("jitter"),
                             format!(
-                                "must be <= (spacing - 2 * radius) / 2 = {} so that jittered \
-                                 spheres cannot overlap, got {jitter}",
-                                (spacing - 2.0 * radius) / 2.0
+                                "must be <= (spacing - 2 * radius) / 2 = {} m so that jittered \
+                                 spheres cannot overlap, got {}",
+                                format_number((spacing - 2.0 * radius) / 2.0),
+                                format_number(*jitter)
                             ),
                         );
                     }
@@ -757,6 +780,7 @@ impl DemConfig {
                     c.finite3(f("velocity"), velocity);
                     c.box_max(f("max"), min, max);
                     match (count, mass) {
+                        (Some(0), None) => c.fail(f("count"), "must be >= 1".into()),
                         (Some(_), None) => {}
                         (None, Some(m)) => c.positive(f("mass"), *m),
                         _ => c.fail(f("count"), "give exactly one of `count` and `mass`".into()),
@@ -794,10 +818,20 @@ impl DemConfig {
                                     "needs >= 2 entries and as many as `radius`".into(),
                                 );
                             } else {
-                                if radius[0] <= 0.0 || radius.windows(2).any(|w| w[1] < w[0]) {
-                                    c.fail(d("radius"), "must be > 0 and non-decreasing".into());
+                                if radius[0].partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
+                                    || radius.iter().any(|r| !r.is_finite())
+                                    || radius.windows(2).any(|w| w[1] < w[0])
+                                {
+                                    c.fail(
+                                        d("radius"),
+                                        format!(
+                                            "must be finite, > 0 and non-decreasing, got \
+                                             {radius:?}"
+                                        ),
+                                    );
                                 }
                                 if cumulative[0] != 0.0
+                                    || cumulative.iter().any(|c| !c.is_finite())
                                     || *cumulative.last().unwrap() != 1.0
                                     || cumulative.windows(2).any(|w| w[1] < w[0])
                                 {
@@ -852,6 +886,8 @@ impl DemConfig {
                     ..
                 } => {
                     c.material(f("material"), material, self);
+                    c.finite3(f("min"), min);
+                    c.finite3(f("max"), max);
                     c.box_max(f("max"), min, max);
                     for o in open {
                         if !["-x", "+x", "-y", "+y", "-z", "+z"].contains(&o.as_str()) {
@@ -925,6 +961,7 @@ impl DemConfig {
                 c.non_negative(f("remove_at"), t);
             }
         }
+        self.check_particle_counts(&mut c);
         let mut names: Vec<&str> = Vec::new();
         for (k, s) in self.sinks.iter().enumerate() {
             c.box_max(pi(&["dem", "sinks"], k, &["max"]), &s.min, &s.max);
@@ -1008,6 +1045,103 @@ impl DemConfig {
     }
 }
 
+impl DemConfig {
+    /// The particle counts of the sources, checked before anything is allocated: overflow of
+    /// a lattice's `nx · ny · nz`, and the memory the particles need (≈
+    /// [`crate::resources::BYTES_PER_PARTICLE`] each, summed over the sources in order)
+    /// against the memory available. A `mass` fill is counted at its fewest particles (all of
+    /// the largest radius), so a refusal is certain, not a guess. File sources are counted
+    /// when they are read (`Engine::from_config`).
+    fn check_particle_counts(&self, c: &mut Check) {
+        use crate::resources::{check_memory, BYTES_PER_PARTICLE};
+        let available = crate::resources::available_memory();
+        let mut total = 0.0_f64;
+        for (k, src) in self.particles.iter().enumerate() {
+            let f = |field: &str| pi(&["dem", "particles"], k, &[field]);
+            let (field, count, how) = match src {
+                ParticleSource::List { spheres, .. } => (
+                    f("spheres"),
+                    spheres.len() as f64,
+                    (String::new(), String::new()),
+                ),
+                ParticleSource::Lattice { count, .. } => {
+                    let n = count
+                        .iter()
+                        .try_fold(1_u64, |a, &n| a.checked_mul(u64::try_from(n).ok()?));
+                    match n {
+                        Some(n) => (
+                            f("count"),
+                            n as f64,
+                            (format!("{count:?} = "), String::new()),
+                        ),
+                        None => {
+                            c.fail(
+                                f("count"),
+                                format!(
+                                    "{count:?} is more than {} particles (the product \
+                                     overflows)",
+                                    format_number(u64::MAX as f64)
+                                ),
+                            );
+                            continue;
+                        }
+                    }
+                }
+                ParticleSource::Fill { count: Some(n), .. } => {
+                    (f("count"), *n as f64, (String::new(), String::new()))
+                }
+                ParticleSource::Fill {
+                    mass: Some(mass),
+                    distribution,
+                    material,
+                    ..
+                } => {
+                    let r_max = match distribution {
+                        SizeDistribution::Constant { radius } => *radius,
+                        SizeDistribution::Uniform { max, .. }
+                        | SizeDistribution::Normal { max, .. } => *max,
+                        SizeDistribution::Table { radius, .. } => {
+                            radius.last().copied().unwrap_or(f64::NAN)
+                        }
+                    };
+                    let Some(rho) = self.materials.get(material).map(|m| m.density) else {
+                        continue;
+                    };
+                    let largest = rho * 4.0 / 3.0 * std::f64::consts::PI * r_max.powi(3);
+                    let n = (mass / largest).ceil();
+                    if !(n.is_finite() && n >= 0.0) {
+                        continue; // the ranges are reported above
+                    }
+                    (
+                        f("mass"),
+                        n,
+                        (
+                            "at least ".to_string(),
+                            format!(" (all of the largest radius, {} m)", format_number(r_max)),
+                        ),
+                    )
+                }
+                ParticleSource::Fill { .. } | ParticleSource::File { .. } => continue,
+            };
+            total += count;
+            let what = format!(
+                "{}{} particles{}{}",
+                how.0,
+                format_number(count),
+                how.1,
+                if total > count {
+                    format!(" ({} with the sources before)", format_number(total))
+                } else {
+                    String::new()
+                }
+            );
+            if let Err(m) = check_memory(&what, total * BYTES_PER_PARTICLE as f64, available) {
+                c.fail(field, m);
+            }
+        }
+    }
+}
+
 #[derive(Deserialize)]
 struct SceneDoc {
     #[serde(default)]
@@ -1061,6 +1195,76 @@ fn locate(text: &str, path: &[Seg]) -> Option<std::ops::Range<usize>> {
         }
     }
     Some(best)
+}
+
+/// The string value a serde message quotes (`invalid type: string "big", expected f64`).
+fn quoted_value(message: &str) -> Option<String> {
+    let rest = message.split_once("string \"")?.1;
+    Some(rest.split('"').next()?.to_string())
+}
+
+/// `"3 kg"`, `"0.1 ms"`: a number followed by a unit, as other tables of a scene accept.
+fn looks_like_quantity(value: &str) -> bool {
+    let mut parts = value.split_whitespace();
+    matches!(
+        (parts.next().map(str::parse::<f64>), parts.next(), parts.next()),
+        (Some(Ok(_)), Some(unit), None) if unit.chars().all(|c| c.is_alphabetic() || c == '/')
+    )
+}
+
+/// The field path (`dem.particles[0].radius`) and byte offset of the value an error span
+/// points at: the leaf whose string equals the value the message quotes, inside the span
+/// (internally tagged tables report the span of the whole table), else the innermost key or
+/// value containing the span's start. Only paths under `dem` count.
+fn field_at(text: &str, span: std::ops::Range<usize>, message: &str) -> Option<(String, usize)> {
+    use toml::de::{DeTable, DeValue};
+    fn walk<'a>(
+        v: &'a toml::Spanned<DeValue<'a>>,
+        path: String,
+        key_start: usize,
+        out: &mut Vec<(String, usize, std::ops::Range<usize>, &'a DeValue<'a>)>,
+    ) {
+        out.push((path.clone(), key_start, v.span(), v.get_ref()));
+        match v.get_ref() {
+            DeValue::Table(t) => {
+                for (k, child) in t.iter() {
+                    let p = format!("{path}.{}", k.get_ref());
+                    walk(child, p, k.span().start, out);
+                }
+            }
+            DeValue::Array(a) => {
+                for (i, child) in a.iter().enumerate() {
+                    walk(child, format!("{path}[{i}]"), child.span().start, out);
+                }
+            }
+            _ => {}
+        }
+    }
+    let doc = DeTable::parse(text).ok()?;
+    let dem = doc
+        .get_ref()
+        .iter()
+        .find(|(k, _)| k.get_ref().as_ref() == "dem")?;
+    let mut nodes = Vec::new();
+    walk(dem.1, "dem".into(), dem.0.span().start, &mut nodes);
+    // innermost: the last node (depth-first order) whose key or value contains the start
+    let (inner, at) = nodes
+        .iter()
+        .rev()
+        .find(|(_, key, s, _)| s.contains(&span.start) || *key == span.start)
+        .map(|(path, key, _, _)| (path.clone(), *key))?;
+    // inside it, the value the message quotes
+    if let Some(value) = quoted_value(message) {
+        let hit = nodes.iter().find(|(path, _, _, v)| {
+            path.starts_with(&inner)
+                && matches!(v, DeValue::String(x) if x.as_ref() == value)
+                && path.rsplit('.').next() != Some("kind")
+        });
+        if let Some((path, key, _, _)) = hit {
+            return Some((path.clone(), *key));
+        }
+    }
+    Some((inner, at))
 }
 
 /// Byte offset of a line `name = ...` after `from` and before the next table header.
@@ -1117,6 +1321,7 @@ fn find_string_value_in_table(text: &str, from: usize, value: &str) -> Option<us
 pub fn parse_scene_section(text: &str) -> Result<Option<DemConfig>, SceneError> {
     let doc: SceneDoc = toml::from_str(text).map_err(|e| {
         let mut start = e.span().map(|s| s.start).unwrap_or(0);
+        let reported = start;
         // Internally tagged tables (`kind = ...`) report the span of the whole table; point at
         // the unknown key itself when it is found inside that table.
         if let Some(name) = e
@@ -1138,12 +1343,34 @@ pub fn parse_scene_section(text: &str) -> Result<Option<DemConfig>, SceneError> 
                 start = off;
             }
         }
+        let mut message = e.message().trim().to_string();
+        // a wrong type or value (`radius = "big"`) names no field: find it in the document
+        if !message.starts_with("unknown field") {
+            // already at the offending value (an unknown variant): name its field, stay there
+            let moved = start != reported;
+            let span = if moved {
+                start..start + 1
+            } else {
+                e.span().unwrap_or(start..start)
+            };
+            if let Some((path, at)) = field_at(text, span, &message) {
+                if !moved {
+                    start = at;
+                }
+                message = format!("{path}: {message}");
+            }
+        }
+        if quoted_value(&message).is_some_and(|v| looks_like_quantity(&v)) {
+            message.push_str(
+                "; [dem] takes plain numbers in SI units (m, s, kg, Pa), not strings with a unit",
+            );
+        }
         let (line, column) = line_column(text, start);
         // toml's message names the offending key, e.g. "unknown field `radiuss`, expected ...".
         SceneError {
             line,
             column,
-            message: e.message().trim().to_string(),
+            message,
         }
     })?;
     let Some(cfg) = doc.dem else { return Ok(None) };

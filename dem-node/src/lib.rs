@@ -26,6 +26,7 @@ pub mod output;
 pub mod particle_file;
 pub mod particles;
 pub mod resolve_forces;
+pub mod resources;
 pub mod sensors;
 pub mod snapshot;
 pub mod stl;
@@ -387,12 +388,52 @@ impl Engine {
                             message: e.message,
                         })?;
                     let read = spheres.len();
+                    let file_error = |line: usize, message: String| DemError::ParticleFile {
+                        field: format!("dem.particles[{k}].path"),
+                        file: full.display().to_string(),
+                        line,
+                        message,
+                    };
+                    let spheres: Vec<particle_file::FileSphere> = spheres
+                        .into_iter()
+                        .filter(|s| {
+                            let p = s.position;
+                            keep.as_ref().is_none_or(|b| b.contains([p.x, p.y, p.z]))
+                        })
+                        .collect();
+                    if let Some((a, b, fraction)) =
+                        particle_file::find_overlap(&spheres, particle_file::MAX_FILE_OVERLAP)
+                    {
+                        let (a, b) = (&spheres[a], &spheres[b]);
+                        return Err(file_error(
+                            a.line,
+                            format!(
+                                "the spheres on lines {} and {} overlap by {} of the smaller \
+                                 radius (radii {} and {} m, centres {} m apart; at most {} is \
+                                 accepted): spheres written twice or a wrong column?",
+                                a.line,
+                                b.line,
+                                resources::format_number(fraction),
+                                resources::format_number(a.radius),
+                                resources::format_number(b.radius),
+                                resources::format_number((a.position - b.position).norm()),
+                                particle_file::MAX_FILE_OVERLAP
+                            ),
+                        ));
+                    }
+                    let total = particles.len() as f64 + spheres.len() as f64;
+                    resources::check_memory(
+                        &format!(
+                            "its {} particles ({} with the sources before)",
+                            spheres.len(),
+                            resources::format_number(total)
+                        ),
+                        total * resources::BYTES_PER_PARTICLE as f64,
+                        resources::available_memory(),
+                    )
+                    .map_err(|message| file_error(0, message))?;
                     let before = particles.len();
                     for s in spheres {
-                        let p = s.position;
-                        if keep.as_ref().is_some_and(|b| !b.contains([p.x, p.y, p.z])) {
-                            continue;
-                        }
                         particles.push(s.position, s.velocity, V3::zeros(), s.radius, rho, m);
                     }
                     if let Some(b) = keep.as_ref().filter(|_| particles.len() == before) {

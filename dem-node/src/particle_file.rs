@@ -17,6 +17,8 @@ pub struct FileSphere {
     pub position: V3,
     pub radius: f64,
     pub velocity: V3,
+    /// 1-based line of the file.
+    pub line: usize,
 }
 
 /// An error at a 1-based line of the file (0: the file as a whole).
@@ -118,9 +120,59 @@ pub fn parse(text: &str) -> Result<Vec<FileSphere>, FileError> {
             position: V3::new(num(req[0])?, num(req[1])?, num(req[2])?),
             radius,
             velocity,
+            line,
         });
     }
     Ok(out)
+}
+
+/// Largest overlap of two spheres of a file that is still accepted, as a fraction of the
+/// smaller radius. A settled or compacted bed written with `final_particles` overlaps by a few
+/// per cent of r at most (contact overlaps of a dense bed under load; fewer printed digits add
+/// rounding on top); half a radius is far beyond any contact the engine holds and means
+/// spheres written twice, a wrong column, or a lattice written at the wrong spacing.
+pub const MAX_FILE_OVERLAP: f64 = 0.5;
+
+/// Two spheres overlapping by more than `max_fraction` of the smaller radius, as
+/// (index a, index b, overlap / smaller radius) with a < b, the first such pair in the order
+/// of `a` (then `b`), or `None`. A cell grid of edge 2 r_max keeps it O(n) for a bed.
+pub fn find_overlap(spheres: &[FileSphere], max_fraction: f64) -> Option<(usize, usize, f64)> {
+    use std::collections::HashMap;
+    let r_max = spheres.iter().map(|s| s.radius).fold(0.0, f64::max);
+    if spheres.len() < 2 || r_max <= 0.0 {
+        return None;
+    }
+    let h = 2.0 * r_max;
+    let cell = |x: V3| [x.x, x.y, x.z].map(|c| (c / h).floor().clamp(-9.0e15, 9.0e15) as i64);
+    let mut grid: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
+    for (k, s) in spheres.iter().enumerate() {
+        grid.entry(cell(s.position)).or_default().push(k);
+    }
+    for (a, s) in spheres.iter().enumerate() {
+        let c = cell(s.position);
+        let mut worst: Option<(usize, f64)> = None;
+        for dz in -1..=1 {
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    let Some(others) = grid.get(&[c[0] + dx, c[1] + dy, c[2] + dz]) else {
+                        continue;
+                    };
+                    for &b in others.iter().filter(|&&b| b > a) {
+                        let o = &spheres[b];
+                        let overlap = s.radius + o.radius - (s.position - o.position).norm();
+                        let fraction = overlap / s.radius.min(o.radius);
+                        if fraction > max_fraction && worst.is_none_or(|(w, _)| b < w) {
+                            worst = Some((b, fraction));
+                        }
+                    }
+                }
+            }
+        }
+        if let Some((b, fraction)) = worst {
+            return Some((a, b, fraction));
+        }
+    }
+    None
 }
 
 /// The particles in id order as a particle file with velocities.
@@ -140,8 +192,25 @@ pub fn format(p: &Particles) -> String {
     s
 }
 
-/// Reads a particle file; errors carry the line.
+/// Reads a particle file; errors carry the line. The file's size is checked against the
+/// memory available before it is read: its text and the spheres parsed from it (56 B each,
+/// one per line of at least ~30 characters) take about twice its size.
 pub fn read(path: &Path) -> Result<Vec<FileSphere>, FileError> {
+    let size = std::fs::metadata(path)
+        .map_err(|e| FileError {
+            line: 0,
+            message: format!("cannot read: {e}"),
+        })?
+        .len();
+    crate::resources::check_memory(
+        &format!(
+            "reading it ({})",
+            crate::resources::format_bytes(size as f64)
+        ),
+        2.0 * size as f64,
+        crate::resources::available_memory(),
+    )
+    .map_err(|message| FileError { line: 0, message })?;
     let text = std::fs::read_to_string(path).map_err(|e| FileError {
         line: 0,
         message: format!("cannot read: {e}"),

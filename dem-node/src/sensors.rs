@@ -367,8 +367,10 @@ pub fn angle_of_repose(
     bin_width: f64,
     along: Option<Axis>,
 ) -> f64 {
+    // only the occupied bins are stored: a narrow `bin_width` over a wide ring must not
+    // allocate a bin per width (the count saturates instead of overflowing)
     let bins = (((r_max - r_min) / bin_width).ceil() as usize).max(1);
-    let mut top: Vec<Option<(f64, f64)>> = vec![None; bins];
+    let mut top: std::collections::BTreeMap<usize, (f64, f64)> = Default::default();
     for (x, r) in p.position.iter().zip(&p.radius) {
         let rho = match along {
             Some(Axis::X) => (x.x - centre[0]).abs(),
@@ -380,11 +382,12 @@ pub fn angle_of_repose(
         }
         let b = (((rho - r_min) / bin_width) as usize).min(bins - 1);
         let h = x.z + r;
-        if top[b].is_none_or(|(_, best)| h > best) {
-            top[b] = Some((rho, h));
+        let slot = top.entry(b).or_insert((rho, h));
+        if h > slot.1 {
+            *slot = (rho, h);
         }
     }
-    let pts: Vec<(f64, f64)> = top.into_iter().flatten().collect();
+    let pts: Vec<(f64, f64)> = top.into_values().collect();
     if pts.len() < 2 {
         return f64::NAN;
     }
