@@ -283,7 +283,7 @@ fn a_coupling_window_that_is_not_a_whole_number_of_dem_steps_is_refused() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("not a whole multiple"), "{err}");
     assert!(
-        err.contains("0.0001 s") && err.contains("0.00003 s"),
+        err.contains("Δt^C = 100 µs") && err.contains("Δt^D = 30 µs"),
         "{err}"
     );
 }
