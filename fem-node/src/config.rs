@@ -577,13 +577,6 @@ impl FemConfig {
                                 format!("must be > 0 m, got {h}"),
                             ));
                         }
-                        let n: f64 = size.iter().map(|s| (s / h).round().max(1.0)).product();
-                        if n > 5e6 {
-                            return Err((
-                                "fem.mesh.element_size".into(),
-                                format!("would generate {n:.0} cells (limit 5e6)"),
-                            ));
-                        }
                     }
                     (None, Some(d)) => {
                         if d.contains(&0) {
@@ -594,6 +587,7 @@ impl FemConfig {
                         }
                     }
                 }
+                box_size_check(&self.mesh)?;
             }
         }
         match &self.analysis {
@@ -714,6 +708,12 @@ impl FemConfig {
                     "give exactly one of node (file id) or point [m]".into(),
                 ));
             }
+            if let Some(q) = p.point.filter(|q| q.iter().any(|x| !x.is_finite())) {
+                return Err((
+                    format!("fem.probes[{i}].point"),
+                    format!("must be finite (m), got {q:?}"),
+                ));
+            }
         }
         let mut names = std::collections::BTreeSet::new();
         for (i, g) in self.strain_gauges.iter().enumerate() {
@@ -729,6 +729,105 @@ impl FemConfig {
         }
         Ok(())
     }
+}
+
+impl MeshSpec {
+    /// Divisions of a generated box (`divisions`, or `size / element_size` rounded, at least
+    /// 1); `None` for a file or when a division does not fit in 32 bits (see
+    /// [`box_size_check`], which refuses such a box).
+    pub fn box_divisions(&self) -> Option<[usize; 3]> {
+        let MeshSpec::Box {
+            size,
+            element_size,
+            divisions,
+            ..
+        } = self
+        else {
+            return None;
+        };
+        let d = match (divisions, element_size) {
+            (Some(d), _) => d.map(|n| n as f64),
+            (None, Some(h)) => [0, 1, 2].map(|k| (size[k] / h).round().max(1.0)),
+            (None, None) => return None,
+        };
+        if d.iter().all(|n| n.is_finite() && *n <= u32::MAX as f64) {
+            Some(d.map(|n| n as usize))
+        } else {
+            None
+        }
+    }
+}
+
+/// A generated box's node and element counts with overflow-checked products, and the memory
+/// the model needs (≈ [`crate::resources::BYTES_PER_NODE`] per node) against the memory
+/// available, before anything is allocated. Node indices are 32-bit: the box's grid (which
+/// for hex20 / tet10 includes the mid-edge points) must fit.
+fn box_size_check(mesh: &MeshSpec) -> Result<(), (String, String)> {
+    use crate::resources::{check_memory, format_number, model_bytes};
+    let MeshSpec::Box {
+        element_size,
+        element,
+        ..
+    } = mesh
+    else {
+        return Ok(());
+    };
+    let field = if element_size.is_some() {
+        "fem.mesh.element_size"
+    } else {
+        "fem.mesh.divisions"
+    };
+    let too_many = |what: String| (field.to_string(), what);
+    let div = mesh.box_divisions().ok_or_else(|| {
+        too_many(format!(
+            "more than {} elements along an edge",
+            format_number(u32::MAX as f64)
+        ))
+    })?;
+    let quadratic = matches!(element, ElementKind::Hex20 | ElementKind::Tet10);
+    let r: u64 = if quadratic { 2 } else { 1 };
+    let per_cell: u64 = match element {
+        ElementKind::Tet4 | ElementKind::Tet10 => 6,
+        _ => 1,
+    };
+    let product = |v: [u64; 3]| v[0].checked_mul(v[1])?.checked_mul(v[2]);
+    let d = div.map(|n| n as u64);
+    let grid = product(d.map(|n| r * n + 1));
+    let cells = product(d);
+    let elements = cells.and_then(|c| c.checked_mul(per_cell));
+    let (Some(grid), Some(elements)) = (grid, elements) else {
+        return Err(too_many(format!(
+            "divisions {div:?} give more than {} elements (the count overflows)",
+            format_number(u64::MAX as f64)
+        )));
+    };
+    // hex20 leaves face and body centres out; every other point of the grid is a node
+    let nodes = if *element == ElementKind::Hex20 {
+        product(d.map(|n| n + 1)).unwrap_or(grid)
+            + d[0] * (d[1] + 1) * (d[2] + 1)
+            + (d[0] + 1) * d[1] * (d[2] + 1)
+            + (d[0] + 1) * (d[1] + 1) * d[2]
+    } else {
+        grid
+    };
+    if grid >= u32::MAX as u64 {
+        return Err(too_many(format!(
+            "divisions {div:?} give {} grid points, more than the {} a mesh can index",
+            format_number(grid as f64),
+            format_number(u32::MAX as f64)
+        )));
+    }
+    check_memory(
+        &format!(
+            "the generated box (divisions {div:?}: {} {} elements, {} nodes)",
+            format_number(elements as f64),
+            element.name(),
+            format_number(nodes as f64)
+        ),
+        model_bytes(nodes, elements),
+        crate::resources::available_memory(),
+    )
+    .map_err(too_many)
 }
 
 fn join(a: &str, b: &str) -> String {
@@ -773,9 +872,18 @@ fn check_selector(s: &Selector, path: &str) -> Result<(), (String, String)> {
         }
     }
     if let Some(p) = &s.plane {
+        if !p.value.is_finite() {
+            return Err((
+                format!("{path}.plane.value"),
+                format!("must be finite (m), got {}", p.value),
+            ));
+        }
         if let Some(t) = p.tol {
-            if !(t >= 0.0) {
-                return Err((format!("{path}.plane.tol"), "must be ≥ 0".into()));
+            if !(t >= 0.0 && t.is_finite()) {
+                return Err((
+                    format!("{path}.plane.tol"),
+                    format!("must be finite and ≥ 0 (m), got {t}"),
+                ));
             }
         }
     }

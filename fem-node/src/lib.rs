@@ -27,6 +27,7 @@ pub mod history;
 pub mod mesh;
 mod model;
 pub mod output;
+pub mod resources;
 pub mod surface;
 
 pub use config::parse_scene_section;
@@ -50,7 +51,8 @@ pub struct InterfaceMesh {
 pub enum FemError {
     #[error("{path}: {message}")]
     Io { path: String, message: String },
-    #[error("{file}:{line}: {message}")]
+    /// `line` 0: the file as a whole (printed without a line number, not as `file:0`).
+    #[error("{file}{}: {message}", line_part(.line))]
     Mesh {
         file: String,
         line: usize,
@@ -70,4 +72,46 @@ pub enum FemError {
     Snapshot(String),
     #[error("non-finite value in {0} (diverged?)")]
     NonFinite(String),
+}
+
+/// ":N" for an error on line N of a file, nothing for one about the whole file (line 0).
+fn line_part(line: &usize) -> String {
+    if *line > 0 {
+        format!(":{line}")
+    } else {
+        String::new()
+    }
+}
+
+/// Makes a panic print one line on stderr instead of the default message and backtrace hint:
+/// `fem-node: internal error: <message> at <file:line:column>; please report` (`program`
+/// names the binary). A panic is a bug, not a scene error (those are values), and the node's
+/// log, which the coordinator shows, then says why the node died. The exit status stays that
+/// of a panic (non-zero). With `RUST_BACKTRACE` set (and not `0`) the default report follows
+/// the line, for whoever debugs it.
+pub fn install_panic_hook(program: &'static str) {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        eprintln!("{}", panic_line(program, info));
+        if std::env::var("RUST_BACKTRACE").is_ok_and(|v| v != "0") {
+            default(info);
+        }
+    }));
+}
+
+/// The one line [`install_panic_hook`] prints.
+pub fn panic_line(program: &str, info: &std::panic::PanicHookInfo<'_>) -> String {
+    let payload = info.payload();
+    let message = payload
+        .downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| payload.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "(no message)".into());
+    let location = info.location().map_or_else(
+        || "an unknown location".to_string(),
+        |l| format!("{}:{}:{}", l.file(), l.line(), l.column()),
+    );
+    // one line: a multi-line message would be split by the log reader
+    let message = message.replace('\n', " ");
+    format!("{program}: internal error: {message} at {location}; please report")
 }

@@ -95,15 +95,13 @@ impl Model {
             MeshSpec::Box {
                 size,
                 origin,
-                element_size,
-                divisions,
                 element,
+                ..
             } => {
-                let div = match (divisions, element_size) {
-                    (Some(d), _) => *d,
-                    (None, Some(h)) => [0, 1, 2].map(|k| ((size[k] / h).round() as usize).max(1)),
-                    (None, None) => unreachable!("validated"),
-                };
+                let div = cfg.mesh.box_divisions().ok_or_else(|| FemError::Config {
+                    field: "fem.mesh".into(),
+                    message: "a generated box needs element_size (or divisions)".into(),
+                })?;
                 box_mesh(*origin, *size, div, *element)
             }
         };
@@ -126,6 +124,22 @@ impl Model {
                 mesh.set_hex8_formulation(element::ElementKind::Hex8b);
             }
         }
+        // a mesh file's counts are known only now: refuse a model that cannot fit before
+        // the matrices are built (a generated box was checked with the scene)
+        crate::resources::check_memory(
+            &format!(
+                "the model of {} ({} nodes, {} elements)",
+                mesh.source,
+                mesh.num_nodes(),
+                mesh.num_elements()
+            ),
+            crate::resources::model_bytes(mesh.num_nodes() as u64, mesh.num_elements() as u64),
+            crate::resources::available_memory(),
+        )
+        .map_err(|message| FemError::Config {
+            field: "fem.mesh".into(),
+            message,
+        })?;
         let timing = tracing::enabled!(tracing::Level::DEBUG);
         let t0 = std::time::Instant::now();
         let lap = |what: &str| {
@@ -269,6 +283,20 @@ impl Model {
                     if d < best.0 {
                         best = (d, n as u32);
                     }
+                }
+                if !point_in_body(&mesh, q) {
+                    let x = mesh.nodes[best.1 as usize];
+                    return Err(FemError::Selection(format!(
+                        "fem.probes[{i}] '{}': point {} lies outside the body (farther than \
+                         {} % of an element's size from every element); the nearest node is \
+                         {} at {}, {} m away",
+                        p.name,
+                        fmt_point(q),
+                        PROBE_TOLERANCE * 100.0,
+                        mesh.node_ids[best.1 as usize],
+                        fmt_point(x),
+                        crate::resources::format_number(best.0.sqrt())
+                    )));
                 }
                 best.1
             };
@@ -1527,6 +1555,37 @@ fn gauge_elements(
         )));
     }
     Ok(elements)
+}
+
+/// How far outside an element a probe point may lie, as a fraction of the element's
+/// bounding-box diagonal: round-off of a point written on the surface, not a point elsewhere.
+const PROBE_TOLERANCE: f64 = 0.05;
+
+/// Whether `q` lies in the bounding box of some element, grown by [`PROBE_TOLERANCE`] of its
+/// diagonal: inside the body up to that tolerance (a bounding box is looser than a
+/// tetrahedron or a curved element, so points near such a surface pass as well).
+fn point_in_body(mesh: &Mesh, q: [f64; 3]) -> bool {
+    let mut x = Vec::new();
+    (0..mesh.num_elements()).any(|e| {
+        mesh.element_coords(e, &mut x);
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for p in &x {
+            for k in 0..3 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+        let diagonal = (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f64>().sqrt();
+        let tol = PROBE_TOLERANCE * diagonal;
+        (0..3).all(|k| q[k] >= lo[k] - tol && q[k] <= hi[k] + tol)
+    })
+}
+
+/// `[x, y, z]` with readable numbers.
+fn fmt_point(p: [f64; 3]) -> String {
+    let f = crate::resources::format_number;
+    format!("[{}, {}, {}]", f(p[0]), f(p[1]), f(p[2]))
 }
 
 fn gravity_loads(mesh: &Mesh, rho: f64, g: [f64; 3], f: &mut [f64]) -> Result<(), FemError> {

@@ -297,16 +297,18 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
             "element definition is incomplete at end of file".into(),
         ));
     }
-    let generate = |name: &str, ln: usize, v: &[i64]| -> Result<Vec<u64>, FemError> {
+    // the ids of a range, produced one by one: a range longer than the mesh (`1, 1e15`) ends
+    // at its first missing id instead of being collected into memory first
+    let generate = |name: &str,
+                    ln: usize,
+                    v: &[i64]|
+     -> Result<std::iter::StepBy<std::ops::RangeInclusive<u64>>, FemError> {
         if !(v.len() == 2 || v.len() == 3) || v[0] < 0 || v[1] < v[0] || (v.len() == 3 && v[2] <= 0)
         {
             return Err(err(ln, format!("set {name}, GENERATE: expected 'first, last[, step]' with first ≤ last, step > 0")));
         }
         let step = if v.len() == 3 { v[2] } else { 1 };
-        Ok((v[0]..=v[1])
-            .step_by(step as usize)
-            .map(|x| x as u64)
-            .collect())
+        Ok((v[0] as u64..=v[1] as u64).step_by(step as usize))
     };
     for (name, ln, v) in nset_gen {
         for id in generate(&name, ln, &v)? {

@@ -183,7 +183,9 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
                         "expected 'numEntityBlocks numNodes minNodeTag maxNodeTag'",
                     ));
                 }
-                mesh.nodes.reserve(h[1] as usize);
+                // a count from the file, not trusted for allocation: every node needs at
+                // least a few bytes of the text, so reserve no more than the text could hold
+                mesh.nodes.reserve((h[1] as usize).min(text.len() / 4));
                 for _ in 0..h[0] {
                     let (bl, b) = ls.numbers::<i64>("$Nodes block header")?;
                     if b.len() != 4 {
@@ -194,7 +196,7 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
                     }
                     let parametric = b[2] != 0;
                     let n = b[3] as usize;
-                    let mut tags = Vec::with_capacity(n);
+                    let mut tags = Vec::with_capacity(n.min(text.len() / 2));
                     while tags.len() < n {
                         let (tl, t) = ls.numbers::<u64>("node tags")?;
                         for id in t {
