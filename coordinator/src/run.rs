@@ -764,10 +764,10 @@ fn sender_of(key: &str) -> &'static str {
 
 fn write_summary(out_dir: &Path, summary: &Summary) -> anyhow::Result<PathBuf> {
     let path = out_dir.join("summary.json");
-    let tmp = out_dir.join(".summary.json.tmp");
-    let text = serde_json::to_string_pretty(summary)?;
-    std::fs::write(&tmp, text + "\n").with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, &path).with_context(|| format!("writing {}", path.display()))?;
+    let text = serde_json::to_string_pretty(summary)? + "\n";
+    // temporary file, fsync, rename: a reader (or a crash) never sees half a summary
+    proto::node::write_atomically(&path, text.as_bytes())
+        .with_context(|| format!("writing {}", path.display()))?;
     Ok(path)
 }
 

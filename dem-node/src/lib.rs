@@ -128,6 +128,9 @@ pub fn rayleigh_time_step_of(
 
 struct OutputState {
     last_vtk_step: Option<u64>,
+    /// The step of the last CSV rows: a second call at the same step (the node's `finish`
+    /// right after a window) writes no duplicate row.
+    last_row_step: Option<u64>,
     vtk_files: u64,
 }
 
@@ -496,6 +499,7 @@ impl Engine {
             pool,
             output: OutputState {
                 last_vtk_step: None,
+                last_row_step: None,
                 vtk_files: 0,
             },
             box_region,
@@ -1289,7 +1293,9 @@ impl Engine {
             path: out_dir.display().to_string(),
             message: e.to_string(),
         })?;
-        if self.cfg.output.csv {
+        let new_rows = self.output.last_row_step != Some(self.state.steps);
+        self.output.last_row_step = Some(self.state.steps);
+        if self.cfg.output.csv && new_rows {
             let mut row = vec![
                 ("time".to_string(), self.time()),
                 ("step".to_string(), self.state.steps as f64),
@@ -1297,7 +1303,7 @@ impl Engine {
             row.extend(self.engine_results());
             output::append_csv(&out_dir.join("dem_timeseries.csv"), &row)?;
         }
-        if let Some(values) = self.sample_sensors() {
+        if let Some(values) = new_rows.then(|| self.sample_sensors()).flatten() {
             let mut row = vec![("time".to_string(), self.time())];
             row.extend(
                 sensors::column_names(&self.cfg.sensors)
@@ -1319,6 +1325,7 @@ impl Engine {
                 &self.state.particles,
                 self.time(),
             )?;
+            output::write_pvd(out_dir, "particles", self.dt)?;
             for (k, m) in self.state.meshes.iter().enumerate() {
                 let moving = self.wall_motions.iter().any(|w| {
                     w.wall == WallRef::Mesh(k)
@@ -1337,6 +1344,7 @@ impl Engine {
                         &out_dir.join(format!("mesh{k}_{safe}_{step:09}.vtk")),
                         m,
                     )?;
+                    output::write_pvd(out_dir, &format!("mesh{k}_{safe}"), self.dt)?;
                 }
             }
             self.output.last_vtk_step = Some(step);

@@ -98,6 +98,39 @@ pub fn write_mesh_vtk(path: &Path, m: &Mesh) -> Result<(), DemError> {
     write_file(path, &s)
 }
 
+/// `<dir>/<prefix>.pvd`: a ParaView collection of every `<prefix>_<step>.vtk` in `dir`, at time
+/// step × `dt`, so that ParaView opens the whole run as one time series. Made from the folder's
+/// files, so it also holds after a resumed run rewrote some of them.
+pub fn write_pvd(dir: &Path, prefix: &str, dt: f64) -> Result<(), DemError> {
+    let mut steps: Vec<(u64, String)> = std::fs::read_dir(dir)
+        .map_err(|e| io_err(dir, e))?
+        .filter_map(|e| e.ok())
+        .filter_map(|e| {
+            let name = e.file_name().to_string_lossy().into_owned();
+            let step = name
+                .strip_prefix(prefix)?
+                .strip_prefix('_')?
+                .strip_suffix(".vtk")?
+                .parse::<u64>()
+                .ok()?;
+            Some((step, name))
+        })
+        .collect();
+    steps.sort();
+    let mut s = String::from(
+        "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\">\n<Collection>\n",
+    );
+    for (step, name) in &steps {
+        let _ = writeln!(
+            s,
+            "<DataSet timestep=\"{:e}\" part=\"0\" file=\"{name}\"/>",
+            *step as f64 * dt
+        );
+    }
+    s.push_str("</Collection>\n</VTKFile>\n");
+    write_file(&dir.join(format!("{prefix}.pvd")), &s)
+}
+
 /// Appends one row (with a header for a new file) to a CSV file.
 pub fn append_csv(path: &Path, columns: &[(String, f64)]) -> Result<(), DemError> {
     let new = !path.exists();

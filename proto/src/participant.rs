@@ -255,8 +255,17 @@ impl Participant {
     }
 
     /// Waits until every data publisher has a matching subscriber (the peer node opened its
-    /// side), so that the first window's data cannot be published into the void.
-    pub async fn wait_for_peers(&self, timeout: Duration) -> Result<(), ProtoError> {
+    /// side), so that the first window's data cannot be published into the void. A `stop`
+    /// (the other node failed its start) or the coordinator's departure ends the wait at once.
+    pub async fn wait_for_peers(&mut self, timeout: Duration) -> Result<(), ProtoError> {
+        let what = "the other solver's subscribers";
+        match self.unless_stopped(what, self.peers_matched(timeout)).await? {
+            Ok(()) => Ok(()),
+            Err(command) => Err(self.stopped_by(&command, what)),
+        }
+    }
+
+    async fn peers_matched(&self, timeout: Duration) -> Result<(), ProtoError> {
         let start = Instant::now();
         for (key, publisher) in &self.publishers {
             loop {
@@ -299,13 +308,62 @@ impl Participant {
         Ok(())
     }
 
-    /// DEM side: fetch the interface mesh, retrying until the FEM node serves it.
+    /// DEM side: fetch the interface mesh, retrying until the FEM node serves it. A `stop`
+    /// (the FEM node failed its start) or the coordinator's departure ends the wait at once.
     pub async fn read_mesh(
-        &self,
+        &mut self,
         interface: &str,
         timeout: Duration,
     ) -> Result<InterfaceMesh, ProtoError> {
-        fetch_mesh(&self.session, &self.keys, interface, timeout).await
+        let what = format!("the interface mesh `{interface}`");
+        let fetch = fetch_mesh(&self.session, &self.keys, interface, timeout);
+        match self.unless_stopped(&what, fetch).await? {
+            Ok(mesh) => Ok(mesh),
+            Err(command) => Err(self.stopped_by(&command, &what)),
+        }
+    }
+
+    /// Runs `work` while watching the coordinator: `Err(command)` when a command arrives
+    /// first (see [`Self::stopped_by`]), an error when the coordinator leaves.
+    async fn unless_stopped<T>(
+        &self,
+        what: &str,
+        work: impl std::future::Future<Output = Result<T, ProtoError>>,
+    ) -> Result<Result<T, Sample>, ProtoError> {
+        tokio::pin!(work);
+        loop {
+            tokio::select! {
+                r = &mut work => return r.map(Ok),
+                c = self.commands.recv_async() => {
+                    return Ok(Err(c.map_err(|_| ProtoError::Closed)?));
+                }
+                a = self.coordinator_alive.recv_async() => {
+                    let a = a.map_err(|_| ProtoError::Closed)?;
+                    if a.kind() == SampleKind::Delete {
+                        return Err(ProtoError::PeerLost {
+                            node: COORDINATOR.into(),
+                            context: format!("while waiting for {what}"),
+                        });
+                    }
+                }
+            }
+        }
+    }
+
+    /// A command that arrived while this node waited for `what`: `stop` ends the wait
+    /// ([`ProtoError::Stopped`], a clean exit), anything else is out of turn.
+    fn stopped_by(&mut self, command: &Sample, what: &str) -> ProtoError {
+        match self.accept_command(command) {
+            Ok(CommandBody::Stop { reason }) => ProtoError::Stopped { reason },
+            Ok(other) => ProtoError::Invalid {
+                what: "command",
+                reason: format!(
+                    "received {} while waiting for {what}",
+                    command_name(&other)
+                ),
+            },
+            Err(e) => e,
+        }
     }
 
     /// Publishes interface kinematics (FEM side). Non-finite values are never sent: they
@@ -404,13 +462,7 @@ impl Participant {
                 }
                 c = self.commands.recv_async() => {
                     let sample = c.map_err(|_| ProtoError::Closed)?;
-                    return match self.accept_command(&sample)? {
-                        CommandBody::Stop { reason } => Err(ProtoError::Stopped { reason }),
-                        other => Err(ProtoError::Invalid {
-                            what: "command",
-                            reason: format!("received {} while waiting for {what}", command_name(&other)),
-                        }),
-                    };
+                    return Err(self.stopped_by(&sample, &what));
                 }
                 a = self.coordinator_alive.recv_async() => {
                     let a = a.map_err(|_| ProtoError::Closed)?;

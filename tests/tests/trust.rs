@@ -335,3 +335,32 @@ fn a_node_ends_when_its_coordinator_process_is_gone() {
         "{err}"
     );
 }
+
+#[test]
+fn a_fem_scene_error_stops_the_waiting_dem_node_at_once() {
+    // the FEM refuses its table; the DEM is then waiting for the interface mesh and must take
+    // the coordinator's `stop` there (it used to be killed after a 5 s grace)
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(root().join("scenes/plate.toml"))
+        .unwrap()
+        .replacen("[fem]", "[fem]\nnot_a_key = 1", 1);
+    let scene = write_scene(dir.path(), "bad-fem.toml", &text);
+    let out = dir.path().join("out");
+    let t0 = Instant::now();
+    let mut c = cosim();
+    c.arg("run")
+        .arg(&scene)
+        .args(["--no-progress", "--out"])
+        .arg(&out);
+    let o = run(c);
+    eprintln!("the run failed after {:.2} s", t0.elapsed().as_secs_f64());
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("not_a_key"), "{err}");
+    let dem = std::fs::read_to_string(out.join("logs/dem.log")).unwrap();
+    assert!(
+        dem.contains("stopped by the coordinator"),
+        "the DEM node left on the coordinator's stop: {dem}"
+    );
+    assert_eq!(summary(&out)["status"], "failed");
+}
