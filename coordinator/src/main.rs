@@ -175,6 +175,7 @@ fn report(scene: &Scene, s: &coordinator::run::Summary, out_dir: &std::path::Pat
 }
 
 fn main() -> ExitCode {
+    proto::node::install_panic_hook("cosim");
     proto::alloc::keep_message_buffers();
     let cli = Cli::parse();
     tracing_subscriber::fmt()

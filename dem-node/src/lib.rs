@@ -1496,36 +1496,3 @@ impl Engine {
         r
     }
 }
-
-/// Makes a panic print one line on stderr instead of the default message and backtrace hint:
-/// `dem-node: internal error: <message> at <file:line:column>; please report` (`program`
-/// names the binary). A panic is a bug, not a scene error (those are values), and the node's
-/// log, which the coordinator shows, then says why the node died. The exit status stays that
-/// of a panic (non-zero). With `RUST_BACKTRACE` set (and not `0`) the default report follows
-/// the line, for whoever debugs it.
-pub fn install_panic_hook(program: &'static str) {
-    let default = std::panic::take_hook();
-    std::panic::set_hook(Box::new(move |info| {
-        eprintln!("{}", panic_line(program, info));
-        if std::env::var("RUST_BACKTRACE").is_ok_and(|v| v != "0") {
-            default(info);
-        }
-    }));
-}
-
-/// The one line [`install_panic_hook`] prints.
-pub fn panic_line(program: &str, info: &std::panic::PanicHookInfo<'_>) -> String {
-    let payload = info.payload();
-    let message = payload
-        .downcast_ref::<&str>()
-        .map(|s| s.to_string())
-        .or_else(|| payload.downcast_ref::<String>().cloned())
-        .unwrap_or_else(|| "(no message)".into());
-    let location = info.location().map_or_else(
-        || "an unknown location".to_string(),
-        |l| format!("{}:{}:{}", l.file(), l.line(), l.column()),
-    );
-    // one line: a multi-line message would be split by the log reader
-    let message = message.replace('\n', " ");
-    format!("{program}: internal error: {message} at {location}; please report")
-}

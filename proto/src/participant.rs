@@ -259,7 +259,10 @@ impl Participant {
     /// (the other node failed its start) or the coordinator's departure ends the wait at once.
     pub async fn wait_for_peers(&mut self, timeout: Duration) -> Result<(), ProtoError> {
         let what = "the other solver's subscribers";
-        match self.unless_stopped(what, self.peers_matched(timeout)).await? {
+        match self
+            .unless_stopped(what, self.peers_matched(timeout))
+            .await?
+        {
             Ok(()) => Ok(()),
             Err(command) => Err(self.stopped_by(&command, what)),
         }
@@ -357,10 +360,7 @@ impl Participant {
             Ok(CommandBody::Stop { reason }) => ProtoError::Stopped { reason },
             Ok(other) => ProtoError::Invalid {
                 what: "command",
-                reason: format!(
-                    "received {} while waiting for {what}",
-                    command_name(&other)
-                ),
+                reason: format!("received {} while waiting for {what}", command_name(&other)),
             },
             Err(e) => e,
         }

@@ -246,7 +246,7 @@ impl Solver for DemNode {
 }
 
 fn main() -> std::process::ExitCode {
-    dem::install_panic_hook("dem-node");
+    proto::node::install_panic_hook("dem-node");
     proto::alloc::keep_message_buffers();
     let args = Args::parse();
     proto::node::init_logging();

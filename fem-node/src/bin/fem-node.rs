@@ -358,7 +358,7 @@ impl Solver for FemNode {
 }
 
 fn main() -> std::process::ExitCode {
-    fem::install_panic_hook("fem-node");
+    proto::node::install_panic_hook("fem-node");
     proto::alloc::keep_message_buffers();
     let args = Args::parse();
     proto::node::init_logging();

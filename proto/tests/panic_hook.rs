@@ -1,15 +1,15 @@
-//! A panic in the node binary (a bug: scene errors are values) reaches the log as one line
+//! A panic in a binary (a node or `cosim`; a bug: scene errors are values) reaches the log as one line
 //! naming the message and the place, not as the default report with a backtrace hint.
 
 use std::process::Command;
 
-const CHILD: &str = "FEM_PANIC_HOOK_CHILD";
+const CHILD: &str = "COSIM_PANIC_HOOK_CHILD";
 
 #[test]
 fn a_panic_prints_one_line_with_message_and_location_and_fails() {
     if std::env::var_os(CHILD).is_some() {
         // the child: the hook the binary installs, then a panic as a bug would raise it
-        fem::install_panic_hook("fem-node");
+        proto::node::install_panic_hook("dem-node");
         let counts: Vec<usize> = Vec::new();
         let _ = counts[usize::from(std::env::var_os(CHILD).is_some())];
         return;
@@ -30,11 +30,11 @@ fn a_panic_prints_one_line_with_message_and_location_and_fails() {
     assert!(!out.status.success(), "a panic still fails the process");
     let line = stderr
         .lines()
-        .find(|l| l.starts_with("fem-node: internal error: "))
+        .find(|l| l.starts_with("dem-node: internal error: "))
         .unwrap_or_else(|| panic!("no internal-error line in: {stderr}"));
     assert!(
         line.contains("index out of bounds: the len is 0 but the index is 1 at ")
-            && line.contains("fem-node/tests/panic_hook.rs:")
+            && line.contains("proto/tests/panic_hook.rs:")
             && line.ends_with("; please report"),
         "{line}"
     );
