@@ -14,6 +14,7 @@ pub mod link;
 pub mod messages;
 pub mod node;
 pub mod participant;
+pub mod resources;
 
 pub use codec::{decode, encode};
 pub use error::ProtoError;
