@@ -13,6 +13,14 @@ fn scene(body: &str) -> String {
     format!("[dem]\ntime_step = 1e-5\n{GRAIN}\n{body}")
 }
 
+/// A scene with one lattice source of r = 1 mm grains, `count` as written in TOML.
+fn lattice(count: &str) -> String {
+    scene(&format!(
+        "[[dem.particles]]\nkind = \"lattice\"\nmaterial = \"grain\"\nradius = 0.001\n\
+         first = [0.0, 0.0, 0.0]\nspacing = 0.0025\ncount = {count}\n"
+    ))
+}
+
 /// The error of a scene that must not parse, printed for the test log.
 fn error_of(text: &str) -> dem::SceneError {
     let err = parse_scene_section(text).expect_err("the scene must be refused");
@@ -27,16 +35,7 @@ fn line_of(text: &str, prefix: &str) -> usize {
 
 #[test]
 fn a_lattice_of_1e12_particles_is_refused_naming_count_and_memory() {
-    let text = scene(
-        r#"[[dem.particles]]
-kind = "lattice"
-material = "grain"
-radius = 0.001
-first = [0.0, 0.0, 0.0]
-spacing = 0.0025
-count = [10000, 10000, 10000]
-"#,
-    );
+    let text = lattice("[10000, 10000, 10000]");
     let err = error_of(&text);
     assert!(err.message.starts_with("dem.particles[0].count: "), "{err}");
     // 1e12 particles at 500 B each
@@ -48,16 +47,7 @@ count = [10000, 10000, 10000]
 
 #[test]
 fn a_lattice_count_whose_product_overflows_is_refused() {
-    let text = scene(
-        r#"[[dem.particles]]
-kind = "lattice"
-material = "grain"
-radius = 0.001
-first = [0.0, 0.0, 0.0]
-spacing = 0.0025
-count = [4294967296, 4294967296, 2]
-"#,
-    );
+    let text = lattice("[4294967296, 4294967296, 2]");
     let err = error_of(&text);
     assert!(
         err.message.starts_with("dem.particles[0].count: ") && err.message.contains("overflows"),

@@ -74,57 +74,46 @@ fn study_sweeps_and_resumes() {
         .contains("\"completed\""));
 }
 
+/// `cosim study scenes/minimal.toml --vary <vary>` that must be refused before any run: its
+/// error output.
+fn refused_study(out: &Path, vary: &str) -> String {
+    let mut c = cosim();
+    c.args(["study", "scenes/minimal.toml", "--vary", vary, "--out"])
+        .arg(out);
+    let o = run(c);
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(!o.status.success(), "{err}");
+    assert!(!out.join("run000").exists(), "nothing was run");
+    assert!(
+        !err.contains(".study-"),
+        "no temporary file is named: {err}"
+    );
+    err
+}
+
 #[test]
 fn an_invalid_variant_refuses_the_study_before_any_run() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("study");
     // 10 ms windows are not a whole number of 3e-5 s steps (found by the DEM's check)
-    let o = study_of_minimal(&out, "1e-5,3e-5");
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success(), "{err}");
+    let err = refused_study(&out, "dem.time_step=1e-5,3e-5");
     assert!(
         err.contains("scenes/minimal.toml with --vary dem.time_step=3e-5")
             && err.contains("not a whole multiple of the DEM time step Δt^D = 30 µs"),
         "{err}"
     );
-    assert!(
-        !err.contains(".study-"),
-        "no temporary file is named: {err}"
-    );
-    assert!(!out.join("run000").exists(), "nothing was run");
     // a misspelt key: every variant is invalid, the key is named
-    let mut c = cosim();
-    c.args([
-        "study",
-        "scenes/minimal.toml",
-        "--vary",
-        "dem.time_stp=1e-5,2e-5",
-        "--out",
-    ])
-    .arg(&out);
-    let o = run(c);
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success(), "{err}");
+    let err = refused_study(&out, "dem.time_stp=1e-5,2e-5");
     assert!(
         err.contains("scenes/minimal.toml with --vary dem.time_stp=1e-5: unknown field `time_stp`"),
         "{err}"
     );
-    assert!(!out.join("run000").exists(), "nothing was run");
     // a coordinator key out of range is found the same way
-    let mut c = cosim();
-    c.args([
-        "study",
-        "scenes/minimal.toml",
-        "--vary",
-        "coupling.max_force_growth=0.5",
-        "--out",
-    ])
-    .arg(&out);
-    let o = run(c);
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success(), "{err}");
+    let err = refused_study(&out, "coupling.max_force_growth=0.5");
     assert!(
-        err.contains("scenes/minimal.toml with --vary coupling.max_force_growth=0.5: coupling.max_force_growth"),
+        err.contains(
+            "scenes/minimal.toml with --vary coupling.max_force_growth=0.5: coupling.max_force_growth"
+        ),
         "{err}"
     );
 }
