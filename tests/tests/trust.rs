@@ -364,3 +364,61 @@ fn a_fem_scene_error_stops_the_waiting_dem_node_at_once() {
     );
     assert_eq!(summary(&out)["status"], "failed");
 }
+
+#[test]
+fn counts_beyond_the_machine_are_scene_errors_not_aborts() {
+    let dir = tempfile::tempdir().unwrap();
+    let base = std::fs::read_to_string(root().join("scenes/plate.toml")).unwrap();
+    let fem_table = base.find("[fem]").unwrap();
+    let cases = [
+        (
+            "lattice",
+            std::fs::read_to_string(root().join("scenes/minimal.toml"))
+                .unwrap()
+                .replace("count = [3, 3, 3]", "count = [10000, 10000, 10000]"),
+            "dem.particles[0].count",
+        ),
+        (
+            "threads",
+            std::fs::read_to_string(root().join("scenes/minimal.toml"))
+                .unwrap()
+                .replace("time_step = 1e-5", "time_step = 1e-5\nthreads = 1000000"),
+            "dem.threads",
+        ),
+        (
+            "mesh",
+            format!(
+                "{}[fem]\nmesh = {{ size = [1.0, 1.0, 1.0], divisions = [2000, 2000, 200], element = \"hex8\" }}\n{}",
+                &base[..fem_table],
+                &base[fem_table..]
+                    .lines()
+                    .skip(1)
+                    .filter(|l| !l.starts_with("mesh"))
+                    .collect::<Vec<_>>()
+                    .join("\n")
+            ),
+            "fem.mesh.divisions",
+        ),
+    ];
+    for (name, text, field) in cases {
+        let scene = write_scene(dir.path(), &format!("{name}.toml"), &text);
+        let out = dir.path().join(name);
+        let mut c = cosim();
+        c.arg("run")
+            .arg(&scene)
+            .args(["--no-progress", "--out"])
+            .arg(&out);
+        let o = run(c);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{name}: {err}");
+        assert!(err.contains(field), "{name}: {err}");
+        assert!(!err.contains("panicked"), "{name}: {err}");
+        if name != "threads" {
+            assert!(
+                err.contains("needs ≈") && err.contains("available"),
+                "{name}: {err}"
+            );
+        }
+        assert_eq!(summary(&out)["status"], "failed", "{name}");
+    }
+}
