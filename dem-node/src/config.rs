@@ -720,6 +720,32 @@ impl DemConfig {
                         c.finite3(g("velocity"), &sp.velocity);
                         c.finite3(g("angular_velocity"), &sp.angular_velocity);
                     }
+                    // spheres written twice (or nearly): as for particle files
+                    let as_file: Vec<crate::particle_file::FileSphere> = spheres
+                        .iter()
+                        .enumerate()
+                        .map(|(s, sp)| crate::particle_file::FileSphere {
+                            position: sp.position.into(),
+                            radius: sp.radius,
+                            velocity: sp.velocity.into(),
+                            line: s,
+                        })
+                        .collect();
+                    if let Some((a, b, fraction)) = crate::particle_file::find_overlap(
+                        &as_file,
+                        crate::particle_file::MAX_FILE_OVERLAP,
+                    ) {
+                        let mut at = f("spheres");
+                        at.push(Seg::Index(b));
+                        c.fail(
+                            at,
+                            format!(
+                                "spheres {a} and {b} overlap by {} of the smaller radius (at most {} is accepted): a sphere written twice?",
+                                format_number(fraction),
+                                crate::particle_file::MAX_FILE_OVERLAP
+                            ),
+                        );
+                    }
                 }
                 ParticleSource::Lattice {
                     material,

@@ -385,3 +385,30 @@ fn every_shipped_scene_still_passes_the_checks() {
     }
     assert!(checked >= 12, "only {checked} scenes with [dem]");
 }
+
+#[test]
+fn a_list_source_with_a_sphere_written_twice_is_refused() {
+    let text = scene(
+        r#"[[dem.particles]]
+kind = "list"
+material = "grain"
+spheres = [
+  { position = [0.0, 0.0, 0.1], radius = 0.005 },
+  { position = [0.02, 0.0, 0.1], radius = 0.005 },
+  { position = [0.0, 0.0, 0.1], radius = 0.005 },
+]
+"#,
+    );
+    let err = error_of(&text);
+    assert!(
+        err.message
+            .starts_with("dem.particles[0].spheres[2]: spheres 0 and 2 overlap by 2 of"),
+        "{err}"
+    );
+    // touching spheres are fine
+    let ok = text.replace(
+        "{ position = [0.0, 0.0, 0.1], radius = 0.005 },\n]",
+        "{ position = [0.0, 0.0, 0.11], radius = 0.005 },\n]",
+    );
+    assert!(parse_scene_section(&ok).is_ok());
+}
