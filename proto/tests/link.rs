@@ -168,3 +168,35 @@ async fn wrong_window_and_bad_sizes_are_refused_at_the_boundary() {
     fem.finish().await.unwrap();
     dem.finish().await.unwrap();
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_node_never_publishes_its_own_nan_it_reports_an_instability() {
+    let run = "link-nan";
+    let (fem, mut dem) = coupled_pair(run).await;
+    let mut k = kinematics(run, 0, 4);
+    k.velocities.0[7] = f64::NAN;
+    let e = fem.write_kinematics(&k).await.unwrap_err();
+    assert!(
+        matches!(
+            e,
+            ProtoError::Diverged {
+                field: "velocities",
+                index: 7,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert!(e.to_string().contains("the solver diverged"), "{e}");
+    // the node loop reports it as an instability of this node, not as bad data of the other
+    let n = proto::node::NodeError::from(e);
+    assert_eq!(n.code, proto::ErrorCode::Unstable);
+    // nothing was sent
+    let e = dem
+        .read_kinematics("top", 0, 4, Duration::from_millis(300))
+        .await
+        .unwrap_err();
+    assert!(matches!(e, ProtoError::Timeout { .. }), "{e}");
+    fem.finish().await.unwrap();
+    dem.finish().await.unwrap();
+}
