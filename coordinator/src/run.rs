@@ -983,15 +983,20 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
     }
     .await;
     if let Err(e) = &result {
-        if e.downcast_ref::<crate::interrupt::Interrupted>().is_some() {
+        let interrupted = e.downcast_ref::<crate::interrupt::Interrupted>().is_some();
+        if interrupted {
             run.summary.status = "interrupted".into();
         } else if run.summary.status != "unstable" {
             run.summary.status = "failed".into();
         }
         run.summary.error = Some(format!("{e:#}"));
         // Best effort: tell the others to stop, then make sure no process is left behind.
-        let _ =
-            tokio::time::timeout(Duration::from_secs(5), run.stop("the run failed", false)).await;
+        let reason = if interrupted {
+            "the run was interrupted"
+        } else {
+            "the run failed"
+        };
+        let _ = tokio::time::timeout(Duration::from_secs(5), run.stop(reason, false)).await;
         for n in &mut run.nodes {
             if let Some(c) = n.child.as_mut() {
                 let _ = c.kill().await;

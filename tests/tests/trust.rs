@@ -177,17 +177,18 @@ fn a_run_holds_its_folder_and_sigterm_stops_it_cleanly() {
     nodes_gone(&run_id, Duration::from_secs(5));
     // the DEM node was stopped, not killed: its log says so
     let log = std::fs::read_to_string(out.join("logs/dem.log")).unwrap();
-    assert!(log.contains("stop:"), "{log}");
+    assert!(log.contains("stop: the run was interrupted"), "{log}");
 }
 
 #[test]
 fn ctrl_c_checkpoints_and_resume_continues_bitwise() {
     let dir = tempfile::tempdir().unwrap();
+    // 500 windows: the signal lands long before the end, however busy the machine
     let scene = minimal(
         dir.path(),
         "ck.toml",
-        "1 s",
-        "checkpoint_every = 1000\nfinal_state = true",
+        "5 s",
+        "checkpoint_every = 100000\nfinal_state = true",
     );
     let whole = dir.path().join("whole");
     let mut c = cosim();
@@ -207,7 +208,7 @@ fn ctrl_c_checkpoints_and_resume_continues_bitwise() {
     let s = summary(&broken);
     assert_eq!(s["status"], "interrupted", "{s}");
     let done = s["windows_done"].as_u64().unwrap();
-    assert!((20..100).contains(&done), "{s}");
+    assert!((20..500).contains(&done), "{s}");
     // the checkpoint of the interrupt (checkpoint_every alone would have made none yet)
     let latest: serde_json::Value = serde_json::from_str(
         &std::fs::read_to_string(broken.join("checkpoints/latest.json")).unwrap(),
