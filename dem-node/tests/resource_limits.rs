@@ -172,17 +172,9 @@ bin_width = 1e-300
 
 #[test]
 fn fields_without_range_checks_are_checked_now() {
-    let lattice = r#"[[dem.particles]]
-kind = "lattice"
-material = "grain"
-radius = 0.001
-first = [0.0, 0.0, 0.0]
-spacing = 0.0025
-count = [2, 2, 2]
-"#;
     let cases: [(String, &str); 6] = [
         (
-            scene(lattice).replace(
+            lattice("[2, 2, 2]").replace(
                 "time_step = 1e-5\n",
                 "time_step = 1e-5\nrayleigh_fraction = 5.0\n",
             ),
@@ -239,7 +231,7 @@ distribution = { kind = "table", radius = [0.001, 0.002, 0.003], cumulative = [0
             "dem.particles[0].distribution.cumulative: ",
         ),
         (
-            scene(lattice).replace("spacing = 0.0025", "spacing = 0.0025\njitter = 0.0003"),
+            lattice("[2, 2, 2]").replace("spacing = 0.0025", "spacing = 0.0025\njitter = 0.0003"),
             // (0.0025 − 0.002) / 2 printed readably, not as 0.00024999999999999995
             "must be <= (spacing - 2 * radius) / 2 = 0.00025 m",
         ),
@@ -324,15 +316,7 @@ fn a_kept_part_of_a_file_is_checked_not_the_spheres_left_out() {
 
 #[test]
 fn a_value_of_the_wrong_type_names_its_field_and_a_unit_string_says_why() {
-    let lattice = r#"[[dem.particles]]
-kind = "lattice"
-material = "grain"
-radius = 0.001
-first = [0.0, 0.0, 0.0]
-spacing = 0.0025
-count = [2, 2, 2]
-"#;
-    let text = scene(lattice).replace("radius = 0.001", "radius = \"big\"");
+    let text = lattice("[2, 2, 2]").replace("radius = 0.001", "radius = \"big\"");
     let err = error_of(&text);
     assert!(
         err.message.starts_with("dem.particles[0].radius: "),
@@ -340,7 +324,7 @@ count = [2, 2, 2]
     );
     assert_eq!(err.line, line_of(&text, "radius"), "{err}");
 
-    let text = scene(lattice).replace("radius = 0.001", "radius = \"3 kg\"");
+    let text = lattice("[2, 2, 2]").replace("radius = 0.001", "radius = \"3 kg\"");
     let err = error_of(&text);
     assert!(
         err.message.starts_with("dem.particles[0].radius: "),
@@ -348,13 +332,13 @@ count = [2, 2, 2]
     );
     assert!(err.message.contains("plain numbers in SI units"), "{err}");
 
-    let text = scene(lattice).replace("time_step = 1e-5", "time_step = \"0.1 ms\"");
+    let text = lattice("[2, 2, 2]").replace("time_step = 1e-5", "time_step = \"0.1 ms\"");
     let err = error_of(&text);
     assert!(err.message.starts_with("dem.time_step: "), "{err}");
     assert!(err.message.contains("plain numbers in SI units"), "{err}");
     assert_eq!(err.line, line_of(&text, "time_step"), "{err}");
 
-    let text = scene(lattice).replace("density = 1000.0", "density = \"heavy\"");
+    let text = lattice("[2, 2, 2]").replace("density = 1000.0", "density = \"heavy\"");
     let err = error_of(&text);
     assert!(
         err.message.starts_with("dem.materials.grain.density: "),
