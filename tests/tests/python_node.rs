@@ -233,3 +233,50 @@ fn python_fem_node_snapshot_restore_and_refusals() {
     assert!(o.status.success(), "protocol_check.py failed (see above)");
     assert!(String::from_utf8_lossy(&o.stdout).contains("protocol check passed"));
 }
+
+/// The Python node, like the Rust ones, ends soon after the coordinator that started it is
+/// gone (COSIM_COORDINATOR_PID), whatever the network says.
+#[test]
+fn the_python_node_ends_when_its_coordinator_process_is_gone() {
+    if python_with_requirements().is_none() {
+        return;
+    }
+    // a stand-in coordinator; the node is not its child, so it watches the pid
+    let mut parent = Command::new("sleep").arg("1").spawn().unwrap();
+    let port = proto::link::free_loopback_port().unwrap();
+    let node = Command::new("python3")
+        .arg(root().join("examples/python-fem-node/fem_node.py"))
+        .args([
+            "--run-id",
+            &format!("py-orphan-{}", std::process::id()),
+            "--node",
+            "fem",
+            "--listen",
+            &format!("tcp/127.0.0.1:{port}"),
+        ])
+        .env("COSIM_COORDINATOR_PID", parent.id().to_string())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    parent.wait().unwrap();
+    let t0 = std::time::Instant::now();
+    let mut node = node;
+    while node.try_wait().unwrap().is_none() {
+        assert!(
+            t0.elapsed() < std::time::Duration::from_secs(20),
+            "the Python node outlived its coordinator"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let o = node.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(3), "{err}");
+    assert!(
+        err.contains(&format!(
+            "the coordinator (process {}) is gone",
+            parent.id()
+        )),
+        "{err}"
+    );
+}
