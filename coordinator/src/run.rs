@@ -788,7 +788,14 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
     };
     // held until this function returns: no other run writes into the folder meanwhile
     let lock = crate::outdir::lock(&out_dir, &format!("{what} of scene `{}`", scene.name))?;
-    if opts.resume.is_none() {
+    if opts.check_only {
+        // a check's scratch folder: never another run's (cosim check has no --overwrite)
+        crate::outdir::prepare_new(&lock, false).map_err(|e| {
+            anyhow!(
+                "{e:#}\n(cosim check writes the nodes' scratch output into its --out folder: give an empty or new one, or none)"
+            )
+        })?;
+    } else if opts.resume.is_none() {
         crate::outdir::prepare_new(&lock, opts.overwrite)?;
     }
     let run_id = opts

@@ -423,3 +423,32 @@ fn counts_beyond_the_machine_are_scene_errors_not_aborts() {
         assert_eq!(summary(&out)["status"], "failed", "{name}");
     }
 }
+
+#[test]
+fn cosim_check_never_deletes_an_existing_folder() {
+    // `cosim check --out <a finished run>` used to delete that folder after the check
+    let dir = tempfile::tempdir().unwrap();
+    let scene = minimal(dir.path(), "m.toml", "0.02 s", "");
+    let out = dir.path().join("out");
+    let mut c = cosim();
+    c.arg("run")
+        .arg(&scene)
+        .args(["--no-progress", "--out"])
+        .arg(&out);
+    assert!(run(c).status.success());
+    let before = std::fs::read(out.join("summary.json")).unwrap();
+    let mut c = cosim();
+    c.arg("check").arg(&scene).arg("--out").arg(&out);
+    let o = run(c);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("give an empty or new one"), "{err}");
+    assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), before);
+    // an empty folder given to a check is used and kept
+    let scratch = dir.path().join("scratch");
+    std::fs::create_dir_all(&scratch).unwrap();
+    let mut c = cosim();
+    c.arg("check").arg(&scene).arg("--out").arg(&scratch);
+    assert!(run(c).status.success());
+    assert!(scratch.exists());
+}
