@@ -411,7 +411,8 @@ pub async fn run_study(
             v.text = toml::to_string(&t)?;
         }
     }
-    std::fs::create_dir_all(out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
+    // one study at a time in a folder (each of its runs also locks its own)
+    let _lock = crate::outdir::lock(out_dir, &format!("study of scene `{}`", scene.name))?;
     validate_variants(scene, &variants, opts.jobs.max(1), out_dir).await?;
     let mut signals = crate::interrupt::Watch::new();
     let bar = indicatif::ProgressBar::new(variants.len() as u64);

@@ -149,3 +149,53 @@ fn a_study_where_no_run_completes_still_writes_its_table_and_stability_map() {
         .unwrap()
         .starts_with("<svg"));
 }
+
+#[test]
+fn a_second_study_into_the_same_folder_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("study");
+    let mut c = cosim();
+    c.args([
+        "study",
+        "scenes/minimal.toml",
+        "--vary",
+        "scene.end_time=60",
+        "--out",
+    ])
+    .arg(&out)
+    .stdout(std::process::Stdio::null())
+    .stderr(std::process::Stdio::null());
+    let mut first = cosim_tests::Reaper(vec![c.spawn().unwrap()]);
+    // its run is under way once the run's summary says so
+    let t0 = std::time::Instant::now();
+    while !std::fs::read_to_string(out.join("run000/summary.json"))
+        .is_ok_and(|s| s.contains("\"running\""))
+    {
+        assert!(
+            t0.elapsed() < std::time::Duration::from_secs(60),
+            "the first study did not start"
+        );
+        assert!(
+            first.0[0].try_wait().unwrap().is_none(),
+            "the first study ended early"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let mut c = cosim();
+    c.args([
+        "study",
+        "scenes/minimal.toml",
+        "--vary",
+        "scene.end_time=60",
+        "--out",
+    ])
+    .arg(&out);
+    let o = run(c);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{err}");
+    assert!(
+        err.contains("in use by another cosim process") && err.contains("study of scene `minimal`"),
+        "{err}"
+    );
+    first.0[0].kill().unwrap();
+}
