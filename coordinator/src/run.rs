@@ -378,6 +378,11 @@ impl Run<'_> {
         self.windows_wall_base + self.windows_started.elapsed().as_secs_f64()
     }
 
+    /// The run's wall time so far, the parts before a resume included.
+    fn total_wall(&self) -> f64 {
+        self.total_wall_base + self.started.elapsed().as_secs_f64()
+    }
+
     fn limit(&self, node: &str, key: &str) -> Option<f64> {
         self.summary
             .nodes
@@ -529,7 +534,7 @@ impl Run<'_> {
                         if let Some((field, index)) = d.non_finite {
                             bail!(
                                 "invalid interface data from the {} node: the {} of interface `{}` for window {} carry a non-finite value ({field}, value {index})",
-                                if d.kind == "forces" { "dem" } else { "fem" },
+                                sender_of(d.kind),
                                 d.kind,
                                 d.interface,
                                 d.window
@@ -664,8 +669,7 @@ impl Run<'_> {
         let dir = crate::checkpoint::checkpoint_dir(&self.out_dir, window);
         self.snapshot_all(window, &dir, timeout).await?;
         self.summary.timing.windows_wall_s = self.windows_wall();
-        self.summary.timing.total_wall_s =
-            self.total_wall_base + self.started.elapsed().as_secs_f64();
+        self.summary.timing.total_wall_s = self.total_wall();
         let state = crate::checkpoint::CheckpointState {
             window,
             scheduler: scheduler.clone(),
@@ -750,12 +754,12 @@ fn progress_bar(show: bool, windows: u64) -> indicatif::ProgressBar {
     bar
 }
 
-/// The node that publishes on an interface data key: forces come from the DEM, kinematics
-/// from the FEM.
-fn sender_of(key: &str) -> &'static str {
-    if key.ends_with("/forces") {
+/// The node that publishes interface data, from its key (`.../forces`) or kind (`forces`):
+/// forces come from the DEM, kinematics from the FEM.
+fn sender_of(key_or_kind: &str) -> &'static str {
+    if key_or_kind.ends_with("forces") {
         "dem"
-    } else if key.ends_with("/kinematics") {
+    } else if key_or_kind.ends_with("kinematics") {
         "fem"
     } else {
         "unknown"
@@ -1010,11 +1014,12 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
             }
         }
     }
+    let total_wall = run.total_wall();
     let mut summary = run.summary;
     let dem = summary.nodes.get("dem").map(|n| n.compute_s).unwrap_or(0.0);
     let fem = summary.nodes.get("fem").map(|n| n.compute_s).unwrap_or(0.0);
     let t = &mut summary.timing;
-    t.total_wall_s = run.total_wall_base + t0.elapsed().as_secs_f64();
+    t.total_wall_s = total_wall;
     t.dem_compute_s = dem;
     t.fem_compute_s = fem;
     t.coupling_overhead_s = (t.windows_wall_s - dem - fem).max(0.0);

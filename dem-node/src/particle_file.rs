@@ -196,25 +196,8 @@ pub fn format(p: &Particles) -> String {
 /// memory available before it is read: its text and the spheres parsed from it (56 B each,
 /// one per line of at least ~30 characters) take about twice its size.
 pub fn read(path: &Path) -> Result<Vec<FileSphere>, FileError> {
-    let size = std::fs::metadata(path)
-        .map_err(|e| FileError {
-            line: 0,
-            message: format!("cannot read: {e}"),
-        })?
-        .len();
-    crate::resources::check_memory(
-        &format!(
-            "reading it ({})",
-            crate::resources::format_bytes(size as f64)
-        ),
-        2.0 * size as f64,
-        crate::resources::available_memory(),
-    )
-    .map_err(|message| FileError { line: 0, message })?;
-    let text = std::fs::read_to_string(path).map_err(|e| FileError {
-        line: 0,
-        message: format!("cannot read: {e}"),
-    })?;
+    let text = crate::resources::read_text_within_memory(path, "it")
+        .map_err(|message| FileError { line: 0, message })?;
     parse(&text)
 }
 

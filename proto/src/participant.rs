@@ -439,41 +439,36 @@ impl Participant {
         timeout: Duration,
     ) -> Result<M, ProtoError> {
         let what = format!("{} of window {window} on `{key}`", M::WHAT);
+        let sub = self
+            .subscribers
+            .get(key)
+            .ok_or_else(|| ProtoError::Invalid {
+                what: M::WHAT,
+                reason: format!("`{key}` was not opened by open_interfaces for this node's role"),
+            })?;
         let deadline = tokio::time::Instant::now() + timeout;
-        loop {
-            let sub = self
-                .subscribers
-                .get(key)
-                .ok_or_else(|| ProtoError::Invalid {
-                    what: M::WHAT,
-                    reason: format!(
-                        "`{key}` was not opened by open_interfaces for this node's role"
-                    ),
-                })?;
-            tokio::select! {
-                s = sub.recv_async() => {
-                    let sample = s.map_err(|_| ProtoError::Closed)?;
-                    match decode::<M>(&payload(&sample), self.keys.run_id()) {
-                        // not addressed to this run (a misconfigured or hostile publisher):
-                        // refused and logged; the real message is still awaited
-                        Err(e @ ProtoError::WrongRun { .. }) => tracing::warn!("refused on `{key}`: {e}"),
-                        other => return other,
+        let receive = async {
+            loop {
+                let sample = tokio::time::timeout_at(deadline, sub.recv_async())
+                    .await
+                    .map_err(|_| ProtoError::Timeout {
+                        what: what.clone(),
+                        waited: timeout,
+                    })?
+                    .map_err(|_| ProtoError::Closed)?;
+                match decode::<M>(&payload(&sample), self.keys.run_id()) {
+                    // not addressed to this run (a misconfigured or hostile publisher):
+                    // refused and logged; the real message is still awaited
+                    Err(e @ ProtoError::WrongRun { .. }) => {
+                        tracing::warn!("refused on `{key}`: {e}")
                     }
-                }
-                c = self.commands.recv_async() => {
-                    let sample = c.map_err(|_| ProtoError::Closed)?;
-                    return Err(self.stopped_by(&sample, &what));
-                }
-                a = self.coordinator_alive.recv_async() => {
-                    let a = a.map_err(|_| ProtoError::Closed)?;
-                    if a.kind() == SampleKind::Delete {
-                        return Err(ProtoError::PeerLost { node: COORDINATOR.into(), context: format!("while waiting for {what}") });
-                    }
-                }
-                _ = tokio::time::sleep_until(deadline) => {
-                    return Err(ProtoError::Timeout { what, waited: timeout });
+                    other => return other,
                 }
             }
+        };
+        match self.unless_stopped(&what, receive).await? {
+            Ok(message) => Ok(message),
+            Err(command) => Err(self.stopped_by(&command, &what)),
         }
     }
 

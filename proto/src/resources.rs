@@ -77,6 +77,21 @@ pub fn check_memory(what: &str, bytes: f64, available: Option<u64>) -> Result<()
     }
 }
 
+/// Reads a text file after checking that it fits: its text and what is parsed from it take
+/// about twice its size (`what` names the file in the message). Errors are messages without
+/// the path; the caller names the file.
+pub fn read_text_within_memory(path: &std::path::Path, what: &str) -> Result<String, String> {
+    let size = std::fs::metadata(path)
+        .map_err(|e| format!("cannot read: {e}"))?
+        .len();
+    check_memory(
+        &format!("reading {what} ({})", format_bytes(size as f64)),
+        2.0 * size as f64,
+        available_memory(),
+    )?;
+    std::fs::read_to_string(path).map_err(|e| format!("cannot read: {e}"))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

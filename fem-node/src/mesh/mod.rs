@@ -66,29 +66,14 @@ impl Mesh {
 
     /// Reads a `.msh` (Gmsh 4.1 ASCII) or `.inp` (Abaqus / CalculiX) file.
     pub fn read(path: &Path) -> Result<Mesh, FemError> {
-        let io = |e: std::io::Error| FemError::Io {
-            path: path.display().to_string(),
-            message: e.to_string(),
-        };
         // the text and the mesh parsed from it (a node line of ~40 characters becomes 24 B
         // of coordinates plus its id and index entries) take about twice the file's size
-        let size = std::fs::metadata(path).map_err(io)?.len();
-        crate::resources::check_memory(
-            &format!(
-                "reading the mesh file ({})",
-                crate::resources::format_bytes(size as f64)
-            ),
-            2.0 * size as f64,
-            crate::resources::available_memory(),
-        )
-        .map_err(|message| FemError::Io {
-            path: path.display().to_string(),
-            message,
-        })?;
-        let text = std::fs::read_to_string(path).map_err(|e| FemError::Io {
-            path: path.display().to_string(),
-            message: e.to_string(),
-        })?;
+        let text = crate::resources::read_text_within_memory(path, "the mesh file").map_err(
+            |message| FemError::Io {
+                path: path.display().to_string(),
+                message,
+            },
+        )?;
         let name = path.display().to_string();
         let ext = path
             .extension()
