@@ -1,0 +1,403 @@
+//! Local contact detection of two superquadrics: the common normal by minimisation over the
+//! contact direction (Wellmann 2011 §3.4.2, eqs. 3.51–3.61).
+//!
+//! For a direction c the contact points are p1(c) = x1 + T1 X1(T1ᵀc) and
+//! p2(c) = x2 + T2 X2(−T2ᵀc) (A.2 point from normal), so the normals are anti-parallel by
+//! construction (3.51); d = p2 − p1 (3.54) and f = |d|² (3.55) is minimised over c. At the
+//! solution d ∥ c (3.52) and δ = −d·c is the penetration.
+//!
+//! **Local parameters** (*not in thesis*, equivalent to (3.53)–(3.58)): every iteration
+//! re-centres the angles α on the current c with tangents (t1, t2), so the iterate is never
+//! near the poles of (3.53) and c_i = t_i, c_ij = −c δ_ij. With G = T1 J1 T1ᵀ + T2 J2 T2ᵀ
+//! (J = ∂X/∂n of the point-from-normal map; G c = 0), d_i = −G t_i, so the gradient is
+//! f_i = −2 (G d)·t_i and, dropping only the third-derivative term that vanishes with the
+//! tangential part d_t of d, the Hessian is f_ij = 2 G_t (G_t + (d·c) I). The Newton step is
+//! then Δα = (G_t + (d·c) I)⁻¹ d_t — which is also exactly the Newton step of the parallel
+//! condition d·c_i = 0 (3.60)–(3.61), the temporal-coherence update: the same iteration
+//! serves both, warm-started from the last step's normal for a tracked pair. A
+//! Levenberg–Marquardt shift μI keeps the step a descent step where G_t + (d·c) I is not
+//! positive definite or f does not decrease.
+//!
+//! Early exit (3.59): as soon as an iterate has c·d > 0 the tangent plane at p1 separates the
+//! bodies (P1 lies behind it, P2 — whose support point in −c is p2 — in front), no contact.
+//! Acceptance: a converged penetration is the global minimum only if p1 ∈ P2 and p2 ∈ P1;
+//! otherwise (a local minimum, Fig. 3.10) or without convergence the search restarts from the
+//! best of a set of fixed directions around the centre line (*not in thesis*: W uses random
+//! search + Nelder–Mead; fixed directions keep the result deterministic).
+
+use crate::hertz_mindlin::V3;
+use crate::shape::superquadric::{tangent_basis, Superquadric};
+use nalgebra::Matrix3;
+
+/// A superquadric body placed in space: centre and rotation T (body → global).
+#[derive(Debug, Clone, Copy)]
+pub struct SqBody<'a> {
+    pub shape: &'a Superquadric,
+    pub position: V3,
+    pub rotation: Matrix3<f64>,
+}
+
+/// Settings of the search.
+#[derive(Debug, Clone, Copy)]
+pub struct SearchSettings {
+    /// Converged when |d_t| ≤ `tolerance` × the length scale (mean bounding radius).
+    pub tolerance: f64,
+    /// Newton iterations per start (W: 50).
+    pub max_iterations: u32,
+    /// Restarts after a local minimum or no convergence.
+    pub max_restarts: u32,
+}
+
+impl Default for SearchSettings {
+    fn default() -> Self {
+        SearchSettings {
+            tolerance: 1e-10,
+            max_iterations: 50,
+            max_restarts: 16,
+        }
+    }
+}
+
+/// The geometry of a penetrating pair.
+#[derive(Debug, Clone, Copy)]
+pub struct SqContact {
+    /// Unit contact normal c: outward normal of body 1 at p1, pointing from body 1 to body 2.
+    pub normal: V3,
+    /// Contact points on the surfaces of bodies 1 and 2.
+    pub p1: V3,
+    pub p2: V3,
+    /// Penetration δ = −d·c > 0.
+    pub overlap: f64,
+    /// Tangent basis (t1, t2) of the normal in which the radius tensors are given.
+    pub t1: V3,
+    pub t2: V3,
+    /// Tangent blocks [a, b, c] = [[a, b], [b, c]] of the inverse curvature tensors (principal
+    /// radii as eigenvalues) of bodies 1 and 2 at their contact points.
+    pub radii1: [f64; 3],
+    pub radii2: [f64; 3],
+}
+
+/// Outcome of one detection.
+#[derive(Debug, Clone, Copy)]
+pub enum Detection {
+    /// A separating plane was found; `normal` is its direction (the warm start for the next
+    /// step).
+    Separated {
+        normal: V3,
+    },
+    Contact(SqContact),
+}
+
+/// What the search did (for the validation statistics and the cost figures).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SearchStats {
+    /// Newton iterations summed over all starts (0: decided at the initial guess).
+    pub iterations: u32,
+    pub restarts: u32,
+    /// Starts that converged to a rejected (local) minimum, starts that did not converge.
+    pub local_minima: u32,
+    pub not_converged: u32,
+    /// No start converged to an accepted minimum: the best iterate was returned.
+    pub failed: bool,
+}
+
+/// One evaluation at direction c, relative to x1 (no loss of digits far from the origin).
+struct Eval {
+    c: V3,
+    d: V3,
+    p1: V3,
+    p2: V3,
+    /// t1, t2 and the tangent blocks of T_β J_β T_βᵀ.
+    t: (V3, V3),
+    g1: [f64; 3],
+    g2: [f64; 3],
+}
+
+impl Eval {
+    fn f(&self) -> f64 {
+        self.d.norm_squared()
+    }
+    fn s(&self) -> f64 {
+        self.d.dot(&self.c)
+    }
+    /// |d_t|: the residual of the parallel condition (3.52).
+    fn residual(&self) -> f64 {
+        (self.d - self.c * self.s()).norm()
+    }
+}
+
+#[inline]
+fn evaluate(b1: &SqBody, b2: &SqBody, x21: &V3, c: V3, with_jacobian: bool) -> Eval {
+    let n1 = b1.rotation.tr_mul(&c);
+    let n2 = -b2.rotation.tr_mul(&c);
+    let (t1, t2) = tangent_basis(&c);
+    let block = |rot: &Matrix3<f64>, j: &Matrix3<f64>| {
+        let (u, v) = (rot.tr_mul(&t1), rot.tr_mul(&t2));
+        let (ju, jv) = (j * u, j * v);
+        [u.dot(&ju), 0.5 * (u.dot(&jv) + v.dot(&ju)), v.dot(&jv)]
+    };
+    let (x1, x2, g1, g2) = if with_jacobian {
+        let s1 = b1.shape.point_from_normal(&n1);
+        let s2 = b2.shape.point_from_normal(&n2);
+        (
+            s1.x,
+            s2.x,
+            block(&b1.rotation, &s1.jacobian),
+            block(&b2.rotation, &s2.jacobian),
+        )
+    } else {
+        (b1.shape.point(&n1), b2.shape.point(&n2), [0.0; 3], [0.0; 3])
+    };
+    let p1 = b1.rotation * x1;
+    let p2 = x21 + b2.rotation * x2;
+    Eval {
+        c,
+        d: p2 - p1,
+        p1,
+        p2,
+        t: (t1, t2),
+        g1,
+        g2,
+    }
+}
+
+/// c rotated by the tangent step (Δα1, Δα2): the exponential map on the unit sphere.
+#[inline]
+fn rotate_normal(c: &V3, t: &(V3, V3), da: [f64; 2]) -> V3 {
+    let angle = da[0].hypot(da[1]);
+    if angle == 0.0 {
+        return *c;
+    }
+    let dir = (t.0 * da[0] + t.1 * da[1]) / angle;
+    (c * angle.cos() + dir * angle.sin()).normalize()
+}
+
+/// Result of one Newton run from a start direction.
+enum Run {
+    Separated(V3),
+    Converged(Eval),
+    NotConverged(Eval),
+}
+
+fn newton(
+    b1: &SqBody,
+    b2: &SqBody,
+    x21: &V3,
+    c0: V3,
+    tol: f64,
+    max_iter: u32,
+    iterations: &mut u32,
+) -> Run {
+    let mut e = evaluate(b1, b2, x21, c0, false);
+    if e.s() > 0.0 {
+        return Run::Separated(e.c);
+    }
+    e = evaluate(b1, b2, x21, c0, true);
+    let mut mu = 0.0f64;
+    for _ in 0..max_iter {
+        let (t1, t2) = e.t;
+        let dt = [e.d.dot(&t1), e.d.dot(&t2)];
+        if dt[0].hypot(dt[1]) <= tol {
+            return Run::Converged(e);
+        }
+        *iterations += 1;
+        let s = e.s();
+        let g = [e.g1[0] + e.g2[0], e.g1[1] + e.g2[1], e.g1[2] + e.g2[2]];
+        let (lo, ..) = crate::shape::superquadric::sym2_eigen(g[0], g[1], g[2]);
+        let floor = 1e-3 * (0.5 * (g[0] + g[2])).abs().max(tol);
+        // First the plain Newton step (shift 0, or the last successful shift): it also solves
+        // the parallel condition where f is flat (two sharp tips: the points hardly move
+        // with c, so only the direction of c is found, and G_t + sI is indefinite). If it
+        // neither lowers f nor the residual, shift to a positive definite matrix (a descent
+        // step of f) and grow the shift (Levenberg–Marquardt).
+        let pd_shift = (floor - (lo + s)).max(0.0);
+        let mut shift = mu;
+        let mut tries = 0;
+        loop {
+            tries += 1;
+            let (a, b, c) = (g[0] + s + shift, g[1], g[2] + s + shift);
+            let det = a * c - b * b;
+            let ok = det.abs() > 1e-300 && det.is_finite();
+            let da = if ok {
+                [(c * dt[0] - b * dt[1]) / det, (a * dt[1] - b * dt[0]) / det]
+            } else {
+                [0.0, 0.0]
+            };
+            // never turn by more than ~0.5 rad in one step
+            let len = da[0].hypot(da[1]);
+            let da = if len > 0.5 {
+                [da[0] * 0.5 / len, da[1] * 0.5 / len]
+            } else {
+                da
+            };
+            let cn = rotate_normal(&e.c, &e.t, da);
+            let trial = evaluate(b1, b2, x21, cn, false);
+            if trial.s() > 0.0 {
+                return Run::Separated(cn);
+            }
+            // near the solution f changes by less than its round-off (|d_t|² ≪ ε|d|²): then
+            // the decrease of the residual |d_t| decides
+            // (f must not grow beyond round-off: an indefinite step that lowers the residual
+            // while f grows heads for another stationary point, e.g. the far side)
+            let better = ok
+                && (trial.f() < e.f()
+                    || (trial.residual() < e.residual() && trial.f() <= e.f() * (1.0 + 1e-9)));
+            if better || tries > 40 {
+                e = evaluate(b1, b2, x21, cn, true);
+                mu *= 0.25;
+                if mu < 1e-6 * floor {
+                    mu = 0.0;
+                }
+                break;
+            }
+            mu = if shift < pd_shift {
+                pd_shift + floor
+            } else {
+                4.0 * shift.max(floor)
+            };
+            shift = mu;
+        }
+    }
+    let (t1, t2) = e.t;
+    if e.d.dot(&t1).hypot(e.d.dot(&t2)) <= tol {
+        Run::Converged(e)
+    } else {
+        Run::NotConverged(e)
+    }
+}
+
+/// p1 ∈ P2 and p2 ∈ P1 (the acceptance test of W §3.4.2, step 5), up to the penetration
+/// itself (*not in thesis*): near a sharp tip (ε near 2) the body is thinner than δ a little
+/// behind its surface, and the inner point of a true contact lies just outside the other
+/// body; a local minimum (W Fig. 3.10) has its points outside by a distance of the order of
+/// the particle size. The distance outside is estimated as (F − 1)/|∇F|.
+fn accepted(b1: &SqBody, b2: &SqBody, x21: &V3, e: &Eval) -> bool {
+    let size = b1.shape.inscribed_radius().min(b2.shape.inscribed_radius());
+    let margin = (-e.s()).clamp(0.0, 0.05 * size) + 1e-12 * size;
+    let outside = |shape: &Superquadric, x: V3| {
+        let f = shape.inside_outside(&x);
+        f <= 1.0 || (f - 1.0) <= margin * shape.gradient(&x).norm()
+    };
+    outside(b2.shape, b2.rotation.tr_mul(&(e.p1 - x21)))
+        && outside(b1.shape, b1.rotation.tr_mul(&e.p2))
+}
+
+/// Restart directions (deterministic): restart k takes 32 points of a spherical Fibonacci
+/// set turned by the golden angle per restart, in the frame of the centre line (its pole
+/// first), so successive restarts cover the whole sphere of directions ever more densely.
+fn restart_directions(axis: &V3, restart: u32) -> impl Iterator<Item = V3> {
+    const N: u32 = 32;
+    let (t1, t2) = tangent_basis(axis);
+    let axis = *axis;
+    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    let turn = golden * restart as f64 * 0.618;
+    (0..N).map(move |k| {
+        let z = 1.0 - (k as f64 + 0.5) / N as f64 * 2.0;
+        let r = (1.0 - z * z).sqrt();
+        let az = golden * k as f64 + turn;
+        (axis * z + (t1 * az.cos() + t2 * az.sin()) * r).normalize()
+    })
+}
+
+/// Detects the contact of two superquadrics. `guess` is the last step's normal of this pair
+/// (temporal coherence), else the centre line x2 − x1 is the start (exact for spheres).
+pub fn detect(
+    b1: &SqBody,
+    b2: &SqBody,
+    guess: Option<V3>,
+    settings: &SearchSettings,
+    stats: &mut SearchStats,
+) -> Detection {
+    let x21 = b2.position - b1.position;
+    let centre = if x21.norm_squared() > 0.0 {
+        x21.normalize()
+    } else {
+        V3::z()
+    };
+    let scale = 0.5 * (b1.shape.bounding_radius() + b2.shape.bounding_radius());
+    let tol = settings.tolerance * scale;
+    let finish = |e: Eval| {
+        let (t1, t2) = e.t;
+        SqContact {
+            normal: e.c,
+            p1: e.p1 + b1.position,
+            p2: e.p2 + b1.position,
+            overlap: -e.s(),
+            t1,
+            t2,
+            radii1: e.g1,
+            radii2: e.g2,
+        }
+    };
+    let start = guess.filter(|g| g.norm_squared() > 0.0).unwrap_or(centre);
+    let mut best: Option<Eval> = None;
+    let keep = |e: Eval, best: &mut Option<Eval>| {
+        if best.as_ref().is_none_or(|b| e.f() < b.f()) {
+            *best = Some(e);
+        }
+    };
+    match newton(
+        b1,
+        b2,
+        &x21,
+        start,
+        tol,
+        settings.max_iterations,
+        &mut stats.iterations,
+    ) {
+        Run::Separated(n) => return Detection::Separated { normal: n },
+        Run::Converged(e) if accepted(b1, b2, &x21, &e) => return Detection::Contact(finish(e)),
+        Run::Converged(e) => {
+            stats.local_minima += 1;
+            keep(e, &mut best)
+        }
+        Run::NotConverged(e) => {
+            stats.not_converged += 1;
+            keep(e, &mut best)
+        }
+    }
+    for ring in 0..settings.max_restarts {
+        stats.restarts += 1;
+        // the best sampled direction (a separating one ends the search): mutually inside
+        // contact points first (the acceptance test), then the smallest |d|
+        let mut pick: Option<((bool, f64), V3)> = None;
+        for c in restart_directions(&centre, ring) {
+            let e = evaluate(b1, b2, &x21, c, false);
+            if e.s() > 0.0 {
+                return Detection::Separated { normal: c };
+            }
+            let key = (!accepted(b1, b2, &x21, &e), e.f());
+            if pick.is_none_or(|(k, _)| key < k) {
+                pick = Some((key, c));
+            }
+        }
+        let Some((_, c)) = pick else { break };
+        match newton(
+            b1,
+            b2,
+            &x21,
+            c,
+            tol,
+            settings.max_iterations,
+            &mut stats.iterations,
+        ) {
+            Run::Separated(n) => return Detection::Separated { normal: n },
+            Run::Converged(e) if accepted(b1, b2, &x21, &e) => {
+                return Detection::Contact(finish(e))
+            }
+            Run::Converged(e) => {
+                stats.local_minima += 1;
+                keep(e, &mut best)
+            }
+            Run::NotConverged(e) => {
+                stats.not_converged += 1;
+                keep(e, &mut best)
+            }
+        }
+    }
+    stats.failed = true;
+    match best {
+        Some(e) => Detection::Contact(finish(e)),
+        None => Detection::Separated { normal: centre },
+    }
+}
