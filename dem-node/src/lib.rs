@@ -28,6 +28,7 @@ pub mod particle_file;
 pub mod particles;
 pub mod resolve_forces;
 pub mod resources;
+pub mod rotation;
 pub mod sensors;
 pub mod shape;
 pub mod snapshot;
