@@ -18,7 +18,12 @@ pub const BYTES_PER_PARTICLE: u64 = 500;
 /// Largest `threads`, whatever the machine: beyond this a pool is a mistake, not a setting.
 pub const MAX_THREADS: usize = 1024;
 
-pub use proto::resources::*;
+// The machine's memory and the readable figures are proto's: one source file compiled into
+// each crate that needs it, because the engine libraries build without proto
+// (`--no-default-features`, as the benches build them).
+#[path = "../../proto/src/resources.rs"]
+mod shared;
+pub use shared::*;
 
 /// The largest sane `threads`: 4 × the cores this process may use, at most [`MAX_THREADS`].
 pub fn max_threads() -> usize {
