@@ -15,7 +15,7 @@
 
 use crate::config::CentreBox;
 use crate::hertz_mindlin::V3;
-use crate::particles::Particles;
+use crate::particles::{Particles, SPHERE};
 use crate::triangle_contact::distance_squared;
 use crate::walls::{Mesh, Plane};
 use rayon::prelude::*;
@@ -56,6 +56,62 @@ impl WallContact {
     }
 }
 
+/// State of a contact of a non-spherical body (a shaped pair or a shaped body with a wall),
+/// carried across list builds: the warm start of the narrow phase (temporal coherence,
+/// Wellmann 3.60–3.61), the tangential force history (3.25) and the per-contact record
+/// (point and force) that the gather, sensors and outputs read.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq)]
+pub struct ShapedContact {
+    /// Last contact normal, from the first body towards the second (or the wall); zero
+    /// before the first evaluation.
+    pub normal: V3,
+    /// Tangential force on the first body (zero when not touching).
+    pub tangential: V3,
+    /// Overlap δ of the last evaluation, negative when not touching.
+    pub overlap: f64,
+    /// Contact point and total contact force on the first body (zero when not touching).
+    pub point: V3,
+    pub force: V3,
+    /// γ of the elliptic Hertz law (W 3.19) used in the last evaluation (0 when not touching).
+    pub stiffness: f64,
+}
+
+impl ShapedContact {
+    pub const NONE: ShapedContact = ShapedContact {
+        normal: V3::new(0.0, 0.0, 0.0),
+        tangential: V3::new(0.0, 0.0, 0.0),
+        overlap: -1.0,
+        point: V3::new(0.0, 0.0, 0.0),
+        force: V3::new(0.0, 0.0, 0.0),
+        stiffness: 0.0,
+    };
+
+    pub fn touching(&self) -> bool {
+        self.overlap >= 0.0
+    }
+
+    /// The same contact seen from the other body (first and second swapped).
+    pub fn swapped(&self) -> ShapedContact {
+        ShapedContact {
+            normal: -self.normal,
+            tangential: -self.tangential,
+            overlap: self.overlap,
+            point: self.point,
+            force: -self.force,
+            stiffness: self.stiffness,
+        }
+    }
+}
+
+/// Per body, the shaped contacts it takes part in (CSR, ascending): pair k as first body is
+/// entry 2k, as second 2k + 1; wall contacts are theirs alone (`wall_start`).
+#[derive(Debug, Clone, Default)]
+pub struct ShapedIncidence {
+    pub pair_start: Vec<u32>,
+    pub pair_entries: Vec<u32>,
+    pub wall_start: Vec<u32>,
+}
+
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct NeighbourLists {
     pub skin: f64,
@@ -80,6 +136,20 @@ pub struct NeighbourLists {
     /// by [`NeighbourLists::index_blocks`] (not part of snapshots).
     #[serde(skip)]
     pub cross: CrossPairs,
+    /// The pair bucket of the non-spherical bodies (Wellmann's narrow phase and elliptic
+    /// law; a sphere–superquadric pair is here too): pairs (i < j) with their contacts.
+    #[serde(default)]
+    pub shaped_pairs: Vec<[u32; 2]>,
+    #[serde(default)]
+    pub shaped_pair_contacts: Vec<ShapedContact>,
+    /// Plane candidates of non-spherical bodies: (body, plane), sorted, with contacts.
+    #[serde(default)]
+    pub shaped_walls: Vec<[u32; 2]>,
+    #[serde(default)]
+    pub shaped_wall_contacts: Vec<ShapedContact>,
+    /// Derived from the shaped lists (not part of snapshots).
+    #[serde(skip)]
+    pub shaped_incidence: ShapedIncidence,
 }
 
 /// Cross-block pairs: the force block of i writes the reaction on j into `force` (numbered by
@@ -165,6 +235,43 @@ impl NeighbourLists {
         }
         c.force.clear();
         c.force.resize(total as usize, [V3::zeros(); 2]);
+        self.index_shaped(n);
+    }
+
+    /// Derives the per-body incidence of the shaped pairs and walls.
+    fn index_shaped(&mut self, n: usize) {
+        let inc = &mut self.shaped_incidence;
+        inc.pair_start.clear();
+        inc.pair_entries.clear();
+        inc.wall_start.clear();
+        if self.shaped_pairs.is_empty() && self.shaped_walls.is_empty() {
+            return;
+        }
+        let mut count = vec![0u32; n + 1];
+        for &[i, j] in &self.shaped_pairs {
+            count[i as usize + 1] += 1;
+            count[j as usize + 1] += 1;
+        }
+        for k in 0..n {
+            count[k + 1] += count[k];
+        }
+        inc.pair_start.clone_from(&count);
+        inc.pair_entries.resize(count[n] as usize, 0);
+        // pairs in list order: each body's entries come out ascending
+        for (k, &[i, j]) in self.shaped_pairs.iter().enumerate() {
+            for (body, side) in [(i, 0), (j, 1)] {
+                let at = &mut count[body as usize];
+                inc.pair_entries[*at as usize] = 2 * k as u32 + side;
+                *at += 1;
+            }
+        }
+        inc.wall_start.resize(n + 1, 0);
+        for &[b, _] in &self.shaped_walls {
+            inc.wall_start[b as usize + 1] += 1;
+        }
+        for k in 0..n {
+            inc.wall_start[k + 1] += inc.wall_start[k];
+        }
     }
 
     /// True if the stored lists index `n` particles consistently (checked on restore).
@@ -188,6 +295,14 @@ impl NeighbourLists {
             && csr(&self.wall_start, self.walls.len())
             && self.wall_contacts.len() == self.walls.len()
             && self.position_at_build.len() == n
+            && self.shaped_pair_contacts.len() == self.shaped_pairs.len()
+            && self.shaped_wall_contacts.len() == self.shaped_walls.len()
+            && self
+                .shaped_pairs
+                .iter()
+                .all(|&[i, j]| i < j && (j as usize) < n)
+            && self.shaped_walls.windows(2).all(|w| w[0] < w[1])
+            && self.shaped_walls.iter().all(|&[b, _]| (b as usize) < n)
     }
 }
 
@@ -352,6 +467,33 @@ pub fn rebuild(
         cell_end[c] = k as u32 + 1;
     }
 
+    // old shaped contacts in new numbering (a swapped pair is seen from the other body)
+    let mut old_shaped: Vec<([u32; 2], ShapedContact)> = Vec::new();
+    for (&[i, j], c) in lists.shaped_pairs.iter().zip(&lists.shaped_pair_contacts) {
+        let (Some(&a), Some(&b)) = (inverse.get(i as usize), inverse.get(j as usize)) else {
+            continue;
+        };
+        if a == u32::MAX || b == u32::MAX || c.normal == V3::zeros() {
+            continue;
+        }
+        old_shaped.push(if a < b {
+            ([a, b], *c)
+        } else {
+            ([b, a], c.swapped())
+        });
+    }
+    old_shaped.sort_unstable_by_key(|e| e.0);
+    let mut old_shaped_walls: Vec<([u32; 2], ShapedContact)> = Vec::new();
+    for (&[b, w], c) in lists.shaped_walls.iter().zip(&lists.shaped_wall_contacts) {
+        match inverse.get(b as usize) {
+            Some(&nb) if nb != u32::MAX && c.normal != V3::zeros() => {
+                old_shaped_walls.push(([nb, w], *c))
+            }
+            _ => {}
+        }
+    }
+    old_shaped_walls.sort_unstable_by_key(|e| e.0);
+
     // old histories in new numbering, sorted for the merges below
     let mut old_pairs: Vec<(u32, u32, V3)> = Vec::new();
     if lists.first_pair.len() >= 2 {
@@ -409,12 +551,16 @@ pub fn rebuild(
         );
         *o = oz * dxy + oy * dx + ox;
     }
-    let chunks: Vec<(Vec<u32>, Vec<u32>)> = (0..n.div_ceil(BLOCK))
+    let shape = &particles.shape;
+    let shaped_any = particles.has_shapes();
+    #[allow(clippy::type_complexity)] // (counts, partners, shaped pairs) of one block
+    let chunks: Vec<(Vec<u32>, Vec<u32>, Vec<[u32; 2]>)> = (0..n.div_ceil(BLOCK))
         .into_par_iter()
         .map(|b| {
             let range = b * BLOCK..((b + 1) * BLOCK).min(n);
             let mut counts = Vec::with_capacity(range.len());
             let mut out = Vec::with_capacity(8 * range.len());
+            let mut shaped = Vec::new();
             let mut cells = [0usize; 27];
             for i in range {
                 let xi = pos[i];
@@ -451,23 +597,42 @@ pub fn rebuild(
                         let j = j as usize;
                         let reach = ri + rad[j] + skin;
                         if (pos[j] - xi).norm_squared() < reach * reach {
-                            out.push(j as u32);
+                            // (3.47) for bounding spheres; a pair with a non-spherical body
+                            // goes to the shaped bucket
+                            if shaped_any && (shape[i] != SPHERE || shape[j] != SPHERE) {
+                                shaped.push([i as u32, j as u32]);
+                            } else {
+                                out.push(j as u32);
+                            }
                         }
                     }
                 }
                 out[start..].sort_unstable();
                 counts.push((out.len() - start) as u32);
             }
-            (counts, out)
+            (counts, out, shaped)
         })
         .collect();
     let total: usize = chunks.iter().map(|c| c.1.len()).sum();
+    lists.shaped_pairs.clear();
+    for c in &chunks {
+        lists.shaped_pairs.extend_from_slice(&c.2);
+    }
+    lists.shaped_pairs.sort_unstable();
+    lists.shaped_pair_contacts.clear();
+    lists
+        .shaped_pair_contacts
+        .extend(lists.shaped_pairs.iter().map(|key| {
+            old_shaped
+                .binary_search_by_key(key, |e| e.0)
+                .map_or(ShapedContact::NONE, |k| old_shaped[k].1)
+        }));
     lists.first_pair.clear();
     lists.first_pair.reserve(n + 1);
     lists.partner.clear();
     lists.partner.reserve(total);
     lists.first_pair.push(0);
-    for (counts, js) in chunks {
+    for (counts, js, _) in chunks {
         let mut at = lists.partner.len() as u32;
         for c in counts {
             at += c;
@@ -501,7 +666,8 @@ pub fn rebuild(
             .flat_map_iter(|k| {
                 planes.iter().enumerate().filter_map(move |(w, pl)| {
                     let d = (pos[k] - pl.point).dot(&pl.normal);
-                    (pl.active && d < rad[k] + skin).then_some((
+                    // shaped bodies' plane candidates are listed below
+                    (pl.active && d < rad[k] + skin && shape[k] == SPHERE).then_some((
                         k as u32,
                         WallCandidate {
                             wall: w as u32,
@@ -513,6 +679,28 @@ pub fn rebuild(
             })
             .collect()
     };
+    lists.shaped_walls.clear();
+    if shaped_any {
+        for k in 0..n {
+            if shape[k] == SPHERE {
+                continue;
+            }
+            for (w, pl) in planes.iter().enumerate() {
+                let d = (pos[k] - pl.point).dot(&pl.normal);
+                if pl.active && d < rad[k] + skin {
+                    lists.shaped_walls.push([k as u32, w as u32]);
+                }
+            }
+        }
+    }
+    lists.shaped_wall_contacts.clear();
+    lists
+        .shaped_wall_contacts
+        .extend(lists.shaped_walls.iter().map(|key| {
+            old_shaped_walls
+                .binary_search_by_key(key, |e| e.0)
+                .map_or(ShapedContact::NONE, |k| old_shaped_walls[k].1)
+        }));
     for (m, mesh) in meshes.iter_mut().enumerate() {
         if !mesh.active {
             mesh.positions_at_build.clone_from(&mesh.positions);
@@ -546,6 +734,9 @@ pub fn rebuild(
                             let ci = grid.index([x, y, z]);
                             for k in cell_start[ci]..cell_end[ci] {
                                 let k = k as usize;
+                                if shape[k] != SPHERE {
+                                    continue; // refused at set-up: no shaped–mesh kernel yet
+                                }
                                 let rr = rad[k] + skin;
                                 if distance_squared(&pos[k], &a, &b, &c) <= rr * rr {
                                     out.push((

@@ -1,14 +1,18 @@
 //! Stage "update particle states" (Ullrich Algorithm 1, line 5): velocity Verlet for
 //! translation (second order, symplectic: with e = 1 the rebound error of fig. 2.5 falls as
 //! Δt²) and the same kick–drift–kick for the angular velocity (spheres carry no orientation:
-//! it would change none of their contacts).
+//! it would change none of their contacts). A non-spherical body kicks its angular momentum
+//! H = T Ĩ Tᵀ ω by half steps of the torque and turns between the kicks by Wellmann's
+//! scheme (3.35)–(3.46) ([`crate::rotation`]); the sphere-only pass is compiled without that
+//! branch.
 //!
 //! Each half of the update is one pass over the particles that also does the bookkeeping
 //! needing the same data: the drift checks the Verlet-skin displacement (Wellmann B4), the
 //! second kick checks that the state is finite.
 
 use crate::hertz_mindlin::V3;
-use crate::particles::Particles;
+use crate::particles::{Orientation, Particles, ShapeTemplate, SPHERE};
+use crate::rotation;
 use rayon::prelude::*;
 
 /// Particles per parallel chunk (the passes are element-wise: the result does not depend on
@@ -59,9 +63,24 @@ fn pass<const MODE: u8>(
     dt: f64,
     rotation: bool,
 ) -> (bool, bool) {
+    if p.has_shapes() {
+        pass_with::<MODE, true>(p, position_at_build, half_skin, dt, rotation)
+    } else {
+        pass_with::<MODE, false>(p, position_at_build, half_skin, dt, rotation)
+    }
+}
+
+fn pass_with<const MODE: u8, const SHAPES: bool>(
+    p: &mut Particles,
+    position_at_build: &[V3],
+    half_skin: f64,
+    dt: f64,
+    rotation: bool,
+) -> (bool, bool) {
     let half2 = half_skin * half_skin;
     let check = position_at_build.len() == p.len();
     let build: &[V3] = if check { position_at_build } else { &[] };
+    let templates: &[ShapeTemplate] = &p.templates;
     let (finite, moved) = (
         p.position.par_chunks_mut(CHUNK),
         p.velocity.par_chunks_mut(CHUNK),
@@ -70,10 +89,12 @@ fn pass<const MODE: u8>(
         p.angular_velocity.par_chunks_mut(CHUNK),
         p.torque.par_chunks(CHUNK),
         p.inertia.par_chunks(CHUNK),
+        p.orientation.par_chunks_mut(CHUNK),
+        p.shape.par_chunks(CHUNK),
     )
         .into_par_iter()
         .enumerate()
-        .map(|(c, (x, v, f, m, w, t, inertia))| {
+        .map(|(c, (x, v, f, m, w, t, inertia, q, shape))| {
             let x0 = build.get(c * CHUNK..c * CHUNK + x.len()).unwrap_or(&[]);
             let s = Chunk {
                 x,
@@ -84,15 +105,18 @@ fn pass<const MODE: u8>(
                 t,
                 inertia,
                 x0,
+                q,
+                shape,
+                templates,
             };
             #[cfg(target_arch = "x86_64")]
             if std::arch::is_x86_feature_detected!("avx2")
                 && std::arch::is_x86_feature_detected!("fma")
             {
                 // SAFETY: the CPU supports AVX2 and FMA (checked above)
-                return unsafe { chunk_avx2::<MODE>(s, dt, half2, rotation) };
+                return unsafe { chunk_avx2::<MODE, SHAPES>(s, dt, half2, rotation) };
             }
-            chunk::<MODE>(s, dt, half2, rotation)
+            chunk::<MODE, SHAPES>(s, dt, half2, rotation)
         })
         .reduce(|| (true, false), |a, b| (a.0 && b.0, a.1 || b.1));
     (finite, moved || (MODE & DRIFT != 0 && !check))
@@ -107,23 +131,31 @@ struct Chunk<'a> {
     t: &'a [V3],
     inertia: &'a [f64],
     x0: &'a [V3],
+    q: &'a mut [Orientation],
+    shape: &'a [u32],
+    templates: &'a [ShapeTemplate],
 }
 
 /// [`chunk`] compiled for AVX2 (no FMA contraction happens without explicit `mul_add`, so
 /// the results are bitwise those of the baseline build).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn chunk_avx2<const MODE: u8>(
+unsafe fn chunk_avx2<const MODE: u8, const SHAPES: bool>(
     s: Chunk,
     dt: f64,
     half2: f64,
     rotation: bool,
 ) -> (bool, bool) {
-    chunk::<MODE>(s, dt, half2, rotation)
+    chunk::<MODE, SHAPES>(s, dt, half2, rotation)
 }
 
 #[inline(always)]
-fn chunk<const MODE: u8>(s: Chunk, dt: f64, half2: f64, rotation: bool) -> (bool, bool) {
+fn chunk<const MODE: u8, const SHAPES: bool>(
+    s: Chunk,
+    dt: f64,
+    half2: f64,
+    rotation: bool,
+) -> (bool, bool) {
     let Chunk {
         x,
         v,
@@ -133,10 +165,41 @@ fn chunk<const MODE: u8>(s: Chunk, dt: f64, half2: f64, rotation: bool) -> (bool
         t,
         inertia,
         x0,
+        q,
+        shape,
+        templates,
     } = s;
     let mut ok = true;
     let mut moved = false;
     for k in 0..x.len() {
+        if SHAPES && shape[k] != SPHERE {
+            let principal = &templates[shape[k] as usize].principal_inertia;
+            let half_kick = f[k] * (0.5 * dt / m[k]);
+            if MODE & KICK != 0 {
+                v[k] += half_kick;
+                if rotation {
+                    // (3.35) as a half kick of H, then ω(T, H) (3.37)
+                    let h = rotation::angular_momentum(&q[k], &w[k], principal) + t[k] * (0.5 * dt);
+                    w[k] = rotation::angular_velocity(&q[k], &h, principal);
+                }
+                let (a, b, c) = (x[k], v[k], w[k]);
+                ok &= (a.x + a.y + a.z + b.x + b.y + b.z + c.x + c.y + c.z).is_finite();
+            }
+            if MODE & DRIFT != 0 {
+                v[k] += half_kick;
+                x[k] += v[k] * dt;
+                if let Some(x0) = x0.get(k) {
+                    moved |= (x[k] - x0).norm_squared() > half2;
+                }
+                if rotation {
+                    let h = rotation::angular_momentum(&q[k], &w[k], principal) + t[k] * (0.5 * dt);
+                    let (qn, wn) = rotation::rotate(&q[k], &h, principal, dt);
+                    q[k] = qn;
+                    w[k] = wn;
+                }
+            }
+            continue;
+        }
         let half_kick = f[k] * (0.5 * dt / m[k]);
         let half_turn = t[k] * (0.5 * dt / inertia[k]);
         if MODE & KICK != 0 {

@@ -32,6 +32,7 @@ pub mod resources;
 pub mod rotation;
 pub mod sensors;
 pub mod shape;
+pub mod shaped_forces;
 pub mod snapshot;
 pub mod stl;
 pub mod triangle_contact;
@@ -608,30 +609,38 @@ impl Engine {
 
     /// Number of particle–particle contacts (overlap > 0).
     pub fn num_contacts(&self) -> usize {
+        let l = &self.state.lists;
         self.pair_overlaps().filter(|&d| d > 0.0).count()
+            + l.shaped_pair_contacts
+                .iter()
+                .filter(|c| c.overlap > 0.0)
+                .count()
     }
 
     /// Number of particle–wall contacts.
     pub fn num_wall_contacts(&self) -> usize {
-        self.state
-            .lists
-            .wall_contacts
-            .iter()
-            .filter(|c| c.touching())
-            .count()
+        let l = &self.state.lists;
+        l.wall_contacts.iter().filter(|c| c.touching()).count()
+            + l.shaped_wall_contacts
+                .iter()
+                .filter(|c| c.touching())
+                .count()
     }
 
     /// Largest overlap of any contact (pair or wall), m.
     pub fn max_overlap(&self) -> f64 {
+        let l = &self.state.lists;
         let a = self.pair_overlaps().fold(0.0, f64::max);
-        let b = self
-            .state
-            .lists
+        let b = l
             .wall_contacts
             .iter()
             .map(|c| c.overlap)
             .fold(0.0, f64::max);
-        a.max(b)
+        let shaped = (l.shaped_pair_contacts.iter())
+            .chain(&l.shaped_wall_contacts)
+            .map(|c| c.overlap)
+            .fold(0.0, f64::max);
+        a.max(b).max(shaped)
     }
 
     /// Heap bytes of the mutable state (particles, neighbour lists, contact histories, wall
@@ -1134,9 +1143,11 @@ impl Engine {
             planes: &self.planes,
             meshes: &s.meshes,
             gravity: self.gravity,
+            hold_stiffness: self.cfg.superquadric_stiffness == config::StiffnessUpdate::FirstTouch,
             dt,
         };
         resolve_forces::contact_forces(&mut s.lists, &mut s.particles, &mut s.records, &ctx);
+        shaped_forces::shaped_forces(&mut s.lists, &mut s.particles, &ctx);
         if s.meshes.iter().any(|m| m.coupled) {
             resolve_forces::accumulate_nodal_forces(
                 &mut s.meshes,
@@ -1401,6 +1412,7 @@ impl Engine {
             planes: &self.planes,
             meshes: &s.meshes,
             gravity: self.gravity,
+            hold_stiffness: self.cfg.superquadric_stiffness == config::StiffnessUpdate::FirstTouch,
             dt: 0.0,
         };
         s.sensors
@@ -1417,6 +1429,7 @@ impl Engine {
             planes: &self.planes,
             meshes: &s.meshes,
             gravity: self.gravity,
+            hold_stiffness: self.cfg.superquadric_stiffness == config::StiffnessUpdate::FirstTouch,
             dt: 0.0,
         };
         r.extend(

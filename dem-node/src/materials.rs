@@ -41,6 +41,11 @@ pub struct PairParams {
     pub eight_g_star: f64,
     pub four_thirds_e_star: f64,
     pub damping_factor: f64,
+    /// λ1, λ2 of Mindlin's elliptic compliance (Wellmann 3.22), for shaped contacts.
+    #[serde(default)]
+    pub mindlin_lambda1: f64,
+    #[serde(default)]
+    pub mindlin_lambda2: f64,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -87,6 +92,12 @@ impl MaterialTable {
                     / ((2.0 - a.poisson_ratio) / a.shear_modulus()
                         + (2.0 - b.poisson_ratio) / b.shear_modulus());
                 let beta = crate::hertz_mindlin::damping_beta(restitution);
+                let mindlin = crate::elliptic_hertz::MindlinConstants::new(
+                    a.youngs_modulus,
+                    a.poisson_ratio,
+                    b.youngs_modulus,
+                    b.poisson_ratio,
+                );
                 pairs.push(PairParams {
                     e_star,
                     g_star,
@@ -99,6 +110,8 @@ impl MaterialTable {
                     four_thirds_e_star: 4.0 / 3.0 * e_star,
                     damping_factor: -2.0 * crate::hertz_mindlin::SQRT_5_6 * beta,
                     sqrt_stiffness_ratio: (4.0 * g_star / e_star).sqrt(),
+                    mindlin_lambda1: mindlin.lambda1,
+                    mindlin_lambda2: mindlin.lambda2,
                 });
             }
         }

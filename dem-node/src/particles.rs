@@ -1,9 +1,31 @@
-//! Particles as structure-of-arrays (spheres). A sphere's orientation changes nothing in its
-//! contacts, so none is stored or integrated (shapes that need one will carry it); the angular
-//! velocity is, for the tangential and rolling contact terms.
+//! Particles (bodies) as structure-of-arrays: centre, velocity, orientation, angular velocity,
+//! mass, inertia, material and a shape id, apart from the table of shape templates the
+//! non-spherical bodies point into (the shape layer, DESIGN "DEM bodies and shapes").
+//!
+//! A sphere (shape id [`SPHERE`]) is its `radius`; its orientation changes nothing in its
+//! contacts, so it stays the identity and is not integrated; its angular velocity is, for
+//! the tangential and rolling contact terms. A superquadric's `radius` is its bounding radius
+//! (the broad phase's, Wellmann 3.47), `inertia` the smallest principal moment, and its
+//! template holds the shape and the principal moments (3.5)–(3.7); its rotation follows
+//! Wellmann's scheme ([`crate::rotation`]).
 
 use crate::hertz_mindlin::V3;
+use crate::shape::Superquadric;
+use nalgebra::UnitQuaternion;
 use serde::{Deserialize, Serialize};
+
+/// Shape id of a sphere.
+pub const SPHERE: u32 = u32::MAX;
+
+/// Orientation body → global.
+pub type Orientation = UnitQuaternion<f64>;
+
+/// A non-spherical body's shape and principal moments of inertia (body frame).
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
+pub struct ShapeTemplate {
+    pub superquadric: Superquadric,
+    pub principal_inertia: V3,
+}
 
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct Particles {
@@ -21,6 +43,14 @@ pub struct Particles {
     /// Total force and torque of the last force evaluation (gravity included).
     pub force: Vec<V3>,
     pub torque: Vec<V3>,
+    /// Orientation body → global (identity for spheres).
+    #[serde(default)]
+    pub orientation: Vec<Orientation>,
+    /// [`SPHERE`] or an index into `templates`.
+    #[serde(default)]
+    pub shape: Vec<u32>,
+    #[serde(default)]
+    pub templates: Vec<ShapeTemplate>,
 }
 
 impl Particles {
@@ -52,6 +82,61 @@ impl Particles {
         self.material.push(material);
         self.force.push(V3::zeros());
         self.torque.push(V3::zeros());
+        self.orientation.push(Orientation::identity());
+        self.shape.push(SPHERE);
+    }
+
+    /// Adds a superquadric body of `density` (mass and inertia by (3.4)–(3.7)).
+    #[allow(clippy::too_many_arguments)] // one body's state, as `push`
+    pub fn push_superquadric(
+        &mut self,
+        position: V3,
+        velocity: V3,
+        omega: V3,
+        orientation: Orientation,
+        shape: Superquadric,
+        density: f64,
+        material: u16,
+    ) {
+        let (mass, principal_inertia) = shape.mass_properties(density);
+        self.id.push(self.position.len() as u32);
+        self.position.push(position);
+        self.velocity.push(velocity);
+        self.angular_velocity.push(omega);
+        self.radius.push(shape.bounding_radius());
+        self.mass.push(mass);
+        self.inertia.push(principal_inertia.min());
+        self.material.push(material);
+        self.force.push(V3::zeros());
+        self.torque.push(V3::zeros());
+        self.orientation.push(orientation);
+        self.shape.push(self.templates.len() as u32);
+        self.templates.push(ShapeTemplate {
+            superquadric: shape,
+            principal_inertia,
+        });
+    }
+
+    /// True if some body is not a sphere (the shaped pipeline runs).
+    pub fn has_shapes(&self) -> bool {
+        !self.templates.is_empty()
+    }
+
+    /// The template of body k, `None` for a sphere.
+    #[inline]
+    pub fn template(&self, k: usize) -> Option<&ShapeTemplate> {
+        self.templates.get(self.shape[k] as usize)
+    }
+
+    /// Fills orientation and shape for states written before bodies had them (all spheres).
+    pub fn complete_shape_columns(&mut self) {
+        let n = self.len();
+        if self.orientation.len() != n {
+            self.orientation = vec![Orientation::identity(); n];
+        }
+        if self.shape.len() != n {
+            self.shape = vec![SPHERE; n];
+        }
     }
 
     /// Reorders every array so that new index k holds old particle `perm[k]`.
@@ -70,21 +155,34 @@ impl Particles {
         apply(&mut self.material, perm);
         apply(&mut self.force, perm);
         apply(&mut self.torque, perm);
+        apply(&mut self.orientation, perm);
+        apply(&mut self.shape, perm);
     }
 
     pub fn kinetic_energy(&self) -> f64 {
         // serial sum in storage order: deterministic for any thread count
         let mut e = 0.0;
         for k in 0..self.len() {
-            e += 0.5 * self.mass[k] * self.velocity[k].norm_squared()
-                + 0.5 * self.inertia[k] * self.angular_velocity[k].norm_squared();
+            let w = &self.angular_velocity[k];
+            let rot = match self.template(k) {
+                None => 0.5 * self.inertia[k] * w.norm_squared(),
+                Some(t) => {
+                    let h = crate::rotation::angular_momentum(
+                        &self.orientation[k],
+                        w,
+                        &t.principal_inertia,
+                    );
+                    0.5 * w.dot(&h)
+                }
+            };
+            e += 0.5 * self.mass[k] * self.velocity[k].norm_squared() + rot;
         }
         e
     }
 
     /// Bytes of per-particle state (for the benchmark's memory figure).
     pub fn bytes_per_particle() -> usize {
-        // id, 5 vectors (x, v, ω, F, T), r, m, I, material
-        4 + 5 * 24 + 3 * 8 + 2
+        // id, 5 vectors (x, v, ω, F, T), r, m, I, material, orientation, shape id
+        4 + 5 * 24 + 3 * 8 + 2 + 32 + 4
     }
 }

@@ -33,6 +33,9 @@ pub struct ForceContext<'a> {
     pub planes: &'a [Plane],
     pub meshes: &'a [Mesh],
     pub gravity: V3,
+    /// Hold the elliptic Hertz stiffness of a shaped contact from its first touch
+    /// ([`crate::config::StiffnessUpdate::FirstTouch`]).
+    pub hold_stiffness: bool,
     /// Tangential history increment time (Δt, or 0 for a pure evaluation).
     pub dt: f64,
 }

@@ -13,8 +13,10 @@ use serde::{Deserialize, Serialize};
 /// 3: moving/removable static walls (mesh `active`, wall displacements at the list build),
 /// sensor state. 4: spheres without orientation. 5: loaded walls' state (first written with
 /// each wall's acceleration as a fourth number, which reading skips), particles removed by
-/// sinks (a version 4 snapshot reads as one without loaded walls and removals).
-pub const SNAPSHOT_VERSION: u32 = 5;
+/// sinks (a version 4 snapshot reads as one without loaded walls and removals). 6: bodies
+/// with orientation and shape id, shape templates, shaped contacts (an older snapshot reads
+/// as one of spheres).
+pub const SNAPSHOT_VERSION: u32 = 6;
 /// The oldest version [`decode`] reads.
 pub const OLDEST_READABLE_VERSION: u32 = 4;
 
@@ -73,6 +75,20 @@ pub fn decode(bytes: &[u8]) -> Result<EngineState, String> {
         return Err(format!(
             "snapshot version {} is not {OLDEST_READABLE_VERSION}–{SNAPSHOT_VERSION}",
             s.version
+        ));
+    }
+    let mut s = s;
+    s.particles.complete_shape_columns();
+    let t = s.particles.templates.len();
+    if let Some(k) = s
+        .particles
+        .shape
+        .iter()
+        .position(|&id| id != crate::particles::SPHERE && id as usize >= t)
+    {
+        return Err(format!(
+            "particle {} has shape {} but the snapshot holds {t} shape templates",
+            s.particles.id[k], s.particles.shape[k]
         ));
     }
     Ok(EngineState {

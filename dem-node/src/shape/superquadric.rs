@@ -20,6 +20,7 @@
 
 use crate::hertz_mindlin::V3;
 use nalgebra::Matrix3;
+use serde::{Deserialize, Serialize};
 
 /// Smallest |n_i| used in the point-from-normal map (Wellmann A.43: TOL = 1e-20).
 const NORMAL_FLOOR: f64 = 1e-20;
@@ -32,7 +33,8 @@ pub const EXPONENT_MAX: f64 = 1.9;
 /// A superquadric (3.1): F(X) = (|X1/r1|^(2/ε1) + |X2/r2|^(2/ε1))^(ε1/ε2) + |X3/r3|^(2/ε2).
 /// Half-extents r_i along the body axes E_i; ε1 is the angularity in the X1–X2 plane, ε2
 /// towards X3 (ε → 0 cuboid, ε = 1 ellipsoid, ε → 2 octahedron).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(into = "SuperquadricParams", try_from = "SuperquadricParams")]
 pub struct Superquadric {
     pub radii: V3,
     pub eps1: f64,
@@ -48,6 +50,36 @@ pub struct Superquadric {
     two_e1: f64,
     two_e2: f64,
     e1_e2: f64,
+}
+
+/// The five parameters of a superquadric as stored (the derived constants are rebuilt).
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+pub struct SuperquadricParams {
+    pub radii: [f64; 3],
+    pub eps1: f64,
+    pub eps2: f64,
+}
+
+impl From<Superquadric> for SuperquadricParams {
+    fn from(s: Superquadric) -> Self {
+        SuperquadricParams {
+            radii: [s.radii.x, s.radii.y, s.radii.z],
+            eps1: s.eps1,
+            eps2: s.eps2,
+        }
+    }
+}
+
+impl TryFrom<SuperquadricParams> for Superquadric {
+    type Error = String;
+    fn try_from(p: SuperquadricParams) -> Result<Self, String> {
+        Superquadric::new(V3::from(p.radii), p.eps1, p.eps2).ok_or_else(|| {
+            format!(
+                "not a convex superquadric: semi-axes {:?}, exponents {} and {}",
+                p.radii, p.eps1, p.eps2
+            )
+        })
+    }
 }
 
 /// Surface point X(n) of a body-frame normal n and its Jacobian J = ∂X/∂n (symmetric,

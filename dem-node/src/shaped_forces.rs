@@ -1,0 +1,310 @@
+//! Stage "resolve forces", shaped bucket: the contacts of non-spherical bodies (with each
+//! other, with spheres, with planes). Each listed contact is evaluated on its own — narrow
+//! phase ([`crate::narrow::superquadric`], warm-started from the last normal: Wellmann's
+//! temporal coherence) then the elliptic Hertz–Mindlin–Coulomb law
+//! ([`crate::elliptic_hertz`], W 3.13–3.31) — and stored in its [`ShapedContact`] record;
+//! then every body gathers the forces and torques of its records in list order. No sum
+//! depends on the scheduling, so results are bitwise the same for any thread count.
+
+use crate::broad_phase::{NeighbourLists, ShapedContact};
+use crate::elliptic_hertz::{
+    hertz_ellipse, lift, relative_curvature, tangential_force, MindlinConstants,
+    TangentialStiffness,
+};
+use crate::hertz_mindlin::V3;
+use crate::materials::PairParams;
+use crate::narrow::superquadric::{detect, Detection, SearchSettings, SearchStats, SqBody};
+use crate::particles::Particles;
+use crate::resolve_forces::ForceContext;
+use crate::shape::superquadric::{sym2_eigen, tangent_basis};
+use crate::shape::Superquadric;
+use nalgebra::Matrix3;
+use rayon::prelude::*;
+
+/// Contacts per parallel work item (fixed: the result does not depend on it).
+const CHUNK: usize = 256;
+
+/// Bounds of the principal radii of curvature used by the law, relative to the body
+/// (*not in thesis*): a flat point of an ε < 1 face has an infinite radius and a tip of an
+/// ε > 1 body a zero one, where Hertz (3.19) degenerates (SEED-SPEC §1.1). Radii are kept
+/// within [1e-2 × the smallest semi-axis, 10 × the bounding radius].
+const RADIUS_FLOOR: f64 = 1e-2;
+const RADIUS_CEILING: f64 = 10.0;
+
+/// A body as the narrow phase and the law see it.
+struct BodyView {
+    shape: Superquadric,
+    position: V3,
+    rotation: Matrix3<f64>,
+    velocity: V3,
+    omega: V3,
+    mass: f64,
+    /// Radius bounds of the law.
+    radius_range: (f64, f64),
+}
+
+fn body(p: &Particles, k: usize) -> BodyView {
+    let shape = match p.template(k) {
+        Some(t) => t.superquadric,
+        // a sphere is the superquadric with equal semi-axes and ε = 1 (exact in the search)
+        None => Superquadric::new(V3::repeat(p.radius[k]), 1.0, 1.0)
+            .expect("a particle radius is positive"),
+    };
+    let smallest = shape.radii.min();
+    BodyView {
+        radius_range: (
+            RADIUS_FLOOR * smallest,
+            RADIUS_CEILING * shape.bounding_radius(),
+        ),
+        shape,
+        position: p.position[k],
+        rotation: p.orientation[k].to_rotation_matrix().into_inner(),
+        velocity: p.velocity[k],
+        omega: p.angular_velocity[k],
+        mass: p.mass[k],
+    }
+}
+
+/// Curvature tensor (2×2, tangent basis) from a radius tensor [a, b, c] with the principal
+/// radii clamped to `range`.
+fn curvature(radii: [f64; 3], range: (f64, f64)) -> [[f64; 2]; 2] {
+    let (r_lo, r_hi, v_lo, v_hi) = sym2_eigen(radii[0], radii[1], radii[2]);
+    let (k_lo, k_hi) = (
+        1.0 / r_lo.clamp(range.0, range.1),
+        1.0 / r_hi.clamp(range.0, range.1),
+    );
+    let m = |a: usize, b: usize| k_lo * v_lo[a] * v_lo[b] + k_hi * v_hi[a] * v_hi[b];
+    [[m(0, 0), m(0, 1)], [m(1, 0), m(1, 1)]]
+}
+
+/// The contact geometry the law needs.
+struct Geometry {
+    /// Unit normal from body 1 towards body 2 (or the wall).
+    normal: V3,
+    overlap: f64,
+    point: V3,
+    t1: V3,
+    t2: V3,
+    k1: [[f64; 2]; 2],
+    k2: [[f64; 2]; 2],
+}
+
+/// Elliptic Hertz + Mindlin + Coulomb (W 3.13–3.31) on body 1; `d_dot` is the velocity of
+/// body 2's contact point relative to body 1's, `m_eff` the effective mass.
+fn law(
+    g: &Geometry,
+    params: &PairParams,
+    d_dot: &V3,
+    m_eff: f64,
+    old: &ShapedContact,
+    dt: f64,
+    hold: bool,
+) -> ShapedContact {
+    let rel = relative_curvature(g.k1, g.k2);
+    let Some(mut ell) = hertz_ellipse(rel.a, rel.b) else {
+        return ShapedContact::NONE; // no curvature at all: unreachable with the radius bounds
+    };
+    if hold && old.touching() {
+        // γ from the first touch (StiffnessUpdate::FirstTouch): f = −∂W/∂x exactly
+        ell.gamma = old.stiffness;
+    }
+    let delta = g.overlap;
+    let e_star = params.e_star;
+    let f_el = ell.elastic_normal_force(e_star, delta); // (3.19)
+    let c_n = ell.normal_stiffness(e_star, delta); // (3.28)
+                                                   // approach rate δ̇ = −ḋ·c
+    let delta_dot = -d_dot.dot(&g.normal);
+    // Damping calibrated like the sphere law (Tsuji, coefficient from the restitution):
+    // F_d = −2√(5/6) β √(c_N m*) δ̇, c_N = ∂f_el/∂δ; for a sphere pair it is that law's.
+    let f_dis = params.damping_factor * (c_n * m_eff).sqrt() * delta_dot;
+    let f_n = (f_el + f_dis).max(0.0); // (3.31)
+    let mindlin = MindlinConstants {
+        lambda1: params.mindlin_lambda1,
+        lambda2: params.mindlin_lambda2,
+    };
+    let kt = TangentialStiffness::new(
+        &ell,
+        &mindlin,
+        delta,
+        lift(&g.t1, &g.t2, rel.e_x),
+        lift(&g.t1, &g.t2, rel.e_y),
+    );
+    let ft = if dt > 0.0 {
+        tangential_force(
+            &old.tangential,
+            &g.normal,
+            &kt,
+            d_dot,
+            dt,
+            params.friction,
+            f_n,
+        )
+        .force
+    } else {
+        // a pure evaluation keeps the history (turned into the tangent plane, capped)
+        tangential_force(
+            &old.tangential,
+            &g.normal,
+            &kt,
+            &V3::zeros(),
+            0.0,
+            params.friction,
+            f_n,
+        )
+        .force
+    };
+    ShapedContact {
+        normal: g.normal,
+        tangential: ft,
+        overlap: delta,
+        point: g.point,
+        force: -g.normal * f_n + ft, // (3.13)
+        stiffness: ell.gamma,
+    }
+}
+
+/// Evaluates one shaped pair.
+fn pair_contact(
+    p: &Particles,
+    ctx: &ForceContext,
+    [i, j]: [u32; 2],
+    old: &ShapedContact,
+) -> ShapedContact {
+    let (i, j) = (i as usize, j as usize);
+    let (a, b) = (body(p, i), body(p, j));
+    let (ba, bb) = (
+        SqBody {
+            shape: &a.shape,
+            position: a.position,
+            rotation: a.rotation,
+        },
+        SqBody {
+            shape: &b.shape,
+            position: b.position,
+            rotation: b.rotation,
+        },
+    );
+    let guess = (old.normal != V3::zeros()).then_some(old.normal);
+    let mut stats = SearchStats::default();
+    let found = detect(&ba, &bb, guess, &SearchSettings::default(), &mut stats);
+    let c = match found {
+        Detection::Separated { normal } => {
+            return ShapedContact {
+                normal,
+                ..ShapedContact::NONE
+            }
+        }
+        Detection::Contact(c) => c,
+    };
+    let point = (c.p1 + c.p2) * 0.5;
+    let g = Geometry {
+        normal: c.normal,
+        overlap: c.overlap,
+        point,
+        t1: c.t1,
+        t2: c.t2,
+        k1: curvature(c.radii1, a.radius_range),
+        k2: curvature(c.radii2, b.radius_range),
+    };
+    let d_dot = (b.velocity + b.omega.cross(&(point - b.position)))
+        - (a.velocity + a.omega.cross(&(point - a.position)));
+    let params = ctx.materials.pair(p.material[i], p.material[j]);
+    let m_eff = a.mass * b.mass / (a.mass + b.mass);
+    law(&g, params, &d_dot, m_eff, old, ctx.dt, ctx.hold_stiffness)
+}
+
+/// Evaluates a shaped body's contact with plane `w`: the deepest point of the body is its
+/// surface point of outward normal −n (A.2), the plane has no curvature.
+fn plane_contact(
+    p: &Particles,
+    ctx: &ForceContext,
+    [k, w]: [u32; 2],
+    old: &ShapedContact,
+) -> ShapedContact {
+    let (k, w) = (k as usize, w as usize);
+    let pl = &ctx.planes[w];
+    let a = body(p, k);
+    let c = -pl.normal;
+    let n_body = a.rotation.tr_mul(&c);
+    let sp = a.shape.point_from_normal(&n_body);
+    let p1 = a.position + a.rotation * sp.x;
+    let delta = (pl.point - p1).dot(&pl.normal);
+    if !pl.active || delta < 0.0 {
+        return ShapedContact {
+            normal: c,
+            ..ShapedContact::NONE
+        };
+    }
+    let (t1, t2) = tangent_basis(&c);
+    let (u, v) = (a.rotation.tr_mul(&t1), a.rotation.tr_mul(&t2));
+    let (ju, jv) = (sp.jacobian * u, sp.jacobian * v);
+    let radii = [u.dot(&ju), 0.5 * (u.dot(&jv) + v.dot(&ju)), v.dot(&jv)];
+    let point = p1 + pl.normal * (0.5 * delta);
+    let g = Geometry {
+        normal: c,
+        overlap: delta,
+        point,
+        t1,
+        t2,
+        k1: curvature(radii, a.radius_range),
+        k2: [[0.0; 2]; 2],
+    };
+    let d_dot = pl.velocity - (a.velocity + a.omega.cross(&(point - a.position)));
+    let params = ctx.materials.pair(p.material[k], pl.material);
+    law(&g, params, &d_dot, a.mass, old, ctx.dt, ctx.hold_stiffness)
+}
+
+/// Evaluates every shaped contact and adds the forces and torques to the bodies (after the
+/// sphere stage has set gravity and the sphere contacts).
+pub fn shaped_forces(lists: &mut NeighbourLists, p: &mut Particles, ctx: &ForceContext) {
+    if lists.shaped_pairs.is_empty() && lists.shaped_walls.is_empty() {
+        return;
+    }
+    {
+        let pv: &Particles = p;
+        lists
+            .shaped_pair_contacts
+            .par_iter_mut()
+            .with_min_len(CHUNK)
+            .zip(lists.shaped_pairs.par_iter())
+            .for_each(|(c, &pair)| *c = pair_contact(pv, ctx, pair, c));
+        lists
+            .shaped_wall_contacts
+            .par_iter_mut()
+            .with_min_len(CHUNK)
+            .zip(lists.shaped_walls.par_iter())
+            .for_each(|(c, &cand)| *c = plane_contact(pv, ctx, cand, c));
+    }
+    let inc = &lists.shaped_incidence;
+    let pairs = &lists.shaped_pair_contacts;
+    let walls = &lists.shaped_wall_contacts;
+    let pos = &p.position;
+    p.force
+        .par_iter_mut()
+        .zip(p.torque.par_iter_mut())
+        .enumerate()
+        .with_min_len(1024)
+        .for_each(|(k, (f, t))| {
+            let x = pos[k];
+            if !inc.pair_start.is_empty() {
+                for &e in
+                    &inc.pair_entries[inc.pair_start[k] as usize..inc.pair_start[k + 1] as usize]
+                {
+                    let c = &pairs[(e >> 1) as usize];
+                    if c.touching() {
+                        let fk = if e & 1 == 0 { c.force } else { -c.force };
+                        *f += fk;
+                        *t += (c.point - x).cross(&fk);
+                    }
+                }
+            }
+            if !inc.wall_start.is_empty() {
+                for c in &walls[inc.wall_start[k] as usize..inc.wall_start[k + 1] as usize] {
+                    if c.touching() {
+                        *f += c.force;
+                        *t += (c.point - x).cross(&c.force);
+                    }
+                }
+            }
+        });
+}
