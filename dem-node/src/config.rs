@@ -178,6 +178,10 @@ pub struct SphereConfig {
     /// Angular velocity in rad/s, default 0.
     #[serde(default)]
     pub angular_velocity: [f64; 3],
+    /// Orientation of a superquadric as a quaternion [w, x, y, z] (normalised), default
+    /// random (or the identity with `random_orientation = false`).
+    #[serde(default)]
+    pub orientation: Option<[f64; 4]>,
 }
 
 /// Radius distribution of a region fill.
@@ -203,6 +207,40 @@ pub enum SizeDistribution {
     },
 }
 
+/// `shape` of a particle source: spheres (default) or superquadrics (Wellmann 3.1).
+///
+/// For a superquadric the source's radius (`radius`, the drawn radius of a `distribution`,
+/// or a listed `radius`) is the radius of the sphere of equal volume, so masses, mass
+/// targets and sizes read as for spheres. The semi-axis ratios are `aspect` (fixed) or each
+/// uniform in [1, `elongation`]; the exponents ε1, ε2 are `exponents` (fixed) or each uniform
+/// in [1 − `angularity`, 1 + `angularity`] (Wellmann §3.4.4); the default is a sphere-like
+/// ellipsoid (ratios 1, ε = 1). Orientations are uniformly random (seeded) unless
+/// `random_orientation = false`.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq, Default)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum ShapeConfig {
+    #[default]
+    Sphere,
+    Superquadric {
+        #[serde(default)]
+        aspect: Option<[f64; 3]>,
+        #[serde(default)]
+        elongation: Option<f64>,
+        #[serde(default)]
+        exponents: Option<[f64; 2]>,
+        #[serde(default)]
+        angularity: Option<f64>,
+        #[serde(default = "default_true")]
+        random_orientation: bool,
+    },
+}
+
+impl ShapeConfig {
+    pub fn is_sphere(&self) -> bool {
+        matches!(self, ShapeConfig::Sphere)
+    }
+}
+
 /// `[[dem.particles]]`: a particle source.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
@@ -211,6 +249,8 @@ pub enum ParticleSource {
     List {
         material: String,
         spheres: Vec<SphereConfig>,
+        #[serde(default)]
+        shape: ShapeConfig,
     },
     /// Simple-cubic lattice: centres `first + (i,j,k)·spacing`, `count = [nx, ny, nz]`.
     /// `jitter` (m, default 0) displaces every centre at random by up to ± jitter in x and y
@@ -228,6 +268,8 @@ pub enum ParticleSource {
         jitter: f64,
         #[serde(default = "default_seed")]
         seed: u64,
+        #[serde(default)]
+        shape: ShapeConfig,
     },
     /// Random non-overlapping spheres inside the box [min, max] (whole spheres inside), until
     /// `count` particles or `mass` kg are placed (exactly one of them).
@@ -245,6 +287,8 @@ pub enum ParticleSource {
         seed: u64,
         #[serde(default)]
         velocity: [f64; 3],
+        #[serde(default)]
+        shape: ShapeConfig,
     },
     /// Spheres from a CSV file (`path` relative to the scene folder) with the header
     /// `x,y,z,radius` and optionally `vx,vy,vz` (columns in any order), e.g. a settled bed
@@ -574,6 +618,74 @@ impl Check {
             self.fail(path, format!("must be a finite number > 0, got {v}"));
         }
     }
+    /// A source's `shape` (`base` is the path of the source).
+    fn shape(&mut self, base: &[Seg], shape: &ShapeConfig) {
+        let ShapeConfig::Superquadric {
+            aspect,
+            elongation,
+            exponents,
+            angularity,
+            ..
+        } = shape
+        else {
+            return;
+        };
+        let f = |field: &str| {
+            let mut v = base.to_vec();
+            v.push(Seg::Key("shape".into()));
+            v.push(Seg::Key(field.into()));
+            v
+        };
+        use crate::shape::superquadric::{EXPONENT_MAX, EXPONENT_MIN};
+        if aspect.is_some() && elongation.is_some() {
+            self.fail(
+                f("elongation"),
+                "give `aspect` or `elongation`, not both".into(),
+            );
+        }
+        if let Some(a) = aspect {
+            if !a.iter().all(|r| r.is_finite() && *r > 0.0) {
+                self.fail(
+                    f("aspect"),
+                    format!("ratios must be finite and > 0, got {a:?}"),
+                );
+            }
+        }
+        if let Some(e) = elongation {
+            if !(e.is_finite() && *e >= 1.0 && *e <= 100.0) {
+                self.fail(
+                    f("elongation"),
+                    format!("must be >= 1 (largest ratio of semi-axes) and <= 100, got {e}"),
+                );
+            }
+        }
+        if exponents.is_some() && angularity.is_some() {
+            self.fail(
+                f("angularity"),
+                "give `exponents` or `angularity`, not both".into(),
+            );
+        }
+        let range = format!(
+            "the convex range [{EXPONENT_MIN}, {EXPONENT_MAX}] (ε → 0 is a cuboid and ε = 2 an \
+             octahedron, bodies with edges where the contact normal is undefined)"
+        );
+        if let Some(e) = exponents {
+            if !e.iter().all(|x| (EXPONENT_MIN..=EXPONENT_MAX).contains(x)) {
+                self.fail(f("exponents"), format!("must lie in {range}, got {e:?}"));
+            }
+        }
+        if let Some(a) = angularity {
+            let limit = (1.0 - EXPONENT_MIN).min(EXPONENT_MAX - 1.0);
+            if !(a.is_finite() && *a >= 0.0 && *a <= limit) {
+                self.fail(
+                    f("angularity"),
+                    format!(
+                        "must be in [0, {limit}] so that 1 ± angularity stays in {range}, got {a}"
+                    ),
+                );
+            }
+        }
+    }
     fn non_negative(&mut self, path: Vec<Seg>, v: f64) {
         if !(v.is_finite() && v >= 0.0) {
             self.fail(path, format!("must be a finite number >= 0, got {v}"));
@@ -728,8 +840,13 @@ impl DemConfig {
         for (k, src) in self.particles.iter().enumerate() {
             let f = |field: &str| pi(&["dem", "particles"], k, &[field]);
             match src {
-                ParticleSource::List { material, spheres } => {
+                ParticleSource::List {
+                    material,
+                    spheres,
+                    shape,
+                } => {
                     c.material(f("material"), material, self);
+                    c.shape(&pi(&["dem", "particles"], k, &[]), shape);
                     for (s, sp) in spheres.iter().enumerate() {
                         let g = |field: &str| {
                             let mut v = f("spheres");
@@ -741,8 +858,24 @@ impl DemConfig {
                         c.finite3(g("position"), &sp.position);
                         c.finite3(g("velocity"), &sp.velocity);
                         c.finite3(g("angular_velocity"), &sp.angular_velocity);
+                        if let Some(q) = sp.orientation {
+                            let norm = q.iter().map(|x| x * x).sum::<f64>().sqrt();
+                            if !(norm.is_finite() && norm > 0.0) {
+                                c.fail(
+                                    g("orientation"),
+                                    format!("must be a finite non-zero quaternion [w, x, y, z], got {q:?}"),
+                                );
+                            } else if shape.is_sphere() {
+                                c.fail(
+                                    g("orientation"),
+                                    "a sphere has no orientation (give the source a `shape`)"
+                                        .into(),
+                                );
+                            }
+                        }
                     }
-                    // spheres written twice (or nearly): as for particle files
+                    // spheres written twice (or nearly): as for particle files (the bounding
+                    // spheres of superquadrics may overlap: the engine checks those)
                     let as_file: Vec<crate::particle_file::FileSphere> = spheres
                         .iter()
                         .enumerate()
@@ -753,10 +886,15 @@ impl DemConfig {
                             line: s,
                         })
                         .collect();
-                    if let Some((a, b, fraction)) = crate::particle_file::find_overlap(
-                        &as_file,
-                        crate::particle_file::MAX_FILE_OVERLAP,
-                    ) {
+                    let overlap = if shape.is_sphere() {
+                        crate::particle_file::find_overlap(
+                            &as_file,
+                            crate::particle_file::MAX_FILE_OVERLAP,
+                        )
+                    } else {
+                        None
+                    };
+                    if let Some((a, b, fraction)) = overlap {
                         let mut at = f("spheres");
                         at.push(Seg::Index(b));
                         c.fail(
@@ -777,9 +915,11 @@ impl DemConfig {
                     count,
                     velocity,
                     jitter,
+                    shape,
                     ..
                 } => {
                     c.material(f("material"), material, self);
+                    c.shape(&pi(&["dem", "particles"], k, &[]), shape);
                     c.positive(f("radius"), *radius);
                     c.finite3(f("first"), first);
                     c.finite3(f("velocity"), velocity);
@@ -820,9 +960,11 @@ impl DemConfig {
                     mass,
                     distribution,
                     velocity,
+                    shape,
                     ..
                 } => {
                     c.material(f("material"), material, self);
+                    c.shape(&pi(&["dem", "particles"], k, &[]), shape);
                     c.finite3(f("min"), min);
                     c.finite3(f("max"), max);
                     c.finite3(f("velocity"), velocity);

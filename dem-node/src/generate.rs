@@ -162,3 +162,60 @@ pub fn fill_box(
     }
     Ok(out)
 }
+
+/// A uniformly random rotation (a normalised 4-D Gaussian).
+pub fn random_orientation(rng: &mut SplitMix64) -> crate::particles::Orientation {
+    loop {
+        let q = nalgebra::Quaternion::new(rng.normal(), rng.normal(), rng.normal(), rng.normal());
+        if q.norm() > 1e-6 {
+            return nalgebra::UnitQuaternion::from_quaternion(q);
+        }
+    }
+}
+
+/// Draws a superquadric of the source `shape` with the volume of a sphere of radius `r_eq`
+/// (Wellmann §3.4.4: ratios uniform in [1, elongation], exponents uniform in
+/// [1 − angularity, 1 + angularity], then scaled to the size), and its orientation. `None`
+/// for a sphere source.
+pub fn sample_superquadric(
+    shape: &crate::config::ShapeConfig,
+    r_eq: f64,
+    rng: &mut SplitMix64,
+) -> Option<(crate::shape::Superquadric, crate::particles::Orientation)> {
+    let crate::config::ShapeConfig::Superquadric {
+        aspect,
+        elongation,
+        exponents,
+        angularity,
+        random_orientation: random,
+    } = shape
+    else {
+        return None;
+    };
+    let ratios = match (aspect, elongation) {
+        (Some(a), _) => V3::from(*a),
+        (None, Some(e)) => V3::new(
+            1.0 + (e - 1.0) * rng.uniform(),
+            1.0 + (e - 1.0) * rng.uniform(),
+            1.0 + (e - 1.0) * rng.uniform(),
+        ),
+        (None, None) => V3::repeat(1.0),
+    };
+    let [e1, e2] = match (exponents, angularity) {
+        (Some(e), _) => *e,
+        (None, Some(a)) => [
+            1.0 + a * (2.0 * rng.uniform() - 1.0),
+            1.0 + a * (2.0 * rng.uniform() - 1.0),
+        ],
+        (None, None) => [1.0, 1.0],
+    };
+    let unit = crate::shape::Superquadric::new(ratios, e1, e2)?;
+    let scale = (4.0 / 3.0 * std::f64::consts::PI * r_eq.powi(3) / unit.volume()).cbrt();
+    let body = crate::shape::Superquadric::new(ratios * scale, e1, e2)?;
+    let q = if *random {
+        random_orientation(rng)
+    } else {
+        crate::particles::Orientation::identity()
+    };
+    Some((body, q))
+}

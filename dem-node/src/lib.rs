@@ -161,6 +161,16 @@ pub struct Engine {
     predicted: Vec<V3>,
 }
 
+/// The generator of a source's shapes and orientations: its own stream, so that drawing
+/// shapes leaves the positions of sphere sources as they were.
+fn shape_rng(seed: u64, source: usize) -> generate::SplitMix64 {
+    generate::SplitMix64::new(
+        seed.wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            ^ (source as u64).wrapping_mul(0xD1B5_4A32_D192_ED03)
+            ^ 0x5EED,
+    )
+}
+
 fn v3(a: &[f64; 3]) -> V3 {
     V3::new(a[0], a[1], a[2])
 }
@@ -290,18 +300,27 @@ impl Engine {
         for (k, src) in cfg.particles.iter().enumerate() {
             let field = format!("dem.particles[{k}].material");
             match src {
-                ParticleSource::List { material, spheres } => {
+                ParticleSource::List {
+                    material,
+                    spheres,
+                    shape,
+                } => {
                     let m = mat(material, field)?;
                     let rho = materials.materials[m as usize].density;
+                    let mut rng = shape_rng(1, k);
                     for s in spheres {
-                        particles.push(
-                            v3(&s.position),
-                            v3(&s.velocity),
-                            v3(&s.angular_velocity),
-                            s.radius,
-                            rho,
-                            m,
-                        );
+                        let (x, v, w) = (v3(&s.position), v3(&s.velocity), v3(&s.angular_velocity));
+                        match generate::sample_superquadric(shape, s.radius, &mut rng) {
+                            None => particles.push(x, v, w, s.radius, rho, m),
+                            Some((body, q)) => {
+                                let q = s.orientation.map_or(q, |[w0, x0, y0, z0]| {
+                                    nalgebra::UnitQuaternion::from_quaternion(
+                                        nalgebra::Quaternion::new(w0, x0, y0, z0),
+                                    )
+                                });
+                                particles.push_superquadric(x, v, w, q, body, rho, m)
+                            }
+                        }
                     }
                 }
                 ParticleSource::Lattice {
@@ -313,18 +332,48 @@ impl Engine {
                     velocity,
                     jitter,
                     seed,
+                    shape,
                 } => {
                     let m = mat(material, field)?;
                     let rho = materials.materials[m as usize].density;
                     let mut rng = generate::SplitMix64::new(
                         seed.wrapping_mul(0x2545_F491_4F6C_DD1D) ^ 0x5A5A,
                     );
+                    let mut shapes = shape_rng(*seed, k);
                     for mut x in generate::lattice(v3(first), *spacing, *count) {
                         if *jitter > 0.0 {
                             x.x += jitter * (2.0 * rng.uniform() - 1.0);
                             x.y += jitter * (2.0 * rng.uniform() - 1.0);
                         }
-                        particles.push(x, v3(velocity), V3::zeros(), *radius, rho, m);
+                        match generate::sample_superquadric(shape, *radius, &mut shapes) {
+                            None => particles.push(x, v3(velocity), V3::zeros(), *radius, rho, m),
+                            Some((body, q)) => {
+                                // bounding spheres apart: no two bodies can overlap
+                                let reach = 2.0 * body.bounding_radius() + 2.0 * jitter;
+                                if *spacing < reach {
+                                    return Err(DemError::Generation {
+                                        source_index: k,
+                                        message: format!(
+                                            "spacing {} m is less than the bounding diameter \
+                                             {} m of a drawn superquadric (plus twice the \
+                                             jitter): the bodies could overlap; increase \
+                                             `spacing`",
+                                            resources::format_number(*spacing),
+                                            resources::format_number(reach)
+                                        ),
+                                    });
+                                }
+                                particles.push_superquadric(
+                                    x,
+                                    v3(velocity),
+                                    V3::zeros(),
+                                    q,
+                                    body,
+                                    rho,
+                                    m,
+                                )
+                            }
+                        }
                     }
                 }
                 ParticleSource::Fill {
@@ -336,6 +385,7 @@ impl Engine {
                     distribution,
                     seed,
                     velocity,
+                    shape,
                 } => {
                     let m = mat(material, field)?;
                     let rho = materials.materials[m as usize].density;
@@ -371,13 +421,40 @@ impl Engine {
                         .cloned()
                         .zip(particles.radius.iter().cloned())
                         .collect();
+                    // superquadrics are placed by their bounding spheres (never overlapping),
+                    // largest first as fill_box sorts (a stable sort keeps ties in order)
+                    let mut shapes_rng = shape_rng(*seed, k);
+                    let mut bodies: Vec<_> = radii
+                        .iter()
+                        .filter_map(|&r| generate::sample_superquadric(shape, r, &mut shapes_rng))
+                        .collect();
+                    if !bodies.is_empty() {
+                        bodies.sort_by(|a, b| {
+                            b.0.bounding_radius().total_cmp(&a.0.bounding_radius())
+                        });
+                        radii = bodies.iter().map(|b| b.0.bounding_radius()).collect();
+                    }
                     let placed = generate::fill_box(v3(min), v3(max), &mut radii, *seed, &existing)
                         .map_err(|message| DemError::Generation {
                             source_index: k,
                             message,
                         })?;
-                    for (x, r) in placed {
-                        particles.push(x, v3(velocity), V3::zeros(), r, rho, m);
+                    if bodies.is_empty() {
+                        for (x, r) in placed {
+                            particles.push(x, v3(velocity), V3::zeros(), r, rho, m);
+                        }
+                    } else {
+                        for ((x, _), (body, q)) in placed.into_iter().zip(bodies) {
+                            particles.push_superquadric(
+                                x,
+                                v3(velocity),
+                                V3::zeros(),
+                                q,
+                                body,
+                                rho,
+                                m,
+                            );
+                        }
                     }
                 }
                 ParticleSource::File {
@@ -458,11 +535,32 @@ impl Engine {
                 }
             }
         }
+        if particles.has_shapes() {
+            if let Some(w) = cfg
+                .walls
+                .iter()
+                .position(|w| !matches!(w, WallConfig::Plane { .. }))
+            {
+                return Err(DemError::Config {
+                    field: format!("dem.walls[{w}]"),
+                    message: "box and STL walls do not touch superquadric particles yet (planes \
+                              do): build the container from `kind = \"plane\"` walls"
+                        .into(),
+                });
+            }
+        }
         let skin = cfg.skin.unwrap_or_else(|| {
-            // Wellmann B4: d_V = 0.25 r̄
             if particles.is_empty() {
                 1e-3
+            } else if particles.has_shapes() {
+                // Wellmann (3.49): d_V = 0.05 r̄, r̄ = (r_max + r_min)/2 of the bounding radii
+                let r = &particles.radius;
+                let (lo, hi) = r
+                    .iter()
+                    .fold((f64::MAX, 0.0f64), |(a, b), &x| (a.min(x), b.max(x)));
+                0.05 * 0.5 * (lo + hi)
             } else {
+                // Wellmann B4: d_V = 0.25 r̄
                 0.25 * particles.radius.iter().sum::<f64>() / particles.len() as f64
             }
         });
@@ -563,8 +661,12 @@ impl Engine {
         let mut best = (f64::INFINITY, 0u32);
         for k in 0..p.len() {
             let m = &self.materials.materials[p.material[k] as usize];
-            let t =
-                rayleigh_time_step_of(p.radius[k], m.poisson_ratio, m.density, m.shear_modulus());
+            // a superquadric's from its smallest semi-axis (the smallest lump of it that
+            // vibrates)
+            let r = p
+                .template(k)
+                .map_or(p.radius[k], |t| t.superquadric.radii.min());
+            let t = rayleigh_time_step_of(r, m.poisson_ratio, m.density, m.shear_modulus());
             if t < best.0 {
                 best = (t, p.id[k]);
             }
@@ -693,6 +795,13 @@ impl Engine {
             mesh: name.to_string(),
             message,
         };
+        if self.state.particles.has_shapes() {
+            return Err(merr(
+                "coupled meshes do not touch superquadric particles yet (only spheres and \
+                 planes do)"
+                    .into(),
+            ));
+        }
         let Some(mat_name) = &self.cfg.interface_material else {
             return Err(merr("a coupled mesh needs dem.interface_material".into()));
         };
@@ -1030,6 +1139,22 @@ impl Engine {
             for (lw, st) in self.loaded_walls.iter().zip(&mut s.loaded_walls) {
                 if index(lw) == w {
                     st.contact_force += rec.force.dot(&lw.axis);
+                }
+            }
+        }
+        // shaped bodies on loaded planes: the reaction of their contact force
+        for (&[_, w], c) in s
+            .lists
+            .shaped_walls
+            .iter()
+            .zip(&s.lists.shaped_wall_contacts)
+        {
+            if !c.touching() {
+                continue;
+            }
+            for (lw, st) in self.loaded_walls.iter().zip(&mut s.loaded_walls) {
+                if index(lw) == w as usize {
+                    st.contact_force -= c.force.dot(&lw.axis);
                 }
             }
         }
