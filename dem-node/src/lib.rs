@@ -709,6 +709,17 @@ impl Engine {
         })
     }
 
+    /// The listed pairs with a non-spherical body, by particle ids, with their contact
+    /// records (normal, overlap, contact point, force on the first body).
+    pub fn shaped_pair_contacts(
+        &self,
+    ) -> impl Iterator<Item = ([u32; 2], &broad_phase::ShapedContact)> + '_ {
+        let (p, l) = (&self.state.particles, &self.state.lists);
+        (l.shaped_pairs.iter())
+            .zip(&l.shaped_pair_contacts)
+            .map(|(&[i, j], c)| ([p.id[i as usize], p.id[j as usize]], c))
+    }
+
     /// Number of particle–particle contacts (overlap > 0).
     pub fn num_contacts(&self) -> usize {
         let l = &self.state.lists;
