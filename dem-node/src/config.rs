@@ -680,7 +680,8 @@ impl Check {
                 self.fail(
                     f("angularity"),
                     format!(
-                        "must be in [0, {limit}] so that 1 ± angularity stays in {range}, got {a}"
+                        "must be in [0, {}] so that 1 ± angularity stays in {range}, got {a}",
+                        format_number(limit)
                     ),
                 );
             }
