@@ -207,6 +207,17 @@ pub enum SizeDistribution {
     },
 }
 
+impl SizeDistribution {
+    /// The largest radius it can draw.
+    pub fn max_radius(&self) -> f64 {
+        match self {
+            SizeDistribution::Constant { radius } => *radius,
+            SizeDistribution::Uniform { max, .. } | SizeDistribution::Normal { max, .. } => *max,
+            SizeDistribution::Table { radius, .. } => radius.last().copied().unwrap_or(f64::NAN),
+        }
+    }
+}
+
 /// `shape` of a particle source: spheres (default) or superquadrics (Wellmann 3.1).
 ///
 /// For a superquadric the source's radius (`radius`, the drawn radius of a `distribution`,
@@ -222,6 +233,11 @@ pub enum ShapeConfig {
     #[default]
     Sphere,
     Superquadric {
+        /// Semi-axes r1, r2, r3 each drawn from its own distribution (Wellmann's sand,
+        /// SEED-SPEC §3.4); the source's size is then not used (a fill gives no
+        /// `distribution`).
+        #[serde(default)]
+        semi_axes: Option<[SizeDistribution; 3]>,
         #[serde(default)]
         aspect: Option<[f64; 3]>,
         #[serde(default)]
@@ -230,6 +246,9 @@ pub enum ShapeConfig {
         exponents: Option<[f64; 2]>,
         #[serde(default)]
         angularity: Option<f64>,
+        /// Exponents each uniform in [lo, hi] (Wellmann's sand: [0.6, 1.2]).
+        #[serde(default)]
+        exponent_range: Option<[f64; 2]>,
         #[serde(default = "default_true")]
         random_orientation: bool,
     },
@@ -281,7 +300,10 @@ pub enum ParticleSource {
         count: Option<usize>,
         #[serde(default)]
         mass: Option<f64>,
-        distribution: SizeDistribution,
+        /// Radius distribution (equal-volume radius for superquadrics); omitted when the
+        /// shape draws its `semi_axes`.
+        #[serde(default)]
+        distribution: Option<SizeDistribution>,
         /// Seed of the deterministic generator, default 1.
         #[serde(default = "default_seed")]
         seed: u64,
@@ -621,10 +643,12 @@ impl Check {
     /// A source's `shape` (`base` is the path of the source).
     fn shape(&mut self, base: &[Seg], shape: &ShapeConfig) {
         let ShapeConfig::Superquadric {
+            semi_axes,
             aspect,
             elongation,
             exponents,
             angularity,
+            exponent_range,
             ..
         } = shape
         else {
@@ -637,11 +661,19 @@ impl Check {
             v
         };
         use crate::shape::superquadric::{EXPONENT_MAX, EXPONENT_MIN};
-        if aspect.is_some() && elongation.is_some() {
+        let sizes = [semi_axes.is_some(), aspect.is_some(), elongation.is_some()];
+        if sizes.iter().filter(|x| **x).count() > 1 {
             self.fail(
                 f("elongation"),
-                "give `aspect` or `elongation`, not both".into(),
+                "give one of `semi_axes`, `aspect` and `elongation`, not two".into(),
             );
+        }
+        if let Some(axes) = semi_axes {
+            for (k, d) in axes.iter().enumerate() {
+                let mut path = f("semi_axes");
+                path.push(Seg::Index(k));
+                self.size_distribution(path, d);
+            }
         }
         if let Some(a) = aspect {
             if !a.iter().all(|r| r.is_finite() && *r > 0.0) {
@@ -674,6 +706,14 @@ impl Check {
                 self.fail(f("exponents"), format!("must lie in {range}, got {e:?}"));
             }
         }
+        if let Some(e) = exponent_range {
+            if !(e.iter().all(|x| (EXPONENT_MIN..=EXPONENT_MAX).contains(x)) && e[0] <= e[1]) {
+                self.fail(
+                    f("exponent_range"),
+                    format!("must be [lo, hi] with lo <= hi in {range}, got {e:?}"),
+                );
+            }
+        }
         if let Some(a) = angularity {
             let limit = (1.0 - EXPONENT_MIN).min(EXPONENT_MAX - 1.0);
             if !(a.is_finite() && *a >= 0.0 && *a <= limit) {
@@ -684,6 +724,68 @@ impl Check {
                         format_number(limit)
                     ),
                 );
+            }
+        }
+    }
+    /// A radius distribution at `path`.
+    fn size_distribution(&mut self, path: Vec<Seg>, distribution: &SizeDistribution) {
+        let c = self;
+        let d = |field: &str| {
+            let mut v = path.clone();
+            v.push(Seg::Key(field.into()));
+            v
+        };
+        match distribution {
+            SizeDistribution::Constant { radius } => c.positive(d("radius"), *radius),
+            SizeDistribution::Uniform { min, max } => {
+                c.positive(d("min"), *min);
+                if !(max >= min && max.is_finite()) {
+                    c.fail(d("max"), format!("must be >= min = {min}, got {max}"));
+                }
+            }
+            SizeDistribution::Normal {
+                mean,
+                std_dev,
+                min,
+                max,
+            } => {
+                c.positive(d("mean"), *mean);
+                c.non_negative(d("std_dev"), *std_dev);
+                c.positive(d("min"), *min);
+                if !(max >= min && max.is_finite()) {
+                    c.fail(d("max"), format!("must be >= min = {min}, got {max}"));
+                }
+            }
+            SizeDistribution::Table { radius, cumulative } => {
+                if radius.len() < 2 || radius.len() != cumulative.len() {
+                    c.fail(
+                        d("cumulative"),
+                        "needs >= 2 entries and as many as `radius`".into(),
+                    );
+                } else {
+                    if radius[0].partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
+                        || radius.iter().any(|r| !r.is_finite())
+                        || radius.windows(2).any(|w| w[1] < w[0])
+                    {
+                        c.fail(
+                            d("radius"),
+                            format!(
+                                "must be finite, > 0 and non-decreasing, got \
+                                 {radius:?}"
+                            ),
+                        );
+                    }
+                    if cumulative[0] != 0.0
+                        || cumulative.iter().any(|c| !c.is_finite())
+                        || *cumulative.last().unwrap() != 1.0
+                        || cumulative.windows(2).any(|w| w[1] < w[0])
+                    {
+                        c.fail(
+                            d("cumulative"),
+                            "must rise from 0 to 1 (non-decreasing)".into(),
+                        );
+                    }
+                }
             }
         }
     }
@@ -976,63 +1078,25 @@ impl DemConfig {
                         (None, Some(m)) => c.positive(f("mass"), *m),
                         _ => c.fail(f("count"), "give exactly one of `count` and `mass`".into()),
                     }
-                    let d = |field: &str| {
-                        let mut v = f("distribution");
-                        v.push(Seg::Key(field.into()));
-                        v
-                    };
-                    match distribution {
-                        SizeDistribution::Constant { radius } => c.positive(d("radius"), *radius),
-                        SizeDistribution::Uniform { min, max } => {
-                            c.positive(d("min"), *min);
-                            if !(max >= min && max.is_finite()) {
-                                c.fail(d("max"), format!("must be >= min = {min}, got {max}"));
-                            }
+                    let with_axes = matches!(
+                        shape,
+                        ShapeConfig::Superquadric {
+                            semi_axes: Some(_),
+                            ..
                         }
-                        SizeDistribution::Normal {
-                            mean,
-                            std_dev,
-                            min,
-                            max,
-                        } => {
-                            c.positive(d("mean"), *mean);
-                            c.non_negative(d("std_dev"), *std_dev);
-                            c.positive(d("min"), *min);
-                            if !(max >= min && max.is_finite()) {
-                                c.fail(d("max"), format!("must be >= min = {min}, got {max}"));
-                            }
-                        }
-                        SizeDistribution::Table { radius, cumulative } => {
-                            if radius.len() < 2 || radius.len() != cumulative.len() {
-                                c.fail(
-                                    d("cumulative"),
-                                    "needs >= 2 entries and as many as `radius`".into(),
-                                );
-                            } else {
-                                if radius[0].partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
-                                    || radius.iter().any(|r| !r.is_finite())
-                                    || radius.windows(2).any(|w| w[1] < w[0])
-                                {
-                                    c.fail(
-                                        d("radius"),
-                                        format!(
-                                            "must be finite, > 0 and non-decreasing, got \
-                                             {radius:?}"
-                                        ),
-                                    );
-                                }
-                                if cumulative[0] != 0.0
-                                    || cumulative.iter().any(|c| !c.is_finite())
-                                    || *cumulative.last().unwrap() != 1.0
-                                    || cumulative.windows(2).any(|w| w[1] < w[0])
-                                {
-                                    c.fail(
-                                        d("cumulative"),
-                                        "must rise from 0 to 1 (non-decreasing)".into(),
-                                    );
-                                }
-                            }
-                        }
+                    );
+                    match (distribution, with_axes) {
+                        (Some(d), false) => c.size_distribution(f("distribution"), d),
+                        (None, false) => c.fail(
+                            f("distribution"),
+                            "missing: give the radius distribution (or the shape's `semi_axes`)"
+                                .into(),
+                        ),
+                        (Some(_), true) => c.fail(
+                            f("distribution"),
+                            "the size comes from `shape.semi_axes`: remove `distribution`".into(),
+                        ),
+                        (None, true) => {}
                     }
                 }
                 ParticleSource::File {
@@ -1285,20 +1349,27 @@ impl DemConfig {
                     mass: Some(mass),
                     distribution,
                     material,
+                    shape,
                     ..
                 } => {
-                    let r_max = match distribution {
-                        SizeDistribution::Constant { radius } => *radius,
-                        SizeDistribution::Uniform { max, .. }
-                        | SizeDistribution::Normal { max, .. } => *max,
-                        SizeDistribution::Table { radius, .. } => {
-                            radius.last().copied().unwrap_or(f64::NAN)
-                        }
-                    };
                     let Some(rho) = self.materials.get(material).map(|m| m.density) else {
                         continue;
                     };
-                    let largest = rho * 4.0 / 3.0 * std::f64::consts::PI * r_max.powi(3);
+                    // the heaviest possible particle: the largest sphere, or the box around the
+                    // largest semi-axes
+                    let largest = match (distribution, shape) {
+                        (Some(d), _) => {
+                            rho * 4.0 / 3.0 * std::f64::consts::PI * d.max_radius().powi(3)
+                        }
+                        (
+                            None,
+                            ShapeConfig::Superquadric {
+                                semi_axes: Some(axes),
+                                ..
+                            },
+                        ) => rho * 8.0 * axes.iter().map(|d| d.max_radius()).product::<f64>(),
+                        _ => continue, // reported above
+                    };
                     let n = (mass / largest).ceil();
                     if !(n.is_finite() && n >= 0.0) {
                         continue; // the ranges are reported above
@@ -1308,7 +1379,7 @@ impl DemConfig {
                         n,
                         (
                             "at least ".to_string(),
-                            format!(" (all of the largest radius, {} m)", format_number(r_max)),
+                            " (all as heavy as the largest possible particle)".to_string(),
                         ),
                     )
                 }

@@ -183,35 +183,50 @@ pub fn sample_superquadric(
     rng: &mut SplitMix64,
 ) -> Option<(crate::shape::Superquadric, crate::particles::Orientation)> {
     let crate::config::ShapeConfig::Superquadric {
+        semi_axes,
         aspect,
         elongation,
         exponents,
         angularity,
+        exponent_range,
         random_orientation: random,
     } = shape
     else {
         return None;
     };
-    let ratios = match (aspect, elongation) {
-        (Some(a), _) => V3::from(*a),
-        (None, Some(e)) => V3::new(
+    let ratios = match (semi_axes, aspect, elongation) {
+        (Some(d), ..) => V3::new(
+            sample_radius(&d[0], rng),
+            sample_radius(&d[1], rng),
+            sample_radius(&d[2], rng),
+        ),
+        (None, Some(a), _) => V3::from(*a),
+        (None, None, Some(e)) => V3::new(
             1.0 + (e - 1.0) * rng.uniform(),
             1.0 + (e - 1.0) * rng.uniform(),
             1.0 + (e - 1.0) * rng.uniform(),
         ),
-        (None, None) => V3::repeat(1.0),
+        (None, None, None) => V3::repeat(1.0),
     };
-    let [e1, e2] = match (exponents, angularity) {
-        (Some(e), _) => *e,
-        (None, Some(a)) => [
+    let [e1, e2] = match (exponents, angularity, exponent_range) {
+        (Some(e), ..) => *e,
+        (None, Some(a), _) => [
             1.0 + a * (2.0 * rng.uniform() - 1.0),
             1.0 + a * (2.0 * rng.uniform() - 1.0),
         ],
-        (None, None) => [1.0, 1.0],
+        (None, None, Some([lo, hi])) => [
+            lo + (hi - lo) * rng.uniform(),
+            lo + (hi - lo) * rng.uniform(),
+        ],
+        (None, None, None) => [1.0, 1.0],
     };
     let unit = crate::shape::Superquadric::new(ratios, e1, e2)?;
-    let scale = (4.0 / 3.0 * std::f64::consts::PI * r_eq.powi(3) / unit.volume()).cbrt();
-    let body = crate::shape::Superquadric::new(ratios * scale, e1, e2)?;
+    let body = if semi_axes.is_some() {
+        unit // drawn to size
+    } else {
+        let scale = (4.0 / 3.0 * std::f64::consts::PI * r_eq.powi(3) / unit.volume()).cbrt();
+        crate::shape::Superquadric::new(ratios * scale, e1, e2)?
+    };
     let q = if *random {
         random_orientation(rng)
     } else {

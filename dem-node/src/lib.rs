@@ -392,28 +392,37 @@ impl Engine {
                     let mut rng = generate::SplitMix64::new(
                         seed.wrapping_mul(0x2545_F491_4F6C_DD1D) ^ 0xA5A5,
                     );
+                    // equal-volume radii (spheres: the radii), or the bodies themselves when
+                    // the shape draws its semi-axes
+                    let mut shapes_rng = shape_rng(*seed, k);
                     let mut radii = Vec::new();
-                    match (count, mass) {
-                        (Some(n), _) => {
-                            for _ in 0..*n {
-                                radii.push(generate::sample_radius(distribution, &mut rng));
-                            }
-                        }
-                        (None, Some(target)) => {
-                            let mut total = 0.0;
-                            while total < *target {
-                                let r = generate::sample_radius(distribution, &mut rng);
+                    let mut drawn = Vec::new();
+                    let mut total = 0.0;
+                    let enough = |n: usize, total: f64| match (count, mass) {
+                        (Some(c), _) => n >= *c,
+                        (None, Some(target)) => total >= *target,
+                        (None, None) => true, // validated: count or mass
+                    };
+                    while !enough(radii.len().max(drawn.len()), total) {
+                        match distribution {
+                            Some(d) => {
+                                let r = generate::sample_radius(d, &mut rng);
                                 total += rho * 4.0 / 3.0 * std::f64::consts::PI * r.powi(3);
                                 radii.push(r);
-                                if radii.len() > 50_000_000 {
-                                    return Err(DemError::Generation {
-                                        source_index: k,
-                                        message: "mass target needs more than 5e7 particles".into(),
-                                    });
-                                }
+                            }
+                            None => {
+                                let b = generate::sample_superquadric(shape, 0.0, &mut shapes_rng)
+                                    .expect("validated: without a distribution the shape draws its semi-axes");
+                                total += rho * b.0.volume();
+                                drawn.push(b);
                             }
                         }
-                        (None, None) => unreachable!("validated: count or mass"),
+                        if radii.len().max(drawn.len()) > 50_000_000 {
+                            return Err(DemError::Generation {
+                                source_index: k,
+                                message: "mass target needs more than 5e7 particles".into(),
+                            });
+                        }
                     }
                     let existing: Vec<(V3, f64)> = particles
                         .position
@@ -423,11 +432,11 @@ impl Engine {
                         .collect();
                     // superquadrics are placed by their bounding spheres (never overlapping),
                     // largest first as fill_box sorts (a stable sort keeps ties in order)
-                    let mut shapes_rng = shape_rng(*seed, k);
                     let mut bodies: Vec<_> = radii
                         .iter()
                         .filter_map(|&r| generate::sample_superquadric(shape, r, &mut shapes_rng))
                         .collect();
+                    bodies.extend(drawn);
                     if !bodies.is_empty() {
                         bodies.sort_by(|a, b| {
                             b.0.bounding_radius().total_cmp(&a.0.bounding_radius())
