@@ -1538,10 +1538,11 @@ impl Engine {
                     .map(|k| p.position[k][axis] - p.radius[k])
                     .fold(f64::MAX, f64::min)
         };
-        let vol: f64 = p
-            .radius
-            .iter()
-            .map(|r| 4.0 / 3.0 * std::f64::consts::PI * r.powi(3))
+        let vol: f64 = (0..p.len())
+            .map(|k| match p.template(k) {
+                Some(t) => t.superquadric.volume(),
+                None => 4.0 / 3.0 * std::f64::consts::PI * p.radius[k].powi(3),
+            })
             .sum();
         Some(vol / (area * height))
     }
