@@ -171,6 +171,15 @@ fn pair_contact(
     old: &ShapedContact,
 ) -> ShapedContact {
     let (i, j) = (i as usize, j as usize);
+    // bounding spheres apart: no contact, and nothing to evaluate (the last normal stays
+    // the warm start)
+    let reach = p.radius[i] + p.radius[j];
+    if (p.position[j] - p.position[i]).norm_squared() >= reach * reach {
+        return ShapedContact {
+            normal: old.normal,
+            ..ShapedContact::NONE
+        };
+    }
     let (a, b) = (body(p, i), body(p, j));
     let (ba, bb) = (
         SqBody {

@@ -50,6 +50,9 @@ pub struct Superquadric {
     two_e1: f64,
     two_e2: f64,
     e1_e2: f64,
+    /// Bounding and inscribed radii (computed once: they take trigonometry).
+    bounding: f64,
+    inscribed: f64,
 }
 
 /// The five parameters of a superquadric as stored (the derived constants are rebuilt).
@@ -108,7 +111,11 @@ impl Superquadric {
             return None;
         }
         let ln_r = [radii.x.ln(), radii.y.ln(), radii.z.ln()];
+        let (r12_max, _) = extreme_radius_2d(radii.x, radii.y, eps1, true);
+        let (r12_min, _) = extreme_radius_2d(radii.x, radii.y, eps1, false);
         Some(Superquadric {
+            bounding: extreme_radius_2d(r12_max, radii.z, eps2, true).0,
+            inscribed: extreme_radius_2d(r12_min, radii.z, eps2, false).0,
             radii,
             eps1,
             eps2,
@@ -206,15 +213,15 @@ impl Superquadric {
 
     /// Radius of the smallest centred sphere containing the body, (A.8)–(A.14) (exact: the
     /// farthest point in the plane φ2 = 0 stays the farthest for every φ2).
+    #[inline]
     pub fn bounding_radius(&self) -> f64 {
-        let (r12, _) = extreme_radius_2d(self.radii.x, self.radii.y, self.eps1, true);
-        extreme_radius_2d(r12, self.radii.z, self.eps2, true).0
+        self.bounding
     }
 
     /// Radius of the largest centred sphere inside the body (the other extreme of (A.11)).
+    #[inline]
     pub fn inscribed_radius(&self) -> f64 {
-        let (r12, _) = extreme_radius_2d(self.radii.x, self.radii.y, self.eps1, false);
-        extreme_radius_2d(r12, self.radii.z, self.eps2, false).0
+        self.inscribed
     }
 
     /// Volume per unit density and principal moments per unit density, (3.4)–(3.7)
