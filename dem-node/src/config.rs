@@ -979,14 +979,16 @@ impl DemConfig {
                     }
                     // spheres written twice (or nearly): as for particle files (the bounding
                     // spheres of superquadrics may overlap: the engine checks those)
-                    let as_file: Vec<crate::particle_file::FileSphere> = spheres
+                    let as_file: Vec<crate::particle_file::FileParticle> = spheres
                         .iter()
                         .enumerate()
-                        .map(|(s, sp)| crate::particle_file::FileSphere {
-                            position: sp.position.into(),
-                            radius: sp.radius,
-                            velocity: sp.velocity.into(),
-                            line: s,
+                        .map(|(s, sp)| {
+                            crate::particle_file::FileParticle::sphere(
+                                sp.position.into(),
+                                sp.radius,
+                                sp.velocity.into(),
+                                s,
+                            )
                         })
                         .collect();
                     let overlap = if shape.is_sphere() {

@@ -488,7 +488,7 @@ impl Engine {
                         line,
                         message,
                     };
-                    let spheres: Vec<particle_file::FileSphere> = spheres
+                    let spheres: Vec<particle_file::FileParticle> = spheres
                         .into_iter()
                         .filter(|s| {
                             let p = s.position;
