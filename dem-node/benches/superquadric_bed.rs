@@ -161,7 +161,11 @@ fn bed(count: usize) {
     }
     let body = |k: usize| {
         let s = p.template(k).expect("superquadric").superquadric;
-        (s, p.position[k], p.orientation[k].to_rotation_matrix().into_inner())
+        (
+            s,
+            p.position[k],
+            p.orientation[k].to_rotation_matrix().into_inner(),
+        )
     };
     let bodies: Vec<_> = (0..p.len()).map(body).collect();
     let rounds = 5;
@@ -176,7 +180,13 @@ fn bed(count: usize) {
             };
             let mut st = SearchStats::default();
             let g = (guess != V3::zeros()).then_some(guess);
-            std::hint::black_box(detect(&mk(a), &mk(b), g, &SearchSettings::default(), &mut st));
+            std::hint::black_box(detect(
+                &mk(a),
+                &mk(b),
+                g,
+                &SearchSettings::default(),
+                &mut st,
+            ));
             iterations += st.iterations as u64;
         }
     }
@@ -194,14 +204,15 @@ fn bed(count: usize) {
 
 fn packing(e: &Engine, side: f64) -> String {
     let p = e.particles();
-    let top = (0..p.len())
-        .map(|k| p.position[k].z)
-        .fold(0.0f64, f64::max);
+    let top = (0..p.len()).map(|k| p.position[k].z).fold(0.0f64, f64::max);
     let vol: f64 = (0..p.len())
         .map(|k| p.template(k).map_or(0.0, |t| t.superquadric.volume()))
         .sum();
     // below the highest centre, a little under the bed's true fraction
-    format!("{:.3} (below the highest centre)", vol / (side * side * top))
+    format!(
+        "{:.3} (below the highest centre)",
+        vol / (side * side * top)
+    )
 }
 
 fn main() {

@@ -110,6 +110,10 @@ pub struct ShapedIncidence {
     pub pair_start: Vec<u32>,
     pub pair_entries: Vec<u32>,
     pub wall_start: Vec<u32>,
+    /// First candidate of every (body, wall, patch) group of `shaped_mesh`, then its length;
+    /// the groups of body k are `mesh_group_start[k]..mesh_group_start[k+1]`.
+    pub mesh_groups: Vec<u32>,
+    pub mesh_group_start: Vec<u32>,
 }
 
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
@@ -147,6 +151,12 @@ pub struct NeighbourLists {
     pub shaped_walls: Vec<[u32; 2]>,
     #[serde(default)]
     pub shaped_wall_contacts: Vec<ShapedContact>,
+    /// Triangle candidates of non-spherical bodies: (body, candidate), sorted; a contact per
+    /// (body, wall, patch) group, stored at the group's first candidate.
+    #[serde(default)]
+    pub shaped_mesh: Vec<(u32, WallCandidate)>,
+    #[serde(default)]
+    pub shaped_mesh_contacts: Vec<ShapedContact>,
     /// Derived from the shaped lists (not part of snapshots).
     #[serde(skip)]
     pub shaped_incidence: ShapedIncidence,
@@ -244,7 +254,12 @@ impl NeighbourLists {
         inc.pair_start.clear();
         inc.pair_entries.clear();
         inc.wall_start.clear();
-        if self.shaped_pairs.is_empty() && self.shaped_walls.is_empty() {
+        inc.mesh_groups.clear();
+        inc.mesh_group_start.clear();
+        if self.shaped_pairs.is_empty()
+            && self.shaped_walls.is_empty()
+            && self.shaped_mesh.is_empty()
+        {
             return;
         }
         let mut count = vec![0u32; n + 1];
@@ -271,6 +286,22 @@ impl NeighbourLists {
         }
         for k in 0..n {
             inc.wall_start[k + 1] += inc.wall_start[k];
+        }
+        inc.mesh_group_start.resize(n + 1, 0);
+        for g in 0..self.shaped_mesh.len() {
+            let (b, c) = self.shaped_mesh[g];
+            let first = g == 0 || {
+                let (pb, pc) = self.shaped_mesh[g - 1];
+                (pb, pc.wall, pc.patch) != (b, c.wall, c.patch)
+            };
+            if first {
+                inc.mesh_groups.push(g as u32);
+                inc.mesh_group_start[b as usize + 1] += 1;
+            }
+        }
+        inc.mesh_groups.push(self.shaped_mesh.len() as u32);
+        for k in 0..n {
+            inc.mesh_group_start[k + 1] += inc.mesh_group_start[k];
         }
     }
 
@@ -303,6 +334,9 @@ impl NeighbourLists {
                 .all(|&[i, j]| i < j && (j as usize) < n)
             && self.shaped_walls.windows(2).all(|w| w[0] < w[1])
             && self.shaped_walls.iter().all(|&[b, _]| (b as usize) < n)
+            && self.shaped_mesh_contacts.len() == self.shaped_mesh.len()
+            && self.shaped_mesh.windows(2).all(|w| w[0] <= w[1])
+            && self.shaped_mesh.iter().all(|&(b, _)| (b as usize) < n)
     }
 }
 
@@ -493,6 +527,16 @@ pub fn rebuild(
         }
     }
     old_shaped_walls.sort_unstable_by_key(|e| e.0);
+    let mut old_shaped_mesh: Vec<([u32; 3], ShapedContact)> = Vec::new();
+    for (&(b, w), c) in lists.shaped_mesh.iter().zip(&lists.shaped_mesh_contacts) {
+        match inverse.get(b as usize) {
+            Some(&nb) if nb != u32::MAX && c.normal != V3::zeros() => {
+                old_shaped_mesh.push(([nb, w.wall, w.patch], *c))
+            }
+            _ => {}
+        }
+    }
+    old_shaped_mesh.sort_unstable_by_key(|e| e.0);
 
     // old histories in new numbering, sorted for the merges below
     let mut old_pairs: Vec<(u32, u32, V3)> = Vec::new();
@@ -734,9 +778,6 @@ pub fn rebuild(
                             let ci = grid.index([x, y, z]);
                             for k in cell_start[ci]..cell_end[ci] {
                                 let k = k as usize;
-                                if shape[k] != SPHERE {
-                                    continue; // refused at set-up: no shaped–mesh kernel yet
-                                }
                                 let rr = rad[k] + skin;
                                 if distance_squared(&pos[k], &a, &b, &c) <= rr * rr {
                                     out.push((
@@ -759,6 +800,32 @@ pub fn rebuild(
         mesh.positions_at_build.clone_from(&mesh.positions);
     }
     cands.par_sort_unstable();
+    // triangle candidates of shaped bodies go to their own bucket, grouped by (body, wall,
+    // patch) as the spheres' are; their contact state lives at a group's first candidate
+    lists.shaped_mesh.clear();
+    if shaped_any {
+        lists
+            .shaped_mesh
+            .extend(cands.iter().filter(|(k, _)| shape[*k as usize] != SPHERE));
+        cands.retain(|(k, _)| shape[*k as usize] == SPHERE);
+    }
+    lists.shaped_mesh_contacts.clear();
+    lists
+        .shaped_mesh_contacts
+        .resize(lists.shaped_mesh.len(), ShapedContact::NONE);
+    for g in 0..lists.shaped_mesh.len() {
+        let (b, c) = lists.shaped_mesh[g];
+        if g > 0 && {
+            let (pb, pc) = lists.shaped_mesh[g - 1];
+            (pb, pc.wall, pc.patch) == (b, c.wall, c.patch)
+        } {
+            continue;
+        }
+        let key = [b, c.wall, c.patch];
+        if let Ok(k) = old_shaped_mesh.binary_search_by_key(&key, |e| e.0) {
+            lists.shaped_mesh_contacts[g] = old_shaped_mesh[k].1;
+        }
+    }
     lists.wall_start.clear();
     lists.wall_start.resize(n + 1, 0);
     for (k, _) in &cands {

@@ -499,6 +499,20 @@ impl Engine {
                         particle_file::find_overlap(&spheres, particle_file::MAX_FILE_OVERLAP)
                     {
                         let (a, b) = (&spheres[a], &spheres[b]);
+                        if a.shape.is_some() || b.shape.is_some() {
+                            return Err(file_error(
+                                a.line,
+                                format!(
+                                    "the particles on lines {} and {} overlap by {} of the \
+                                     smaller inscribed radius (at most {} is accepted): \
+                                     particles written twice or a wrong column?",
+                                    a.line,
+                                    b.line,
+                                    resources::format_number(fraction),
+                                    particle_file::MAX_FILE_OVERLAP
+                                ),
+                            ));
+                        }
                         return Err(file_error(
                             a.line,
                             format!(
@@ -528,7 +542,26 @@ impl Engine {
                     .map_err(|message| file_error(0, message))?;
                     let before = particles.len();
                     for s in spheres {
-                        particles.push(s.position, s.velocity, V3::zeros(), s.radius, rho, m);
+                        match s.shape {
+                            None => particles.push(
+                                s.position,
+                                s.velocity,
+                                s.angular_velocity,
+                                s.radius,
+                                rho,
+                                m,
+                            ),
+                            Some(body) => particles.push_superquadric(
+                                s.position,
+                                s.velocity,
+                                s.angular_velocity,
+                                s.orientation
+                                    .unwrap_or_else(particles::Orientation::identity),
+                                body,
+                                rho,
+                                m,
+                            ),
+                        }
                     }
                     if let Some(b) = keep.as_ref().filter(|_| particles.len() == before) {
                         return Err(DemError::Generation {
@@ -1486,6 +1519,15 @@ impl Engine {
                 self.time(),
             )?;
             output::write_pvd(out_dir, "particles", self.dt)?;
+            if self.state.particles.has_shapes() {
+                output::write_superquadrics_vtk(
+                    &out_dir.join(format!("superquadrics_{step:09}.vtk")),
+                    &self.state.particles,
+                    self.time(),
+                    16,
+                )?;
+                output::write_pvd(out_dir, "superquadrics", self.dt)?;
+            }
             for (k, m) in self.state.meshes.iter().enumerate() {
                 let moving = self.wall_motions.iter().any(|w| {
                     w.wall == WallRef::Mesh(k)
