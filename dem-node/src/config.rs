@@ -237,7 +237,7 @@ pub enum ShapeConfig {
         /// SEED-SPEC §3.4); the source's size is then not used (a fill gives no
         /// `distribution`).
         #[serde(default)]
-        semi_axes: Option<[SizeDistribution; 3]>,
+        semi_axes: Option<Box<[SizeDistribution; 3]>>,
         #[serde(default)]
         aspect: Option<[f64; 3]>,
         #[serde(default)]
