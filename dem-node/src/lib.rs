@@ -776,8 +776,8 @@ impl Engine {
     pub fn num_wall_contacts(&self) -> usize {
         let l = &self.state.lists;
         l.wall_contacts.iter().filter(|c| c.touching()).count()
-            + l.shaped_wall_contacts
-                .iter()
+            + (l.shaped_wall_contacts.iter())
+                .chain(&l.shaped_mesh_contacts)
                 .filter(|c| c.touching())
                 .count()
     }
@@ -793,6 +793,7 @@ impl Engine {
             .fold(0.0, f64::max);
         let shaped = (l.shaped_pair_contacts.iter())
             .chain(&l.shaped_wall_contacts)
+            .chain(&l.shaped_mesh_contacts)
             .map(|c| c.overlap)
             .fold(0.0, f64::max);
         a.max(b).max(shaped)
@@ -1452,6 +1453,13 @@ impl Engine {
                 .material
                 .iter()
                 .any(|&m| m as usize >= self.materials.materials.len())
+            || s.lists.shaped_mesh.iter().any(|(_, c)| {
+                (c.wall as usize)
+                    .checked_sub(self.planes.len())
+                    .and_then(|m| s.meshes.get(m))
+                    .is_none_or(|mesh| c.triangle as usize >= mesh.triangles.len())
+            })
+            || s.lists.shaped_walls.iter().any(|&[_, w]| w as usize >= self.planes.len())
         {
             return Err(DemError::Snapshot(
                 "snapshot does not match this scene's materials/particles".into(),
