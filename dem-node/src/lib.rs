@@ -139,6 +139,23 @@ struct OutputState {
     vtk_files: u64,
 }
 
+/// Where a step's drift stage leaves the clock.
+#[derive(Debug, Clone, Copy)]
+enum StepClock {
+    /// At the end of a step.
+    Step,
+    /// At the end of sub-step k of n of the step that began at t0.
+    Substep { t0: f64, k: usize, n: usize },
+}
+
+/// The passes over the particles of [`integrate`].
+#[derive(Debug, Clone, Copy)]
+enum Pass {
+    KickDrift,
+    Kick,
+    KickThenKickDrift,
+}
+
 /// The DEM engine.
 pub struct Engine {
     cfg: DemConfig,
@@ -989,36 +1006,19 @@ impl Engine {
             return self.run(|e| (0..substeps).try_for_each(|_| e.step_in_pool()));
         }
         self.run(|e| {
-            let (dt, rotation) = (e.dt, e.cfg.rotation);
-            let mut moved = e.kick_drift();
-            e.track_flow();
+            let dt = e.dt;
+            let mut moved = e.drift_stage(dt, StepClock::Step, None);
             for s in 0..substeps {
-                e.detect_contacts(moved);
-                e.resolve_forces(dt, 1.0, true);
-                let walls_finite = e.loaded_walls_kick(dt);
-                let p = &mut e.state.particles;
-                let finite = if s + 1 < substeps {
-                    let l = &e.state.lists;
-                    let (finite, m) = integrate::kick_then_kick_drift(
-                        p,
-                        &l.position_at_build,
-                        0.5 * l.skin,
-                        dt,
-                        rotation,
-                    );
-                    moved = m;
-                    finite
-                } else {
-                    integrate::kick(p, dt, rotation)
-                };
+                let walls_finite = e.force_stage(moved, dt, 1.0, true);
+                if s + 1 == substeps {
+                    return e.kick_stage(dt, walls_finite);
+                }
+                // the second half kick of this step and the first of the next share one pass
+                let (finite, m) = e.particle_passes(dt, Pass::KickThenKickDrift);
                 if !(finite && walls_finite) {
                     return Err(e.instability());
                 }
-                if s + 1 < substeps {
-                    e.loaded_walls_kick_drift(dt);
-                    e.advance_clock();
-                    e.track_flow();
-                }
+                moved = e.drift_stage(dt, StepClock::Step, Some(m));
             }
             Ok(())
         })
@@ -1039,15 +1039,68 @@ impl Engine {
         if n > 1 && self.contact_during_step() {
             return self.refined_step(n);
         }
-        let moved = self.kick_drift();
+        let moved = self.drift_stage(self.dt, StepClock::Step, None);
+        let walls_finite = self.force_stage(moved, self.dt, 1.0, true);
+        self.kick_stage(self.dt, walls_finite)
+    }
+
+    // The stages of a step (Algorithm 1), written once: a plain step, the fused steps of
+    // `advance` and the sub-steps of an impact-refined step all run drift → forces → kick.
+
+    /// Stage "update particle states", first half: half kick and drift of the particles over
+    /// `h` (unless `particles_moved` says a fused pass did it), of the loaded walls, then the
+    /// clock, coupled meshes and moving walls go to the step's (or sub-step's) end and the
+    /// flow sensors book the crossings. Returns true if a particle moved half the skin.
+    fn drift_stage(&mut self, h: f64, clock: StepClock, particles_moved: Option<bool>) -> bool {
+        let moved = particles_moved.unwrap_or_else(|| self.particle_passes(h, Pass::KickDrift).1);
+        self.loaded_walls_kick_drift(h);
+        match clock {
+            StepClock::Step => self.advance_clock(),
+            StepClock::Substep { t0, k, n } if k < n => {
+                self.set_substep_clock(t0, k as f64 / n as f64)
+            }
+            StepClock::Substep { t0, .. } => {
+                // from t0 by the unrefined step's own operation, so the end time is bitwise
+                self.state.time = t0;
+                self.advance_clock();
+            }
+        }
         self.track_flow();
+        moved
+    }
+
+    /// Stages "detect contacts" and "resolve forces" (Algorithm 1, lines 3–4), then the
+    /// loaded walls' second half kick. Returns false if a loaded wall's state is not finite.
+    fn force_stage(&mut self, moved: bool, h: f64, weight: f64, ends_step: bool) -> bool {
         self.detect_contacts(moved);
-        self.resolve_forces(self.dt, 1.0, true);
-        let walls_finite = self.loaded_walls_kick(self.dt);
-        if integrate::kick(&mut self.state.particles, self.dt, self.cfg.rotation) && walls_finite {
+        self.resolve_forces(h, weight, ends_step);
+        self.loaded_walls_kick(h)
+    }
+
+    /// Stage "update particle states", second half: the particles' half kick over `h`.
+    fn kick_stage(&mut self, h: f64, walls_finite: bool) -> Result<(), DemError> {
+        let (finite, _) = self.particle_passes(h, Pass::Kick);
+        if finite && walls_finite {
             Ok(())
         } else {
             Err(self.instability())
+        }
+    }
+
+    /// One pass over the particles ([`integrate`]): (finite, moved half the skin).
+    fn particle_passes(&mut self, h: f64, pass: Pass) -> (bool, bool) {
+        let rotation = self.cfg.rotation;
+        let p = &mut self.state.particles;
+        let l = &self.state.lists;
+        match pass {
+            Pass::KickDrift => (
+                true,
+                integrate::kick_drift(p, &l.position_at_build, 0.5 * l.skin, h, rotation),
+            ),
+            Pass::Kick => (integrate::kick(p, h, rotation), false),
+            Pass::KickThenKickDrift => {
+                integrate::kick_then_kick_drift(p, &l.position_at_build, 0.5 * l.skin, h, rotation)
+            }
         }
     }
 
@@ -1075,33 +1128,12 @@ impl Engine {
     /// forces enter the window average with weight 1/n, so the average stays a time average
     /// (Ullrich eq. 3.8 with the substeps' forces weighted by their duration).
     fn refined_step(&mut self, n: usize) -> Result<(), DemError> {
-        let (dt, rotation) = (self.dt, self.cfg.rotation);
-        let h = dt / n as f64;
+        let h = self.dt / n as f64;
         let t0 = self.state.time;
         for k in 1..=n {
-            let l = &self.state.lists;
-            let moved = integrate::kick_drift(
-                &mut self.state.particles,
-                &l.position_at_build,
-                0.5 * l.skin,
-                h,
-                rotation,
-            );
-            self.loaded_walls_kick_drift(h);
-            if k < n {
-                self.set_substep_clock(t0, k as f64 / n as f64);
-            } else {
-                // from t0 by the unrefined step's own operation, so the end time is bitwise
-                self.state.time = t0;
-                self.advance_clock();
-            }
-            self.track_flow();
-            self.detect_contacts(moved);
-            self.resolve_forces(h, 1.0 / n as f64, k == n);
-            let walls_finite = self.loaded_walls_kick(h);
-            if !(integrate::kick(&mut self.state.particles, h, rotation) && walls_finite) {
-                return Err(self.instability());
-            }
+            let moved = self.drift_stage(h, StepClock::Substep { t0, k, n }, None);
+            let walls_finite = self.force_stage(moved, h, 1.0 / n as f64, k == n);
+            self.kick_stage(h, walls_finite)?;
         }
         self.refined_steps += 1;
         Ok(())
@@ -1128,23 +1160,6 @@ impl Engine {
     /// Number of DEM steps since the start (snapshots included); a refined step counts once.
     pub fn steps(&self) -> u64 {
         self.state.steps
-    }
-
-    /// Algorithm 1, lines 1–2 (first half of velocity Verlet): first half kick and drift of the
-    /// particles, then the clock and the coupled meshes move to t + Δt. Returns true if a
-    /// particle moved more than half the skin since the last list build.
-    fn kick_drift(&mut self) -> bool {
-        let l = &self.state.lists;
-        let moved = integrate::kick_drift(
-            &mut self.state.particles,
-            &l.position_at_build,
-            0.5 * l.skin,
-            self.dt,
-            self.cfg.rotation,
-        );
-        self.loaded_walls_kick_drift(self.dt);
-        self.advance_clock();
-        moved
     }
 
     /// First half kick and drift of the loaded walls over `h`, with the forces of the last
@@ -1459,7 +1474,10 @@ impl Engine {
                     .and_then(|m| s.meshes.get(m))
                     .is_none_or(|mesh| c.triangle as usize >= mesh.triangles.len())
             })
-            || s.lists.shaped_walls.iter().any(|&[_, w]| w as usize >= self.planes.len())
+            || s.lists
+                .shaped_walls
+                .iter()
+                .any(|&[_, w]| w as usize >= self.planes.len())
         {
             return Err(DemError::Snapshot(
                 "snapshot does not match this scene's materials/particles".into(),
