@@ -4,3 +4,4 @@
 
 pub mod protocol;
 pub mod superquadric;
+pub mod superquadric_patch;

@@ -163,7 +163,7 @@ fn evaluate(b1: &SqBody, b2: &SqBody, x21: &V3, c: V3, with_jacobian: bool) -> E
 
 /// c rotated by the tangent step (Δα1, Δα2): the exponential map on the unit sphere.
 #[inline]
-fn rotate_normal(c: &V3, t: &(V3, V3), da: [f64; 2]) -> V3 {
+pub(crate) fn rotate_normal(c: &V3, t: &(V3, V3), da: [f64; 2]) -> V3 {
     let angle = da[0].hypot(da[1]);
     if angle == 0.0 {
         return *c;
