@@ -157,6 +157,10 @@ pub struct NeighbourLists {
     pub shaped_mesh: Vec<(u32, WallCandidate)>,
     #[serde(default)]
     pub shaped_mesh_contacts: Vec<ShapedContact>,
+    /// Where the force of a group's contact acts on a coupled mesh (at the group's first
+    /// candidate; rewritten every force evaluation).
+    #[serde(default)]
+    pub shaped_mesh_records: Vec<crate::resolve_forces::MeshForceRecord>,
     /// Derived from the shaped lists (not part of snapshots).
     #[serde(skip)]
     pub shaped_incidence: ShapedIncidence,
@@ -813,6 +817,10 @@ pub fn rebuild(
     lists
         .shaped_mesh_contacts
         .resize(lists.shaped_mesh.len(), ShapedContact::NONE);
+    lists.shaped_mesh_records.clear();
+    lists
+        .shaped_mesh_records
+        .resize(lists.shaped_mesh.len(), Default::default());
     for g in 0..lists.shaped_mesh.len() {
         let (b, c) = lists.shaped_mesh[g];
         if g > 0 && {

@@ -594,20 +594,6 @@ impl Engine {
                 }
             }
         }
-        if particles.has_shapes() {
-            if let Some(w) = cfg
-                .walls
-                .iter()
-                .position(|w| !matches!(w, WallConfig::Plane { .. }))
-            {
-                return Err(DemError::Config {
-                    field: format!("dem.walls[{w}]"),
-                    message: "box and STL walls do not touch superquadric particles yet (planes \
-                              do): build the container from `kind = \"plane\"` walls"
-                        .into(),
-                });
-            }
-        }
         let skin = cfg.skin.unwrap_or_else(|| {
             if particles.is_empty() {
                 1e-3
@@ -866,13 +852,6 @@ impl Engine {
             mesh: name.to_string(),
             message,
         };
-        if self.state.particles.has_shapes() {
-            return Err(merr(
-                "coupled meshes do not touch superquadric particles yet (only spheres and \
-                 planes do)"
-                    .into(),
-            ));
-        }
         let Some(mat_name) = &self.cfg.interface_material else {
             return Err(merr("a coupled mesh needs dem.interface_material".into()));
         };
@@ -1211,13 +1190,14 @@ impl Engine {
                 }
             }
         }
-        // shaped bodies on loaded planes: the reaction of their contact force
-        for (&[_, w], c) in s
-            .lists
-            .shaped_walls
-            .iter()
+        // shaped bodies on loaded walls: the reaction of their contact force
+        let mesh_contacts = (s.lists.shaped_mesh.iter())
+            .zip(&s.lists.shaped_mesh_contacts)
+            .map(|(&(_, c), k)| (c.wall, k));
+        let plane_contacts = (s.lists.shaped_walls.iter())
             .zip(&s.lists.shaped_wall_contacts)
-        {
+            .map(|(&[_, w], k)| (w, k));
+        for (w, c) in plane_contacts.chain(mesh_contacts) {
             if !c.touching() {
                 continue;
             }

@@ -607,6 +607,23 @@ pub fn accumulate_nodal_forces(
             mesh.nodal_force_step[node as usize] += rec.force * weight;
         }
     }
+    // then the shaped bodies' contacts, group by group in list order
+    let inc = &lists.shaped_incidence;
+    for g in 0..inc.mesh_groups.len().saturating_sub(1) {
+        let at = inc.mesh_groups[g] as usize;
+        if !lists.shaped_mesh_contacts[at].touching() {
+            continue;
+        }
+        let mesh = &mut meshes[lists.shaped_mesh[at].1.wall as usize - n_planes];
+        if !mesh.coupled {
+            continue;
+        }
+        let rec = &lists.shaped_mesh_records[at];
+        let tri = mesh.triangles[rec.triangle as usize];
+        for (&node, &weight) in tri.iter().zip(&rec.bary) {
+            mesh.nodal_force_step[node as usize] += rec.force * weight;
+        }
+    }
     for m in meshes.iter_mut().filter(|m| m.coupled) {
         m.nodal_force_last.clone_from(&m.nodal_force_step);
         if weight != 0.0 {

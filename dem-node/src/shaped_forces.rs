@@ -6,7 +6,7 @@
 //! then every body gathers the forces and torques of its records in list order. No sum
 //! depends on the scheduling, so results are bitwise the same for any thread count.
 
-use crate::broad_phase::{NeighbourLists, ShapedContact};
+use crate::broad_phase::{NeighbourLists, ShapedContact, WallCandidate};
 use crate::elliptic_hertz::{
     hertz_ellipse, lift, relative_curvature, tangential_force, MindlinConstants,
     TangentialStiffness,
@@ -14,8 +14,10 @@ use crate::elliptic_hertz::{
 use crate::hertz_mindlin::V3;
 use crate::materials::PairParams;
 use crate::narrow::superquadric::{detect, Detection, SearchSettings, SearchStats, SqBody};
+use crate::narrow::superquadric_patch::patch_contact;
 use crate::particles::Particles;
 use crate::resolve_forces::ForceContext;
+use crate::resolve_forces::MeshForceRecord;
 use crate::shape::superquadric::{sym2_eigen, tangent_basis};
 use crate::shape::Superquadric;
 use nalgebra::Matrix3;
@@ -263,10 +265,113 @@ fn plane_contact(
     law(&g, params, &d_dot, a.mass, old, ctx.dt, ctx.hold_stiffness)
 }
 
+/// Evaluates a shaped body's contact with one (mesh, patch) group of triangle candidates:
+/// the minimum translation of the body out of the patch's convex hull
+/// ([`crate::narrow::superquadric_patch`]) — face, edge or vertex without a force jump, and
+/// conservative — with the elliptic law against a flat surface. Returns the contact and, on
+/// a coupled mesh, where its force acts (triangle, barycentric weights).
+fn mesh_contact(
+    p: &Particles,
+    ctx: &ForceContext,
+    group: &[(u32, WallCandidate)],
+    old: &ShapedContact,
+) -> (ShapedContact, MeshForceRecord) {
+    let none = (
+        ShapedContact {
+            normal: old.normal,
+            ..ShapedContact::NONE
+        },
+        MeshForceRecord::default(),
+    );
+    let (k, first) = group[0];
+    let k = k as usize;
+    let mesh = &ctx.meshes[(first.wall as usize) - ctx.planes.len()];
+    if !mesh.active {
+        return none;
+    }
+    // the group's triangles with local vertex numbers (a handful: linear search)
+    let mut nodes: Vec<u32> = Vec::with_capacity(3 * group.len());
+    let mut tris: Vec<[usize; 3]> = Vec::with_capacity(group.len());
+    for (_, c) in group {
+        let t = mesh.triangles[c.triangle as usize];
+        tris.push(t.map(|n| match nodes.iter().position(|&m| m == n) {
+            Some(i) => i,
+            None => {
+                nodes.push(n);
+                nodes.len() - 1
+            }
+        }));
+    }
+    let vertices: Vec<V3> = nodes.iter().map(|&n| mesh.positions[n as usize]).collect();
+    let a = body(p, k);
+    // Walls are two-sided (as for spheres): the patch's front is the side of the body's
+    // centre, judged at the nearest triangle; seen from behind, its triangles turn over.
+    let nearest = tris
+        .iter()
+        .map(|t| {
+            let [u, v, w] = t.map(|i| vertices[i]);
+            let (q, _) =
+                crate::triangle_contact::closest_point_on_triangle(&a.position, &u, &v, &w);
+            (
+                (a.position - q).norm_squared(),
+                (a.position - u).dot(&(v - u).cross(&(w - u))),
+            )
+        })
+        .fold(
+            (f64::INFINITY, 0.0),
+            |best, c| if c.0 < best.0 { c } else { best },
+        );
+    let flipped = nearest.1 < 0.0;
+    if flipped {
+        for t in tris.iter_mut() {
+            t.swap(1, 2);
+        }
+    }
+    // the stored normal points from the body to the wall, the search's from the wall
+    let warm = (old.normal != V3::zeros()).then_some(-old.normal);
+    let Some(pc) = patch_contact(&a.shape, a.position, &a.rotation, &vertices, &tris, warm) else {
+        return none;
+    };
+    let c = -pc.normal;
+    let point = pc.point + pc.normal * (0.5 * pc.overlap);
+    let (t1, t2) = tangent_basis(&c);
+    let g = Geometry {
+        normal: c,
+        overlap: pc.overlap,
+        point,
+        t1,
+        t2,
+        k1: curvature(pc.radii, a.radius_range),
+        k2: [[0.0; 2]; 2],
+    };
+    let tri = group[pc.triangle].1.triangle;
+    // weights in the mesh's own corner order
+    let mut bary = pc.bary;
+    if flipped {
+        bary.swap(1, 2);
+    }
+    let corner = mesh.triangles[tri as usize];
+    let wall_velocity = corner.iter().zip(&bary).fold(V3::zeros(), |v, (&n, &w)| {
+        v + mesh.velocities[n as usize] * w
+    });
+    let d_dot = wall_velocity - (a.velocity + a.omega.cross(&(point - a.position)));
+    let params = ctx.materials.pair(p.material[k], mesh.material);
+    let contact = law(&g, params, &d_dot, a.mass, old, ctx.dt, ctx.hold_stiffness);
+    let record = MeshForceRecord {
+        triangle: tri,
+        bary,
+        force: -contact.force,
+    };
+    (contact, record)
+}
+
 /// Evaluates every shaped contact and adds the forces and torques to the bodies (after the
 /// sphere stage has set gravity and the sphere contacts).
 pub fn shaped_forces(lists: &mut NeighbourLists, p: &mut Particles, ctx: &ForceContext) {
-    if lists.shaped_pairs.is_empty() && lists.shaped_walls.is_empty() {
+    if lists.shaped_pairs.is_empty()
+        && lists.shaped_walls.is_empty()
+        && lists.shaped_mesh.is_empty()
+    {
         return;
     }
     {
@@ -283,10 +388,30 @@ pub fn shaped_forces(lists: &mut NeighbourLists, p: &mut Particles, ctx: &ForceC
             .with_min_len(CHUNK)
             .zip(lists.shaped_walls.par_iter())
             .for_each(|(c, &cand)| *c = plane_contact(pv, ctx, cand, c));
+        let groups = &lists.shaped_incidence.mesh_groups;
+        let cands = &lists.shaped_mesh;
+        let olds = &lists.shaped_mesh_contacts;
+        let results: Vec<(ShapedContact, MeshForceRecord)> = (0..groups.len().saturating_sub(1))
+            .into_par_iter()
+            .with_min_len(CHUNK)
+            .map(|g| {
+                let (lo, hi) = (groups[g] as usize, groups[g + 1] as usize);
+                mesh_contact(pv, ctx, &cands[lo..hi], &olds[lo])
+            })
+            .collect();
+        lists
+            .shaped_mesh_records
+            .resize(lists.shaped_mesh.len(), MeshForceRecord::default());
+        for (g, (c, r)) in results.into_iter().enumerate() {
+            let at = groups[g] as usize;
+            lists.shaped_mesh_contacts[at] = c;
+            lists.shaped_mesh_records[at] = r;
+        }
     }
     let inc = &lists.shaped_incidence;
     let pairs = &lists.shaped_pair_contacts;
     let walls = &lists.shaped_wall_contacts;
+    let meshes = &lists.shaped_mesh_contacts;
     let pos = &p.position;
     p.force
         .par_iter_mut()
@@ -309,6 +434,16 @@ pub fn shaped_forces(lists: &mut NeighbourLists, p: &mut Particles, ctx: &ForceC
             }
             if !inc.wall_start.is_empty() {
                 for c in &walls[inc.wall_start[k] as usize..inc.wall_start[k + 1] as usize] {
+                    if c.touching() {
+                        *f += c.force;
+                        *t += (c.point - x).cross(&c.force);
+                    }
+                }
+            }
+            if !inc.mesh_group_start.is_empty() {
+                let groups = inc.mesh_group_start[k] as usize..inc.mesh_group_start[k + 1] as usize;
+                for g in groups {
+                    let c = &meshes[inc.mesh_groups[g] as usize];
                     if c.touching() {
                         *f += c.force;
                         *t += (c.point - x).cross(&c.force);

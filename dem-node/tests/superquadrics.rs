@@ -420,20 +420,6 @@ fn shape_keys_are_validated_with_the_limit_named() {
         "kind = \"superquadric\", colour = 3",
     );
     assert!(e.contains("colour"), "{e}");
-    // a box wall with superquadrics: refused, naming the wall
-    let with_box = base.replace(
-        "[[dem.particles]]",
-        "[[dem.walls]]\nkind = \"box\"\nmaterial = \"grain\"\nmin = [0.0, 0.0, 0.0]\nmax = [0.05, 0.05, 0.1]\n[[dem.particles]]",
-    );
-    let cfg = dem::parse_scene_section(&with_box).unwrap().unwrap();
-    let err = Engine::from_config(&cfg, std::path::Path::new("."))
-        .err()
-        .unwrap()
-        .to_string();
-    assert!(
-        err.contains("dem.walls[5]") && err.contains("plane"),
-        "{err}"
-    );
 }
 
 /// Wellmann's sand (SEED-SPEC §3.4): semi-axes Gaussian with means 0.57, 0.395, 0.305 mm,
@@ -540,5 +526,127 @@ fn superquadric_bed_round_trips_through_a_particle_file_and_shows_in_paraview() 
             pa.template(ka).unwrap().superquadric,
             pb.template(kb).unwrap().superquadric
         );
+    }
+}
+
+/// One superquadric resting on a coupled (FEM interface) plate of 8 triangles loads the plate
+/// nodes with exactly its weight (1e-6), and the nodal forces balance its moment: their
+/// centre of pressure lies under the body's contact point. Walls are two-sided: the same
+/// with the triangles wound the other way.
+#[test]
+fn superquadric_at_rest_on_a_coupled_plate_loads_it_with_its_weight() {
+    for flip in [false, true] {
+        body_on_plate(flip);
+    }
+}
+
+fn body_on_plate(flip: bool) {
+    let scene = poured_scene(None, 1, "interface_material = \"grain\"")
+        .replace("restitution = 0.5", "restitution = 0.2")
+        .replace(
+            "velocity = [0.05, -0.02, 0.0]",
+            "velocity = [0.0, 0.0, 0.0]",
+        )
+        .replace("min = [0.0, 0.0, 0.005]", "min = [0.012, 0.017, 0.005]")
+        .replace("max = [0.05, 0.05, 0.1]", "max = [0.03, 0.035, 0.02]")
+        .replace(
+            "elongation = 1.6, angularity = 0.3",
+            "aspect = [1.5, 1.2, 0.8], exponents = [0.6, 1.3], random_orientation = false",
+        );
+    // drop the floor plane: the plate carries the body
+    let floor = scene.find("[[dem.walls]]").unwrap();
+    let next = scene[floor + 5..].find("[[dem.walls]]").unwrap() + floor + 5;
+    let scene = format!("{}{}", &scene[..floor], &scene[next..]);
+    let mut e = common::engine(&scene);
+    // a 3 × 3 node plate at z = 0.001 (8 triangles)
+    let mut pos = Vec::new();
+    for j in 0..3 {
+        for i in 0..3 {
+            pos.extend([0.025 * i as f64, 0.025 * j as f64, 0.001]);
+        }
+    }
+    let mut tris = Vec::new();
+    for j in 0..2u32 {
+        for i in 0..2u32 {
+            let a = j * 3 + i;
+            if flip {
+                tris.extend([a, a + 4, a + 1, a, a + 3, a + 4]);
+            } else {
+                tris.extend([a, a + 1, a + 4, a, a + 4, a + 3]);
+            }
+        }
+    }
+    let m = e.add_coupled_mesh("plate", &pos, &tris).unwrap();
+    let zeros = vec![0.0; pos.len()];
+    e.set_mesh_kinematics(m, &pos, &zeros, &zeros, dem::MotionRule::Quadratic)
+        .unwrap();
+    e.refresh_forces();
+    let mass = e.particles().mass[0];
+    e.advance(50_000).unwrap();
+    let f = e.interface_forces(m, false);
+    let fz: f64 = f.chunks(3).map(|c| c[2]).sum();
+    let fx: f64 = f.chunks(3).map(|c| c[0]).sum();
+    let weight = mass * 9.81;
+    let (mut mx, mut my) = (0.0, 0.0);
+    for (k, c) in f.chunks(3).enumerate() {
+        mx += c[2] * pos[3 * k];
+        my += c[2] * pos[3 * k + 1];
+    }
+    let x = e.particles().position[0];
+    let ke = e.kinetic_energy();
+    println!(
+        "weight {weight:e} N, nodal sum z {fz:e}, x {fx:e}, centre of pressure ({}, {}) vs body ({}, {}), KE {ke:e}",
+        mx / fz,
+        my / fz,
+        x.x,
+        x.y
+    );
+    assert!(ke < 1e-12, "not at rest: {ke:e}");
+    assert!((fz + weight).abs() < 1e-6 * weight, "{fz} vs {weight}");
+    assert!(fx.abs() < 1e-6 * weight);
+    assert!((mx / fz - x.x).abs() < 1e-6 && (my / fz - x.y).abs() < 1e-6);
+}
+
+/// A spinning superquadric bouncing off a box's edge and corner (frictionless, e = 1,
+/// stiffness held from the first touch): the contact moves over faces, edges and vertices
+/// of the box mesh and the energy after the impact equals the energy before (1e-5).
+#[test]
+fn superquadric_impacts_on_box_edges_conserve_energy() {
+    let box_scene = format!(
+        "{}{}",
+        ELASTIC.replace("[dem.materials", &format!("{FIRST_TOUCH}[dem.materials")),
+        "[[dem.walls]]\nkind = \"box\"\nmaterial = \"grain\"\nmin = [0.0, 0.0, 0.0]\nmax = [0.02, 0.02, 0.02]\n"
+    );
+    let s = sq([2e-3, 1.2e-3, 1e-3], 0.7, 1.3);
+    let cases = [
+        // towards an edge of the box (from outside), a corner, and a glancing face hit
+        (V3::new(0.024, 0.01, 0.024), V3::new(-0.15, 0.0, -0.15)),
+        (V3::new(0.024, 0.024, 0.024), V3::new(-0.1, -0.1, -0.1)),
+        (V3::new(0.023, 0.003, 0.01), V3::new(-0.2, 0.05, 0.0)),
+    ];
+    for (k, (x, v)) in cases.into_iter().enumerate() {
+        let mut e = engine_with(
+            &box_scene,
+            &[(
+                x,
+                v,
+                V3::new(20.0, -30.0, 10.0),
+                rot([0.2, 1.0, 0.4], 0.8),
+                s,
+            )],
+        );
+        let e0 = e.kinetic_energy();
+        let mut touched = false;
+        for _ in 0..200_000 {
+            e.step().unwrap();
+            touched |= e.num_wall_contacts() > 0;
+            if touched && e.num_wall_contacts() == 0 {
+                break;
+            }
+        }
+        assert!(touched, "case {k}: no impact");
+        let rel = (e.kinetic_energy() - e0) / e0;
+        println!("case {k}: energy change {rel:e}");
+        assert!(rel.abs() < 1e-5, "case {k}: {rel:e}");
     }
 }
