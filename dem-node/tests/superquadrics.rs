@@ -285,6 +285,19 @@ fn superquadric_pour_is_bitwise_reproducible() {
         full.snapshot() == resumed.snapshot(),
         "restore does not continue bitwise"
     );
+    // in a box of triangles (the shaped mesh bucket) too
+    let boxed = |threads: usize| {
+        let scene = poured_scene(Some(threads), 150, "").replacen(
+            "[[dem.walls]]",
+            "[[dem.walls]]\nkind = \"box\"\nmaterial = \"grain\"\nmin = [0.0, 0.0, 0.0]\nmax = [0.05, 0.05, 0.12]\nopen = [\"+z\"]\n[[dem.walls]]",
+            1,
+        );
+        let mut e = common::engine(&scene);
+        e.advance(steps).unwrap();
+        assert!(e.num_wall_contacts() > 10);
+        e.snapshot()
+    };
+    assert!(boxed(1) == boxed(2), "1 and 2 threads differ in a box");
 }
 
 /// The Verlet skin (0.05 r̄, rebuild at d_V/2, W 3.47–3.49) never misses a contact, also
