@@ -162,6 +162,14 @@ pub struct InteractionConfig {
     pub restitution: Option<f64>,
     #[serde(default)]
     pub rolling_friction: Option<f64>,
+    /// Superquadric contacts of this pair: Wellmann's quasi-static dashpot ζ·2√(c_N m*) δ̇
+    /// (W 3.29; ζ = 1 critical, W uses 0.9) instead of the restitution-calibrated one.
+    #[serde(default)]
+    pub damping_ratio: Option<f64>,
+    /// Superquadric contacts of this pair: Brilliantov's viscoelastic dashpot
+    /// (3/2)γE*A√δ δ̇ with A in s (W 3.30) instead of the restitution-calibrated one.
+    #[serde(default)]
+    pub viscoelastic_time: Option<f64>,
 }
 
 /// One explicitly listed sphere.
@@ -935,6 +943,19 @@ impl DemConfig {
             }
             if let Some(v) = ia.rolling_friction {
                 c.non_negative(pi(&["dem", "interactions"], k, &["rolling_friction"]), v);
+            }
+            match (ia.damping_ratio, ia.viscoelastic_time) {
+                (Some(_), Some(_)) => c.fail(
+                    pi(&["dem", "interactions"], k, &["viscoelastic_time"]),
+                    "give `damping_ratio` or `viscoelastic_time`, not both".into(),
+                ),
+                (Some(z), None) => {
+                    c.non_negative(pi(&["dem", "interactions"], k, &["damping_ratio"]), z)
+                }
+                (None, Some(a)) => {
+                    c.non_negative(pi(&["dem", "interactions"], k, &["viscoelastic_time"]), a)
+                }
+                (None, None) => {}
             }
         }
         if let Some(m) = &self.interface_material {

@@ -46,6 +46,21 @@ pub struct PairParams {
     pub mindlin_lambda1: f64,
     #[serde(default)]
     pub mindlin_lambda2: f64,
+    /// Dashpot of superquadric contacts.
+    #[serde(default)]
+    pub shaped_damping: ShapedDamping,
+}
+
+/// The normal dashpot of a superquadric contact (Wellmann 3.27–3.30).
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Default)]
+pub enum ShapedDamping {
+    /// −2√(5/6)β√(c_N m*) δ̇ with β from the pair's restitution, as for spheres.
+    #[default]
+    Restitution,
+    /// ζ · 2√(c_N m*) δ̇ (W 3.29).
+    QuasiStatic(f64),
+    /// (3/2)γE*A√δ δ̇ = c_N A δ̇ (W 3.30).
+    Viscoelastic(f64),
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -77,12 +92,19 @@ impl MaterialTable {
                 let mut friction = 0.5 * (a.friction + b.friction);
                 let mut restitution = 0.5 * (a.restitution + b.restitution);
                 let mut rolling_friction = 0.5 * (a.rolling_friction + b.rolling_friction);
+                let mut shaped_damping = ShapedDamping::Restitution;
                 for ia in &cfg.interactions {
                     let [x, y] = &ia.materials;
                     if (x == &a.name && y == &b.name) || (x == &b.name && y == &a.name) {
                         friction = ia.friction.unwrap_or(friction);
                         restitution = ia.restitution.unwrap_or(restitution);
                         rolling_friction = ia.rolling_friction.unwrap_or(rolling_friction);
+                        if let Some(z) = ia.damping_ratio {
+                            shaped_damping = ShapedDamping::QuasiStatic(z);
+                        }
+                        if let Some(a) = ia.viscoelastic_time {
+                            shaped_damping = ShapedDamping::Viscoelastic(a);
+                        }
                     }
                 }
                 let e_star = 1.0
@@ -112,6 +134,7 @@ impl MaterialTable {
                     sqrt_stiffness_ratio: (4.0 * g_star / e_star).sqrt(),
                     mindlin_lambda1: mindlin.lambda1,
                     mindlin_lambda2: mindlin.lambda2,
+                    shaped_damping,
                 });
             }
         }

@@ -12,7 +12,7 @@ use crate::elliptic_hertz::{
     TangentialStiffness,
 };
 use crate::hertz_mindlin::V3;
-use crate::materials::PairParams;
+use crate::materials::{PairParams, ShapedDamping};
 use crate::narrow::superquadric::{detect, Detection, SearchSettings, SearchStats, SqBody};
 use crate::narrow::superquadric_patch::patch_contact;
 use crate::particles::Particles;
@@ -116,9 +116,15 @@ fn law(
     let c_n = ell.normal_stiffness(e_star, delta); // (3.28)
                                                    // approach rate δ̇ = −ḋ·c
     let delta_dot = -d_dot.dot(&g.normal);
-    // Damping calibrated like the sphere law (Tsuji, coefficient from the restitution):
-    // F_d = −2√(5/6) β √(c_N m*) δ̇, c_N = ∂f_el/∂δ; for a sphere pair it is that law's.
-    let f_dis = params.damping_factor * (c_n * m_eff).sqrt() * delta_dot;
+    let f_dis = match params.shaped_damping {
+        // calibrated like the sphere law (Tsuji, coefficient from the restitution):
+        // F_d = −2√(5/6) β √(c_N m*) δ̇, c_N = ∂f_el/∂δ; for a sphere pair it is that law's
+        ShapedDamping::Restitution => params.damping_factor * (c_n * m_eff).sqrt() * delta_dot,
+        // (3.29): ζ × the critical damping 2√(c_N m*)
+        ShapedDamping::QuasiStatic(zeta) => zeta * 2.0 * (c_n * m_eff).sqrt() * delta_dot,
+        // (3.30): (3/2)γE*√δ A δ̇ = c_N A δ̇
+        ShapedDamping::Viscoelastic(a) => c_n * a * delta_dot,
+    };
     let f_n = (f_el + f_dis).max(0.0); // (3.31)
     let mindlin = MindlinConstants {
         lambda1: params.mindlin_lambda1,

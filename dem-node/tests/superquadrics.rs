@@ -663,3 +663,60 @@ fn superquadric_impacts_on_box_edges_conserve_energy() {
         assert!(rel.abs() < 1e-5, "case {k}: {rel:e}");
     }
 }
+
+/// Rebound velocity of an ellipsoid dropped tip-first onto a plane at `v0` m/s with the
+/// interaction table `extra` (no gravity).
+fn rebound(extra: &str, v0: f64) -> f64 {
+    let scene = format!(
+        "{}[[dem.walls]]\nkind = \"plane\"\nmaterial = \"grain\"\npoint = [0.0, 0.0, 0.0]\nnormal = [0.0, 0.0, 1.0]\n{extra}",
+        ELASTIC.replace("restitution = 1.0", "restitution = 0.6")
+    );
+    let body = sq([1e-3, 1.2e-3, 2e-3], 1.0, 1.0);
+    let mut e = engine_with(
+        &scene,
+        &[(
+            V3::new(0.0, 0.0, 2.2e-3),
+            V3::new(0.0, 0.0, -v0),
+            V3::zeros(),
+            Orientation::identity(),
+            body,
+        )],
+    );
+    let mut touched = false;
+    for _ in 0..100_000 {
+        e.step().unwrap();
+        touched |= e.num_wall_contacts() > 0;
+        if touched && e.num_wall_contacts() == 0 {
+            break;
+        }
+    }
+    assert!(touched);
+    e.particles().velocity[0].z / v0
+}
+
+/// The three dashpots of superquadric contacts: restitution-calibrated (default; e = 0.6
+/// here), Wellmann's quasi-static ζ (3.29) — which is the same dashpot for
+/// ζ = −√(5/6)β(e), so it rebounds bitwise alike — and Brilliantov's viscoelastic A (3.30),
+/// whose restitution falls with the impact velocity (1 − e ∝ v^{1/5}).
+#[test]
+fn superquadric_dashpots_quasi_static_and_viscoelastic() {
+    let e_rest = rebound("", 0.3);
+    println!("restitution-calibrated: e = {e_rest}");
+    assert!((e_rest - 0.6).abs() < 0.01, "{e_rest}");
+    let zeta = -dem::hertz_mindlin::SQRT_5_6 * dem::hertz_mindlin::damping_beta(0.6);
+    let table =
+        |key: &str| format!("[[dem.interactions]]\nmaterials = [\"grain\", \"grain\"]\n{key}\n");
+    let e_zeta = rebound(&table(&format!("damping_ratio = {zeta:e}")), 0.3);
+    println!("ζ = {zeta}: e = {e_zeta}");
+    assert_eq!(e_zeta, e_rest);
+    let e_crit = rebound(&table("damping_ratio = 0.9"), 0.3);
+    println!("ζ = 0.9: e = {e_crit}");
+    assert!(e_crit < 0.2 && e_crit < e_rest, "{e_crit}");
+    let visco = table("viscoelastic_time = 2e-5");
+    let (slow, fast) = (rebound(&visco, 0.05), rebound(&visco, 0.5));
+    println!("viscoelastic A = 2e-5 s: e = {slow} at 0.05 m/s, {fast} at 0.5 m/s");
+    assert!(slow < 1.0 && fast < slow, "{slow} {fast}");
+    // Brilliantov: (1 − e) ∝ v^{1/5} to leading order
+    let ratio = (1.0 - fast) / (1.0 - slow);
+    assert!((ratio - 10f64.powf(0.2)).abs() < 0.15, "{ratio}");
+}
