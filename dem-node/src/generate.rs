@@ -163,6 +163,21 @@ pub fn fill_box(
     Ok(out)
 }
 
+/// A uniformly random unit vector (rejection from the unit ball).
+pub fn random_unit_vector(rng: &mut SplitMix64) -> V3 {
+    loop {
+        let v = V3::new(
+            2.0 * rng.uniform() - 1.0,
+            2.0 * rng.uniform() - 1.0,
+            2.0 * rng.uniform() - 1.0,
+        );
+        let n2 = v.norm_squared();
+        if n2 > 1e-4 && n2 <= 1.0 {
+            return v / n2.sqrt();
+        }
+    }
+}
+
 /// A uniformly random rotation (a normalised 4-D Gaussian).
 pub fn random_orientation(rng: &mut SplitMix64) -> crate::particles::Orientation {
     loop {

@@ -115,22 +115,8 @@ mod tests {
     use crate::generate::SplitMix64;
     use nalgebra::{Matrix3, Unit};
 
-    fn random_unit(rng: &mut SplitMix64) -> V3 {
-        loop {
-            let v = V3::new(
-                2.0 * rng.uniform() - 1.0,
-                2.0 * rng.uniform() - 1.0,
-                2.0 * rng.uniform() - 1.0,
-            );
-            let n = v.norm();
-            if n > 0.1 && n <= 1.0 {
-                return v / n;
-            }
-        }
-    }
-
     fn random_orientation(rng: &mut SplitMix64) -> UnitQuaternion<f64> {
-        let axis = Unit::new_normalize(random_unit(rng));
+        let axis = Unit::new_normalize(crate::generate::random_unit_vector(rng));
         UnitQuaternion::from_axis_angle(&axis, std::f64::consts::PI * rng.uniform())
     }
 
@@ -191,7 +177,7 @@ mod tests {
                 0.5 + rng.uniform(),
                 0.5 + rng.uniform(),
             );
-            let h = random_unit(&mut rng) * 3.0;
+            let h = crate::generate::random_unit_vector(&mut rng) * 3.0;
             let t = q.to_rotation_matrix().into_inner();
             let inv = Matrix3::from_diagonal(&inertia.map(|i| 1.0 / i));
             let omega_matrix = t * inv * t.transpose() * h;
@@ -359,7 +345,7 @@ mod tests {
                 0.2 + rng.uniform(),
             );
             // |ω| Δt up to about 0.5 rad per update
-            let omega = random_unit(&mut rng) * (50.0 * rng.uniform());
+            let omega = crate::generate::random_unit_vector(&mut rng) * (50.0 * rng.uniform());
             let h = angular_momentum(&q, &omega, &inertia);
             q = rotate(&q, &h, &inertia, dt).0;
         }

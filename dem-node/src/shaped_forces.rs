@@ -137,30 +137,17 @@ fn law(
         lift(&g.t1, &g.t2, rel.e_x),
         lift(&g.t1, &g.t2, rel.e_y),
     );
-    let ft = if dt > 0.0 {
-        tangential_force(
-            &old.tangential,
-            &g.normal,
-            &kt,
-            d_dot,
-            dt,
-            params.friction,
-            f_n,
-        )
-        .force
-    } else {
-        // a pure evaluation keeps the history (turned into the tangent plane, capped)
-        tangential_force(
-            &old.tangential,
-            &g.normal,
-            &kt,
-            &V3::zeros(),
-            0.0,
-            params.friction,
-            f_n,
-        )
-        .force
-    };
+    // a pure evaluation (dt = 0) keeps the history: turned into the tangent plane, capped
+    let ft = tangential_force(
+        &old.tangential,
+        &g.normal,
+        &kt,
+        d_dot,
+        dt,
+        params.friction,
+        f_n,
+    )
+    .force;
     ShapedContact {
         normal: g.normal,
         tangential: ft,

@@ -11,7 +11,7 @@ use crate::generate::SplitMix64;
 use crate::hertz_mindlin::V3;
 use crate::narrow::superquadric::{detect, Detection, SearchSettings, SearchStats, SqBody};
 use crate::shape::Superquadric;
-use nalgebra::{Matrix3, UnitQuaternion, Vector4};
+use nalgebra::Matrix3;
 
 /// ε range of Wellmann's angularity classes 1, 2, 3.
 pub fn class_range(class: u32) -> (f64, f64) {
@@ -50,32 +50,6 @@ pub struct ProtocolStats {
     pub separation_wrong: u64,
 }
 
-fn random_rotation(rng: &mut SplitMix64) -> Matrix3<f64> {
-    // uniform on SO(3): a normalised 4-D Gaussian (Box–Muller)
-    let mut g = || {
-        let (u, v) = (rng.uniform().max(1e-300), rng.uniform());
-        (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
-    };
-    let q = Vector4::new(g(), g(), g(), g());
-    UnitQuaternion::from_quaternion(nalgebra::Quaternion::from_vector(q))
-        .to_rotation_matrix()
-        .into_inner()
-}
-
-fn random_unit(rng: &mut SplitMix64) -> V3 {
-    loop {
-        let v = V3::new(
-            2.0 * rng.uniform() - 1.0,
-            2.0 * rng.uniform() - 1.0,
-            2.0 * rng.uniform() - 1.0,
-        );
-        let n2 = v.norm_squared();
-        if n2 > 1e-4 && n2 <= 1.0 {
-            return v / n2.sqrt();
-        }
-    }
-}
-
 fn random_shape(rng: &mut SplitMix64, (lo, hi): (f64, f64)) -> Superquadric {
     let mut r = || 0.5 + 2.5 * rng.uniform();
     let radii = V3::new(r(), r(), r());
@@ -97,9 +71,11 @@ pub fn run(class: u32, pairs: u64, seed: u64, settings: &SearchSettings) -> Prot
         for _ in 0..pairs {
             let s1 = random_shape(&mut rng, range);
             let s2 = random_shape(&mut rng, range);
-            let c = random_unit(&mut rng);
+            let c = crate::generate::random_unit_vector(&mut rng);
             let p1 = s1.point(&c);
-            let t2 = random_rotation(&mut rng);
+            let t2 = crate::generate::random_orientation(&mut rng)
+                .to_rotation_matrix()
+                .into_inner();
             let (p2, delta) = if test == 1 {
                 (p1 + c * (0.25 * rng.uniform()), 0.0)
             } else {

@@ -172,6 +172,24 @@ pub(crate) fn rotate_normal(c: &V3, t: &(V3, V3), da: [f64; 2]) -> V3 {
     (c * angle.cos() + dir * angle.sin()).normalize()
 }
 
+/// The step Δα = (G_t + sI)⁻¹ d_t of the common-normal iteration, G_t = [[g0, g1], [g1, g2]],
+/// turned by at most 0.5 rad; `None` where the matrix is singular.
+#[inline]
+pub(crate) fn shifted_newton_step(g: [f64; 3], s: f64, dt: [f64; 2]) -> Option<[f64; 2]> {
+    let (a, b, c) = (g[0] + s, g[1], g[2] + s);
+    let det = a * c - b * b;
+    if !(det.abs() > 1e-300 && det.is_finite()) {
+        return None;
+    }
+    let da = [(c * dt[0] - b * dt[1]) / det, (a * dt[1] - b * dt[0]) / det];
+    let len = da[0].hypot(da[1]);
+    Some(if len > 0.5 {
+        [da[0] * 0.5 / len, da[1] * 0.5 / len]
+    } else {
+        da
+    })
+}
+
 /// Result of one Newton run from a start direction.
 enum Run {
     Separated(V3),
@@ -215,21 +233,9 @@ fn newton(
         let mut tries = 0;
         loop {
             tries += 1;
-            let (a, b, c) = (g[0] + s + shift, g[1], g[2] + s + shift);
-            let det = a * c - b * b;
-            let ok = det.abs() > 1e-300 && det.is_finite();
-            let da = if ok {
-                [(c * dt[0] - b * dt[1]) / det, (a * dt[1] - b * dt[0]) / det]
-            } else {
-                [0.0, 0.0]
-            };
-            // never turn by more than ~0.5 rad in one step
-            let len = da[0].hypot(da[1]);
-            let da = if len > 0.5 {
-                [da[0] * 0.5 / len, da[1] * 0.5 / len]
-            } else {
-                da
-            };
+            let step = shifted_newton_step(g, s + shift, dt);
+            let ok = step.is_some();
+            let da = step.unwrap_or([0.0, 0.0]);
             let cn = rotate_normal(&e.c, &e.t, da);
             let trial = evaluate(b1, b2, x21, cn, false);
             if trial.s() > 0.0 {

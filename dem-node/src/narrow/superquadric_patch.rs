@@ -88,6 +88,7 @@
 
 use crate::hertz_mindlin::V3;
 use crate::narrow::superquadric::rotate_normal;
+use crate::narrow::superquadric::shifted_newton_step;
 use crate::shape::superquadric::{sym2_eigen, tangent_basis, Superquadric};
 use crate::triangle_contact::closest_point_on_triangle;
 use nalgebra::Matrix3;
@@ -1038,20 +1039,9 @@ impl Ctx<'_> {
             let mut tries = 0;
             loop {
                 tries += 1;
-                let (a, b, c) = (g[0] + s + shift, g[1], g[2] + s + shift);
-                let det = a * c - b * b;
-                let ok = det.abs() > 1e-300 && det.is_finite();
-                let da = if ok {
-                    [(c * dt[0] - b * dt[1]) / det, (a * dt[1] - b * dt[0]) / det]
-                } else {
-                    [0.0, 0.0]
-                };
-                let len = da[0].hypot(da[1]);
-                let da = if len > 0.5 {
-                    [da[0] * 0.5 / len, da[1] * 0.5 / len]
-                } else {
-                    da
-                };
+                let step = shifted_newton_step(g, s + shift, dt);
+                let ok = step.is_some();
+                let da = step.unwrap_or([0.0, 0.0]);
                 let cn = rotate_normal(&e.c, &t, da);
                 let trial = self.eval(cn);
                 let (o_t, r_t) = (ov(&trial), resid(&trial));

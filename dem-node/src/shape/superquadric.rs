@@ -344,20 +344,6 @@ mod tests {
         Superquadric::new(V3::new(r[0], r[1], r[2]), e1, e2).unwrap()
     }
 
-    fn random_unit(rng: &mut SplitMix64) -> V3 {
-        loop {
-            let v = V3::new(
-                2.0 * rng.uniform() - 1.0,
-                2.0 * rng.uniform() - 1.0,
-                2.0 * rng.uniform() - 1.0,
-            );
-            let n2 = v.norm_squared();
-            if n2 > 1e-4 && n2 <= 1.0 {
-                return v / n2.sqrt();
-            }
-        }
-    }
-
     /// W §1.2 table (r = (1, 1.5, 2), ρ = 1): the closed forms (3.4)–(3.7) against the values
     /// the SEED-SPEC obtained by quadrature (6 digits), and the ellipsoid exactly.
     #[test]
@@ -477,7 +463,7 @@ mod tests {
                 0.5 + 2.5 * rng.uniform(),
             ];
             let s = sq(r, 0.3 + 1.4 * rng.uniform(), 0.3 + 1.4 * rng.uniform());
-            let n = random_unit(&mut rng);
+            let n = crate::generate::random_unit_vector(&mut rng);
             let x = s.point(&n);
             let f = s.inside_outside(&x);
             assert!((f - 1.0).abs() < 1e-12, "F = {f} for {s:?}, n = {n}");
@@ -501,7 +487,7 @@ mod tests {
                 0.5 + 2.5 * rng.uniform(),
             ];
             let s = sq(r, 0.3 + 1.4 * rng.uniform(), 0.3 + 1.4 * rng.uniform());
-            let n = random_unit(&mut rng);
+            let n = crate::generate::random_unit_vector(&mut rng);
             if n.iter().any(|c| c.abs() < 0.05) {
                 continue; // the derivative is singular on the principal planes for ε ≠ 1
             }
@@ -558,7 +544,9 @@ mod tests {
             );
             let (rb, ri) = (s.bounding_radius(), s.inscribed_radius());
             for _ in 0..200 {
-                let d = s.point(&random_unit(&mut rng)).norm();
+                let d = s
+                    .point(&crate::generate::random_unit_vector(&mut rng))
+                    .norm();
                 assert!(
                     d <= rb * (1.0 + 1e-12) && d >= ri * (1.0 - 1e-12),
                     "{d} outside [{ri}, {rb}]"
@@ -579,13 +567,14 @@ mod tests {
         let s = sq([0.7, 0.7, 0.7], 1.0, 1.0);
         let mut rng = SplitMix64::new(5);
         for _ in 0..100 {
-            let (k1, k2, ..) = s.principal_curvatures(&random_unit(&mut rng));
+            let (k1, k2, ..) =
+                s.principal_curvatures(&crate::generate::random_unit_vector(&mut rng));
             assert!((k1 - 1.0 / 0.7).abs() < 1e-10 && (k2 - 1.0 / 0.7).abs() < 1e-10);
         }
         // a general ellipsoid point against the closed form of the Gaussian curvature
         // K = 1 / (a²b²c² (x²/a⁴ + y²/b⁴ + z²/c⁴)²)
         for _ in 0..100 {
-            let n = random_unit(&mut rng);
+            let n = crate::generate::random_unit_vector(&mut rng);
             let x = e.point(&n);
             let (k1, k2, ..) = e.principal_curvatures(&n);
             let q = x.x * x.x + x.y * x.y / 1.5f64.powi(4) + x.z * x.z / 16.0;
