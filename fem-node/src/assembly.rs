@@ -212,6 +212,29 @@ pub enum Operator {
     Mass,
 }
 
+/// Per-element material data of the linear operators: element e has stiffness
+/// `lame[of[e]]` and density `density[of[e]]`.
+#[derive(Clone, Copy, Debug)]
+pub struct ElementProps<'a> {
+    pub of: &'a [u32],
+    pub lame: &'a [Lame],
+    pub density: &'a [f64],
+}
+
+impl ElementProps<'_> {
+    #[inline]
+    pub fn lame(&self, e: usize) -> Lame {
+        self.lame[self.of[e] as usize]
+    }
+    #[inline]
+    pub fn density(&self, e: usize) -> f64 {
+        self.density[self.of[e] as usize]
+    }
+}
+
+/// Largest element matrix (hex20: 60×60).
+pub const MAX_ELEMENT_MATRIX: usize = 60 * 60;
+
 /// Assembles K (2.56) or the consistent M (2.78) on `pattern`. Element matrices are computed in
 /// parallel batches; the scatter is parallel over disjoint column ranges and adds element
 /// contributions in element order, so results are identical for any thread count.
@@ -220,14 +243,12 @@ pub fn assemble(
     dofs: &DofMap,
     pattern: &Pattern,
     op: Operator,
-    mat: Lame,
-    rho: f64,
+    props: ElementProps<'_>,
 ) -> Result<Vec<f64>, FemError> {
     let mut vals = vec![0.0; pattern.nnz()];
     let ne = mesh.num_elements();
     const BATCH: usize = 2048;
-    let max_nn = 20;
-    let stride = (3 * max_nn) * (3 * max_nn);
+    let stride = MAX_ELEMENT_MATRIX;
     let mut buf = vec![0.0; BATCH * stride];
     let parts = pattern.column_partitions(4 * rayon::current_num_threads().max(1));
     let mut start = 0;
@@ -248,11 +269,11 @@ pub fn assemble(
                     let nd = 3 * kind.num_nodes();
                     match op {
                         Operator::Stiffness => {
-                            element::stiffness(kind, x, mat, ke).map_err(|b| (e, b))?;
+                            element::stiffness(kind, x, props.lame(e), ke).map_err(|b| (e, b))?;
                             out[..nd * nd].copy_from_slice(ke);
                         }
                         Operator::Mass => {
-                            element::mass(kind, x, rho, ke).map_err(|b| (e, b))?;
+                            element::mass(kind, x, props.density(e), ke).map_err(|b| (e, b))?;
                             let nn = kind.num_nodes();
                             out[..nd * nd].fill(0.0);
                             for a in 0..nn {
@@ -277,47 +298,16 @@ pub fn assemble(
         t_elem += t0.elapsed();
         let t0 = std::time::Instant::now();
         // 2. scatter, parallel over column ranges
-        let mut slices: Vec<(usize, usize, &mut [f64])> = Vec::with_capacity(parts.len());
-        let mut rest: &mut [f64] = &mut vals;
-        let mut offset = 0usize;
-        for &(c0, c1) in &parts {
-            let a = pattern.col_ptr[c0] as usize;
-            let b = pattern.col_ptr[c1] as usize;
-            let (_, tail) = rest.split_at_mut(a - offset);
-            let (mine, tail) = tail.split_at_mut(b - a);
-            rest = tail;
-            offset = b;
-            slices.push((c0, c1, mine));
-        }
-        let buf_ref = &buf;
-        slices.par_iter_mut().for_each(|(c0, c1, mine)| {
-            let base = pattern.col_ptr[*c0] as usize;
-            let mut eqs = [0u32; 60];
-            for e in start..end {
-                let nodes = mesh.element_nodes(e);
-                let nd = 3 * nodes.len();
-                for (a, &n) in nodes.iter().enumerate() {
-                    for k in 0..3 {
-                        eqs[3 * a + k] = dofs.eq[3 * n as usize + k];
-                    }
-                }
-                let ke = &buf_ref[(e - start) * stride..];
-                for (jl, &cj) in eqs[..nd].iter().enumerate() {
-                    if cj == FIXED || (cj as usize) < *c0 || (cj as usize) >= *c1 {
-                        continue;
-                    }
-                    for (il, &ri) in eqs[..nd].iter().enumerate() {
-                        if ri == FIXED {
-                            continue;
-                        }
-                        let p = pattern
-                            .find(ri, cj)
-                            .expect("pattern covers element couplings");
-                        mine[p - base] += ke[il * nd + jl];
-                    }
-                }
-            }
-        });
+        scatter_batch(
+            mesh,
+            dofs,
+            pattern,
+            &parts,
+            start..end,
+            &buf,
+            stride,
+            &mut vals,
+        );
         t_scatter += t0.elapsed();
         start = end;
     }
@@ -327,8 +317,70 @@ pub fn assemble(
     Ok(vals)
 }
 
+/// Column ranges of `pattern` for [`scatter_batch`] (a few per thread).
+pub fn scatter_parts(pattern: &Pattern) -> Vec<(usize, usize)> {
+    pattern.column_partitions(4 * rayon::current_num_threads().max(1))
+}
+
+/// Adds the element matrices of `elements` (row-major, element i of the batch at
+/// `buf[i * stride..]`) into `vals`, in parallel over the column ranges `parts` and in element
+/// order within each: the same sums for any thread count.
+#[allow(clippy::too_many_arguments)]
+pub fn scatter_batch(
+    mesh: &Mesh,
+    dofs: &DofMap,
+    pattern: &Pattern,
+    parts: &[(usize, usize)],
+    elements: std::ops::Range<usize>,
+    buf: &[f64],
+    stride: usize,
+    vals: &mut [f64],
+) {
+    let start = elements.start;
+    let mut slices: Vec<(usize, usize, &mut [f64])> = Vec::with_capacity(parts.len());
+    let mut rest: &mut [f64] = vals;
+    let mut offset = 0usize;
+    for &(c0, c1) in parts {
+        let a = pattern.col_ptr[c0] as usize;
+        let b = pattern.col_ptr[c1] as usize;
+        let (_, tail) = rest.split_at_mut(a - offset);
+        let (mine, tail) = tail.split_at_mut(b - a);
+        rest = tail;
+        offset = b;
+        slices.push((c0, c1, mine));
+    }
+    slices.par_iter_mut().for_each(|(c0, c1, mine)| {
+        let base = pattern.col_ptr[*c0] as usize;
+        let mut eqs = [0u32; 60];
+        for e in elements.clone() {
+            let nodes = mesh.element_nodes(e);
+            let nd = 3 * nodes.len();
+            for (a, &n) in nodes.iter().enumerate() {
+                for k in 0..3 {
+                    eqs[3 * a + k] = dofs.eq[3 * n as usize + k];
+                }
+            }
+            let ke = &buf[(e - start) * stride..];
+            for (jl, &cj) in eqs[..nd].iter().enumerate() {
+                if cj == FIXED || (cj as usize) < *c0 || (cj as usize) >= *c1 {
+                    continue;
+                }
+                for (il, &ri) in eqs[..nd].iter().enumerate() {
+                    if ri == FIXED {
+                        continue;
+                    }
+                    let p = pattern
+                        .find(ri, cj)
+                        .expect("pattern covers element couplings");
+                    mine[p - base] += ke[il * nd + jl];
+                }
+            }
+        }
+    });
+}
+
 /// Lumped (HRZ) nodal masses for every dof (3 per node).
-pub fn lumped_mass(mesh: &Mesh, rho: f64) -> Result<Vec<f64>, FemError> {
+pub fn lumped_mass(mesh: &Mesh, props: ElementProps<'_>) -> Result<Vec<f64>, FemError> {
     let per_elem: Vec<Result<Vec<f64>, FemError>> = (0..mesh.num_elements())
         .into_par_iter()
         .map(|e| {
@@ -336,10 +388,12 @@ pub fn lumped_mass(mesh: &Mesh, rho: f64) -> Result<Vec<f64>, FemError> {
             mesh.element_coords(e, &mut x);
             let kind: ElementKind = mesh.kinds[e];
             let mut m = vec![0.0; kind.num_nodes()];
-            element::lumped_mass(kind, &x, rho, &mut m).map_err(|b| FemError::Mesh {
-                file: mesh.source.clone(),
-                line: mesh.elem_lines[e],
-                message: format!("element {} has det J = {:.3e}", mesh.elem_ids[e], b.det_j),
+            element::lumped_mass(kind, &x, props.density(e), &mut m).map_err(|b| {
+                FemError::Mesh {
+                    file: mesh.source.clone(),
+                    line: mesh.elem_lines[e],
+                    message: format!("element {} has det J = {:.3e}", mesh.elem_ids[e], b.det_j),
+                }
             })?;
             Ok(m)
         })
@@ -791,5 +845,45 @@ impl MixedFactor {
                 .for_each(|(pi, zi)| *pi = zi + beta * *pi);
         }
         it
+    }
+}
+
+/// Sparse LU factor (faer, partial pivoting, COLAMD ordering) of a general matrix on the
+/// full pattern: the tangent of a non-associative plastic material is not symmetric, and a
+/// softening one need not be positive definite.
+pub struct LuFactor {
+    lu: faer::sparse::linalg::solvers::Lu<u32, f64>,
+}
+
+/// Cached symbolic LU analysis of one pattern.
+pub type SymbolicLu = faer::sparse::linalg::solvers::SymbolicLu<u32>;
+
+impl LuFactor {
+    pub fn new(
+        pattern: &Pattern,
+        vals: &[f64],
+        symbolic: &mut Option<SymbolicLu>,
+    ) -> Result<LuFactor, FemError> {
+        if symbolic.is_none() {
+            *symbolic = Some(
+                SymbolicLu::try_new(pattern.symbolic())
+                    .map_err(|e| FemError::Solver(format!("symbolic LU failed: {e:?}")))?,
+            );
+        }
+        let sym = symbolic.clone().expect("set above");
+        let lu = faer::sparse::linalg::solvers::Lu::try_new_with_symbolic(
+            sym,
+            SparseColMatRef::new(pattern.symbolic(), vals),
+        )
+        .map_err(|e| FemError::Solver(format!("LU factorisation failed ({e:?})")))?;
+        Ok(LuFactor { lu })
+    }
+
+    /// Solves A x = b in place.
+    pub fn solve_in_place(&self, b: &mut [f64]) {
+        use faer::linalg::solvers::Solve;
+        let n = b.len();
+        let rhs = faer::MatMut::from_column_major_slice_mut(b, n, 1);
+        self.lu.solve_in_place(rhs);
     }
 }

@@ -34,7 +34,19 @@ impl std::error::Error for SceneError {}
 pub struct FemConfig {
     /// Mesh file (`"beam.msh"`, `"beam.inp"`, relative to the scene file) or a generated box.
     pub mesh: MeshSpec,
-    pub material: Material,
+    /// The material of every element no `[[fem.sections]]` entry assigns (linear elastic).
+    #[serde(default)]
+    pub material: Option<Material>,
+    /// Named materials (`[fem.materials.<name>]` with `model = ...`), assigned to element
+    /// sets by `sections`.
+    #[serde(default)]
+    pub materials: BTreeMap<String, MaterialSpec>,
+    /// Element set → material assignments.
+    #[serde(default)]
+    pub sections: Vec<Section>,
+    /// Newton–Raphson controls of nonlinear models.
+    #[serde(default)]
+    pub newton: NewtonConfig,
     /// `"static"` (default), `"dynamic"`, `"explicit"`, or a table with `type` and parameters.
     #[serde(default)]
     pub analysis: Analysis,
@@ -201,6 +213,133 @@ pub struct Material {
     /// Density ρ [kg/m³].
     #[serde(alias = "rho")]
     pub density: f64,
+}
+
+/// `[fem.materials.<name>]`: a constitutive model and its parameters (FEM.md "Materials").
+/// Angles in degrees.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(tag = "model", rename_all = "snake_case", deny_unknown_fields)]
+pub enum MaterialSpec {
+    /// Isotropic linear elasticity (Ullrich (2.35)–(2.37)).
+    LinearElastic {
+        #[serde(alias = "E")]
+        youngs_modulus: f64,
+        #[serde(alias = "nu")]
+        poisson_ratio: f64,
+        #[serde(alias = "rho")]
+        density: f64,
+    },
+    /// Compressible Neo-Hooke (Wellmann §2.1.4), finite strain; E, ν are the small-strain
+    /// moduli.
+    NeoHooke {
+        #[serde(alias = "E")]
+        youngs_modulus: f64,
+        #[serde(alias = "nu")]
+        poisson_ratio: f64,
+        #[serde(alias = "rho")]
+        density: f64,
+    },
+    /// Decoupled Mooney–Rivlin, finite strain: c₁ = (1 − c) G/2, c₂ = c G/2 with
+    /// c = `second_invariant_share` (Wellmann's c, §4.3.3), G and K from E, ν.
+    MooneyRivlin {
+        #[serde(alias = "E")]
+        youngs_modulus: f64,
+        #[serde(alias = "nu")]
+        poisson_ratio: f64,
+        #[serde(alias = "c")]
+        second_invariant_share: f64,
+        #[serde(alias = "rho")]
+        density: f64,
+    },
+    /// Decoupled Ogden, finite strain: `terms = [[μ₁, α₁], ...]` (1 to 3 terms, μ_p in Pa);
+    /// the bulk modulus follows from the small-strain shear modulus ½ Σ μ_p α_p and ν.
+    Ogden {
+        terms: Vec<[f64; 2]>,
+        #[serde(alias = "nu")]
+        poisson_ratio: f64,
+        #[serde(alias = "rho")]
+        density: f64,
+    },
+    /// Non-associative Mohr–Coulomb perfect plasticity, small strain (Wellmann (2.31)–(2.37),
+    /// (2.32) corrected).
+    MohrCoulomb {
+        #[serde(alias = "E")]
+        youngs_modulus: f64,
+        #[serde(alias = "nu")]
+        poisson_ratio: f64,
+        /// φ [°].
+        friction_angle: f64,
+        /// ψ [°], 0 ≤ ψ ≤ φ.
+        dilation_angle: f64,
+        /// c [Pa].
+        cohesion: f64,
+        #[serde(alias = "rho")]
+        density: f64,
+    },
+}
+
+impl MaterialSpec {
+    pub fn density(&self) -> f64 {
+        match self {
+            MaterialSpec::LinearElastic { density, .. }
+            | MaterialSpec::NeoHooke { density, .. }
+            | MaterialSpec::MooneyRivlin { density, .. }
+            | MaterialSpec::Ogden { density, .. }
+            | MaterialSpec::MohrCoulomb { density, .. } => *density,
+        }
+    }
+}
+
+/// `[[fem.sections]]`: the elements of a set get a material.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Section {
+    /// Element set of the mesh (Gmsh 3-D physical group, Abaqus *ELSET) by name, `"all"`, or
+    /// a selector table (`{ box = ... }`, `{ plane = ... }`: the elements whose nodes are all
+    /// selected).
+    pub elements: SectionElements,
+    /// A name under `[fem.materials]`.
+    pub material: String,
+}
+
+/// Which elements a section covers.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(untagged)]
+pub enum SectionElements {
+    Set(String),
+    Select(Selector),
+}
+
+/// `[fem.newton]`: controls of the Newton–Raphson iterations of nonlinear models.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct NewtonConfig {
+    /// Converged when ‖R‖ ≤ this × the force scale (max of ‖F_ext‖ and ‖f_int‖ incl.
+    /// reactions) ...
+    pub force_tolerance: f64,
+    /// ... and the last correction ‖δu‖ ≤ this × ‖Δu‖ of the increment.
+    pub displacement_tolerance: f64,
+    /// Iterations per increment before it is cut back.
+    pub max_iterations: u32,
+    /// Load increments per static solve (per `advance`); cut-backs halve them as needed.
+    pub increments: u32,
+    /// Halvings of a failed increment (static) or time step (Bossak) before giving up.
+    pub max_cutbacks: u32,
+    /// Use the Newton path even when every material is linear (verification).
+    pub always: bool,
+}
+
+impl Default for NewtonConfig {
+    fn default() -> Self {
+        NewtonConfig {
+            force_tolerance: 1e-8,
+            displacement_tolerance: 1e-8,
+            max_iterations: 25,
+            increments: 1,
+            max_cutbacks: 10,
+            always: false,
+        }
+    }
 }
 
 /// Analysis type and its parameters.
@@ -502,6 +641,123 @@ pub fn parse_scene_section(text: &str) -> Result<Option<FemConfig>, SceneError> 
     Ok(Some(cfg))
 }
 
+fn check_elastic(base: &str, e: f64, nu: f64) -> Result<(), (String, String)> {
+    if !(e.is_finite() && e > 0.0) {
+        return Err((
+            format!("{base}.youngs_modulus"),
+            format!("must be > 0 Pa, got {e}"),
+        ));
+    }
+    check_poisson(base, nu)
+}
+
+fn check_poisson(base: &str, nu: f64) -> Result<(), (String, String)> {
+    if !(nu > -1.0 && nu < 0.5) {
+        return Err((
+            format!("{base}.poisson_ratio"),
+            format!("must satisfy −1 < ν < 0.5, got {nu}"),
+        ));
+    }
+    Ok(())
+}
+
+fn check_density(base: &str, rho: f64) -> Result<(), (String, String)> {
+    if !(rho.is_finite() && rho > 0.0) {
+        return Err((
+            format!("{base}.density"),
+            format!("must be > 0 kg/m³, got {rho}"),
+        ));
+    }
+    Ok(())
+}
+
+/// Parameter checks of one `[fem.materials.<name>]` table (`base` is its path).
+fn check_material(base: &str, m: &MaterialSpec) -> Result<(), (String, String)> {
+    check_density(base, m.density())?;
+    match m {
+        MaterialSpec::LinearElastic {
+            youngs_modulus,
+            poisson_ratio,
+            ..
+        }
+        | MaterialSpec::NeoHooke {
+            youngs_modulus,
+            poisson_ratio,
+            ..
+        } => check_elastic(base, *youngs_modulus, *poisson_ratio),
+        MaterialSpec::MooneyRivlin {
+            youngs_modulus,
+            poisson_ratio,
+            second_invariant_share: c,
+            ..
+        } => {
+            check_elastic(base, *youngs_modulus, *poisson_ratio)?;
+            if !(*c >= 0.0 && *c <= 1.0) {
+                return Err((
+                    format!("{base}.second_invariant_share"),
+                    format!("must lie in [0, 1] (c₁ = (1 − c) G/2 and c₂ = c G/2 must not be negative), got {c}"),
+                ));
+            }
+            Ok(())
+        }
+        MaterialSpec::Ogden {
+            terms,
+            poisson_ratio,
+            ..
+        } => {
+            check_poisson(base, *poisson_ratio)?;
+            if terms.is_empty() || terms.len() > 3 {
+                return Err((
+                    format!("{base}.terms"),
+                    format!("give 1 to 3 terms [μ_p, α_p], got {}", terms.len()),
+                ));
+            }
+            for (p, [mu, alpha]) in terms.iter().enumerate() {
+                if !(mu.is_finite() && alpha.is_finite()) || *alpha == 0.0 {
+                    return Err((
+                        format!("{base}.terms[{p}]"),
+                        format!("μ and α must be finite and α ≠ 0, got [{mu}, {alpha}]"),
+                    ));
+                }
+                if !(mu * alpha > 0.0) {
+                    return Err((
+                        format!("{base}.terms[{p}]"),
+                        format!(
+                            "μ_p α_p = {} must be > 0 for every term (Ogden's stability condition)",
+                            mu * alpha
+                        ),
+                    ));
+                }
+            }
+            Ok(())
+        }
+        MaterialSpec::MohrCoulomb {
+            youngs_modulus,
+            poisson_ratio,
+            friction_angle,
+            dilation_angle,
+            cohesion,
+            ..
+        } => {
+            check_elastic(base, *youngs_modulus, *poisson_ratio)?;
+            if !(friction_angle.is_finite() && dilation_angle.is_finite() && cohesion.is_finite()) {
+                return Err((
+                    format!("{base}.friction_angle"),
+                    "friction_angle, dilation_angle and cohesion must be finite".into(),
+                ));
+            }
+            crate::material::mohr_coulomb::MohrCoulomb::check(
+                *youngs_modulus,
+                *poisson_ratio,
+                friction_angle.to_radians(),
+                dilation_angle.to_radians(),
+                *cohesion,
+            )
+            .map_err(|(field, msg)| (format!("{base}.{field}"), msg))
+        }
+    }
+}
+
 fn line_col(text: &str, offset: usize) -> (usize, usize) {
     let offset = offset.min(text.len());
     let before = &text[..offset];
@@ -516,23 +772,79 @@ fn line_col(text: &str, offset: usize) -> (usize, usize) {
 impl FemConfig {
     /// Value checks; the error carries the field path (e.g. `fem.material.poisson_ratio`).
     pub fn validate(&self) -> Result<(), (String, String)> {
-        let m = &self.material;
-        if !(m.youngs_modulus.is_finite() && m.youngs_modulus > 0.0) {
+        if let Some(m) = &self.material {
+            check_elastic("fem.material", m.youngs_modulus, m.poisson_ratio)?;
+            check_density("fem.material", m.density)?;
+        }
+        for (name, m) in &self.materials {
+            check_material(&format!("fem.materials.{name}"), m)?;
+        }
+        for (i, sec) in self.sections.iter().enumerate() {
+            if !self.materials.contains_key(&sec.material) {
+                let known: Vec<&str> = self.materials.keys().map(String::as_str).collect();
+                return Err((
+                    format!("fem.sections[{i}].material"),
+                    format!(
+                        "no material \"{}\" under [fem.materials] (defined: {})",
+                        sec.material,
+                        if known.is_empty() {
+                            "none".to_string()
+                        } else {
+                            known.join(", ")
+                        }
+                    ),
+                ));
+            }
+            match &sec.elements {
+                SectionElements::Set(name) if name.trim().is_empty() => {
+                    return Err((
+                        format!("fem.sections[{i}].elements"),
+                        "empty element set name".into(),
+                    ));
+                }
+                SectionElements::Set(_) => {}
+                SectionElements::Select(sel) => {
+                    check_selector(sel, &format!("fem.sections[{i}].elements"))?
+                }
+            }
+        }
+        if self.material.is_none() && self.sections.is_empty() {
             return Err((
-                "fem.material.youngs_modulus".into(),
-                format!("must be > 0 Pa, got {}", m.youngs_modulus),
+                "fem.material".into(),
+                "missing: give [fem.material] (linear elastic, every element) or \
+                 [fem.materials.<name>] with [[fem.sections]] assigning them"
+                    .into(),
             ));
         }
-        if !(m.poisson_ratio > -1.0 && m.poisson_ratio < 0.5) {
+        let n = &self.newton;
+        for (field, v) in [
+            ("force_tolerance", n.force_tolerance),
+            ("displacement_tolerance", n.displacement_tolerance),
+        ] {
+            if !(v.is_finite() && v > 0.0 && v < 1.0) {
+                return Err((
+                    format!("fem.newton.{field}"),
+                    format!("must lie in (0, 1), got {v}"),
+                ));
+            }
+        }
+        if n.max_iterations == 0 || n.increments == 0 {
             return Err((
-                "fem.material.poisson_ratio".into(),
-                format!("must satisfy −1 < ν < 0.5, got {}", m.poisson_ratio),
+                format!(
+                    "fem.newton.{}",
+                    if n.max_iterations == 0 {
+                        "max_iterations"
+                    } else {
+                        "increments"
+                    }
+                ),
+                "must be ≥ 1".into(),
             ));
         }
-        if !(m.density.is_finite() && m.density > 0.0) {
+        if n.max_cutbacks > 30 {
             return Err((
-                "fem.material.density".into(),
-                format!("must be > 0 kg/m³, got {}", m.density),
+                "fem.newton.max_cutbacks".into(),
+                format!("at most 30 (an increment of 2⁻³⁰), got {}", n.max_cutbacks),
             ));
         }
         match &self.mesh {

@@ -435,7 +435,7 @@ fn size_cubed(x: &[[f64; 3]]) -> f64 {
 
 /// Physical gradients dN/dx at every point of `tab`, with det J · w.
 /// Fails on an inverted (det J ≤ 0) or degenerate (det J < 1e-10 h³) element.
-fn gradients(
+pub(crate) fn gradients(
     tab: &Tabulated,
     x: &[[f64; 3]],
     grads: &mut Vec<[f64; 3]>,
@@ -549,7 +549,7 @@ pub fn stiffness(
 }
 
 /// Element-mean shape-function gradients ḡ_a = (1/V) Σ_q w_q ∇N_a(x_q) and the volume V.
-fn mean_gradients(g: &[[f64; 3]], w: &[f64], nn: usize) -> (Vec<[f64; 3]>, f64) {
+pub(crate) fn mean_gradients(g: &[[f64; 3]], w: &[f64], nn: usize) -> (Vec<[f64; 3]>, f64) {
     let vol: f64 = w.iter().sum();
     let mut gbar = vec![[0.0; 3]; nn];
     for (wq, gq) in w.iter().zip(g.chunks_exact(nn)) {

@@ -13,6 +13,7 @@ pub fn write_vtu(
     u: &[f64],
     v: &[f64],
     stress: &[[f64; 6]],
+    cell_scalars: &[(&str, &[f64])],
 ) -> std::io::Result<()> {
     let mut s = String::with_capacity(64 * mesh.num_nodes() + 128 * mesh.num_elements());
     let _ = writeln!(s, "<?xml version=\"1.0\"?>");
@@ -71,7 +72,18 @@ pub fn write_vtu(
             st[0], st[1], st[2], st[3], st[4], st[5]
         );
     }
-    s.push_str("</DataArray>\n</CellData>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n");
+    s.push_str("</DataArray>\n");
+    for (name, data) in cell_scalars {
+        let _ = writeln!(
+            s,
+            "<DataArray type=\"Float64\" Name=\"{name}\" format=\"ascii\">"
+        );
+        for v in data.iter() {
+            let _ = write!(s, "{v:e} ");
+        }
+        s.push_str("\n</DataArray>\n");
+    }
+    s.push_str("</CellData>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n");
     std::fs::write(path, s)
 }
 

@@ -1,10 +1,15 @@
 //! The FEM model: mesh + material + boundary conditions + solvers, behind the small
 //! solver-facing API the `fem-node` adapter calls (set forces → advance → read kinematics).
 
-use crate::assembly::{self, DofMap, Factor, MixedFactor, Operator, Pattern, RefinedSolve, FIXED};
-use crate::config::{Analysis, FemConfig, LinearSolver, Load, MeshSpec, Output};
+mod newton;
+
+use crate::assembly::{
+    self, DofMap, ElementProps, Factor, MixedFactor, Operator, Pattern, RefinedSolve, FIXED,
+};
+use crate::config::{Analysis, FemConfig, LinearSolver, Load, MeshSpec, NewtonConfig, Output};
 use crate::element::{self, Lame};
 use crate::history::History;
+use crate::material::Material;
 use crate::mesh::{box_mesh, Mesh};
 use crate::output;
 use crate::surface::{self, Boundary, Interface};
@@ -39,6 +44,10 @@ struct State {
     /// smallest min-principal strain, largest von Mises strain. (Absent in older snapshots.)
     #[serde(default)]
     strain_peaks: Vec<[f64; 3]>,
+    /// Committed integration-point states of materials with state (`state_stride` values per
+    /// element; empty when no material has state). (Absent in older snapshots.)
+    #[serde(default)]
+    points: Vec<f64>,
 }
 
 struct LoadVector {
@@ -50,9 +59,21 @@ struct LoadVector {
 /// A finite element model ready to be stepped.
 pub struct Model {
     mesh: Mesh,
-    mat: Lame,
-    poisson_ratio: f64,
-    rho: f64,
+    /// The scene's materials; element e has `materials[elem_mat[e]]`.
+    materials: Vec<Material>,
+    elem_mat: Vec<u32>,
+    /// Per material: the initial (small-strain) Lamé constants of the linear stiffness K.
+    lame: Vec<Lame>,
+    /// Internal forces from stresses and Newton iterations (some material is not linear
+    /// elastic, or `newton.always`); otherwise K u with the cached factor.
+    nonlinear: bool,
+    /// Point-state values per element (max over the elements; 0 without stateful materials).
+    state_stride: usize,
+    newton: NewtonConfig,
+    lu_symbolic: Option<assembly::SymbolicLu>,
+    /// Relative residuals ‖R‖ / force scale of every Newton iteration, per increment (static)
+    /// or step (Bossak), of the last nonlinear solve.
+    last_newton: Vec<Vec<f64>>,
     analysis: Analysis,
     dofs: DofMap,
     pattern: Pattern,
@@ -149,8 +170,25 @@ impl Model {
         };
         mesh.check_elements()?;
         lap("check_elements");
-        let mat = Lame::from_young_poisson(cfg.material.youngs_modulus, cfg.material.poisson_ratio);
-        let rho = cfg.material.density;
+        let (materials, elem_mat) = newton::assign_materials(cfg, &mesh)?;
+        let lame: Vec<Lame> = materials.iter().map(|m| m.model.initial_lame()).collect();
+        let densities: Vec<f64> = materials.iter().map(|m| m.density).collect();
+        let nonlinear = cfg.newton.always || materials.iter().any(|m| !m.model.is_linear());
+        if nonlinear {
+            newton::check_element_kinds(&mesh, &materials, &elem_mat, cfg.newton.always)?;
+        }
+        let state_stride = (0..mesh.num_elements())
+            .map(|e| {
+                crate::nonlinear::num_points(mesh.kinds[e])
+                    * materials[elem_mat[e] as usize].model.state_len()
+            })
+            .max()
+            .unwrap_or(0);
+        let props = ElementProps {
+            of: &elem_mat,
+            lame: &lame,
+            density: &densities,
+        };
         let nd = 3 * mesh.num_nodes();
 
         // Supports: eliminated dofs (η_g of (2.52)–(2.53)).
@@ -167,9 +205,9 @@ impl Model {
         lap("supports");
         let pattern = Pattern::build(&mesh, &dofs)?;
         lap("pattern");
-        let k = assembly::assemble(&mesh, &dofs, &pattern, Operator::Stiffness, mat, rho)?;
+        let k = assembly::assemble(&mesh, &dofs, &pattern, Operator::Stiffness, props)?;
         lap("stiffness");
-        let m_lumped = assembly::lumped_mass(&mesh, rho)?;
+        let m_lumped = assembly::lumped_mass(&mesh, props)?;
         lap("lumped mass");
         let diag_pos: Vec<usize> = (0..pattern.n)
             .map(|j| {
@@ -187,8 +225,7 @@ impl Model {
                 &dofs,
                 &pattern,
                 Operator::Mass,
-                mat,
-                rho,
+                props,
             )?),
             _ => None,
         };
@@ -240,7 +277,7 @@ impl Model {
                     acceleration,
                     history,
                 } => {
-                    gravity_loads(&mesh, rho, *acceleration, &mut f)?;
+                    gravity_loads(&mesh, props, *acceleration, &mut f)?;
                     history
                 }
             };
@@ -305,7 +342,8 @@ impl Model {
 
         let mut gauges = Vec::new();
         for (i, g) in cfg.strain_gauges.iter().enumerate() {
-            let elements = gauge_elements(&mesh, g.on.as_ref(), i)?;
+            let elements =
+                gauge_elements(&mesh, g.on.as_ref(), &format!("fem.strain_gauges[{i}].on"))?;
             gauges.push((g.name.clone(), elements));
         }
 
@@ -325,11 +363,17 @@ impl Model {
                 windows: 0,
                 csv_started: false,
                 strain_peaks: vec![NO_PEAK; gauges.len()],
+                points: newton::initial_points(&mesh, &materials, &elem_mat, state_stride),
             },
             mesh,
-            mat,
-            poisson_ratio: cfg.material.poisson_ratio,
-            rho,
+            materials,
+            elem_mat,
+            lame,
+            nonlinear,
+            state_stride,
+            newton: cfg.newton.clone(),
+            lu_symbolic: None,
+            last_newton: Vec::new(),
             analysis: cfg.analysis.clone(),
             dofs,
             pattern,
@@ -427,6 +471,7 @@ impl Model {
                 self.static_solve_at(t)?;
                 self.st.time = t;
             }
+            Analysis::Dynamic { .. } if self.nonlinear => self.bossak_nonlinear(dt)?,
             Analysis::Dynamic { .. } => self.bossak_step(dt)?,
             Analysis::Explicit { safety, .. } => {
                 let crit = self.critical_time_step().ok_or_else(|| {
@@ -539,26 +584,33 @@ impl Model {
     /// Warnings about the scene that do not stop it (shown by the coordinator): elements that
     /// lock volumetrically at the scene's Poisson ratio (measured table in FEM.md).
     pub fn warnings(&self) -> Vec<String> {
-        let nu = self.poisson_ratio;
         let mut out = Vec::new();
-        if nu <= LOCKING_POISSON_RATIO {
-            return out;
-        }
-        let has = |k: element::ElementKind| self.mesh.kinds.contains(&k);
-        if has(element::ElementKind::Tet4) {
-            out.push(format!(
-                "fem.material.poisson_ratio = {nu}: linear tetrahedra (tet4, C3D4) lock \
-                 volumetrically above ν = {LOCKING_POISSON_RATIO} (in pure bending 3.6× too stiff \
-                 at ν = 0.49, 15× at 0.499; FEM.md); use tet10 (C3D10)"
-            ));
-        }
-        if has(element::ElementKind::Hex8) {
-            out.push(format!(
-                "fem.material.poisson_ratio = {nu}: fully integrated hexahedra (hex8, C3D8) lock \
-                 volumetrically above ν = {LOCKING_POISSON_RATIO} (in pure bending 17 % too stiff \
-                 at ν = 0.49, 33 % at 0.499; FEM.md); use hex8b (mean-dilatation B̄: mesh = {{ file = \
-                 ..., hex8 = \"bbar\" }} or element = \"hex8b\"), hex8i or hex20"
-            ));
+        for (m, mat) in self.materials.iter().enumerate() {
+            let nu = mat.model.poisson_ratio();
+            if nu <= LOCKING_POISSON_RATIO {
+                continue;
+            }
+            let has = |k: element::ElementKind| {
+                (0..self.mesh.num_elements())
+                    .any(|e| self.mesh.kinds[e] == k && self.elem_mat[e] as usize == m)
+            };
+            let name = &mat.name;
+            if has(element::ElementKind::Tet4) {
+                out.push(format!(
+                    "{name}.poisson_ratio = {nu}: linear tetrahedra (tet4, C3D4) lock \
+                     volumetrically above ν = {LOCKING_POISSON_RATIO} (in pure bending 3.6× too \
+                     stiff at ν = 0.49, 15× at 0.499; FEM.md); use tet10 (C3D10)"
+                ));
+            }
+            if has(element::ElementKind::Hex8) {
+                out.push(format!(
+                    "{name}.poisson_ratio = {nu}: fully integrated hexahedra (hex8, C3D8) lock \
+                     volumetrically above ν = {LOCKING_POISSON_RATIO} (in pure bending 17 % too \
+                     stiff at ν = 0.49, 33 % at 0.499; FEM.md); use hex8b (mean-dilatation B̄: \
+                     mesh = {{ file = ..., hex8 = \"bbar\" }} or element = \"hex8b\"), hex8i or \
+                     hex20"
+                ));
+            }
         }
         out
     }
@@ -662,6 +714,7 @@ impl Model {
             || st.a.len() != nd
             || st.prescribed.len() != nd
             || st.interface_forces.len() != 3 * self.iface.nodes.len()
+            || st.points.len() != self.st.points.len()
         {
             return Err(FemError::Snapshot(format!(
                 "snapshot has {} dofs / {} interface values, model has {nd} / {}",
@@ -728,9 +781,35 @@ impl Model {
         if self.output.vtu_every > 0 && self.st.windows % self.output.vtu_every == 0 {
             let name = format!("fem_{:06}.vtu", self.st.windows);
             let path = out_dir.join(&name);
-            let stress = self.element_stresses();
-            output::write_vtu(&path, &self.mesh, &self.st.u, &self.st.v, &stress)
-                .map_err(|e| io(e, &path))?;
+            let material: Vec<f64> = self.elem_mat.iter().map(|&m| m as f64).collect();
+            let written = if self.nonlinear {
+                // stresses (Cauchy), the largest equivalent plastic strain of each element and
+                // the share of its points that yielded in the last update (the plastic zone)
+                let (stress, peeq, zone) = self.element_point_summaries();
+                output::write_vtu(
+                    &path,
+                    &self.mesh,
+                    &self.st.u,
+                    &self.st.v,
+                    &stress,
+                    &[
+                        ("material", &material),
+                        ("equivalent_plastic_strain", &peeq),
+                        ("plastic_zone", &zone),
+                    ],
+                )
+            } else {
+                let stress = self.element_stresses();
+                output::write_vtu(
+                    &path,
+                    &self.mesh,
+                    &self.st.u,
+                    &self.st.v,
+                    &stress,
+                    &[("material", &material)],
+                )
+            };
+            written.map_err(|e| io(e, &path))?;
             self.vtu_files.push((self.st.time, name));
             let pvd = out_dir.join("fem.pvd");
             output::write_pvd(&pvd, &self.vtu_files).map_err(|e| io(e, &pvd))?;
@@ -857,8 +936,12 @@ impl Model {
         self.st.accel_ready = false;
         Ok(())
     }
-    /// Strain energy ½ uᵀ K u over the free dofs [J].
+    /// Strain energy ½ uᵀ K u over the free dofs [J]; for a nonlinear model the stored
+    /// energy ∫ Ψ dV₀ (elastic part for plasticity).
     pub fn strain_energy(&self) -> f64 {
+        if self.nonlinear {
+            return self.stored_energy();
+        }
         let u = self.dofs.gather(&self.st.u);
         let mut ku = vec![0.0; u.len()];
         self.pattern.mul(&self.k, &u, &mut ku);
@@ -897,6 +980,11 @@ impl Model {
     }
     /// Internal forces K u assembled element by element over all dofs [N].
     pub fn internal_forces(&self) -> Vec<f64> {
+        if self.nonlinear {
+            return self
+                .internal_forces_at(&self.st.u)
+                .unwrap_or_else(|_| vec![f64::NAN; self.num_dofs()]);
+        }
         self.element_forces(&self.st.u)
     }
     /// Support reactions R = K u − F(t) (non-zero only on supported dofs) [N].
@@ -924,13 +1012,20 @@ impl Model {
     }
     /// Element-mean stress (Voigt xx, yy, zz, xy, yz, zx) [Pa].
     pub fn element_stresses(&self) -> Vec<[f64; 6]> {
+        if self.nonlinear {
+            return self.element_point_summaries().0;
+        }
         (0..self.mesh.num_elements())
             .into_par_iter()
             .map(|e| {
                 let (x, u) = self.element_state(e);
-                element::mean_stress(self.mesh.kinds[e], &x, &u, self.mat).unwrap_or([f64::NAN; 6])
+                element::mean_stress(self.mesh.kinds[e], &x, &u, self.lame_of(e))
+                    .unwrap_or([f64::NAN; 6])
             })
             .collect()
+    }
+    fn lame_of(&self, e: usize) -> Lame {
+        self.lame[self.elem_mat[e] as usize]
     }
     /// Per strain gauge (in scene order): name and the current [largest max-principal strain,
     /// smallest min-principal strain, largest von Mises equivalent strain] over its elements'
@@ -950,7 +1045,7 @@ impl Model {
             .map(|&e| {
                 let e = e as usize;
                 let (x, u) = self.element_state(e);
-                match element::point_strains(self.mesh.kinds[e], &x, &u, self.mat) {
+                match element::point_strains(self.mesh.kinds[e], &x, &u, self.lame_of(e)) {
                     Ok(eps) => eps.iter().fold(NO_PEAK, |acc, ep| {
                         let p = element::principal_values(ep);
                         [
@@ -1031,8 +1126,19 @@ impl Model {
     pub fn total_mass(&self) -> f64 {
         self.m_lumped.iter().step_by(3).sum()
     }
-    pub fn density(&self) -> f64 {
-        self.rho
+    /// The materials (scene order: `[fem.materials]` by name, then `[fem.material]`).
+    pub fn materials(&self) -> &[Material] {
+        &self.materials
+    }
+    /// Whether the model is solved by Newton iterations (internal forces from stresses).
+    pub fn is_nonlinear(&self) -> bool {
+        self.nonlinear
+    }
+    /// Relative residuals of each Newton iteration, per increment (static) or step (Bossak,
+    /// after cut-backs) of the last nonlinear solve; empty for linear models. The number of
+    /// iterations of an increment is its length − 1.
+    pub fn last_newton_residuals(&self) -> &[Vec<f64>] {
+        &self.last_newton
     }
 
     // ----------------------------------------------------------------------------------------
@@ -1047,6 +1153,10 @@ impl Model {
 
     /// K_fg g on the free equations, when any support has a non-zero prescribed value.
     fn prescribed_load(&self) -> Option<Vec<f64>> {
+        // a nonlinear model's internal forces see the prescribed values directly
+        if self.nonlinear {
+            return None;
+        }
         if self.st.prescribed.iter().any(|&g| g != 0.0) {
             Some(self.dofs.gather(&self.element_forces(&self.st.prescribed)))
         } else {
@@ -1085,6 +1195,9 @@ impl Model {
     /// With the mixed-precision solver (`[fem] solver`), an f32 factor preconditions f64
     /// conjugate gradients; when that fails the f64 factor takes over (logged once).
     fn static_solve_at(&mut self, t: f64) -> Result<(), FemError> {
+        if self.nonlinear {
+            return self.newton_static(t);
+        }
         let mut rhs = self.free_rhs(t);
         let mut solved = false;
         if self.k_factor.is_none() && !self.mixed_failed && self.solver.mixed_for(self.dofs.n_eq) {
@@ -1130,6 +1243,34 @@ impl Model {
         Ok(())
     }
 
+    /// The stiffness part of the balance on the free equations: K (u + b v) for a linear
+    /// model, f_int(u) + b K₀ v for a nonlinear one (committing the point states with
+    /// `commit`, as an explicit step does).
+    fn stiffness_forces(
+        &mut self,
+        u: &[f64],
+        v: &[f64],
+        rb: f64,
+        out: &mut [f64],
+        commit: bool,
+    ) -> Result<(), FemError> {
+        if self.nonlinear {
+            let f = self.free_internal_forces(u, commit)?;
+            if rb != 0.0 {
+                self.pattern.mul(&self.k, v, out);
+            } else {
+                out.fill(0.0);
+            }
+            for (o, fi) in out.iter_mut().zip(&f) {
+                *o = fi + rb * *o;
+            }
+        } else {
+            let w: Vec<f64> = u.iter().zip(v).map(|(a, b)| a + rb * b).collect();
+            self.pattern.mul(&self.k, &w, out);
+        }
+        Ok(())
+    }
+
     fn mass_mul(&self, x: &[f64], y: &mut [f64]) {
         match &self.m_consistent {
             Some(m) => self.pattern.mul(m, x, y),
@@ -1165,9 +1306,8 @@ impl Model {
         let v = self.dofs.gather(&self.st.v);
         let mut rhs = self.free_rhs(self.st.time);
         let mut tmp = vec![0.0; u.len()];
-        // K (u + b v)
-        let w: Vec<f64> = u.iter().zip(&v).map(|(a, b)| a + rb * b).collect();
-        self.pattern.mul(&self.k, &w, &mut tmp);
+        // K (u + b v), or f_int(u) + b K₀ v
+        self.stiffness_forces(&u, &v, rb, &mut tmp, false)?;
         for (r, t) in rhs.iter_mut().zip(&tmp) {
             *r -= t;
         }
@@ -1278,14 +1418,11 @@ impl Model {
         let (ra, rb) = self.rayleigh();
         let ml = self.dofs.gather(&self.m_lumped);
         if !self.st.accel_ready {
-            let mut u = self.dofs.gather(&self.st.u);
+            let u = self.dofs.gather(&self.st.u);
             let v = self.dofs.gather(&self.st.v);
             let mut r = self.free_rhs(self.st.time);
             let mut tmp = vec![0.0; u.len()];
-            for i in 0..u.len() {
-                u[i] += rb * v[i];
-            }
-            self.pattern.mul(&self.k, &u, &mut tmp);
+            self.stiffness_forces(&u, &v, rb, &mut tmp, false)?;
             for i in 0..r.len() {
                 r[i] = (r[i] - tmp[i] - ra * ml[i] * v[i]) / ml[i];
             }
@@ -1316,10 +1453,14 @@ impl Model {
             if has_hist {
                 f_const = self.free_rhs_with(t, kg.as_deref());
             }
-            for i in 0..m {
-                w[i] = u[i] + rb * v[i];
+            if self.nonlinear {
+                self.stiffness_forces(&u, &v, rb, &mut tmp, true)?;
+            } else {
+                for i in 0..m {
+                    w[i] = u[i] + rb * v[i];
+                }
+                self.pattern.mul(&self.k, &w, &mut tmp);
             }
-            self.pattern.mul(&self.k, &w, &mut tmp);
             for i in 0..m {
                 a[i] = (f_const[i] - tmp[i] - ra * ml[i] * v[i]) / ml[i];
                 v[i] += 0.5 * h * a[i];
@@ -1422,7 +1563,7 @@ impl Model {
                         let kind = self.mesh.kinds[e];
                         let nodes = self.mesh.element_nodes(e);
                         let nd = 3 * nodes.len();
-                        if element::stiffness(kind, x, self.mat, ke).is_err() {
+                        if element::stiffness(kind, x, self.lame_of(e), ke).is_err() {
                             return vec![f64::NAN; nd];
                         }
                         let ue: Vec<f64> = nodes
@@ -1528,9 +1669,8 @@ const NO_PEAK: [f64; 3] = [f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY];
 fn gauge_elements(
     mesh: &Mesh,
     on: Option<&crate::config::Selector>,
-    i: usize,
+    what: &str,
 ) -> Result<Vec<u32>, FemError> {
-    let what = format!("fem.strain_gauges[{i}].on");
     let Some(sel) = on else {
         return Ok((0..mesh.num_elements() as u32).collect());
     };
@@ -1588,7 +1728,12 @@ fn fmt_point(p: [f64; 3]) -> String {
     format!("[{}, {}, {}]", f(p[0]), f(p[1]), f(p[2]))
 }
 
-fn gravity_loads(mesh: &Mesh, rho: f64, g: [f64; 3], f: &mut [f64]) -> Result<(), FemError> {
+fn gravity_loads(
+    mesh: &Mesh,
+    props: ElementProps<'_>,
+    g: [f64; 3],
+    f: &mut [f64],
+) -> Result<(), FemError> {
     // f_a = ρ g ∫ N_a dV, the body-force term (v, f) of (2.45)
     for e in 0..mesh.num_elements() {
         let mut x = Vec::new();
@@ -1602,6 +1747,7 @@ fn gravity_loads(mesh: &Mesh, rho: f64, g: [f64; 3], f: &mut [f64]) -> Result<()
             message: format!("element {} has det J = {:.3e}", mesh.elem_ids[e], b.det_j),
         })?;
         // Σ_b ∫ N_a N_b dV = ∫ N_a dV (partition of unity)
+        let rho = props.density(e);
         for (a, &n) in mesh.element_nodes(e).iter().enumerate() {
             let w: f64 = (0..nn).map(|b| m[a * nn + b]).sum();
             for c in 0..3 {
