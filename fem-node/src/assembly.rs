@@ -51,6 +51,14 @@ impl DofMap {
         }
         out
     }
+    /// Writes free-equation values into a full dof vector, leaving the fixed dofs as they are.
+    pub fn scatter_free(&self, free: &[f64], full: &mut [f64]) {
+        for (d, &e) in self.eq.iter().enumerate() {
+            if e != FIXED {
+                full[d] = free[e as usize];
+            }
+        }
+    }
     /// Writes free-equation values into a full dof vector (fixed dofs set to zero).
     pub fn scatter(&self, free: &[f64], full: &mut [f64]) {
         for (d, &e) in self.eq.iter().enumerate() {

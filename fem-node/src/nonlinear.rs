@@ -259,3 +259,128 @@ pub fn point_stresses(
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::element::Lame;
+    use crate::material::hyperelastic::{MooneyRivlin, NeoHooke, Ogden};
+    use crate::material::mohr_coulomb::MohrCoulomb;
+
+    fn rng(seed: &mut u64) -> f64 {
+        *seed ^= *seed << 13;
+        *seed ^= *seed >> 7;
+        *seed ^= *seed << 17;
+        (*seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+    }
+
+    /// The element tangent equals central differences of the element forces, for every
+    /// model and element kind (hex8b only small strain), at random displacements.
+    #[test]
+    fn element_tangent_matches_finite_differences_of_the_forces() {
+        let models = [
+            Model::Linear(Lame::from_young_poisson(1e7, 0.3)),
+            Model::NeoHooke(NeoHooke::from_young_poisson(1e7, 0.3)),
+            Model::MooneyRivlin(MooneyRivlin::from_young_poisson_ratio(1e7, 0.41, 0.2)),
+            Model::Ogden(
+                Ogden::new(2e6, &[(745.5e3, 1.3), (1.5e3, 5.0), (-11.85e3, -2.0)]).unwrap(),
+            ),
+            Model::MohrCoulomb(MohrCoulomb::new(
+                1e7,
+                0.3,
+                30f64.to_radians(),
+                10f64.to_radians(),
+                1e3,
+            )),
+        ];
+        let mut seed = 0x2545_F491_4F6C_DD1Du64;
+        for kind in [
+            ElementKind::Tet4,
+            ElementKind::Tet10,
+            ElementKind::Hex8,
+            ElementKind::Hex8b,
+            ElementKind::Hex20,
+        ] {
+            for model in &models {
+                if kind == ElementKind::Hex8b && model.finite_strain() {
+                    continue;
+                }
+                let nn = kind.num_nodes();
+                let nd = 3 * nn;
+                let x: Vec<[f64; 3]> = kind
+                    .reference_nodes()
+                    .iter()
+                    .map(|p| [0.1 * p[0] + 0.01 * rng(&mut seed), 0.1 * p[1], 0.1 * p[2]])
+                    .collect();
+                // MC: a compressive triaxial strain that yields, plus a random part
+                let plastic = matches!(model, Model::MohrCoulomb(_));
+                let amp = if plastic { 1e-5 } else { 0.02 };
+                let base = if plastic {
+                    [-1e-2, 1e-3, 1e-3]
+                } else {
+                    [0.0; 3]
+                };
+                let u: Vec<[f64; 3]> = x
+                    .iter()
+                    .map(|p| [0, 1, 2].map(|c| base[c] * p[c] + amp * rng(&mut seed)))
+                    .collect();
+                let np = num_points(kind);
+                let sl = model.state_len();
+                let st_n = vec![0.0; np * sl];
+                let mut st = vec![0.0; np * sl];
+                let mut s = Scratch::default();
+                let mut h = Vec::new();
+                let mut f = vec![0.0; nd];
+                let mut k = vec![0.0; nd * nd];
+                element_response(
+                    kind,
+                    &x,
+                    &u,
+                    model,
+                    &st_n,
+                    &mut st,
+                    &mut f,
+                    Some(&mut k),
+                    &mut s,
+                    &mut h,
+                )
+                .unwrap();
+                if plastic {
+                    assert!(
+                        (0..np).all(|q| st[q * sl + 7] == 1.0),
+                        "{kind:?}: every point yields"
+                    );
+                }
+                let kmax = k.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                let eps = 1e-7 * amp.max(1e-3);
+                let mut worst: f64 = 0.0;
+                for j in 0..nd {
+                    let mut up = u.clone();
+                    let mut um = u.clone();
+                    up[j / 3][j % 3] += eps;
+                    um[j / 3][j % 3] -= eps;
+                    let mut fp = vec![0.0; nd];
+                    let mut fm = vec![0.0; nd];
+                    element_response(
+                        kind, &x, &up, model, &st_n, &mut st, &mut fp, None, &mut s, &mut h,
+                    )
+                    .unwrap();
+                    element_response(
+                        kind, &x, &um, model, &st_n, &mut st, &mut fm, None, &mut s, &mut h,
+                    )
+                    .unwrap();
+                    for i in 0..nd {
+                        let fd = (fp[i] - fm[i]) / (2.0 * eps);
+                        worst = worst.max((fd - k[i * nd + j]).abs() / kmax);
+                    }
+                }
+                println!("{kind:?} {}: tangent error {worst:.2e}", model.kind_name());
+                assert!(
+                    worst < 1e-6,
+                    "{kind:?} {}: tangent error {worst:e}",
+                    model.kind_name()
+                );
+            }
+        }
+    }
+}

@@ -911,7 +911,10 @@ impl Model {
             )));
         }
         self.st.prescribed[dof] = value;
-        self.st.u[dof] = value;
+        // a nonlinear model moves it there over the next solve's load increments
+        if !self.nonlinear {
+            self.st.u[dof] = value;
+        }
         Ok(())
     }
     /// Sets initial displacements and velocities (full vectors; supported dofs keep their

@@ -382,6 +382,11 @@ impl Model {
         let mut ds = 1.0 / self.newton.increments as f64;
         let mut cutbacks = 0;
         self.last_newton.clear();
+        // the force scale of the convergence test: the largest load or internal force seen in
+        // this solve (a stress-free end state, e.g. after a rigid rotation, has none of its own)
+        let mut scale = dot(&f_start, &f_start)
+            .sqrt()
+            .max(dot(&f_target, &f_target).sqrt());
         while s < 1.0 {
             let s1 = if s + ds > 1.0 - 1e-12 { 1.0 } else { s + ds };
             let load: Vec<f64> = f_start
@@ -395,7 +400,7 @@ impl Model {
                     u[d] = g_start[d] + s1 * (g_target[d] - g_start[d]);
                 }
             }
-            match self.newton_increment(u, &load) {
+            match self.newton_increment(u, &load, &mut scale) {
                 Ok(history) => {
                     self.last_newton.push(history);
                     s = s1;
@@ -438,6 +443,7 @@ impl Model {
         &mut self,
         mut u: Vec<f64>,
         load: &[f64],
+        scale: &mut f64,
     ) -> Result<Vec<f64>, NoConvergence> {
         let tol_f = self.newton.force_tolerance;
         let tol_u = self.newton.displacement_tolerance;
@@ -456,9 +462,9 @@ impl Model {
                 })?;
             let fint = self.dofs.gather(&r.f);
             let mut res: Vec<f64> = load.iter().zip(&fint).map(|(a, b)| a - b).collect();
-            let scale = dot(load, load).sqrt().max(dot(&r.f, &r.f).sqrt());
+            *scale = scale.max(dot(&r.f, &r.f).sqrt());
             let rn = dot(&res, &res).sqrt();
-            let rel = if scale > 0.0 { rn / scale } else { 0.0 };
+            let rel = if *scale > 0.0 { rn / *scale } else { 0.0 };
             history.push(rel);
             if !rel.is_finite() {
                 return Err(NoConvergence {
@@ -514,7 +520,7 @@ impl Model {
             for (a, d) in u_new.iter_mut().zip(&res) {
                 *a += d;
             }
-            self.dofs.scatter(&u_new, &mut u);
+            self.dofs.scatter_free(&u_new, &mut u);
         }
         unreachable!("the loop returns")
     }
@@ -588,13 +594,18 @@ impl Model {
         let mut a1 = a.clone();
         let mut trial = self.st.points.clone();
         let mut full = self.st.u.clone();
+        for (d, &e) in self.dofs.eq.iter().enumerate() {
+            if e == assembly::FIXED {
+                full[d] = self.st.prescribed[d];
+            }
+        }
         let mut history = Vec::new();
         let (mut tmp, mut tmp2) = (vec![0.0; n], vec![0.0; n]);
         let mut last_da = f64::INFINITY;
         for it in 0..=self.newton.max_iterations {
             let u1: Vec<f64> = (0..n).map(|i| ut[i] + beta * dt * dt * a1[i]).collect();
             let v1: Vec<f64> = (0..n).map(|i| vt[i] + gamma * dt * a1[i]).collect();
-            self.dofs.scatter(&u1, &mut full);
+            self.dofs.scatter_free(&u1, &mut full);
             let r = self
                 .internal(&full, true, &mut trial)
                 .map_err(|f| fail(it, f64::NAN, self.describe(f)))?;
