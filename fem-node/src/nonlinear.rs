@@ -375,8 +375,15 @@ mod tests {
                     }
                 }
                 println!("{kind:?} {}: tangent error {worst:.2e}", model.kind_name());
+                // (Mohr–Coulomb edge returns carry a trace of the elastic stiffness; the exact
+                // consistent tangent is checked in material::mohr_coulomb to 1e-8)
+                let tol = if plastic {
+                    1e-6 + 2.0 * crate::material::EDGE_REGULARISATION
+                } else {
+                    1e-6
+                };
                 assert!(
-                    worst < 1e-6,
+                    worst < tol,
                     "{kind:?} {}: tangent error {worst:e}",
                     model.kind_name()
                 );

@@ -311,3 +311,335 @@ fn newton_converges_quadratically() {
         assert!(quadratic, "no quadratic step in {ratios:?}");
     }
 }
+
+// ---------------------------------------------------------------------------------------------
+// Mohr–Coulomb
+// ---------------------------------------------------------------------------------------------
+
+/// Wellmann's Mohr–Coulomb fit to the DEM sand (§5.4): E = 60 MPa, ν = 0.145, φ = 23.15°,
+/// ψ = 5.17°, c = 15 Pa.
+const SAND: &str = "model = \"mohr_coulomb\"\nyoungs_modulus = 60e6\npoisson_ratio = 0.145\n\
+                    friction_angle = 23.15\ndilation_angle = 5.17\ncohesion = 15.0\ndensity = 1600.0";
+
+/// One hex8 unit cube in a drained triaxial test: lateral pressure `p` on xmax and ymax,
+/// symmetry supports, the top (zmax) displacement-controlled.
+fn triaxial_cell(p: f64) -> fem::Model {
+    model(&format!(
+        "[fem]\nmesh = {{ size = [1.0, 1.0, 1.0], divisions = [1, 1, 1], element = \"hex8\" }}\n\
+         [fem.materials.sand]\n{SAND}\n[[fem.sections]]\nelements = \"all\"\nmaterial = \"sand\"\n\
+         [[fem.supports]]\non = {{ set = \"xmin\" }}\nfix = [\"x\"]\n\
+         [[fem.supports]]\non = {{ set = \"ymin\" }}\nfix = [\"y\"]\n\
+         [[fem.supports]]\non = {{ set = \"zmin\" }}\nfix = [\"z\"]\n\
+         [[fem.supports]]\non = {{ set = \"zmax\" }}\nfix = [\"z\"]\n\
+         [[fem.loads]]\ntype = \"pressure\"\non = {{ set = \"xmax\" }}\nvalue = {p}\n\
+         [[fem.loads]]\ntype = \"pressure\"\non = {{ set = \"ymax\" }}\nvalue = {p}\n\
+         [fem.newton]\nforce_tolerance = 1e-12\ndisplacement_tolerance = 1e-12\n"
+    ))
+}
+
+/// Sets the top's axial strain (compression negative) and solves; returns the axial and a
+/// lateral stress and the sum of the two lateral strains.
+fn triaxial_step(m: &mut fem::Model, eps_axial: f64) -> (f64, f64, f64) {
+    for n in 0..m.mesh().num_nodes() {
+        if m.mesh().nodes[n][2] == 1.0 {
+            m.set_prescribed_displacement(3 * n + 2, eps_axial).unwrap();
+        }
+    }
+    m.advance(1.0).unwrap();
+    let corner = (0..m.mesh().num_nodes())
+        .find(|&n| m.mesh().nodes[n] == [1.0, 1.0, 1.0])
+        .unwrap();
+    // both lateral strains: on a Mohr–Coulomb edge only their sum is determined
+    let u = m.displacements();
+    let s = m.element_stresses()[0];
+    (s[2], s[0], u[3 * corner] + u[3 * corner + 1])
+}
+
+/// SEED-SPEC V8 with the fitted parameters at σ_lateral = 100 kPa: elastic slope E, elastic
+/// ε_V/ε_axial = 1 − 2ν, yield at σ_axial/σ_lateral = 2.296 (cohesion included exactly),
+/// axial strain at yield 0.216 %, then constant stress and −Δε_V/Δε_axial = 2 sin ψ/(1 − sin ψ)
+/// = 0.198; the element reports the plastic zone and the equivalent plastic strain.
+#[test]
+fn mohr_coulomb_triaxial_single_element() {
+    let p = 1e5;
+    let (e, nu) = (60e6, 0.145);
+    let (sphi, spsi) = (23.15f64.to_radians().sin(), 5.17f64.to_radians().sin());
+    let cphi = 23.15f64.to_radians().cos();
+    let mut m = triaxial_cell(p);
+    // isotropic consolidation: the elastic strain of σ = −p I
+    let eps0 = -p * (1.0 - 2.0 * nu) / e;
+    let (sa, sl, _) = triaxial_step(&mut m, eps0);
+    assert!(
+        (sa + p).abs() < 1e-6 * p && (sl + p).abs() < 1e-6 * p,
+        "isotropic: {sa}, {sl}"
+    );
+    let de = -1e-5;
+    let mut rows = vec![(eps0, sa, 2.0 * eps0)];
+    for k in 1..=400 {
+        let ea = eps0 + k as f64 * de;
+        let (sa, sl, lat) = triaxial_step(&mut m, ea);
+        assert!(
+            (sl + p).abs() < 1e-6 * p,
+            "step {k}: lateral stress held: {sl}, axial {sa}, residuals {:?}",
+            m.last_newton_residuals()
+        );
+        rows.push((ea, sa, lat));
+    }
+    let sigma_yield = -(p * (1.0 + sphi) + 2.0 * 15.0 * cphi) / (1.0 - sphi);
+    let vol = |r: &(f64, f64, f64)| r.0 + r.2;
+    // elastic part
+    let slope = (rows[1].1 - rows[0].1) / (rows[1].0 - rows[0].0);
+    let dv = (vol(&rows[1]) - vol(&rows[0])) / (rows[1].0 - rows[0].0);
+    // plastic part: the last steps
+    let n = rows.len();
+    let plateau = rows[n - 1].1;
+    let dil = -(vol(&rows[n - 1]) - vol(&rows[n - 2])) / (rows[n - 1].0 - rows[n - 2].0);
+    let first_plastic = rows
+        .iter()
+        .position(|r| (r.1 - sigma_yield).abs() < 1e-9 * p)
+        .unwrap();
+    let yield_strain = (sigma_yield + p) / e;
+    let observed = rows[first_plastic].0 - eps0;
+    println!(
+        "elastic slope {:.6e} Pa (E = 60 MPa), ε_V/ε_axial {dv:.6} (1 − 2ν = {:.3}); yield \
+         stress ratio {:.6} (closed form {:.6}, (1+sinφ)/(1−sinφ) = {:.4}); axial strain at yield \
+         {:.5} % (closed form {:.5} %), first plastic step at {:.5} %; −Δε_V/Δε_axial {dil:.6} \
+         (2 sinψ/(1 − sinψ) = {:.6})",
+        slope,
+        1.0 - 2.0 * nu,
+        plateau / -p,
+        sigma_yield / -p,
+        (1.0 + sphi) / (1.0 - sphi),
+        -100.0 * yield_strain,
+        -100.0 * (sigma_yield + p) / e,
+        -100.0 * observed,
+        2.0 * spsi / (1.0 - spsi)
+    );
+    assert!((slope - e).abs() < 1e-8 * e, "slope {slope}");
+    assert!((dv - (1.0 - 2.0 * nu)).abs() < 1e-8, "{dv}");
+    assert!(
+        (plateau - sigma_yield).abs() < 1e-9 * p,
+        "{plateau} vs {sigma_yield}"
+    );
+    assert!((sigma_yield / -p - 2.2961).abs() < 1e-4);
+    assert!(
+        (dil - 2.0 * spsi / (1.0 - spsi)).abs() < 1e-8,
+        "dilatancy {dil}: {:e}",
+        dil - 2.0 * spsi / (1.0 - spsi)
+    );
+    assert!(
+        (-100.0 * yield_strain - 0.2160).abs() < 5e-4,
+        "{yield_strain}"
+    );
+    assert!(
+        (observed - yield_strain).abs() <= 1e-5 + 1e-12,
+        "{observed} vs {yield_strain}"
+    );
+    // the VTU reports the plastic zone and ε̄ᵖ
+    let dir = std::env::temp_dir().join(format!("fem-mc-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    m.write_outputs(&dir).unwrap();
+    let vtu = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|x| x == "vtu"))
+        .expect("a vtu file");
+    let text = std::fs::read_to_string(&vtu).unwrap();
+    let array = |name: &str| -> f64 {
+        let at = text
+            .find(&format!("Name=\"{name}\""))
+            .unwrap_or_else(|| panic!("{name}"));
+        let body = &text[at..];
+        let start = body.find('>').unwrap() + 1;
+        body[start..]
+            .split_whitespace()
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    assert_eq!(array("plastic_zone"), 1.0);
+    let peeq = array("equivalent_plastic_strain");
+    assert!(peeq > 1e-3 && peeq < 5e-3, "ε̄ᵖ = {peeq}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A snapshot in the plastic range restores the plastic strains: the continuation is bitwise
+/// the uninterrupted one.
+#[test]
+fn plastic_state_survives_snapshot_and_restore() {
+    let mut a = triaxial_cell(1e5);
+    let e0 = -1e5 * (1.0 - 0.29) / 60e6;
+    for k in 0..=300 {
+        triaxial_step(&mut a, e0 - 1e-5 * k as f64);
+    }
+    let snap = a.snapshot();
+    let mut b = triaxial_cell(1e5);
+    b.restore(&snap).unwrap();
+    for k in 301..=330 {
+        let ra = triaxial_step(&mut a, e0 - 1e-5 * k as f64);
+        let rb = triaxial_step(&mut b, e0 - 1e-5 * k as f64);
+        assert_eq!(ra.0.to_bits(), rb.0.to_bits());
+        assert_eq!(ra.2.to_bits(), rb.2.to_bits());
+    }
+    assert_eq!(a.displacements(), b.displacements());
+    // the plastic strain is remembered: unloaded to the consolidation strain, the cell keeps
+    // its dilation, a fresh cell does not
+    let ra = triaxial_step(&mut a, e0);
+    let mut c = triaxial_cell(1e5);
+    let rc = triaxial_step(&mut c, e0);
+    println!(
+        "lateral strain sum after unloading {:.4e}, without history {:.4e}",
+        ra.2, rc.2
+    );
+    assert!(
+        (ra.2 - rc.2).abs() > 1e-4,
+        "history matters: {} vs {}",
+        ra.2,
+        rc.2
+    );
+}
+
+// ---------------------------------------------------------------------------------------------
+// Scene keys
+// ---------------------------------------------------------------------------------------------
+
+const TWO_MATERIALS: &str = r#"[fem]
+mesh = { size = [1.0, 0.1, 0.1], divisions = [10, 1, 1], element = "hex8" }
+
+[fem.materials.rubber]
+model = "neo_hooke"
+youngs_modulus = 94e6
+poisson_ratio = 0.3
+density = 3000.0
+
+[fem.materials.sand]
+model = "mohr_coulomb"
+youngs_modulus = 60e6
+poisson_ratio = 0.145
+friction_angle = 23.15
+dilation_angle = 5.17
+cohesion = 15.0
+density = 1600.0
+
+[[fem.sections]]
+elements = { box = { min = [-1.0, -1.0, -1.0], max = [0.5, 1.0, 1.0] } }
+material = "rubber"
+
+[[fem.sections]]
+elements = { box = { min = [0.5, -1.0, -1.0], max = [2.0, 1.0, 1.0] } }
+material = "sand"
+
+[[fem.supports]]
+on = { set = "xmin" }
+"#;
+
+/// Inconsistent parameters are refused naming the field and its line.
+#[test]
+fn bad_material_parameters_name_their_field() {
+    let cases = [
+        (
+            "dilation_angle = 5.17",
+            "dilation_angle = 30.0",
+            "fem.materials.sand.dilation_angle",
+            "exceeds the friction angle",
+        ),
+        (
+            "friction_angle = 23.15",
+            "friction_angle = 95.0",
+            "fem.materials.sand.friction_angle",
+            "90°",
+        ),
+        (
+            "cohesion = 15.0",
+            "cohesion = -1.0",
+            "fem.materials.sand.cohesion",
+            "≥ 0 Pa",
+        ),
+        (
+            "poisson_ratio = 0.3",
+            "poisson_ratio = 0.5",
+            "fem.materials.rubber.poisson_ratio",
+            "0.5",
+        ),
+        (
+            "material = \"sand\"",
+            "material = \"gravel\"",
+            "fem.sections[1].material",
+            "no material \"gravel\"",
+        ),
+        (
+            "model = \"neo_hooke\"",
+            "model = \"neo_hook\"",
+            "",
+            "neo_hooke",
+        ),
+    ];
+    for (from, to, field, words) in cases {
+        let text = TWO_MATERIALS.replace(from, to);
+        let e = fem::parse_scene_section(&text).unwrap_err();
+        println!("{e}");
+        assert!(
+            e.message.contains(field) && e.message.contains(words),
+            "{to}: {e}"
+        );
+        assert!(e.line > 0, "{to}: a line number");
+    }
+    let ogden = TWO_MATERIALS.replace(
+        "model = \"neo_hooke\"\nyoungs_modulus = 94e6\npoisson_ratio = 0.3",
+        "model = \"ogden\"\nterms = [[745.5e3, 1.3], [-1.5e3, 5.0]]\npoisson_ratio = 0.45",
+    );
+    let e = fem::parse_scene_section(&ogden).unwrap_err();
+    println!("{e}");
+    assert!(
+        e.message.contains("fem.materials.rubber.terms[1]") && e.message.contains("stability"),
+        "{e}"
+    );
+}
+
+/// Sections assign materials by box, set or "all"; an element in two sections, an element in
+/// none without a default material, an unknown set and a finite-strain material on hex8i are
+/// refused naming the element or set.
+#[test]
+fn sections_assign_materials_and_refuse_conflicts() {
+    let m = model(TWO_MATERIALS);
+    assert!(m.is_nonlinear());
+    let names: Vec<&str> = m.materials().iter().map(|x| x.name.as_str()).collect();
+    assert_eq!(names, ["fem.materials.rubber", "fem.materials.sand"]);
+    let fail = |text: &str| {
+        let cfg = config(text);
+        match fem::Model::from_config(&cfg, std::path::Path::new(".")) {
+            Ok(_) => panic!("accepted:\n{text}"),
+            Err(e) => e.to_string(),
+        }
+    };
+    let e = fail(&TWO_MATERIALS.replace("max = [0.5, 1.0, 1.0]", "max = [0.6, 1.0, 1.0]"));
+    println!("{e}");
+    assert!(
+        e.contains("element 6") && e.contains("fem.sections[0] and fem.sections[1]"),
+        "{e}"
+    );
+    let e = fail(&TWO_MATERIALS.replace("max = [2.0, 1.0, 1.0]", "max = [0.8, 1.0, 1.0]"));
+    println!("{e}");
+    assert!(e.contains("2 elements") && e.contains("no material"), "{e}");
+    let e = fail(&TWO_MATERIALS.replace(
+        "elements = { box = { min = [0.5, -1.0, -1.0], max = [2.0, 1.0, 1.0] } }",
+        "elements = \"body\"",
+    ));
+    println!("{e}");
+    assert!(
+        e.contains("no element set \"body\"") && e.contains("all"),
+        "{e}"
+    );
+    let e = fail(&TWO_MATERIALS.replace("element = \"hex8\"", "element = \"hex8i\""));
+    println!("{e}");
+    assert!(
+        e.contains("hex8i") && e.contains("fem.materials.rubber"),
+        "{e}"
+    );
+    // a default linear material covers what the sections leave out
+    let with_default = TWO_MATERIALS.replace("max = [2.0, 1.0, 1.0]", "max = [0.8, 1.0, 1.0]")
+        + "[fem.material]\nyoungs_modulus = 210e9\npoisson_ratio = 0.3\ndensity = 7800.0\n";
+    let m = model(&with_default);
+    assert_eq!(m.materials().len(), 3);
+}

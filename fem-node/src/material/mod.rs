@@ -26,6 +26,10 @@ pub type Tangent = nalgebra::SMatrix<f64, 6, 6>;
 /// 1 when the point's last converged update was plastic (the "plastic zone"), else 0.
 pub const MOHR_COULOMB_STATE: usize = 8;
 
+/// Share of the elastic stiffness added to the Mohr–Coulomb tangent at edge and apex returns
+/// (see [`Model::evaluate`]).
+pub const EDGE_REGULARISATION: f64 = 1e-6;
+
 /// A constitutive model with its parameters.
 #[derive(Clone, Debug)]
 pub enum Model {
@@ -174,9 +178,21 @@ impl Model {
                 let p = (s[0] + s[1] + s[2]) / 3.0;
                 let dev = [s[0] - p, s[1] - p, s[2] - p, s[3], s[4], s[5]];
                 let energy = 0.5 * (double_contract(&dev, &dev) / (2.0 * m.shear) + p * p / m.bulk);
+                let mut tangent = up.tangent;
+                if matches!(
+                    up.kind,
+                    Return::EdgeCompression | Return::EdgeExtension | Return::Apex
+                ) {
+                    // perfect plasticity leaves the consistent tangent singular on an edge
+                    // (rank 1 in principal space: the two lateral strains of a triaxial test are
+                    // not separated) and zero at the apex; a trace of the elastic stiffness keeps
+                    // the Newton system solvable and changes the iterations, not the solution
+                    tangent += EDGE_REGULARISATION
+                        * isotropic_tangent(m.bulk - 2.0 / 3.0 * m.shear, m.shear);
+                }
                 Ok(PointResponse {
                     stress: s,
-                    tangent: up.tangent,
+                    tangent,
                     energy,
                 })
             }

@@ -215,7 +215,7 @@ impl MohrCoulomb {
         }
     }
 
-    /// Validate the arguments of [`MohrCoulomb::new`] (angles in radians).
+    /// Validate the arguments of [`MohrCoulomb::new`] (angles in radians; messages in degrees).
     /// On failure returns the offending field name and a message.
     pub fn check(
         youngs_modulus: f64,
@@ -228,14 +228,14 @@ impl MohrCoulomb {
         if !youngs_modulus.is_finite() || youngs_modulus <= 0.0 {
             return Err((
                 "youngs_modulus",
-                format!("Young's modulus must be finite and > 0, got {youngs_modulus}"),
+                format!("Young's modulus must be finite and > 0 Pa, got {youngs_modulus}"),
             ));
         }
         if !poisson_ratio.is_finite() || poisson_ratio <= -1.0 || poisson_ratio >= 0.5 {
             return Err((
                 "poisson_ratio",
                 format!(
-                    "Poisson's ratio must satisfy -1 < nu < 0.5 (nu = 0.5 is incompressible: \
+                    "Poisson's ratio must satisfy −1 < ν < 0.5 (ν = 0.5 is incompressible: \
                      infinite bulk modulus), got {poisson_ratio}"
                 ),
             ));
@@ -245,7 +245,7 @@ impl MohrCoulomb {
                 "friction_angle",
                 format!(
                     "friction angle must satisfy 0° ≤ φ < 90°, got {}°",
-                    phi.to_degrees()
+                    degrees(phi)
                 ),
             ));
         }
@@ -254,7 +254,7 @@ impl MohrCoulomb {
                 "dilation_angle",
                 format!(
                     "dilation angle must be finite and ≥ 0°, got {}°",
-                    psi.to_degrees()
+                    degrees(psi)
                 ),
             ));
         }
@@ -262,19 +262,18 @@ impl MohrCoulomb {
             return Err((
                 "dilation_angle",
                 format!(
-                    "dilation angle psi = {} deg exceeds the friction angle phi = {} deg; psi > phi \
-                     is non-physical: the plastic dissipation sigma:dot(eps_p) = dot(gamma) \
-                     [(s1 + s3)(sin psi - sin phi) + 2c cos phi] becomes negative under sufficient \
-                     confinement (second law violated)",
-                    psi.to_degrees(),
-                    phi.to_degrees()
+                    "dilation angle ψ = {}° exceeds the friction angle φ = {}°; ψ > φ is \
+                     non-physical: the plastic dissipation σ:ε̇ᵖ = γ̇ [(σ1 + σ3)(sin ψ − sin φ) \
+                     + 2c cos φ] becomes negative under enough confinement",
+                    degrees(psi),
+                    degrees(phi)
                 ),
             ));
         }
         if !cohesion.is_finite() || cohesion < 0.0 {
             return Err((
                 "cohesion",
-                format!("cohesion must be finite and >= 0, got {cohesion}"),
+                format!("cohesion must be finite and ≥ 0 Pa, got {cohesion}"),
             ));
         }
         if cohesion == 0.0 && phi == 0.0 {
@@ -1013,4 +1012,9 @@ mod tests {
         let m = MohrCoulomb::new(e, 0.5, phi, psi, c);
         assert!(m.bulk.is_infinite());
     }
+}
+
+/// An angle in degrees for messages (radians → degrees round-off removed).
+fn degrees(rad: f64) -> f64 {
+    (rad.to_degrees() * 1e9).round() / 1e9
 }

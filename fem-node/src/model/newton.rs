@@ -382,8 +382,10 @@ impl Model {
         let mut ds = 1.0 / self.newton.increments as f64;
         let mut cutbacks = 0;
         self.last_newton.clear();
-        // the force scale of the convergence test: the largest load or internal force seen in
-        // this solve (a stress-free end state, e.g. after a rigid rotation, has none of its own)
+        // the force scale of the convergence test: the largest load or internal force of the
+        // converged states of this solve (a stress-free end state, e.g. after a rigid
+        // rotation, has none of its own), the increment's load, and the internal forces of its
+        // first iterate (a prescribed displacement's)
         let mut scale = dot(&f_start, &f_start)
             .sqrt()
             .max(dot(&f_target, &f_target).sqrt());
@@ -452,6 +454,7 @@ impl Model {
         let mut trial = self.st.points.clone();
         let mut history = Vec::new();
         let mut last_du = f64::INFINITY;
+        let mut local = scale.max(dot(load, load).sqrt());
         for it in 0..=self.newton.max_iterations {
             let r = self
                 .internal(&u, true, &mut trial)
@@ -462,9 +465,12 @@ impl Model {
                 })?;
             let fint = self.dofs.gather(&r.f);
             let mut res: Vec<f64> = load.iter().zip(&fint).map(|(a, b)| a - b).collect();
-            *scale = scale.max(dot(&r.f, &r.f).sqrt());
+            let fnorm = dot(&r.f, &r.f).sqrt();
+            if it == 0 {
+                local = local.max(fnorm);
+            }
             let rn = dot(&res, &res).sqrt();
-            let rel = if *scale > 0.0 { rn / *scale } else { 0.0 };
+            let rel = if local > 0.0 { rn / local } else { 0.0 };
             history.push(rel);
             if !rel.is_finite() {
                 return Err(NoConvergence {
@@ -482,6 +488,7 @@ impl Model {
                 .sqrt();
             let du_ok = it == 0 || last_du <= tol_u * incr.max(f64::MIN_POSITIVE);
             if rel <= tol_f && (du_ok || rel <= tol_f * 1e-3) {
+                *scale = local.max(fnorm);
                 let mut u = u;
                 // keep the converged free dofs; prescribed dofs stay at their targets
                 self.st.u.copy_from_slice(&u);
