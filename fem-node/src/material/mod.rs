@@ -162,7 +162,17 @@ impl Model {
                     energy: 0.5 * double_contract(&s, &eps),
                 })
             }
-            Model::NeoHooke(m) => finite(h, |f| m.evaluate(f)),
+            Model::NeoHooke(m) => {
+                let hm = Matrix3::from_fn(|i, j| h[i][j]);
+                match m.evaluate_gradient(&hm) {
+                    Ok((stress, tangent, energy)) => Ok(PointResponse {
+                        stress,
+                        tangent,
+                        energy,
+                    }),
+                    Err(e) => Err(PointFailure::NonPositiveJacobian(e.j)),
+                }
+            }
             Model::MooneyRivlin(m) => finite(h, |f| m.evaluate(f)),
             Model::Ogden(m) => finite(h, |f| m.evaluate(f)),
             Model::MohrCoulomb(m) => {

@@ -67,6 +67,8 @@ pub struct Model {
     /// Internal forces from stresses and Newton iterations (some material is not linear
     /// elastic, or `newton.always`); otherwise K u with the cached factor.
     nonlinear: bool,
+    /// Whether every material in use has a symmetric tangent (Cholesky, else LU).
+    symmetric_tangent: bool,
     /// Point-state values per element (max over the elements; 0 without stateful materials).
     state_stride: usize,
     newton: NewtonConfig,
@@ -173,10 +175,23 @@ impl Model {
         let (materials, elem_mat) = newton::assign_materials(cfg, &mesh)?;
         let lame: Vec<Lame> = materials.iter().map(|m| m.model.initial_lame()).collect();
         let densities: Vec<f64> = materials.iter().map(|m| m.density).collect();
-        let nonlinear = cfg.newton.always || materials.iter().any(|m| !m.model.is_linear());
-        if nonlinear {
-            newton::check_element_kinds(&mesh, &materials, &elem_mat, cfg.newton.always)?;
+        // only the materials some element has count
+        let mut used = vec![false; materials.len()];
+        for &m in &elem_mat {
+            used[m as usize] = true;
         }
+        let nonlinear = cfg.newton.always
+            || materials
+                .iter()
+                .zip(&used)
+                .any(|(m, &u)| u && !m.model.is_linear());
+        if nonlinear {
+            newton::check_element_kinds(&mesh, &materials, &elem_mat)?;
+        }
+        let symmetric_tangent = materials
+            .iter()
+            .zip(&used)
+            .all(|(m, &u)| !u || m.model.symmetric_tangent());
         let state_stride = (0..mesh.num_elements())
             .map(|e| {
                 crate::nonlinear::num_points(mesh.kinds[e])
@@ -370,6 +385,7 @@ impl Model {
             elem_mat,
             lame,
             nonlinear,
+            symmetric_tangent,
             state_stride,
             newton: cfg.newton.clone(),
             lu_symbolic: None,

@@ -145,25 +145,26 @@ fn law(spec: &MaterialSpec) -> Law {
     }
 }
 
-/// Element formulations the stress-based path supports: hex8i's condensed modes are linear
-/// only, and hex8b's B̄ is small strain only.
+/// Element formulations the stress-based path supports: hex8i's condensed incompatible modes
+/// exist only for the linear path (not in a model solved by Newton iterations, whatever the
+/// element's own material), and hex8b's B̄ is small strain only.
 pub(super) fn check_element_kinds(
     mesh: &Mesh,
     materials: &[Material],
     of: &[u32],
-    always: bool,
 ) -> Result<(), FemError> {
     for e in 0..mesh.num_elements() {
         let m = &materials[of[e] as usize];
         let kind = mesh.kinds[e];
         let bad = match kind {
-            ElementKind::Hex8i => !m.model.is_linear() || always,
+            ElementKind::Hex8i => true,
             ElementKind::Hex8b => m.model.finite_strain(),
             _ => false,
         };
         if bad {
             let why = if kind == ElementKind::Hex8i {
-                "hex8i (incompatible modes) is linear elastic only"
+                "hex8i (incompatible modes) works only when every material is linear elastic \
+                 (the model is solved by Newton iterations here)"
             } else {
                 "hex8b (mean-dilatation B̄) is small strain only"
             };
@@ -345,10 +346,6 @@ impl Model {
             .map_or(f64::NAN, |r| r.energy)
     }
 
-    fn symmetric_tangent(&self) -> bool {
-        self.materials.iter().all(|m| m.model.symmetric_tangent())
-    }
-
     /// Solves J x = b in place: Cholesky when J is symmetric (falling back to LU when it is
     /// not positive definite), LU otherwise.
     fn solve_tangent(
@@ -358,12 +355,17 @@ impl Model {
         symmetric: bool,
     ) -> Result<(), FemError> {
         if symmetric {
-            if let Ok(f) = Factor::new(&self.pattern, vals, &mut self.symbolic) {
-                f.solve_in_place(b);
-                return Ok(());
+            match Factor::new(&self.pattern, vals, &mut self.symbolic) {
+                Ok(f) => {
+                    f.solve_in_place(b);
+                    return Ok(());
+                }
+                Err(e) => tracing::debug!("newton: {e}; solving with LU"),
             }
         }
+        let t0 = std::time::Instant::now();
         LuFactor::new(&self.pattern, vals, &mut self.lu_symbolic)?.solve_in_place(b);
+        tracing::debug!("newton: LU of {} equations in {:?}", b.len(), t0.elapsed());
         Ok(())
     }
 
@@ -379,7 +381,9 @@ impl Model {
         let g_start = self.st.u.clone();
         let g_target = self.st.prescribed.clone();
         let mut s = 0.0;
-        let mut ds = 1.0 / self.newton.increments as f64;
+        let ds0 = 1.0 / self.newton.increments as f64;
+        let mut ds = ds0;
+        // consecutive halvings of the current increment
         let mut cutbacks = 0;
         self.last_newton.clear();
         // the force scale of the convergence test: the largest load or internal force of the
@@ -406,6 +410,9 @@ impl Model {
                 Ok(history) => {
                     self.last_newton.push(history);
                     s = s1;
+                    // after a cut-back, grow the increment again
+                    cutbacks = 0;
+                    ds = (2.0 * ds).min(ds0);
                 }
                 Err(fail) => {
                     cutbacks += 1;
@@ -414,8 +421,10 @@ impl Model {
                             "Newton iterations did not converge at t = {t:.6e} s (solve {}): \
                              load factor {s:.6} → {s1:.6} after {} cut-backs; iteration {}: \
                              relative residual {:.3e} (tolerance {:.1e}); {}. Try more \
-                             [fem.newton] increments, a smaller time step, or check the loads \
-                             and supports",
+                             [fem.newton] increments or smaller changes of load per window \
+                             (shorter windows or load histories), or check the loads and \
+                             supports (a perfectly plastic body above its collapse load has no \
+                             equilibrium)",
                             self.st.steps + 1,
                             cutbacks - 1,
                             fail.iteration,
@@ -449,7 +458,7 @@ impl Model {
     ) -> Result<Vec<f64>, NoConvergence> {
         let tol_f = self.newton.force_tolerance;
         let tol_u = self.newton.displacement_tolerance;
-        let symmetric = self.symmetric_tangent();
+        let symmetric = self.symmetric_tangent;
         let u_start = self.dofs.gather(&self.st.u);
         let mut trial = self.st.points.clone();
         let mut history = Vec::new();
@@ -487,7 +496,13 @@ impl Model {
                 .sum::<f64>()
                 .sqrt();
             let du_ok = it == 0 || last_du <= tol_u * incr.max(f64::MIN_POSITIVE);
-            if rel <= tol_f && (du_ok || rel <= tol_f * 1e-3) {
+            // the residual at the round-off floor of the internal forces (tiny strains of a
+            // stiff finite-strain material): the displacement has converged far below its
+            // tolerance and the residual is within 1000 × the force tolerance
+            let floor = it > 0
+                && last_du <= 1e-3 * tol_u * incr.max(f64::MIN_POSITIVE)
+                && rel <= 1e3 * tol_f;
+            if (rel <= tol_f && (du_ok || rel <= tol_f * 1e-3)) || floor {
                 *scale = local.max(fnorm);
                 let mut u = u;
                 // keep the converged free dofs; prescribed dofs stay at their targets
@@ -562,7 +577,8 @@ impl Model {
             Err(fail) => Err(FemError::Solver(format!(
                 "Newton iterations of the Bossak step did not converge at t = {:.6e} s (step {}) \
                  after halving the step {level} times (to {dt:.3e} s); iteration {}: relative \
-                 residual {:.3e} (tolerance {:.1e}); {}",
+                 residual {:.3e} (tolerance {:.1e}); {}. Try a shorter coupling window or more \
+                 [fem.newton] max_cutbacks, or check the loads and supports",
                 self.st.time,
                 self.st.steps + 1,
                 fail.iteration,
@@ -582,7 +598,7 @@ impl Model {
         let beta = 0.25 * (1.0 - alpha_b).powi(2);
         let tol_f = self.newton.force_tolerance;
         let tol_u = self.newton.displacement_tolerance;
-        let symmetric = self.symmetric_tangent();
+        let symmetric = self.symmetric_tangent;
         let u = self.dofs.gather(&self.st.u);
         let v = self.dofs.gather(&self.st.v);
         let a = self.dofs.gather(&self.st.a);
@@ -641,8 +657,11 @@ impl Model {
                 return Err(fail(it, rel, "non-finite residual".into()));
             }
             let step: f64 = (0..n).map(|i| (u1[i] - u[i]).powi(2)).sum::<f64>().sqrt();
-            let du_ok = it == 0 || beta * dt * dt * last_da <= tol_u * step.max(f64::MIN_POSITIVE);
-            if rel <= tol_f && (du_ok || rel <= tol_f * 1e-3) {
+            let du = beta * dt * dt * last_da;
+            let du_ok = it == 0 || du <= tol_u * step.max(f64::MIN_POSITIVE);
+            let floor =
+                it > 0 && du <= 1e-3 * tol_u * step.max(f64::MIN_POSITIVE) && rel <= 1e3 * tol_f;
+            if (rel <= tol_f && (du_ok || rel <= tol_f * 1e-3)) || floor {
                 self.set_free(0, &u1);
                 self.set_free(1, &v1);
                 self.set_free(2, &a1);

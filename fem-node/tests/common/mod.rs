@@ -1,6 +1,8 @@
 #![allow(dead_code)]
 //! Shared helpers for the integration tests.
 
+pub mod footing;
+
 use fem::config::FemConfig;
 use fem::Model;
 use std::path::Path;
