@@ -333,7 +333,8 @@ fn triaxial_cell(p: f64) -> fem::Model {
          [[fem.supports]]\non = {{ set = \"zmax\" }}\nfix = [\"z\"]\n\
          [[fem.loads]]\ntype = \"pressure\"\non = {{ set = \"xmax\" }}\nvalue = {p}\n\
          [[fem.loads]]\ntype = \"pressure\"\non = {{ set = \"ymax\" }}\nvalue = {p}\n\
-         [fem.newton]\nforce_tolerance = 1e-12\ndisplacement_tolerance = 1e-12\n"
+         [fem.newton]\nforce_tolerance = 1e-12\ndisplacement_tolerance = 1e-12\n\
+         [[fem.strain_gauges]]\nname = \"cell\"\n"
     ))
 }
 
@@ -461,6 +462,27 @@ fn mohr_coulomb_triaxial_single_element() {
     assert_eq!(array("plastic_zone"), 1.0);
     let peeq = array("equivalent_plastic_strain");
     assert!(peeq > 1e-3 && peeq < 5e-3, "ε̄ᵖ = {peeq}");
+    // and so do the gauge columns of fem_probes.csv
+    let csv = std::fs::read_to_string(dir.join("fem_probes.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let row: Vec<f64> = lines
+        .next()
+        .unwrap()
+        .split(',')
+        .map(|v| v.parse().unwrap())
+        .collect();
+    let col = |name: &str| {
+        row[header
+            .iter()
+            .position(|h| *h == name)
+            .unwrap_or_else(|| panic!("{name} in {header:?}"))]
+    };
+    // (the CSV has 10 significant digits, the VTU full precision)
+    assert!((col("equivalent_plastic_strain.cell") - peeq).abs() < 1e-9 * peeq);
+    assert_eq!(col("plastic_zone.cell"), 1.0);
+    let s = m.element_stresses()[0];
+    assert!((col("stress_von_mises.cell") - (s[0] - s[2]).abs()).abs() < 1e-6 * p);
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

@@ -507,6 +507,11 @@ impl MohrCoulomb {
     }
 }
 
+/// An angle in degrees for messages (radians → degrees round-off removed).
+fn degrees(rad: f64) -> f64 {
+    (rad.to_degrees() * 1e9).round() / 1e9
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1012,9 +1017,4 @@ mod tests {
         let m = MohrCoulomb::new(e, 0.5, phi, psi, c);
         assert!(m.bulk.is_infinite());
     }
-}
-
-/// An angle in degrees for messages (radians → degrees round-off removed).
-fn degrees(rad: f64) -> f64 {
-    (rad.to_degrees() * 1e9).round() / 1e9
 }

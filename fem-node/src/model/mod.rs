@@ -779,6 +779,13 @@ impl Model {
                         text.push_str(&format!(",strain.{name}.{q}"));
                     }
                 }
+                if self.nonlinear {
+                    for (name, _) in &self.gauges {
+                        for q in GAUGE_STRESS_QUANTITIES {
+                            text.push_str(&format!(",{q}.{name}"));
+                        }
+                    }
+                }
                 text.push('\n');
             }
             text.push_str(&format!("{:.9e}", self.st.time));
@@ -789,6 +796,11 @@ impl Model {
             }
             for v in strains.iter().flatten() {
                 text.push_str(&format!(",{v:.9e}"));
+            }
+            if self.nonlinear {
+                for v in self.gauge_stresses().iter().flatten() {
+                    text.push_str(&format!(",{v:.9e}"));
+                }
             }
             text.push('\n');
             output::append(&path, &text, !self.st.csv_started).map_err(|e| io(e, &path))?;
@@ -878,10 +890,39 @@ impl Model {
                 r.push((format!("strain.{name}.{q}.peak"), peak[k]));
             }
         }
+        if self.nonlinear {
+            for ((name, _), v) in self.gauges.iter().zip(self.gauge_stresses()) {
+                for (q, x) in GAUGE_STRESS_QUANTITIES.iter().zip(v) {
+                    r.push((format!("{q}.{name}"), x));
+                }
+            }
+        }
         if let Some(Some(dt)) = self.crit.get() {
             r.push(("critical_time_step".to_string(), *dt));
         }
         r
+    }
+
+    /// Per strain gauge of a nonlinear model: the largest element-mean von Mises (Cauchy)
+    /// stress, equivalent plastic strain and plastic-zone share over its elements.
+    fn gauge_stresses(&self) -> Vec<[f64; 3]> {
+        if self.gauges.is_empty() {
+            return Vec::new();
+        }
+        let (stress, peeq, zone) = self.element_point_summaries();
+        self.gauges
+            .iter()
+            .map(|(_, elements)| {
+                elements.iter().fold([0.0f64; 3], |acc, &e| {
+                    let e = e as usize;
+                    [
+                        acc[0].max(element::von_mises(&stress[e])),
+                        acc[1].max(peeq[e]),
+                        acc[2].max(zone[e]),
+                    ]
+                })
+            })
+            .collect()
     }
 
     // ----------------------------------------------------------------------------------------
@@ -1680,6 +1721,12 @@ fn lanczos_largest(
 
 /// Column/result names of a strain gauge's three quantities.
 const STRAIN_QUANTITIES: [&str; 3] = ["max_principal", "min_principal", "von_mises"];
+/// Gauge columns of nonlinear models (`<quantity>.<gauge>`), largest over the gauge's elements.
+const GAUGE_STRESS_QUANTITIES: [&str; 3] = [
+    "stress_von_mises",
+    "equivalent_plastic_strain",
+    "plastic_zone",
+];
 /// Neutral element of the [max, min, max] strain reductions.
 const NO_PEAK: [f64; 3] = [f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY];
 
@@ -1698,7 +1745,7 @@ fn gauge_elements(
             return Ok(set.clone());
         }
     }
-    let nodes = surface::select_nodes(mesh, sel, &what)?;
+    let nodes = surface::select_nodes(mesh, sel, what)?;
     let mut mark = vec![false; mesh.num_nodes()];
     for n in nodes {
         mark[n as usize] = true;
