@@ -512,6 +512,13 @@ pub struct Support {
     /// Components to fix (default all three).
     #[serde(default = "all_axes")]
     pub fix: Vec<Axis>,
+    /// Prescribed displacement [m] of the fixed components (x, y, z; the others must be 0),
+    /// scaled by `history(t)` (default 1): a support that moves. Default zero.
+    #[serde(default)]
+    pub displacement: Option<[f64; 3]>,
+    /// History scaling `displacement`.
+    #[serde(default)]
+    pub history: Option<String>,
 }
 
 fn all_axes() -> Vec<Axis> {
@@ -939,6 +946,43 @@ impl FemConfig {
                     format!("fem.supports[{i}].fix"),
                     "fixes no component".into(),
                 ));
+            }
+            if let Some(d) = s.displacement {
+                for (c, name) in ["x", "y", "z"].iter().enumerate() {
+                    if !d[c].is_finite() {
+                        return Err((
+                            format!("fem.supports[{i}].displacement"),
+                            "must be finite".into(),
+                        ));
+                    }
+                    if d[c] != 0.0 && !s.fix.iter().any(|a| a.index() == c) {
+                        return Err((
+                            format!("fem.supports[{i}].displacement"),
+                            format!("moves {name} by {}, but {name} is not in fix", d[c]),
+                        ));
+                    }
+                }
+            }
+            if let Some(h) = &s.history {
+                if s.displacement.is_none() {
+                    return Err((
+                        format!("fem.supports[{i}].history"),
+                        "scales nothing: give a displacement".into(),
+                    ));
+                }
+                if !self.histories.contains_key(h) {
+                    return Err((
+                        format!("fem.supports[{i}].history"),
+                        format!(
+                            "unknown history '{h}' (defined in [fem.histories]: {})",
+                            self.histories
+                                .keys()
+                                .cloned()
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ),
+                    ));
+                }
             }
         }
         for (name, h) in &self.histories {

@@ -718,3 +718,82 @@ fn strip_footing_bearing_capacity_matches_prandtl() {
         extrapolated / c
     );
 }
+
+// ---------------------------------------------------------------------------------------------
+// Moving supports
+// ---------------------------------------------------------------------------------------------
+
+/// A support with `displacement` and `history` moves: its dofs follow value × h(t) in static,
+/// Bossak and explicit analyses, linear and Neo-Hooke; the body follows it; a displacement of a
+/// component that is not fixed is refused.
+#[test]
+fn moving_supports_follow_their_history() {
+    let base = |material: &str, analysis: &str| {
+        format!(
+            "[fem]\nmesh = {{ size = [1.0, 0.1, 0.1], divisions = [10, 1, 1], element = \"hex8\" }}\n\
+             {material}\n{analysis}\n\
+             [fem.histories.ramp]\ntype = \"table\"\npoints = [[0.0, 0.0], [1.0, 1.0]]\n\
+             [[fem.supports]]\non = {{ set = \"xmin\" }}\n\
+             [[fem.supports]]\non = {{ set = \"xmax\" }}\nfix = [\"x\"]\n\
+             displacement = [2e-3, 0.0, 0.0]\nhistory = \"ramp\"\n"
+        )
+    };
+    let rubber =
+        "[fem.materials.r]\nmodel = \"neo_hooke\"\nyoungs_modulus = 9.4e6\npoisson_ratio = 0.3\n\
+                  density = 1000.0\n[[fem.sections]]\nelements = \"all\"\nmaterial = \"r\"";
+    let linear = "[fem.material]\nyoungs_modulus = 9.4e6\npoisson_ratio = 0.3\ndensity = 1000.0";
+    for (material, analysis, dt, steps) in [
+        (linear, "", 0.25, 2),
+        (rubber, "", 0.25, 2),
+        (
+            linear,
+            "[fem.analysis]\ntype = \"dynamic\"\nmass = \"lumped\"",
+            0.005,
+            100,
+        ),
+        (
+            rubber,
+            "[fem.analysis]\ntype = \"dynamic\"\nmass = \"lumped\"",
+            0.005,
+            100,
+        ),
+        (rubber, "[fem.analysis]\ntype = \"explicit\"", 0.005, 100),
+    ] {
+        let mut m = model(&base(material, analysis));
+        for _ in 0..steps {
+            m.advance(dt).unwrap();
+        }
+        let t = m.time();
+        let u = m.displacements();
+        let (mut end, mut mid) = (f64::NAN, f64::NAN);
+        for n in 0..m.mesh().num_nodes() {
+            let x = m.mesh().nodes[n];
+            if x[0] == 1.0 {
+                end = u[3 * n];
+            }
+            if (x[0] - 0.5).abs() < 1e-12 {
+                mid = u[3 * n];
+            }
+        }
+        println!("{analysis:?}: t = {t}, end {end:.6e}, midspan {mid:.6e}");
+        assert!(
+            (end - 2e-3 * t).abs() < 1e-15,
+            "end at {end}, want {}",
+            2e-3 * t
+        );
+        assert!(
+            mid > 0.2 * end && mid < 0.8 * end,
+            "the bar follows: {mid} of {end}"
+        );
+    }
+    let bad = base(linear, "").replace(
+        "displacement = [2e-3, 0.0, 0.0]",
+        "displacement = [2e-3, 1e-3, 0.0]",
+    );
+    let e = fem::parse_scene_section(&bad).unwrap_err();
+    println!("{e}");
+    assert!(
+        e.message.contains("fem.supports[1].displacement") && e.message.contains("y is not in fix"),
+        "{e}"
+    );
+}

@@ -50,6 +50,12 @@ struct State {
     points: Vec<f64>,
 }
 
+/// A support with a prescribed displacement `value × history(t)` per dof.
+struct MovingSupport {
+    dofs: Vec<(usize, f64)>,
+    history: Option<String>,
+}
+
 struct LoadVector {
     history: Option<String>,
     /// Spatial pattern (full dof vector) multiplied by history(t).
@@ -94,6 +100,7 @@ pub struct Model {
     eff_factor: Option<(u64, Factor)>,
     m_factor: Option<Factor>,
     loads: Vec<LoadVector>,
+    moving: Vec<MovingSupport>,
     histories: BTreeMap<String, History>,
     boundary: Boundary,
     iface: Interface,
@@ -217,6 +224,23 @@ impl Model {
             }
         }
         let dofs = DofMap::new(&fixed, &mesh.used_nodes());
+        let mut moving = Vec::new();
+        for (i, s) in cfg.supports.iter().enumerate() {
+            if let Some(d) = s.displacement {
+                let nodes = surface::select_nodes(&mesh, &s.on, &format!("fem.supports[{i}].on"))?;
+                let mut dofs_moved = Vec::new();
+                for n in nodes {
+                    for ax in &s.fix {
+                        let c = ax.index();
+                        dofs_moved.push((3 * n as usize + c, d[c]));
+                    }
+                }
+                moving.push(MovingSupport {
+                    dofs: dofs_moved,
+                    history: s.history.clone(),
+                });
+            }
+        }
         lap("supports");
         let pattern = Pattern::build(&mesh, &dofs)?;
         lap("pattern");
@@ -406,6 +430,7 @@ impl Model {
             eff_factor: None,
             m_factor: None,
             loads,
+            moving,
             histories: cfg.histories.clone(),
             boundary,
             iface,
@@ -484,11 +509,18 @@ impl Model {
         match self.analysis {
             Analysis::Static => {
                 let t = self.st.time + dt;
+                self.move_supports(t);
                 self.static_solve_at(t)?;
                 self.st.time = t;
             }
-            Analysis::Dynamic { .. } if self.nonlinear => self.bossak_nonlinear(dt)?,
-            Analysis::Dynamic { .. } => self.bossak_step(dt)?,
+            Analysis::Dynamic { .. } => {
+                self.move_supports(self.st.time + dt);
+                if self.nonlinear {
+                    self.bossak_nonlinear(dt)?
+                } else {
+                    self.bossak_step(dt)?
+                }
+            }
             Analysis::Explicit { safety, .. } => {
                 let crit = self.critical_time_step().ok_or_else(|| {
                     FemError::Solver("no free dofs: explicit stepping undefined".into())
@@ -1205,6 +1237,25 @@ impl Model {
     // Solvers
     // ----------------------------------------------------------------------------------------
 
+    /// Sets the prescribed displacements of the moving supports to their values at `t`.
+    fn move_supports(&mut self, t: f64) {
+        for ms in &self.moving {
+            let h = match &ms.history {
+                Some(name) => self
+                    .histories
+                    .get(name)
+                    .map_or(f64::NAN, |h| h.eval(t, &self.histories)),
+                None => 1.0,
+            };
+            for &(d, v) in &ms.dofs {
+                self.st.prescribed[d] = v * h;
+                if !self.nonlinear {
+                    self.st.u[d] = v * h;
+                }
+            }
+        }
+    }
+
     /// Free-equation right-hand side F_f(t) − K_fg g (2.57).
     fn free_rhs(&self, t: f64) -> Vec<f64> {
         let kg = self.prescribed_load();
@@ -1497,8 +1548,9 @@ impl Model {
         let mut w = vec![0.0; m];
         // loads: constant part of the rhs (−K_fg g) computed once
         let has_hist = !self.loads.is_empty();
-        let kg = self.prescribed_load();
-        let mut f_const = if has_hist {
+        let moving = !self.moving.is_empty();
+        let mut kg = self.prescribed_load();
+        let mut f_const = if has_hist || moving {
             Vec::new()
         } else {
             self.free_rhs_with(self.st.time, kg.as_deref())
@@ -1510,7 +1562,12 @@ impl Model {
                 u[i] += h * v[i];
             }
             t += h;
-            if has_hist {
+            if moving {
+                // the supports move every substep (their K_fg g with them)
+                self.move_supports(t);
+                kg = self.prescribed_load();
+            }
+            if has_hist || moving {
                 f_const = self.free_rhs_with(t, kg.as_deref());
             }
             if self.nonlinear {
