@@ -1,6 +1,8 @@
 //! Helpers for the integration tests: where the built binaries are, scratch folders, and
 //! running `cosim` as a user would.
 
+pub mod timoshenko;
+
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output};
 
