@@ -675,11 +675,11 @@ fn run<F: FnMut(&Simulator)>(
         alpha = sim.approach();
         tracker.update(t0, h, alpha0, p0, alpha, sim.p);
         observer(&sim);
-        if sim.n.is_multiple_of(every) {
+        if sim.n % every == 0 {
             samples.push(sim.sample());
         }
     }
-    if !sim.n.is_multiple_of(every) {
+    if !sim.n % every == 0 {
         samples.push(sim.sample());
     }
     let mut contacts = tracker.closed.clone();
@@ -702,7 +702,7 @@ fn run<F: FnMut(&Simulator)>(
         while sim.time() < t_stop {
             if sim.p <= 0.0
                 && sim.vz <= 0.0
-                && i.is_multiple_of(64)
+                && i % 64 == 0
                 && sim.z + sim.free_amplitude_bound() < 0.0
             {
                 // The sphere moves away and is already beyond the largest
