@@ -813,7 +813,7 @@ impl Model {
                 }
                 if self.nonlinear {
                     for (name, _) in &self.gauges {
-                        for q in GAUGE_STRESS_QUANTITIES {
+                        for q in &GAUGE_STRESS_QUANTITIES[..self.gauge_stress_columns()] {
                             text.push_str(&format!(",{q}.{name}"));
                         }
                     }
@@ -830,8 +830,11 @@ impl Model {
                 text.push_str(&format!(",{v:.9e}"));
             }
             if self.nonlinear {
-                for v in self.gauge_stresses().iter().flatten() {
-                    text.push_str(&format!(",{v:.9e}"));
+                let k = self.gauge_stress_columns();
+                for v in self.gauge_stresses() {
+                    for x in &v[..k] {
+                        text.push_str(&format!(",{x:.9e}"));
+                    }
                 }
             }
             text.push('\n');
@@ -923,8 +926,9 @@ impl Model {
             }
         }
         if self.nonlinear {
+            let k = self.gauge_stress_columns();
             for ((name, _), v) in self.gauges.iter().zip(self.gauge_stresses()) {
-                for (q, x) in GAUGE_STRESS_QUANTITIES.iter().zip(v) {
+                for (q, x) in GAUGE_STRESS_QUANTITIES[..k].iter().zip(v) {
                     r.push((format!("{q}.{name}"), x));
                 }
             }
@@ -933,6 +937,16 @@ impl Model {
             r.push(("critical_time_step".to_string(), *dt));
         }
         r
+    }
+
+    /// How many of [`GAUGE_STRESS_QUANTITIES`] a nonlinear model reports: the plastic ones only
+    /// when a material with plastic state is in use.
+    fn gauge_stress_columns(&self) -> usize {
+        if self.state_stride > 0 {
+            3
+        } else {
+            1
+        }
     }
 
     /// Per strain gauge of a nonlinear model: the largest element-mean von Mises (Cauchy)
