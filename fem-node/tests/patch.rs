@@ -99,8 +99,13 @@ fn linear_field(x: [f64; 3]) -> [f64; 3] {
 }
 
 fn run_patch(kind: ElementKind, div: usize) -> (f64, f64) {
+    run_patch_with(kind, div, "")
+}
+
+/// The patch test with extra scene text (e.g. `[fem.newton] always = true`).
+fn run_patch_with(kind: ElementKind, div: usize, extra: &str) -> (f64, f64) {
     let mesh = distorted(kind, div, 0.2, 0x1234_5678 + div as u64);
-    let cfg = config(&patch_config());
+    let cfg = config(&format!("{}{extra}", patch_config()));
     let mut model = Model::from_mesh(&cfg, mesh).expect("model");
     for n in 0..model.mesh().num_nodes() {
         let u = linear_field(model.mesh().nodes[n]);
@@ -197,4 +202,22 @@ fn distortion_is_real() {
         .filter(|(a, b)| a != b)
         .count();
     assert_eq!(moved, 8, "the 8 interior corner nodes are moved");
+}
+
+/// The same patch tests through the stress-based path and Newton iterations (issue 17):
+/// a linear material gives the linear field exactly there too (hex8i has no such path).
+#[test]
+fn patch_tests_through_the_newton_path() {
+    let newton = "[fem.newton]\nalways = true\nforce_tolerance = 1e-12\n";
+    for (kind, div) in [
+        (ElementKind::Tet4, 3),
+        (ElementKind::Tet10, 3),
+        (ElementKind::Hex8, 3),
+        (ElementKind::Hex8b, 3),
+        (ElementKind::Hex20, 3),
+    ] {
+        let (eu, es) = run_patch_with(kind, div, newton);
+        println!("{kind:?} (Newton path): displacement error {eu:.2e}, stress error {es:.2e}");
+        assert!(eu < 1e-10 && es < 1e-10, "{kind:?}: {eu:e} {es:e}");
+    }
 }

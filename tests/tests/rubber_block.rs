@@ -59,3 +59,43 @@ fn rubber_block_is_pressed_and_dragged_over_the_bed() {
         "two materials: {values:?}"
     );
 }
+
+/// The same block on a bed of 800 superquadric grains (ε in Wellmann's [0.6, 1.2], elongated up
+/// to 1.3, random orientations) poured by random addition — loose (solid fraction ≈ 0.35),
+/// unlike the lattice: the block sinks deeper and the drag resistance is smaller, and the run
+/// goes through the superquadric–mesh contacts of the coupled surface.
+#[test]
+fn rubber_block_on_superquadric_grains() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(root().join("scenes/rubber-block.toml")).unwrap();
+    let start = text.find("[[dem.particles]]").unwrap();
+    let end = text.find("[fem]").unwrap();
+    let text = format!(
+        "{}[[dem.particles]]\nkind = \"fill\"\nmaterial = \"sand\"\nmin = [0.0, 0.0, 0.0]\n\
+         max = [0.06, 0.02, 0.008]\ncount = 800\n\
+         distribution = {{ kind = \"uniform\", min = 0.8e-3, max = 1.0e-3 }}\n\
+         shape = {{ kind = \"superquadric\", elongation = 1.3, exponent_range = [0.6, 1.2] }}\n\n{}",
+        &text[..start],
+        &text[end..]
+    );
+    let s = run_scene(dir.path(), "rubber-block-sq.toml", &text);
+    assert_eq!(s["status"], "completed", "{s}");
+    let r = &s["results"];
+    let f = |k: &str| r[k].as_f64().unwrap_or_else(|| panic!("{k} in {r}"));
+    let (fx, fz) = (f("fem.interface_force.x"), f("fem.interface_force.z"));
+    let (ux, uz) = (
+        f("fem.probe.front_bottom.ux"),
+        f("fem.probe.front_bottom.uz"),
+    );
+    eprintln!(
+        "superquadric grains on the block {}; bed force x {fx:.2} N, z {fz:.2} N; front corner \
+         {:.2} mm forward, {:.2} mm down",
+        f("dem.wall_contacts"),
+        ux * 1e3,
+        -uz * 1e3
+    );
+    assert!(f("dem.wall_contacts") > 20.0);
+    assert!(fz > 25.0 && fz < 100.0, "{fz}");
+    assert!(fx < 0.0 && -fx < fz, "{fx}");
+    assert!(ux > 5e-3 && uz < 0.0, "{ux} {uz}");
+}
