@@ -53,7 +53,12 @@ fn main() {
     let h = args.first().copied().unwrap_or(10.0);
     println!("threads: {}", rayon::current_num_threads());
     let mut static_times = Vec::new();
-    for (name, material) in [("linear", LINEAR), ("neo-Hooke", NEO_HOOKE)] {
+    let modified = format!("{NEO_HOOKE}\n[fem.newton]\ntangent = \"modified\"");
+    for (name, material) in [
+        ("linear", LINEAR),
+        ("neo-Hooke", NEO_HOOKE),
+        ("neo-Hooke, modified Newton", modified.as_str()),
+    ] {
         let t0 = Instant::now();
         let mut m = build(&beam(h, material, false));
         let t_build = t0.elapsed().as_secs_f64();

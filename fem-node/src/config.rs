@@ -327,6 +327,19 @@ pub struct NewtonConfig {
     pub max_cutbacks: u32,
     /// Use the Newton path even when every material is linear (verification).
     pub always: bool,
+    /// `"full"` (default): a new tangent every iteration (quadratic convergence);
+    /// `"modified"`: one factor per increment or time step, refreshed only when an iteration
+    /// cuts the residual by less than 4× (fewer factorisations, more iterations).
+    pub tangent: TangentUpdate,
+}
+
+/// How often Newton iterations factorise the tangent.
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum TangentUpdate {
+    #[default]
+    Full,
+    Modified,
 }
 
 impl Default for NewtonConfig {
@@ -338,6 +351,7 @@ impl Default for NewtonConfig {
             increments: 1,
             max_cutbacks: 10,
             always: false,
+            tangent: TangentUpdate::Full,
         }
     }
 }

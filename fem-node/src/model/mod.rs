@@ -1396,6 +1396,23 @@ impl Model {
         Ok(())
     }
 
+    /// vals += cm M on the pattern (the analysis' mass: consistent, or lumped on the diagonal).
+    fn add_mass(&self, vals: &mut [f64], cm: f64) {
+        match &self.m_consistent {
+            Some(m) => {
+                for (v, mm) in vals.iter_mut().zip(m) {
+                    *v += cm * mm;
+                }
+            }
+            None => {
+                let ml = self.dofs.gather(&self.m_lumped);
+                for (j, &p) in self.diag_pos.iter().enumerate() {
+                    vals[p] += cm * ml[j];
+                }
+            }
+        }
+    }
+
     fn mass_mul(&self, x: &[f64], y: &mut [f64]) {
         match &self.m_consistent {
             Some(m) => self.pattern.mul(m, x, y),
@@ -1478,19 +1495,7 @@ impl Model {
         let ck = gamma * dt * rb + beta * dt * dt;
         if self.eff_factor.as_ref().map(|(bits, _)| *bits) != Some(dt.to_bits()) {
             let mut vals: Vec<f64> = self.k.iter().map(|k| ck * k).collect();
-            match &self.m_consistent {
-                Some(m) => {
-                    for (v, mm) in vals.iter_mut().zip(m) {
-                        *v += cm * mm;
-                    }
-                }
-                None => {
-                    let ml = self.dofs.gather(&self.m_lumped);
-                    for (j, &p) in self.diag_pos.iter().enumerate() {
-                        vals[p] += cm * ml[j];
-                    }
-                }
-            }
+            self.add_mass(&mut vals, cm);
             self.eff_factor = None;
             let f = Factor::new(&self.pattern, &vals, &mut self.symbolic)?;
             self.eff_factor = Some((dt.to_bits(), f));

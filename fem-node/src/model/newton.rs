@@ -5,7 +5,7 @@
 
 use super::{check_finite, dot, Model};
 use crate::assembly::{self, Factor, LuFactor, MAX_ELEMENT_MATRIX};
-use crate::config::{Analysis, FemConfig, MaterialSpec, SectionElements};
+use crate::config::{Analysis, FemConfig, MaterialSpec, SectionElements, TangentUpdate};
 use crate::element::{ElementKind, Lame};
 use crate::material::hyperelastic::{MooneyRivlin, NeoHooke, Ogden};
 use crate::material::mohr_coulomb::MohrCoulomb;
@@ -209,6 +209,24 @@ pub(super) struct Failed {
     failure: ElementFailure,
 }
 
+/// A factorised iteration matrix.
+enum TangentFactor {
+    Cholesky(Factor),
+    Lu(Box<LuFactor>),
+}
+
+impl TangentFactor {
+    fn solve_in_place(&self, b: &mut [f64]) {
+        match self {
+            TangentFactor::Cholesky(f) => f.solve_in_place(b),
+            TangentFactor::Lu(f) => f.solve_in_place(b),
+        }
+    }
+}
+
+/// Modified Newton keeps its factor while each iteration cuts the residual at least by this.
+pub const MODIFIED_NEWTON_CONTRACTION: f64 = 0.25;
+
 /// Why a Newton solve failed (reported after the cut-backs run out).
 #[derive(Clone, Debug)]
 struct NoConvergence {
@@ -346,27 +364,34 @@ impl Model {
             .map_or(f64::NAN, |r| r.energy)
     }
 
-    /// Solves J x = b in place: Cholesky when J is symmetric (falling back to LU when it is
-    /// not positive definite), LU otherwise.
-    fn solve_tangent(
-        &mut self,
-        vals: &[f64],
-        b: &mut [f64],
-        symmetric: bool,
-    ) -> Result<(), FemError> {
+    /// Factorises the iteration matrix J: Cholesky when it is symmetric (falling back to LU
+    /// when it is not positive definite), LU otherwise.
+    fn factor_tangent(&mut self, vals: &[f64], symmetric: bool) -> Result<TangentFactor, FemError> {
         if symmetric {
             match Factor::new(&self.pattern, vals, &mut self.symbolic) {
-                Ok(f) => {
-                    f.solve_in_place(b);
-                    return Ok(());
-                }
+                Ok(f) => return Ok(TangentFactor::Cholesky(f)),
                 Err(e) => tracing::debug!("newton: {e}; solving with LU"),
             }
         }
         let t0 = std::time::Instant::now();
-        LuFactor::new(&self.pattern, vals, &mut self.lu_symbolic)?.solve_in_place(b);
-        tracing::debug!("newton: LU of {} equations in {:?}", b.len(), t0.elapsed());
-        Ok(())
+        let lu = LuFactor::new(&self.pattern, vals, &mut self.lu_symbolic)?;
+        tracing::debug!(
+            "newton: LU of {} equations in {:?}",
+            self.pattern.n,
+            t0.elapsed()
+        );
+        Ok(TangentFactor::Lu(Box::new(lu)))
+    }
+
+    /// Whether the next iteration needs a new tangent: always with full Newton; with
+    /// modified Newton when there is none yet or the last iteration reduced the residual by
+    /// less than [`MODIFIED_NEWTON_CONTRACTION`].
+    fn refresh_tangent(&self, have: bool, history: &[f64]) -> bool {
+        if self.newton.tangent == TangentUpdate::Full || !have {
+            return true;
+        }
+        let n = history.len();
+        n >= 2 && history[n - 1] > MODIFIED_NEWTON_CONTRACTION * history[n - 2]
     }
 
     /// Static equilibrium f_int(u) = F(t) by Newton–Raphson with load stepping: from the
@@ -464,9 +489,12 @@ impl Model {
         let mut history = Vec::new();
         let mut last_du = f64::INFINITY;
         let mut local = scale.max(dot(load, load).sqrt());
+        // the factor lives for one increment (a restored snapshot iterates the same way)
+        let mut factor: Option<TangentFactor> = None;
         for it in 0..=self.newton.max_iterations {
+            let refresh = self.refresh_tangent(factor.is_some(), &history);
             let r = self
-                .internal(&u, true, &mut trial)
+                .internal(&u, refresh, &mut trial)
                 .map_err(|f| NoConvergence {
                     iteration: it,
                     residual: f64::NAN,
@@ -523,13 +551,21 @@ impl Model {
                     ),
                 });
             }
-            let k = r.k.expect("tangent requested");
-            self.solve_tangent(&k, &mut res, symmetric)
-                .map_err(|e| NoConvergence {
-                    iteration: it,
-                    residual: rel,
-                    reason: e.to_string(),
-                })?;
+            if refresh {
+                let k = r.k.expect("tangent requested");
+                factor = Some(
+                    self.factor_tangent(&k, symmetric)
+                        .map_err(|e| NoConvergence {
+                            iteration: it,
+                            residual: rel,
+                            reason: e.to_string(),
+                        })?,
+                );
+            }
+            factor
+                .as_ref()
+                .expect("factorised")
+                .solve_in_place(&mut res);
             if res.iter().any(|x| !x.is_finite()) {
                 return Err(NoConvergence {
                     iteration: it,
@@ -625,12 +661,15 @@ impl Model {
         let mut history = Vec::new();
         let (mut tmp, mut tmp2) = (vec![0.0; n], vec![0.0; n]);
         let mut last_da = f64::INFINITY;
+        // the factor lives for one step (a restored snapshot iterates the same way)
+        let mut factor: Option<TangentFactor> = None;
         for it in 0..=self.newton.max_iterations {
             let u1: Vec<f64> = (0..n).map(|i| ut[i] + beta * dt * dt * a1[i]).collect();
             let v1: Vec<f64> = (0..n).map(|i| vt[i] + gamma * dt * a1[i]).collect();
             self.dofs.scatter_free(&u1, &mut full);
+            let refresh = self.refresh_tangent(factor.is_some(), &history);
             let r = self
-                .internal(&full, true, &mut trial)
+                .internal(&full, refresh, &mut trial)
                 .map_err(|f| fail(it, f64::NAN, self.describe(f)))?;
             let fint = self.dofs.gather(&r.f);
             // R = F − M[(1−α)a1 + α a_n + ra v1] − rb K₀ v1 − f_int
@@ -681,28 +720,24 @@ impl Model {
                     ),
                 ));
             }
-            // J = βΔt² K_T + γΔt rb K₀ + [(1−α) + γΔt ra] M
-            let mut jac = r.k.expect("tangent requested");
-            let ck = beta * dt * dt;
-            let cm = (1.0 - alpha_b) + gamma * dt * ra;
-            for (j, k0) in jac.iter_mut().zip(&self.k) {
-                *j = ck * *j + gamma * dt * rb * k0;
-            }
-            match &self.m_consistent {
-                Some(m) => {
-                    for (j, mm) in jac.iter_mut().zip(m) {
-                        *j += cm * mm;
-                    }
+            if refresh {
+                // J = βΔt² K_T + γΔt rb K₀ + [(1−α) + γΔt ra] M
+                let mut jac = r.k.expect("tangent requested");
+                let ck = beta * dt * dt;
+                let cm = (1.0 - alpha_b) + gamma * dt * ra;
+                for (j, k0) in jac.iter_mut().zip(&self.k) {
+                    *j = ck * *j + gamma * dt * rb * k0;
                 }
-                None => {
-                    let ml = self.dofs.gather(&self.m_lumped);
-                    for (j, &p) in self.diag_pos.iter().enumerate() {
-                        jac[p] += cm * ml[j];
-                    }
-                }
+                self.add_mass(&mut jac, cm);
+                factor = Some(
+                    self.factor_tangent(&jac, symmetric)
+                        .map_err(|e| fail(it, rel, e.to_string()))?,
+                );
             }
-            self.solve_tangent(&jac, &mut res, symmetric)
-                .map_err(|e| fail(it, rel, e.to_string()))?;
+            factor
+                .as_ref()
+                .expect("factorised")
+                .solve_in_place(&mut res);
             if res.iter().any(|x| !x.is_finite()) {
                 return Err(fail(
                     it,
