@@ -1394,6 +1394,21 @@ mod tests {
     use crate::rotation::{angular_momentum, angular_velocity, rotate};
     use nalgebra::UnitQuaternion;
 
+    /// The outer corner of the cube [−l, 0]³: its three faces at the origin, outward x, y, z.
+    fn cube_corner(l: f64) -> MeshB {
+        let mut m = MeshB::default();
+        let o = V3::zeros();
+        let (x, y, z) = (
+            V3::new(-l, 0.0, 0.0),
+            V3::new(0.0, -l, 0.0),
+            V3::new(0.0, 0.0, -l),
+        );
+        m.quad([o, y, y + z, z], V3::x());
+        m.quad([o, x, x + z, z], V3::y());
+        m.quad([o, x, x + y, y], V3::z());
+        m
+    }
+
     fn sq(r: [f64; 3], e1: f64, e2: f64) -> Superquadric {
         Superquadric::new(V3::new(r[0], r[1], r[2]), e1, e2).unwrap()
     }
@@ -1722,36 +1737,8 @@ mod tests {
                     sweeps += 1;
                 }
                 // (c) the corner of the cube [−2, 0]³
-                let mut m = MeshB::default();
+                let m = cube_corner(2.0);
                 let o = V3::zeros();
-                let l = 2.0;
-                m.quad(
-                    [
-                        o,
-                        V3::new(0.0, -l, 0.0),
-                        V3::new(0.0, -l, -l),
-                        V3::new(0.0, 0.0, -l),
-                    ],
-                    V3::x(),
-                );
-                m.quad(
-                    [
-                        o,
-                        V3::new(-l, 0.0, 0.0),
-                        V3::new(-l, 0.0, -l),
-                        V3::new(0.0, 0.0, -l),
-                    ],
-                    V3::y(),
-                );
-                m.quad(
-                    [
-                        o,
-                        V3::new(-l, 0.0, 0.0),
-                        V3::new(-l, -l, 0.0),
-                        V3::new(0.0, -l, 0.0),
-                    ],
-                    V3::z(),
-                );
                 // the target point q and direction c: along face z to the edge (z, x), around
                 // it, along it to the corner, into the corner's cone, out onto face x
                 let lerp = |a: V3, b: V3, t: f64| a * (1.0 - t) + b * t;
@@ -1915,35 +1902,7 @@ mod tests {
             m
         };
         // (c) a cube corner
-        let mut corner = MeshB::default();
-        let o = V3::zeros();
-        corner.quad(
-            [
-                o,
-                V3::new(0.0, -2.0, 0.0),
-                V3::new(0.0, -2.0, -2.0),
-                V3::new(0.0, 0.0, -2.0),
-            ],
-            V3::x(),
-        );
-        corner.quad(
-            [
-                o,
-                V3::new(-2.0, 0.0, 0.0),
-                V3::new(-2.0, 0.0, -2.0),
-                V3::new(0.0, 0.0, -2.0),
-            ],
-            V3::y(),
-        );
-        corner.quad(
-            [
-                o,
-                V3::new(-2.0, 0.0, 0.0),
-                V3::new(-2.0, -2.0, 0.0),
-                V3::new(0.0, -2.0, 0.0),
-            ],
-            V3::z(),
-        );
+        let corner = cube_corner(2.0);
         let d2 = V3::new(1.0, 0.0, 1.0).normalize();
         let d3 = V3::new(1.0, 1.0, 1.0).normalize();
         let cases: Vec<(&str, MeshB, V3, V3)> = vec![
@@ -2130,36 +2089,7 @@ mod tests {
             let n = (a - apex).cross(&(b - apex));
             cap.tri(apex, a, b, if n.z > 0.0 { n } else { -n });
         }
-        let mut corner = MeshB::default();
-        let o = V3::zeros();
-        let l = 0.5;
-        corner.quad(
-            [
-                o,
-                V3::new(0.0, -l, 0.0),
-                V3::new(0.0, -l, -l),
-                V3::new(0.0, 0.0, -l),
-            ],
-            V3::x(),
-        );
-        corner.quad(
-            [
-                o,
-                V3::new(-l, 0.0, 0.0),
-                V3::new(-l, 0.0, -l),
-                V3::new(0.0, 0.0, -l),
-            ],
-            V3::y(),
-        );
-        corner.quad(
-            [
-                o,
-                V3::new(-l, 0.0, 0.0),
-                V3::new(-l, -l, 0.0),
-                V3::new(0.0, -l, 0.0),
-            ],
-            V3::z(),
-        );
+        let corner = cube_corner(0.5);
         let mut flat = MeshB::default();
         flat.quad(
             [
@@ -2344,35 +2274,8 @@ mod tests {
     #[test]
     fn degenerate_input_is_guarded() {
         let s = sq([0.5, 0.25, 0.2], 0.4, 1.6);
-        let mut m = MeshB::default();
+        let m = cube_corner(1.0);
         let o = V3::zeros();
-        m.quad(
-            [
-                o,
-                V3::new(0.0, -1.0, 0.0),
-                V3::new(0.0, -1.0, -1.0),
-                V3::new(0.0, 0.0, -1.0),
-            ],
-            V3::x(),
-        );
-        m.quad(
-            [
-                o,
-                V3::new(-1.0, 0.0, 0.0),
-                V3::new(-1.0, 0.0, -1.0),
-                V3::new(0.0, 0.0, -1.0),
-            ],
-            V3::y(),
-        );
-        m.quad(
-            [
-                o,
-                V3::new(-1.0, 0.0, 0.0),
-                V3::new(-1.0, -1.0, 0.0),
-                V3::new(0.0, -1.0, 0.0),
-            ],
-            V3::z(),
-        );
         let mut bad = m.clone();
         let (i, j) = (
             bad.vid(V3::new(-0.5, 0.0, 0.0)),
@@ -2450,35 +2353,7 @@ mod tests {
         let rot = *random_orientation(&mut rng).to_rotation_matrix().matrix();
         let height = |c: V3| -low(&s, &rot, &c).dot(&c) - 0.01;
         let place = |q: V3, c: V3| q - c * 0.01 - low(&s, &rot, &c);
-        let mut corner = MeshB::default();
-        let o = V3::zeros();
-        corner.quad(
-            [
-                o,
-                V3::new(0.0, -2.0, 0.0),
-                V3::new(0.0, -2.0, -2.0),
-                V3::new(0.0, 0.0, -2.0),
-            ],
-            V3::x(),
-        );
-        corner.quad(
-            [
-                o,
-                V3::new(-2.0, 0.0, 0.0),
-                V3::new(-2.0, 0.0, -2.0),
-                V3::new(0.0, 0.0, -2.0),
-            ],
-            V3::y(),
-        );
-        corner.quad(
-            [
-                o,
-                V3::new(-2.0, 0.0, 0.0),
-                V3::new(-2.0, -2.0, 0.0),
-                V3::new(0.0, -2.0, 0.0),
-            ],
-            V3::z(),
-        );
+        let corner = cube_corner(2.0);
         let mut grid = MeshB::default();
         for i in 0..3 {
             for j in 0..3 {

@@ -342,7 +342,7 @@ impl Ogden {
     /// (S, ℂ, Ψ) at deformation gradient `f`.
     pub fn evaluate(&self, f: &Matrix3<f64>) -> Result<Response, NonPositiveJacobian> {
         let j = jacobian(f)?;
-        let (y, v) = sym_eigen3(&(f.transpose() * f));
+        let (y, v) = super::sym_eigen(&(f.transpose() * f));
         if !y.iter().all(|&x| x > 0.0 && x.is_finite()) {
             return Err(NonPositiveJacobian { j });
         }
@@ -408,45 +408,6 @@ fn divided_power(a: f64, b: f64, gamma: f64) -> f64 {
     } else {
         base * (gamma * l).exp_m1() / l.exp_m1()
     }
-}
-
-/// Eigen-decomposition of a symmetric 3×3 matrix by cyclic Jacobi rotations
-/// (Numerical Recipes, §11.1): bounded iteration count, no panic, no heap.
-/// Returns eigenvalues and the matrix whose columns are the eigenvectors.
-fn sym_eigen3(a0: &Matrix3<f64>) -> ([f64; 3], Matrix3<f64>) {
-    let mut a = (a0 + a0.transpose()) * 0.5;
-    let mut v = Matrix3::identity();
-    for _sweep in 0..50 {
-        if a[(0, 1)] == 0.0 && a[(0, 2)] == 0.0 && a[(1, 2)] == 0.0 {
-            break;
-        }
-        for &(p, q) in PAIRS.iter() {
-            let apq = a[(p, q)];
-            let (app, aqq) = (a[(p, p)], a[(q, q)]);
-            let g = 100.0 * apq.abs();
-            if app.abs() + g == app.abs() && aqq.abs() + g == aqq.abs() {
-                a[(p, q)] = 0.0;
-                a[(q, p)] = 0.0;
-                continue;
-            }
-            let theta = (aqq - app) / (2.0 * apq);
-            let t = if theta.abs() > 1e150 {
-                0.5 / theta
-            } else {
-                theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt())
-            };
-            let c = 1.0 / (t * t + 1.0).sqrt();
-            let s = t * c;
-            let mut r = Matrix3::identity();
-            (r[(p, p)], r[(q, q)], r[(p, q)], r[(q, p)]) = (c, c, s, -s);
-            a = r.transpose() * a * r;
-            a = (a + a.transpose()) * 0.5;
-            a[(p, q)] = 0.0;
-            a[(q, p)] = 0.0;
-            v *= r;
-        }
-    }
-    ([a[(0, 0)], a[(1, 1)], a[(2, 2)]], v)
 }
 
 #[cfg(test)]

@@ -24,6 +24,7 @@
 //! strain). [`Tangent`] maps *engineering* strain increments
 //! (ε11, ε22, ε33, 2ε12, 2ε23, 2ε31) to stress increments.
 
+use super::sym_eigen;
 use nalgebra::{Matrix2, Matrix3, SMatrix, Vector3};
 
 /// 6×6 tangent acting on engineering Voigt strain increments:
@@ -107,60 +108,6 @@ fn voigt(m: &Matrix3<f64>) -> [f64; 6] {
 /// `Q diag(d) Qᵀ` as Voigt vector.
 fn from_principal(q: &Matrix3<f64>, d: &[f64; 3]) -> [f64; 6] {
     voigt(&(q * Matrix3::from_diagonal(&Vector3::new(d[0], d[1], d[2])) * q.transpose()))
-}
-
-/// Spectral decomposition of a symmetric 3×3 matrix by cyclic Jacobi
-/// rotations. Eigenvalues sorted descending, eigenvectors are the columns of
-/// the returned orthogonal matrix. Bounded number of sweeps, no allocation,
-/// no panic (NaN in gives NaN out). A diagonal input is returned exactly.
-fn sym_eigen(m: &Matrix3<f64>) -> ([f64; 3], Matrix3<f64>) {
-    let mut a = *m;
-    let mut v = Matrix3::identity();
-    for _ in 0..32 {
-        let off = a[(0, 1)].abs() + a[(0, 2)].abs() + a[(1, 2)].abs();
-        let diag = a[(0, 0)].abs() + a[(1, 1)].abs() + a[(2, 2)].abs();
-        if off == 0.0 || off <= 1e-20 * diag {
-            break;
-        }
-        for &(p, q) in &[(0usize, 1usize), (0, 2), (1, 2)] {
-            let apq = a[(p, q)];
-            if apq == 0.0 {
-                continue;
-            }
-            // Numerical Recipes: θ = cot 2φ, t = tan φ (smaller root).
-            let theta = (a[(q, q)] - a[(p, p)]) / (2.0 * apq);
-            let t = if theta.abs() > 1e150 {
-                0.5 / theta
-            } else {
-                theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt())
-            };
-            let c = 1.0 / (t * t + 1.0).sqrt();
-            let s = t * c;
-            let mut j = Matrix3::identity();
-            j[(p, p)] = c;
-            j[(q, q)] = c;
-            j[(p, q)] = s;
-            j[(q, p)] = -s;
-            a = j.transpose() * a * j;
-            a[(p, q)] = 0.0;
-            a[(q, p)] = 0.0;
-            v *= j;
-        }
-    }
-    let mut w = [a[(0, 0)], a[(1, 1)], a[(2, 2)]];
-    let mut idx = [0usize, 1, 2];
-    for &(i, j) in &[(0usize, 1usize), (1, 2), (0, 1)] {
-        if w[i] < w[j] {
-            w.swap(i, j);
-            idx.swap(i, j);
-        }
-    }
-    let q = Matrix3::from_columns(&[
-        v.column(idx[0]).into_owned(),
-        v.column(idx[1]).into_owned(),
-        v.column(idx[2]).into_owned(),
-    ]);
-    (w, q)
 }
 
 /// Assemble the 6×6 tangent (engineering-strain Voigt form) of an isotropic
