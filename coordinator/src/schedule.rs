@@ -30,21 +30,19 @@ pub fn substeps(window: f64, dem_time_step: f64) -> Result<u32, String> {
             format_seconds(dem_time_step)
         ));
     }
-    let ratio = window / dem_time_step;
-    let n = ratio.round();
-    if n < 1.0 || (ratio - n).abs() > 1e-6 * ratio.max(1.0) {
-        return Err(format!(
+    proto::motion::whole_substeps(window, dem_time_step).map_err(|ratio| {
+        let n = ratio.round();
+        if n > u32::MAX as f64 {
+            return format!("{n:.3e} substeps per window is too many");
+        }
+        format!(
             "the coupling window Δt^C = {} is not a whole multiple of the DEM time step Δt^D = {} (ratio {ratio:.4}); choose Δt^C = n·Δt^D, e.g. {} or {}",
             format_seconds(window),
             format_seconds(dem_time_step),
             format_seconds(n.max(1.0) * dem_time_step),
             format_seconds((n + 1.0) * dem_time_step)
-        ));
-    }
-    if n > u32::MAX as f64 {
-        return Err(format!("{n:.3e} substeps per window is too many"));
-    }
-    Ok(n as u32)
+        )
+    })
 }
 
 /// What the coordinator must do next.

@@ -1427,12 +1427,6 @@ impl DemConfig {
     }
 }
 
-#[derive(Deserialize)]
-struct SceneDoc {
-    #[serde(default)]
-    dem: Option<DemConfig>,
-}
-
 /// 1-based (line, column) of a byte offset.
 pub(crate) fn line_column(text: &str, offset: usize) -> (usize, usize) {
     let offset = offset.min(text.len());
@@ -1604,7 +1598,13 @@ fn find_string_value_in_table(text: &str, from: usize, value: &str) -> Option<us
 
 /// Parses the `[dem]` table of a whole scene file; other top-level tables are ignored.
 pub fn parse_scene_section(text: &str) -> Result<Option<DemConfig>, SceneError> {
-    let doc: SceneDoc = toml::from_str(text).map_err(|e| {
+    parse_scene_table(text, "dem")
+}
+
+/// Parses the top-level table `table` of a whole scene file with the `[dem]` schema (the DEM
+/// node reads the table of its id).
+pub fn parse_scene_table(text: &str, table: &str) -> Result<Option<DemConfig>, SceneError> {
+    let doc: Option<DemConfig> = scenefile::named_table(text, table).map_err(|e| {
         let mut start = e.span().map(|s| s.start).unwrap_or(0);
         let reported = start;
         // Internally tagged tables (`kind = ...`) report the span of the whole table; point at
@@ -1658,7 +1658,7 @@ pub fn parse_scene_section(text: &str) -> Result<Option<DemConfig>, SceneError> 
             message,
         }
     })?;
-    let Some(cfg) = doc.dem else { return Ok(None) };
+    let Some(cfg) = doc else { return Ok(None) };
     if let Some(err) = cfg.validate_values().into_iter().next() {
         let (line, column) = locate(text, &err.path)
             .map(|s| line_column(text, s.start))

@@ -47,7 +47,7 @@ use snapshot::EngineState;
 use std::path::Path;
 use walls::{LoadedWall, LoadedWallState, Mesh, Plane, PrescribedMotion, WallRef};
 
-pub use config::{parse_scene_section, SceneError};
+pub use config::{parse_scene_section, parse_scene_table, SceneError};
 pub use walls::MotionRule;
 
 /// Errors of the DEM engine; messages name the file, field, mesh or particle concerned.

@@ -625,15 +625,17 @@ impl Default for Output {
     }
 }
 
-#[derive(Deserialize)]
-struct SceneFile {
-    fem: Option<FemConfig>,
-}
-
 /// Parses the `[fem]` table of a whole scene file; other top-level tables are ignored.
 /// `Ok(None)` when there is no `[fem]` table.
 pub fn parse_scene_section(text: &str) -> Result<Option<FemConfig>, SceneError> {
-    let scene: SceneFile = toml::from_str(text).map_err(|e| {
+    parse_scene_table(text, "fem")
+}
+
+/// Parses the top-level table `table` of a whole scene file with the `[fem]` schema (a scene
+/// with several structures has one such table per FEM node, named by the node's id). Errors
+/// give the file's line and column and the field's path under `table`.
+pub fn parse_scene_table(text: &str, table: &str) -> Result<Option<FemConfig>, SceneError> {
+    let parsed: Option<FemConfig> = scenefile::named_table(text, table).map_err(|e| {
         let offset = e.span().map(|s| s.start).unwrap_or(0);
         let (line, column) = line_col(text, offset);
         let mut message = e.message().trim().to_string();
@@ -648,10 +650,15 @@ pub fn parse_scene_section(text: &str) -> Result<Option<FemConfig>, SceneError> 
             message,
         }
     })?;
-    let Some(cfg) = scene.fem else {
+    let Some(cfg) = parsed else {
         return Ok(None);
     };
     if let Err((path, msg)) = cfg.validate() {
+        // the checks name paths under `fem`; this table may have another name
+        let path = match path.strip_prefix("fem") {
+            Some(rest) if table != "fem" => format!("{table}{rest}"),
+            _ => path,
+        };
         let (line, column) = spans::locate(text, &path);
         return Err(SceneError {
             line,

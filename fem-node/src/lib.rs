@@ -32,7 +32,7 @@ pub mod output;
 pub mod resources;
 pub mod surface;
 
-pub use config::parse_scene_section;
+pub use config::{parse_scene_section, parse_scene_table};
 pub use element::ElementKind;
 pub use mesh::Mesh;
 pub use model::Model;

@@ -115,25 +115,35 @@ mod tests {
                 scene_path: "scenes/beam.toml".into(),
                 scene_toml: "[scene]\nname = \"beam\"\n".into(),
                 out_dir: "out/beam".into(),
-                interfaces: vec!["top".into()],
+                table: "fem".into(),
+                interfaces: vec![InterfaceDecl {
+                    name: "top".into(),
+                    kind: InterfaceKind::Surface,
+                    provider: "fem".into(),
+                    users: vec!["dem".into()],
+                    force_averaging: true,
+                }],
                 check_only: false,
                 trace: true,
             }),
             CommandBody::Publish {
-                window: 0,
-                force_averaging: false,
+                label: Label::window(0),
             },
             CommandBody::AdvanceWindow(AdvanceWindow {
                 window: 3,
+                iteration: 1,
                 t_start: 3e-4,
                 dt: 1e-4,
-                substeps: 100,
                 motion: MotionRule::Linear,
-                force_averaging: true,
-                input_window: Some(2),
-                output_window: Some(3),
+                input: Some(Label::window(2)),
+                output: Some(Label {
+                    window: 3,
+                    iteration: 1,
+                }),
                 static_solve: false,
             }),
+            CommandBody::Checkpoint { window: 3 },
+            CommandBody::Rollback { window: 3 },
             CommandBody::Snapshot {
                 window: 7,
                 path: "ck/7".into(),
@@ -154,7 +164,7 @@ mod tests {
         let statuses = vec![
             StatusBody::Hello(Hello {
                 software: "dem-node 0.1".into(),
-                role: Role::Dem,
+                kind: NodeKind::Dem,
                 capabilities: vec!["snapshot".into()],
                 pid: 42,
             }),
@@ -201,6 +211,7 @@ mod tests {
             run_id: RUN.into(),
             interface: "top".into(),
             window: 5,
+            iteration: 0,
             time: 0.5,
             positions: vec![0.5; 9].into(),
             velocities: vec![-1.0; 9].into(),
@@ -211,10 +222,11 @@ mod tests {
             run_id: RUN.into(),
             interface: "top".into(),
             window: 5,
+            iteration: 0,
             time: 0.5,
             forces: vec![1e3; 9].into(),
             averaged: true,
-            substeps: 10,
+            samples: 10,
         };
         (commands, statuses, mesh, kin, forces)
     }
@@ -234,8 +246,8 @@ mod tests {
         round_trip(&kin);
         round_trip(&forces);
         mesh.validate().unwrap();
-        kin.validate(3, 5).unwrap();
-        forces.validate(3, 5).unwrap();
+        kin.validate(3, Label::window(5)).unwrap();
+        forces.validate(3, Label::window(5)).unwrap();
     }
 
     #[test]
@@ -270,15 +282,21 @@ mod tests {
     fn validation_names_window_size_and_nan() {
         let (_, _, mut mesh, mut kin, mut forces) = all_messages();
         assert!(matches!(
-            kin.validate(3, 6),
+            kin.validate(3, Label::window(6)),
             Err(ProtoError::WrongWindow {
-                got: 5,
-                expected: 6,
+                got: Label {
+                    window: 5,
+                    iteration: 0
+                },
+                expected: Label {
+                    window: 6,
+                    iteration: 0
+                },
                 ..
             })
         ));
         assert!(matches!(
-            kin.validate(4, 5),
+            kin.validate(4, Label::window(5)),
             Err(ProtoError::Size {
                 field: "positions",
                 got: 9,
@@ -287,7 +305,7 @@ mod tests {
             })
         ));
         kin.accelerations.0[4] = f64::NAN;
-        let e = kin.validate(3, 5).unwrap_err();
+        let e = kin.validate(3, Label::window(5)).unwrap_err();
         assert!(
             matches!(
                 e,
@@ -301,7 +319,7 @@ mod tests {
         );
         forces.forces.0[8] = f64::INFINITY;
         assert!(matches!(
-            forces.validate(3, 5),
+            forces.validate(3, Label::window(5)),
             Err(ProtoError::NotFinite {
                 field: "forces",
                 index: 8,
@@ -347,6 +365,7 @@ mod tests {
             run_id: &'static str,
             interface: &'static str,
             window: u64,
+            iteration: u32,
             time: f64,
             positions: Vec<f64>,
             velocities: Vec<f64>,
@@ -357,6 +376,7 @@ mod tests {
             run_id: RUN,
             interface: "top",
             window: 5,
+            iteration: 0,
             time: 0.5,
             positions: vec![0.5; 9],
             velocities: vec![-1.0; 9],

@@ -23,11 +23,11 @@ pub enum ProtoError {
         got: String,
         expected: String,
     },
-    #[error("{what} is for coupling window {got}, expected window {expected}")]
+    #[error("{what} is for coupling {got}, expected {expected}")]
     WrongWindow {
         what: &'static str,
-        got: u64,
-        expected: u64,
+        got: crate::messages::Label,
+        expected: crate::messages::Label,
     },
     #[error("{what}: field `{field}` has {got} values, expected {expected} ({detail})")]
     Size {

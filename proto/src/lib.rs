@@ -12,6 +12,7 @@ pub mod error;
 pub mod keys;
 pub mod link;
 pub mod messages;
+pub mod motion;
 pub mod node;
 pub mod participant;
 pub mod resources;
@@ -25,4 +26,4 @@ pub use participant::Participant;
 
 /// Version of the wire protocol. Every message carries it; a peer speaking another version is
 /// refused with an error naming both (PROTOCOL.md, "Versioning").
-pub const PROTOCOL_VERSION: u32 = 1;
+pub const PROTOCOL_VERSION: u32 = 2;

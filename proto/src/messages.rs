@@ -102,26 +102,83 @@ impl<'de> Deserialize<'de> for F64Array {
     }
 }
 
-/// What a node is in the coupling.
+/// What kind of solver a node is. Nodes are named by id (`dem`, `fem`, `sleeper_left`, ...);
+/// the kind says what they can do on an interface: a `fem` node provides surface interfaces
+/// (mesh, kinematics; it reads forces), a `dem` node uses them (it reads kinematics, writes
+/// forces).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
-pub enum Role {
+pub enum NodeKind {
     Dem,
     Fem,
 }
 
-impl std::fmt::Display for Role {
+impl std::fmt::Display for NodeKind {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(match self {
-            Role::Dem => "dem",
-            Role::Fem => "fem",
+            NodeKind::Dem => "dem",
+            NodeKind::Fem => "fem",
         })
     }
 }
 
-/// How the DEM side moves the coupled mesh during a window (Ullrich ch. 3.3, τ from the window
-/// start): `quadratic` x = P + Vτ + ½Aτ² (just-in-time), `linear` x = P + Vτ (predictive,
-/// V the predictive velocity (3.4)), `fixed` x = P.
+/// What an interface couples: a surface (mesh triangles, nodal kinematics and forces) or, later,
+/// a volume (Arlequin overlap).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum InterfaceKind {
+    #[default]
+    Surface,
+    Volume,
+}
+
+/// An interface of the run as the coordinator declares it in `init`: who provides it (the node
+/// that owns its mesh, publishes its kinematics and reads its forces) and who uses it (the nodes
+/// that read the kinematics and publish forces).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct InterfaceDecl {
+    pub name: String,
+    pub kind: InterfaceKind,
+    pub provider: String,
+    pub users: Vec<String>,
+    /// Users send the mean of their forces over the window's substeps instead of the last
+    /// substep's (Ullrich (3.8)).
+    pub force_averaging: bool,
+}
+
+/// Labels interface data: the coupling window and, within it, the iteration (0 for explicit
+/// schemes; implicit schemes repeat a window with iterations 1, 2, ...).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+pub struct Label {
+    pub window: u64,
+    pub iteration: u32,
+}
+
+impl Label {
+    /// Iteration 0 of `window`.
+    pub fn window(window: u64) -> Label {
+        Label {
+            window,
+            iteration: 0,
+        }
+    }
+}
+
+impl std::fmt::Display for Label {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.iteration == 0 {
+            write!(f, "window {}", self.window)
+        } else {
+            write!(f, "window {} iteration {}", self.window, self.iteration)
+        }
+    }
+}
+
+/// How the users of an interface move its mesh during a window (Ullrich ch. 3.3, τ from the
+/// window start), from the provider's state P, V, A in the kinematics of the window
+/// ([`crate::motion`]): `quadratic` x = P + Vτ + ½Aτ² (just-in-time: the state at the window
+/// start), `linear` x = P₀ + (P − P₀)τ/Δt (predictive (3.4)–(3.7): from the previous end
+/// position P₀ to this state, the provider's end of the window), `fixed` x = P.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum MotionRule {
@@ -134,7 +191,7 @@ pub enum MotionRule {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Hello {
     pub software: String,
-    pub role: Role,
+    pub kind: NodeKind,
     /// Optional features: `snapshot`, `force_averaging`, `static`, `dynamic`, ...
     pub capabilities: Vec<String>,
     pub pid: u32,
@@ -146,12 +203,15 @@ pub struct Init {
     /// Path of the scene file as the coordinator knows it (names it in errors, resolves
     /// relative file paths when the file system is shared).
     pub scene_path: String,
-    /// The whole scene file (TOML). A node reads its own table (`[dem]` or `[fem]`).
+    /// The whole scene file (TOML). A node reads its own table, `table`.
     pub scene_toml: String,
+    /// The node's table in the scene (`dem`, `fem`, or the node's id for further nodes).
+    pub table: String,
     /// Folder where the node writes its outputs.
     pub out_dir: String,
-    /// Interfaces of the coupling (empty for a single-solver run).
-    pub interfaces: Vec<String>,
+    /// Every interface of the run (empty for a single-solver run); a node serves those that
+    /// name it as provider or user.
+    pub interfaces: Vec<InterfaceDecl>,
     /// Validate and report limits, then wait for `stop`: no stepping (`cosim check`).
     pub check_only: bool,
     /// Write per-window interface traces (CSV) for verification: the DEM its per-substep
@@ -160,28 +220,27 @@ pub struct Init {
     pub trace: bool,
 }
 
-/// Advance one coupling window.
+/// Advance one coupling window (or one iteration of it).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct AdvanceWindow {
     /// Window index k, starting at 0, consecutive.
     pub window: u64,
+    /// Iteration of the window (0 for explicit schemes).
+    pub iteration: u32,
     /// Simulation time at the start of the window (s).
     pub t_start: f64,
-    /// Length of the window Δt^C (s).
+    /// Length of the window Δt^C (s). A DEM node runs Δt^C / Δt^D substeps (the coordinator
+    /// has checked that this is a whole number).
     pub dt: f64,
-    /// DEM substeps n^D in the window (Δt^C = n^D Δt^D); FEM ignores it.
-    pub substeps: u32,
-    /// How the DEM moves the coupled mesh during the window.
+    /// How interface users move the coupled mesh during the window.
     pub motion: MotionRule,
-    /// DEM: send the mean of the substep forces instead of the last (Ullrich (3.8)).
-    pub force_averaging: bool,
-    /// Interface data to wait for before computing (DEM: kinematics, FEM: forces), by the
-    /// window index that data carries; `None`: compute with what the node has.
-    pub input_window: Option<u64>,
-    /// Window index of the interface data to publish at the end of the window (DEM: forces,
-    /// FEM: kinematics); `None`: publish nothing.
-    pub output_window: Option<u64>,
-    /// FEM only: solve statically instead of a dynamic step (one-way coupling).
+    /// Interface data to wait for before computing (users: kinematics, providers: forces);
+    /// `None`: compute with what the node has.
+    pub input: Option<Label>,
+    /// Label of the interface data to publish at the end of the window (users: forces,
+    /// providers: kinematics); `None`: publish nothing.
+    pub output: Option<Label>,
+    /// Solve to equilibrium under the inputs instead of a time step (one-way coupling).
     pub static_solve: bool,
 }
 
@@ -190,15 +249,16 @@ pub struct AdvanceWindow {
 #[serde(tag = "type", rename_all = "snake_case")]
 pub enum CommandBody {
     Init(Init),
-    /// Publish the node's current interface output without stepping, labelled `window`
-    /// (FEM: kinematics, e.g. the initial state before window 0 of just-in-time; DEM: forces,
-    /// e.g. the settled forces of one-way coupling).
-    Publish {
-        window: u64,
-        /// DEM: publish the mean of the last window's substep forces (Ullrich (3.8)).
-        force_averaging: bool,
-    },
+    /// Publish the node's current interface output without stepping, labelled `label`
+    /// (providers: their state, e.g. the initial state before window 0 of just-in-time; users:
+    /// their forces of the last window, averaged when the interface says so).
+    Publish { label: Label },
     AdvanceWindow(AdvanceWindow),
+    /// Keep the current state in memory as the start of window `window` (implicit schemes
+    /// repeat a window from here). No reply.
+    Checkpoint { window: u64 },
+    /// Put the state of the last `checkpoint` back (it must be of window `window`). No reply.
+    Rollback { window: u64 },
     /// Write the full state to `path` (atomically), reply `snapshot_done`.
     Snapshot {
         window: u64,
@@ -303,32 +363,38 @@ pub struct InterfaceMesh {
     pub triangles: Vec<u32>,
 }
 
-/// Interface kinematics for window k, FEM → DEM: positions P, velocities V, accelerations A
-/// of the interface nodes at time `time` (node-major xyz).
+/// Interface kinematics, provider → users: the provider's positions P, velocities V and
+/// accelerations A of the interface nodes at time `time` (node-major xyz), labelled with the
+/// window (and iteration) whose users read them. How a user moves its mesh from them is the
+/// window's [`MotionRule`] ([`crate::motion`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct InterfaceKinematics {
     pub version: u32,
     pub run_id: String,
     pub interface: String,
     pub window: u64,
+    pub iteration: u32,
     pub time: f64,
     pub positions: F64Array,
     pub velocities: F64Array,
     pub accelerations: F64Array,
 }
 
-/// Interface forces for window k, DEM → FEM: forces exerted by the particles on the interface
-/// nodes (N, node-major xyz), the last substep's or the mean over the window's substeps.
+/// Interface forces, user → provider: forces exerted by the user (the particles) on the
+/// interface nodes (N, node-major xyz), the last substep's or the mean over the window's
+/// `samples` substeps.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct InterfaceForces {
     pub version: u32,
     pub run_id: String,
     pub interface: String,
     pub window: u64,
+    pub iteration: u32,
     pub time: f64,
     pub forces: F64Array,
     pub averaged: bool,
-    pub substeps: u32,
+    /// Substeps the forces are the mean of (1 when not averaged).
+    pub samples: u32,
 }
 
 impl Command {
@@ -446,14 +512,21 @@ impl InterfaceMesh {
 }
 
 impl InterfaceKinematics {
-    /// Sizes agree with a mesh of `nodes` nodes, values finite, window as expected.
-    pub fn validate(&self, nodes: usize, expected_window: u64) -> Result<(), ProtoError> {
+    pub fn label(&self) -> Label {
+        Label {
+            window: self.window,
+            iteration: self.iteration,
+        }
+    }
+
+    /// Sizes agree with a mesh of `nodes` nodes, values finite, label as expected.
+    pub fn validate(&self, nodes: usize, expected: Label) -> Result<(), ProtoError> {
         const W: &str = "interface kinematics";
-        if self.window != expected_window {
+        if self.label() != expected {
             return Err(ProtoError::WrongWindow {
                 what: W,
-                got: self.window,
-                expected: expected_window,
+                got: self.label(),
+                expected,
             });
         }
         check_time(W, self.time)?;
@@ -475,14 +548,21 @@ impl InterfaceKinematics {
 }
 
 impl InterfaceForces {
-    /// Sizes agree with a mesh of `nodes` nodes, values finite, window as expected.
-    pub fn validate(&self, nodes: usize, expected_window: u64) -> Result<(), ProtoError> {
+    pub fn label(&self) -> Label {
+        Label {
+            window: self.window,
+            iteration: self.iteration,
+        }
+    }
+
+    /// Sizes agree with a mesh of `nodes` nodes, values finite, label as expected.
+    pub fn validate(&self, nodes: usize, expected: Label) -> Result<(), ProtoError> {
         const W: &str = "interface forces";
-        if self.window != expected_window {
+        if self.label() != expected {
             return Err(ProtoError::WrongWindow {
                 what: W,
-                got: self.window,
-                expected: expected_window,
+                got: self.label(),
+                expected,
             });
         }
         check_time(W, self.time)?;

@@ -1,5 +1,6 @@
-//! The node loop shared by every Rust node: a solver implements [`Solver`] (six methods) and
-//! calls [`serve`]; commands, status, errors, snapshots and shutdown are handled here.
+//! The node loop shared by every Rust node: a solver implements [`Solver`] and calls
+//! [`serve`]; commands, status, errors, snapshots, window checkpoints and shutdown are handled
+//! here.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -83,18 +84,26 @@ pub trait Solver {
         p: &mut Participant,
         w: &AdvanceWindow,
     ) -> Result<WindowReport, NodeError>;
-    /// Publishes the current interface output labelled `window`, without stepping (DEM:
-    /// the mean of the last window's substep forces when `force_averaging`).
-    async fn publish(
-        &mut self,
-        p: &mut Participant,
-        window: u64,
-        force_averaging: bool,
-    ) -> Result<(), NodeError>;
+    /// Publishes the current interface output labelled `label`, without stepping (providers:
+    /// their state; users: their forces of the last window, averaged where the interface says
+    /// so).
+    async fn publish(&mut self, p: &mut Participant, label: Label) -> Result<(), NodeError>;
+    /// The full state, for checkpoint files (the coupling memory of the participant is added
+    /// by the loop).
     fn snapshot(&self) -> Result<Vec<u8>, NodeError>;
     /// Puts the state of a snapshot back. The loop then cuts the node's CSV time series back
     /// to the restored time ([`Solver::time_series`]).
     fn restore(&mut self, bytes: &[u8]) -> Result<(), NodeError>;
+    /// Keeps the state in memory as the start of a window an implicit scheme may repeat
+    /// (`checkpoint` command). The default keeps a [`Solver::snapshot`]; a solver with a
+    /// cheaper copy overrides this and [`Solver::rollback`] together.
+    fn checkpoint(&mut self) -> Result<Vec<u8>, NodeError> {
+        self.snapshot()
+    }
+    /// Puts back the state [`Solver::checkpoint`] kept (`rollback` command).
+    fn rollback(&mut self, kept: &[u8]) -> Result<(), NodeError> {
+        self.restore(kept)
+    }
     /// The folder of the node's CSV time series and the simulation time they have reached
     /// (`None`: the node writes none).
     fn time_series(&self) -> Option<(&Path, f64)> {
@@ -150,6 +159,41 @@ pub fn truncate_time_series_after(dir: &Path, t: f64) -> std::io::Result<Vec<Pat
     Ok(shortened)
 }
 
+/// First bytes of a Rust node's snapshot file: the participant's coupling memory, then the
+/// solver's own state.
+const SNAPSHOT_MAGIC: &[u8] = b"cosim-node-state v2\n";
+
+/// A node's snapshot file: [`SNAPSHOT_MAGIC`], the coupling memory's length (u64 LE), the
+/// coupling memory, the solver's bytes.
+pub fn pack_snapshot(coupling: &[u8], solver: &[u8]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(SNAPSHOT_MAGIC.len() + 8 + coupling.len() + solver.len());
+    out.extend_from_slice(SNAPSHOT_MAGIC);
+    out.extend_from_slice(&(coupling.len() as u64).to_le_bytes());
+    out.extend_from_slice(coupling);
+    out.extend_from_slice(solver);
+    out
+}
+
+/// The two parts of a [`pack_snapshot`] file, or an error naming what is wrong with it.
+pub fn unpack_snapshot(bytes: &[u8]) -> Result<(&[u8], &[u8]), String> {
+    let rest = bytes.strip_prefix(SNAPSHOT_MAGIC).ok_or_else(|| {
+        "not a node snapshot of protocol version 2 (an older cosim wrote it, or it is not a snapshot)"
+            .to_string()
+    })?;
+    if rest.len() < 8 {
+        return Err("the snapshot is cut short".into());
+    }
+    let (len, rest) = rest.split_at(8);
+    let len = u64::from_le_bytes(len.try_into().expect("8 bytes")) as usize;
+    if rest.len() < len {
+        return Err(format!(
+            "the snapshot is cut short: its coupling part says {len} bytes, {} remain",
+            rest.len()
+        ));
+    }
+    Ok(rest.split_at(len))
+}
+
 /// Writes `bytes` to `path` atomically (temporary file, fsync, rename).
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     use std::io::Write;
@@ -172,6 +216,8 @@ pub async fn serve<S: Solver>(
 ) -> Result<(), NodeError> {
     let mut p = Participant::connect(&args.link(), &args.run_id, &args.node, hello).await?;
     let mut window: Option<u64> = None;
+    // the state at the start of the window an implicit scheme may repeat
+    let mut kept: Option<(u64, Vec<u8>, Vec<u8>)> = None;
     let mut compute_s = 0.0;
     let mut wait_s = 0.0;
     let result: Result<(), NodeError> = async {
@@ -202,12 +248,32 @@ pub async fn serve<S: Solver>(
                     })
                     .await?;
                 }
-                CommandBody::Publish {
-                    window: k,
-                    force_averaging,
-                } => solver.publish(&mut p, k, force_averaging).await?,
+                CommandBody::Publish { label } => solver.publish(&mut p, label).await?,
+                CommandBody::Checkpoint { window: k } => {
+                    kept = Some((k, p.coupling_state(), solver.checkpoint()?));
+                }
+                CommandBody::Rollback { window: k } => {
+                    let (coupling, state) = match &kept {
+                        Some((w, c, s)) if *w == k => (c, s),
+                        Some((w, ..)) => {
+                            return Err(NodeError::new(
+                                ErrorCode::Protocol,
+                                format!("`rollback` to window {k}, but the checkpoint kept is of window {w}"),
+                            ))
+                        }
+                        None => {
+                            return Err(NodeError::new(
+                                ErrorCode::Protocol,
+                                format!("`rollback` to window {k} without a `checkpoint` before it"),
+                            ))
+                        }
+                    };
+                    p.set_coupling_state(coupling)?;
+                    solver.rollback(state)?;
+                    truncate_outputs(&solver)?;
+                }
                 CommandBody::Snapshot { window: k, path } => {
-                    let bytes = solver.snapshot()?;
+                    let bytes = pack_snapshot(&p.coupling_state(), &solver.snapshot()?);
                     write_atomically(Path::new(&path), &bytes).map_err(|e| {
                         NodeError::new(ErrorCode::Io, format!("writing snapshot {path}: {e}"))
                     })?;
@@ -218,16 +284,13 @@ pub async fn serve<S: Solver>(
                     let bytes = std::fs::read(&path).map_err(|e| {
                         NodeError::new(ErrorCode::Io, format!("reading snapshot {path}: {e}"))
                     })?;
-                    solver.restore(&bytes)?;
+                    let (coupling, state) = unpack_snapshot(&bytes).map_err(|e| {
+                        NodeError::new(ErrorCode::Io, format!("snapshot {path}: {e}"))
+                    })?;
+                    p.set_coupling_state(coupling)?;
+                    solver.restore(state)?;
                     // rows the interrupted run wrote after the checkpoint would appear twice
-                    if let Some((dir, t)) = solver.time_series() {
-                        truncate_time_series_after(dir, t).map_err(|e| {
-                            NodeError::new(
-                                ErrorCode::Io,
-                                format!("shortening the time series in {}: {e}", dir.display()),
-                            )
-                        })?;
-                    }
+                    truncate_outputs(&solver)?;
                     p.report(StatusBody::Restored { window: k }).await?;
                 }
                 CommandBody::Stop { reason } => {
@@ -275,6 +338,19 @@ pub async fn serve<S: Solver>(
             Err(e)
         }
     }
+}
+
+/// After a restore or rollback: the node's CSV time series lose the rows after its time.
+fn truncate_outputs<S: Solver>(solver: &S) -> Result<(), NodeError> {
+    if let Some((dir, t)) = solver.time_series() {
+        truncate_time_series_after(dir, t).map_err(|e| {
+            NodeError::new(
+                ErrorCode::Io,
+                format!("shortening the time series in {}: {e}", dir.display()),
+            )
+        })?;
+    }
+    Ok(())
 }
 
 /// Makes a panic print one line on stderr instead of the default message and backtrace hint:
@@ -455,21 +531,27 @@ impl Init {
             .unwrap_or(Path::new("."))
     }
 
-    /// Reads this node's table of the scene (`[dem]`, `[fem]`, …) with the engine's parser;
-    /// errors name the scene file (the parser gives line, column and field).
+    /// Reads this node's table of the scene ([`Init::table`]: `[dem]`, `[fem]`, …) with the
+    /// engine's parser; errors name the scene file (the parser gives line, column and field).
     pub fn scene_table<T, E: std::fmt::Display>(
         &self,
-        table: &str,
-        parse: impl FnOnce(&str) -> Result<Option<T>, E>,
+        parse: impl FnOnce(&str, &str) -> Result<Option<T>, E>,
     ) -> Result<T, NodeError> {
-        parse(&self.scene_toml)
+        parse(&self.scene_toml, &self.table)
             .map_err(|e| NodeError::new(ErrorCode::Scene, format!("{}: {e}", self.scene_path)))?
             .ok_or_else(|| {
                 NodeError::new(
                     ErrorCode::Scene,
-                    format!("{}: the scene has no [{table}] table", self.scene_path),
+                    format!("{}: the scene has no [{}] table", self.scene_path, self.table),
                 )
             })
+    }
+
+    /// The interfaces of the run this node takes part in.
+    pub fn interfaces_of<'a>(&'a self, node: &'a str) -> impl Iterator<Item = &'a InterfaceDecl> + 'a {
+        self.interfaces
+            .iter()
+            .filter(move |i| i.provider == node || i.users.iter().any(|u| u == node))
     }
 
     /// This node's output folder `<out_dir>/<node>`, created.
@@ -485,6 +567,16 @@ impl Init {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn snapshots_pack_and_unpack_and_foreign_files_are_named() {
+        let packed = pack_snapshot(b"abc", b"state bytes");
+        assert_eq!(unpack_snapshot(&packed).unwrap(), (&b"abc"[..], &b"state bytes"[..]));
+        let e = unpack_snapshot(b"DEM1 old snapshot").unwrap_err();
+        assert!(e.contains("protocol version 2"), "{e}");
+        let e = unpack_snapshot(&packed[..SNAPSHOT_MAGIC.len() + 9]).unwrap_err();
+        assert!(e.contains("cut short"), "{e}");
+    }
 
     #[test]
     fn time_series_lose_the_rows_after_the_restored_time_and_nothing_else() {

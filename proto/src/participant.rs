@@ -55,6 +55,8 @@ pub fn command_name(c: &CommandBody) -> &'static str {
         CommandBody::Init(_) => "init",
         CommandBody::Publish { .. } => "publish",
         CommandBody::AdvanceWindow(_) => "advance_window",
+        CommandBody::Checkpoint { .. } => "checkpoint",
+        CommandBody::Rollback { .. } => "rollback",
         CommandBody::Snapshot { .. } => "snapshot",
         CommandBody::Restore { .. } => "restore",
         CommandBody::Stop { .. } => "stop",
@@ -79,6 +81,18 @@ pub struct Participant {
     /// Repeated until the first command arrives: a coordinator that started after this node
     /// (another machine) did not hear the first one.
     hello: Option<Hello>,
+    /// Per used interface: the provider's last end position (start of the next predictive
+    /// motion).
+    motion_start: std::collections::BTreeMap<String, Vec<f64>>,
+}
+
+/// A node's part in an interface.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Side {
+    /// Owns the mesh, publishes kinematics, reads forces (a FEM node).
+    Provider,
+    /// Reads kinematics, moves the mesh, publishes forces (a DEM node).
+    User,
 }
 
 impl Participant {
@@ -128,6 +142,7 @@ impl Participant {
             subscribers: HashMap::new(),
             queryables: Vec::new(),
             hello: None,
+            motion_start: Default::default(),
         };
         p.report(StatusBody::Hello(hello.clone())).await?;
         p.hello = Some(hello);
@@ -228,18 +243,37 @@ impl Participant {
         .await
     }
 
-    /// Declares what this node exchanges on each interface: it subscribes to what it reads
-    /// and declares publishers for what it writes. Call before reporting `ready`.
+    /// Declares what this node exchanges on the interfaces of the run that name it: as a
+    /// provider it subscribes to the forces and publishes kinematics, as a user the other way
+    /// round. Returns the interfaces this node takes part in, in the order given. Call before
+    /// reporting `ready`.
     pub async fn open_interfaces(
         &mut self,
-        role: Role,
-        interfaces: &[String],
-    ) -> Result<(), ProtoError> {
-        for name in interfaces {
+        interfaces: &[InterfaceDecl],
+    ) -> Result<Vec<(InterfaceDecl, Side)>, ProtoError> {
+        let mut mine = Vec::new();
+        for decl in interfaces {
+            let name = &decl.name;
             validate_name("interface", name)?;
-            let (read, write) = match role {
-                Role::Dem => (self.keys.kinematics(name), self.keys.forces(name)),
-                Role::Fem => (self.keys.forces(name), self.keys.kinematics(name)),
+            let side = if decl.provider == self.node {
+                Side::Provider
+            } else if decl.users.iter().any(|u| u == &self.node) {
+                Side::User
+            } else {
+                continue;
+            };
+            if decl.kind != InterfaceKind::Surface {
+                return Err(ProtoError::Invalid {
+                    what: "init",
+                    reason: format!(
+                        "interface `{name}` is a {:?} interface; node `{}` couples surfaces only",
+                        decl.kind, self.node
+                    ),
+                });
+            }
+            let (read, write) = match side {
+                Side::User => (self.keys.kinematics(name), self.keys.forces(name)),
+                Side::Provider => (self.keys.forces(name), self.keys.kinematics(name)),
             };
             let sub = self
                 .session
@@ -250,8 +284,9 @@ impl Participant {
             self.subscribers.insert(read, sub);
             let publisher = declare_data_publisher(&self.session, write.clone()).await?;
             self.publishers.insert(write, publisher);
+            mine.push((decl.clone(), side));
         }
-        Ok(())
+        Ok(mine)
     }
 
     /// Waits until every data publisher has a matching subscriber (the peer node opened its
@@ -311,8 +346,9 @@ impl Participant {
         Ok(())
     }
 
-    /// DEM side: fetch the interface mesh, retrying until the FEM node serves it. A `stop`
-    /// (the FEM node failed its start) or the coordinator's departure ends the wait at once.
+    /// User side: fetch the interface mesh, retrying until its provider serves it. A `stop`
+    /// (the provider failed its start) or the coordinator's departure ends the wait at once.
+    /// The mesh's positions are where the predictive motion of the first window starts.
     pub async fn read_mesh(
         &mut self,
         interface: &str,
@@ -321,9 +357,29 @@ impl Participant {
         let what = format!("the interface mesh `{interface}`");
         let fetch = fetch_mesh(&self.session, &self.keys, interface, timeout);
         match self.unless_stopped(&what, fetch).await? {
-            Ok(mesh) => Ok(mesh),
+            Ok(mesh) => {
+                self.motion_start
+                    .insert(interface.to_string(), mesh.positions.0.clone());
+                Ok(mesh)
+            }
             Err(command) => Err(self.stopped_by(&command, &what)),
         }
+    }
+
+    /// The coupling memory of this node (each used interface's previous end position, where
+    /// the next predictive motion starts), for snapshots: a restored node moves its meshes as
+    /// the uninterrupted one would have.
+    pub fn coupling_state(&self) -> Vec<u8> {
+        rmp_serde::to_vec(&self.motion_start).expect("a map of float vectors encodes")
+    }
+
+    /// Puts back what [`Self::coupling_state`] returned.
+    pub fn set_coupling_state(&mut self, bytes: &[u8]) -> Result<(), ProtoError> {
+        self.motion_start = rmp_serde::from_slice(bytes).map_err(|e| ProtoError::Decode {
+            what: "coupling state of a snapshot",
+            reason: e.to_string(),
+        })?;
+        Ok(())
     }
 
     /// Runs `work` while watching the coordinator: `Err(command)` when a command arrives
@@ -397,36 +453,62 @@ impl Participant {
             .get(key)
             .ok_or_else(|| ProtoError::Invalid {
                 what: M::WHAT,
-                reason: format!("`{key}` was not opened by open_interfaces for this node's role"),
+                reason: format!("`{key}` was not opened by open_interfaces for this node"),
             })?;
         put(publisher, msg).await
     }
 
-    /// Waits for and validates the kinematics of `window` (DEM side).
+    /// Waits for and validates the kinematics labelled `label` (user side).
     pub async fn read_kinematics(
         &mut self,
         interface: &str,
-        window: u64,
+        label: Label,
         nodes: usize,
         timeout: Duration,
     ) -> Result<InterfaceKinematics, ProtoError> {
         let key = self.keys.kinematics(interface);
-        let k: InterfaceKinematics = self.read(&key, window, timeout).await?;
-        k.validate(nodes, window)?;
+        let k: InterfaceKinematics = self.read(&key, label, timeout).await?;
+        k.validate(nodes, label)?;
         Ok(k)
     }
 
-    /// Waits for and validates the forces of `window` (FEM side).
+    /// User side: waits for the kinematics labelled `label` and returns the mesh's motion for
+    /// a window of length `dt` under `rule` ([`crate::motion`]: the schedule's maths is done
+    /// here, not by the provider). Remembers the provider's end position for the next window.
+    pub async fn read_motion(
+        &mut self,
+        interface: &str,
+        label: Label,
+        rule: MotionRule,
+        dt: f64,
+        nodes: usize,
+        timeout: Duration,
+    ) -> Result<crate::motion::MeshMotion, ProtoError> {
+        let k = self.read_kinematics(interface, label, nodes, timeout).await?;
+        let start = self
+            .motion_start
+            .get(interface)
+            .ok_or_else(|| ProtoError::Invalid {
+                what: "interface kinematics",
+                reason: format!("interface `{interface}` was read before its mesh"),
+            })?;
+        let motion = crate::motion::mesh_motion(rule, start, &k, dt);
+        self.motion_start
+            .insert(interface.to_string(), k.positions.0);
+        Ok(motion)
+    }
+
+    /// Waits for and validates the forces labelled `label` (provider side).
     pub async fn read_forces(
         &mut self,
         interface: &str,
-        window: u64,
+        label: Label,
         nodes: usize,
         timeout: Duration,
     ) -> Result<InterfaceForces, ProtoError> {
         let key = self.keys.forces(interface);
-        let f: InterfaceForces = self.read(&key, window, timeout).await?;
-        f.validate(nodes, window)?;
+        let f: InterfaceForces = self.read(&key, label, timeout).await?;
+        f.validate(nodes, label)?;
         Ok(f)
     }
 
@@ -435,16 +517,16 @@ impl Participant {
     async fn read<M: Message>(
         &mut self,
         key: &str,
-        window: u64,
+        label: Label,
         timeout: Duration,
     ) -> Result<M, ProtoError> {
-        let what = format!("{} of window {window} on `{key}`", M::WHAT);
+        let what = format!("{} of {label} on `{key}`", M::WHAT);
         let sub = self
             .subscribers
             .get(key)
             .ok_or_else(|| ProtoError::Invalid {
                 what: M::WHAT,
-                reason: format!("`{key}` was not opened by open_interfaces for this node's role"),
+                reason: format!("`{key}` was not opened by open_interfaces for this node"),
             })?;
         let deadline = tokio::time::Instant::now() + timeout;
         let receive = async {

@@ -9,8 +9,10 @@ use clap::Parser;
 use dem::{Engine, MotionRule};
 use proto::cli::NodeArgs;
 use proto::node::{main_with, total, NodeError, Solver, Trace, WindowReport};
-use proto::participant::Participant;
-use proto::{AdvanceWindow, ErrorCode, Hello, Init, InterfaceForces, Role, PROTOCOL_VERSION};
+use proto::participant::{Participant, Side};
+use proto::{
+    AdvanceWindow, ErrorCode, Hello, Init, InterfaceForces, Label, NodeKind, PROTOCOL_VERSION,
+};
 
 #[derive(Parser)]
 #[command(
@@ -23,11 +25,13 @@ struct Args {
     node: NodeArgs,
 }
 
-/// A coupled interface: the FEM mesh as the DEM sees it.
+/// A coupled interface: the provider's mesh as the DEM sees it.
 struct Coupled {
     name: String,
     mesh: usize,
     nodes: usize,
+    /// Send the mean of the window's substep forces (Ullrich (3.8)) instead of the last.
+    force_averaging: bool,
 }
 
 struct DemNode {
@@ -35,7 +39,7 @@ struct DemNode {
     coupled: Vec<Coupled>,
     out_dir: PathBuf,
     data_timeout: std::time::Duration,
-    averaged: bool,
+    /// Substeps of the last window (the number of forces an averaged message is the mean of).
     substeps: u32,
     trace: Option<Trace>,
 }
@@ -51,8 +55,7 @@ impl DemNode {
         })
     }
 
-    async fn write_forces(&mut self, p: &mut Participant, window: u64) -> Result<(), NodeError> {
-        let averaged = self.averaged;
+    async fn write_forces(&mut self, p: &mut Participant, label: Label) -> Result<(), NodeError> {
         let substeps = self.substeps;
         let engine = self
             .engine
@@ -66,11 +69,12 @@ impl DemNode {
                 version: PROTOCOL_VERSION,
                 run_id: p.run_id().to_string(),
                 interface: c.name.clone(),
-                window,
+                window: label.window,
+                iteration: label.iteration,
                 time,
-                forces: engine.interface_forces(c.mesh, averaged).into(),
-                averaged,
-                substeps,
+                forces: engine.interface_forces(c.mesh, c.force_averaging).into(),
+                averaged: c.force_averaging,
+                samples: if c.force_averaging { substeps } else { 1 },
             })
             .collect();
         for m in &msgs {
@@ -86,14 +90,21 @@ impl Solver for DemNode {
         p: &mut Participant,
         init: &Init,
     ) -> Result<(BTreeMap<String, f64>, Vec<String>), NodeError> {
-        let cfg = init.scene_table("dem", dem::parse_scene_section)?;
+        let cfg = init.scene_table(dem::parse_scene_table)?;
         let base = init.scene_dir();
         let mut engine = Engine::from_config(&cfg, base)
             .map_err(|e| scene_error(format!("{}: {e}", init.scene_path)))?;
-        self.out_dir = init.node_out_dir("dem")?;
+        self.out_dir = init.node_out_dir(p.node())?;
         self.trace = init.trace.then(Trace::default);
-        p.open_interfaces(Role::Dem, &init.interfaces).await?;
-        for name in &init.interfaces {
+        for (decl, side) in p.open_interfaces(&init.interfaces).await? {
+            let name = &decl.name;
+            if side == Side::Provider {
+                return Err(scene_error(format!(
+                    "{}: interface `{name}` names the DEM node `{}` as its provider; a DEM node uses surface interfaces that a FEM node provides",
+                    init.scene_path,
+                    p.node()
+                )));
+            }
             let mesh = p.read_mesh(name, self.data_timeout).await?;
             let id = engine
                 .add_coupled_mesh(name, mesh.positions.as_slice(), &mesh.triangles)
@@ -102,6 +113,7 @@ impl Solver for DemNode {
                 name: name.clone(),
                 mesh: id,
                 nodes: mesh.num_nodes(),
+                force_averaging: decl.force_averaging,
             });
         }
         p.wait_for_peers(self.data_timeout).await?;
@@ -115,23 +127,33 @@ impl Solver for DemNode {
         p: &mut Participant,
         w: &AdvanceWindow,
     ) -> Result<WindowReport, NodeError> {
-        self.averaged = w.force_averaging;
-        self.substeps = w.substeps;
+        let step = self.engine()?.time_step();
+        let substeps = proto::motion::whole_substeps(w.dt, step).map_err(|ratio| {
+            NodeError::new(
+                ErrorCode::Protocol,
+                format!(
+                    "window {}: Δt^C = {} s is not a whole multiple of the DEM time step {step} s (ratio {ratio})",
+                    w.window, w.dt
+                ),
+            )
+        })?;
+        self.substeps = substeps;
         let t_wait = Instant::now();
         let rule = match w.motion {
             proto::MotionRule::Quadratic => MotionRule::Quadratic,
             proto::MotionRule::Linear | proto::MotionRule::Fixed => MotionRule::Linear,
         };
-        // Ullrich ch. 3.3: the mesh follows the FEM kinematics of this window; without new
-        // kinematics it stays where it is (which also restarts the force average).
+        // Ullrich ch. 3.3: the mesh follows the provider's kinematics of this window by the
+        // window's rule (proto::motion); without new kinematics it stays where it is (which
+        // also restarts the force average).
         let mut kinematics = Vec::new();
         for c in &self.coupled {
-            kinematics.push(match w.input_window {
-                Some(k) => {
+            kinematics.push(match w.input {
+                Some(label) => {
                     let m = p
-                        .read_kinematics(&c.name, k, c.nodes, self.data_timeout)
+                        .read_motion(&c.name, label, w.motion, w.dt, c.nodes, self.data_timeout)
                         .await?;
-                    (m.positions.0, m.velocities.0, m.accelerations.0)
+                    (m.positions, m.velocities, m.accelerations)
                 }
                 None => {
                     let pos = self
@@ -161,7 +183,7 @@ impl Solver for DemNode {
         if let Some(trace) = self.trace.as_mut() {
             // Substep by substep, recording the total force on each coupled mesh, so that
             // force averaging (Ullrich (3.8)) can be checked against what the FEM received.
-            for s in 0..w.substeps {
+            for s in 0..substeps {
                 engine.advance(1).map_err(unstable)?;
                 for c in &self.coupled {
                     let f = total(&engine.interface_forces(c.mesh, false));
@@ -186,15 +208,15 @@ impl Solver for DemNode {
                 )?;
             }
         } else {
-            engine.advance(w.substeps as usize).map_err(unstable)?;
+            engine.advance(substeps as usize).map_err(unstable)?;
         }
         engine
             .write_outputs(&out_dir)
             .map_err(|e| NodeError::new(ErrorCode::Io, e.to_string()))?;
         let t_end = engine.time();
         let monitor = BTreeMap::from([("kinetic_energy".to_string(), engine.kinetic_energy())]);
-        if let Some(k) = w.output_window {
-            self.write_forces(p, k).await?;
+        if let Some(label) = w.output {
+            self.write_forces(p, label).await?;
         }
         Ok(WindowReport {
             wait_s,
@@ -203,14 +225,8 @@ impl Solver for DemNode {
         })
     }
 
-    async fn publish(
-        &mut self,
-        p: &mut Participant,
-        window: u64,
-        force_averaging: bool,
-    ) -> Result<(), NodeError> {
-        self.averaged = force_averaging;
-        self.write_forces(p, window).await
+    async fn publish(&mut self, p: &mut Participant, label: Label) -> Result<(), NodeError> {
+        self.write_forces(p, label).await
     }
 
     fn snapshot(&self) -> Result<Vec<u8>, NodeError> {
@@ -252,7 +268,7 @@ fn main() -> std::process::ExitCode {
     proto::node::init_logging();
     let hello = Hello {
         software: format!("dem-node {}", env!("CARGO_PKG_VERSION")),
-        role: Role::Dem,
+        kind: NodeKind::Dem,
         capabilities: vec!["snapshot".into(), "force_averaging".into()],
         pid: std::process::id(),
     };
@@ -262,7 +278,6 @@ fn main() -> std::process::ExitCode {
         coupled: Vec::new(),
         out_dir: PathBuf::new(),
         data_timeout,
-        averaged: false,
         substeps: 0,
         trace: None,
     };

@@ -9,9 +9,9 @@ use clap::Parser;
 use fem::Model;
 use proto::cli::NodeArgs;
 use proto::node::{main_with, total, NodeError, Solver, Trace, WindowReport};
-use proto::participant::Participant;
+use proto::participant::{Participant, Side};
 use proto::{
-    AdvanceWindow, ErrorCode, Hello, Init, InterfaceKinematics, InterfaceMesh, MotionRule, Role,
+    AdvanceWindow, ErrorCode, Hello, Init, InterfaceKinematics, InterfaceMesh, Label, NodeKind,
     PROTOCOL_VERSION,
 };
 
@@ -143,10 +143,12 @@ impl FemNode {
         })
     }
 
+    /// Publishes the interface's state (P, V, A at `time`) labelled `label`. How the users move
+    /// their meshes from it is the schedule's business (proto::motion), not this node's.
     async fn write_kinematics(
         &self,
         p: &Participant,
-        window: u64,
+        label: Label,
         time: f64,
         (positions, velocities, accelerations): (Vec<f64>, Vec<f64>, Vec<f64>),
     ) -> Result<(), NodeError> {
@@ -157,7 +159,8 @@ impl FemNode {
             version: PROTOCOL_VERSION,
             run_id: p.run_id().to_string(),
             interface: name.clone(),
-            window,
+            window: label.window,
+            iteration: label.iteration,
             time,
             positions: positions.into(),
             velocities: velocities.into(),
@@ -174,21 +177,35 @@ impl Solver for FemNode {
         p: &mut Participant,
         init: &Init,
     ) -> Result<(BTreeMap<String, f64>, Vec<String>), NodeError> {
-        let cfg = init.scene_table("fem", fem::parse_scene_section)?;
+        let cfg = init.scene_table(fem::parse_scene_table)?;
         let base = init.scene_dir();
         let mut model = Model::from_config(&cfg, base)
             .map_err(|e| scene_error(format!("{}: {e}", init.scene_path)))?;
         self.config = Some((cfg.clone(), base.to_path_buf()));
-        self.out_dir = init.node_out_dir("fem")?;
+        self.out_dir = init.node_out_dir(p.node())?;
         self.trace = init.trace.then(Trace::default);
-        if init.interfaces.len() > 1 {
+        let mine: Vec<_> = init.interfaces_of(p.node()).collect();
+        if mine.len() > 1 {
             return Err(scene_error(format!(
-                "coupling.interfaces lists {} interfaces; the FEM node couples one surface",
-                init.interfaces.len()
+                "{}: coupling.interfaces gives node `{}` {} interfaces ({}); a FEM node provides one surface (give each structure its own node)",
+                init.scene_path,
+                p.node(),
+                mine.len(),
+                mine.iter().map(|i| format!("`{}`", i.name)).collect::<Vec<_>>().join(", ")
             )));
         }
-        p.open_interfaces(Role::Fem, &init.interfaces).await?;
-        if let Some(name) = init.interfaces.first() {
+        let opened = p.open_interfaces(&init.interfaces).await?;
+        if let Some((decl, side)) = opened.first() {
+            if *side != Side::Provider {
+                return Err(scene_error(format!(
+                    "{}: interface `{}` names the FEM node `{}` as a user; a FEM node provides its surface (set provider = \"{}\")",
+                    init.scene_path,
+                    decl.name,
+                    p.node(),
+                    p.node()
+                )));
+            }
+            let name = &decl.name;
             let m = model.interface_mesh();
             let mesh = InterfaceMesh {
                 version: PROTOCOL_VERSION,
@@ -216,10 +233,10 @@ impl Solver for FemNode {
         w: &AdvanceWindow,
     ) -> Result<WindowReport, NodeError> {
         let t_wait = Instant::now();
-        let forces = match (w.input_window, &self.interface) {
-            (Some(k), Some((name, nodes))) => {
+        let forces = match (w.input, &self.interface) {
+            (Some(label), Some((name, nodes))) => {
                 let (name, nodes) = (name.clone(), *nodes);
-                Some(p.read_forces(&name, k, nodes, self.data_timeout).await?)
+                Some(p.read_forces(&name, label, nodes, self.data_timeout).await?)
             }
             _ => None,
         };
@@ -243,7 +260,6 @@ impl Solver for FemNode {
                 .set_interface_forces(f.forces.as_slice())
                 .map_err(|e| fem_error(ErrorCode::Protocol, e))?;
         }
-        let start_positions = model.interface_kinematics().0;
         if w.static_solve {
             model
                 .solve_static()
@@ -280,27 +296,9 @@ impl Solver for FemNode {
                 .map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt())
                 .fold(0.0, f64::max),
         )]);
-        if let Some(k) = w.output_window {
-            let kin = match w.motion {
-                // Ullrich (3.4)–(3.7): predictive velocity V = (P_{i+1} − P_i)/Δt^F, A = 0, so
-                // that the DEM mesh, moving x = P_i + Vτ, lands on the FEM's end position.
-                MotionRule::Linear => {
-                    let v: Vec<f64> = pos
-                        .iter()
-                        .zip(&start_positions)
-                        .map(|(e, s)| (e - s) / w.dt)
-                        .collect();
-                    let zeros = vec![0.0; v.len()];
-                    (start_positions, v, zeros)
-                }
-                MotionRule::Quadratic | MotionRule::Fixed => (pos, vel, acc),
-            };
-            let time = if w.motion == MotionRule::Linear {
-                w.t_start
-            } else {
-                t_end
-            };
-            self.write_kinematics(p, k, time, kin).await?;
+        if let Some(label) = w.output {
+            self.write_kinematics(p, label, t_end, (pos, vel, acc))
+                .await?;
         }
         Ok(WindowReport {
             wait_s,
@@ -309,16 +307,11 @@ impl Solver for FemNode {
         })
     }
 
-    async fn publish(
-        &mut self,
-        p: &mut Participant,
-        window: u64,
-        _force_averaging: bool,
-    ) -> Result<(), NodeError> {
+    async fn publish(&mut self, p: &mut Participant, label: Label) -> Result<(), NodeError> {
         let model = self.model()?;
         let time = model.time();
         let kin = model.interface_kinematics();
-        self.write_kinematics(p, window, time, kin).await
+        self.write_kinematics(p, label, time, kin).await
     }
 
     fn snapshot(&self) -> Result<Vec<u8>, NodeError> {
@@ -364,7 +357,7 @@ fn main() -> std::process::ExitCode {
     proto::node::init_logging();
     let hello = Hello {
         software: format!("fem-node {}", env!("CARGO_PKG_VERSION")),
-        role: Role::Fem,
+        kind: NodeKind::Fem,
         capabilities: vec!["snapshot".into(), "static".into(), "dynamic".into()],
         pid: std::process::id(),
     };
