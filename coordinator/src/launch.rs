@@ -4,14 +4,14 @@ use std::path::{Path, PathBuf};
 use std::process::Stdio;
 
 use anyhow::{bail, Context};
-use proto::Role;
+use proto::NodeKind;
 
 use crate::scene::NodeLaunch;
 
 /// A node the coordinator started (or waits for, when it is external).
 pub struct NodeProcess {
     pub name: String,
-    pub role: Role,
+    pub kind: NodeKind,
     pub child: Option<tokio::process::Child>,
     pub log: Option<PathBuf>,
     pub listen: Vec<String>,
@@ -28,10 +28,12 @@ pub fn bin_dir() -> anyhow::Result<PathBuf> {
 }
 
 impl NodeProcess {
-    /// Starts `role`'s node: the scene's command if it gives one, else the built-in binary.
-    /// Output goes to `<log_dir>/<name>.log`.
+    /// Starts node `name` of `kind`: the scene's command if it gives one, else the built-in
+    /// binary of its kind. Output goes to `<log_dir>/<name>.log`.
+    #[allow(clippy::too_many_arguments)]
     pub fn spawn(
-        role: Role,
+        kind: NodeKind,
+        name: &str,
         launch: Option<&NodeLaunch>,
         run_id: &str,
         listen: Vec<String>,
@@ -39,10 +41,10 @@ impl NodeProcess {
         log_dir: &Path,
         scene_dir: &Path,
     ) -> anyhow::Result<NodeProcess> {
-        let name = role.to_string();
+        let name = name.to_string();
         let mut node = NodeProcess {
             name: name.clone(),
-            role,
+            kind,
             child: None,
             log: None,
             listen,
@@ -57,10 +59,10 @@ impl NodeProcess {
             Some(cmd) if !cmd.is_empty() => (PathBuf::from(&cmd[0]), cmd[1..].to_vec()),
             Some(_) => bail!("nodes.{name}.command is empty"),
             None => {
-                let exe = bin_dir()?.join(format!("{name}-node{}", std::env::consts::EXE_SUFFIX));
+                let exe = bin_dir()?.join(format!("{kind}-node{}", std::env::consts::EXE_SUFFIX));
                 if !exe.exists() {
                     bail!(
-                        "the {name} node binary {} does not exist: build it with `cargo build --release` or set COSIM_BIN_DIR",
+                        "the {kind} node binary {} does not exist: build it with `cargo build --release` or set COSIM_BIN_DIR",
                         exe.display()
                     );
                 }

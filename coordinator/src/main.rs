@@ -46,9 +46,9 @@ enum Command {
         /// Local runs: the coordinator's endpoint (default tcp/127.0.0.1:<free port>).
         #[arg(long)]
         listen: Option<String>,
-        /// A node (`dem` or `fem`) that is started elsewhere; the coordinator waits for it
-        /// (repeatable).
-        #[arg(long, value_parser = ["dem", "fem"])]
+        /// A node (by id: `dem`, `fem`, or a structure's id) that is started elsewhere; the
+        /// coordinator waits for it (repeatable).
+        #[arg(long)]
         external: Vec<String>,
         /// No progress bar.
         #[arg(long)]
@@ -158,9 +158,12 @@ fn report(scene: &Scene, s: &coordinator::run::Summary, out_dir: &std::path::Pat
         Err(e) => tracing::warn!("no plots: {e:#}"),
     }
     // the last line says where to look
-    let pvd: Vec<String> = ["dem", "fem"]
-        .iter()
-        .filter_map(|node| std::fs::read_dir(out_dir.join(node)).ok())
+    let pvd: Vec<String> = std::fs::read_dir(out_dir)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter(|e| e.path().is_dir() && e.file_name() != "checkpoints")
+        .filter_map(|e| std::fs::read_dir(e.path()).ok())
         .flat_map(|d| d.flatten().map(|e| e.path()))
         .filter(|p| p.extension().is_some_and(|x| x == "pvd"))
         .map(|p| p.display().to_string())

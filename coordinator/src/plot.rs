@@ -346,25 +346,41 @@ fn ylabel_of(key: &str) -> String {
     }
 }
 
-/// After a run: PNGs of the nodes' time series in `<out>/plots/`. `fem/fem_probes.csv`
-/// gives one plot per probe (ux, uy, uz) and per strain gauge (its three strain measures),
-/// `dem/dem_sensors.csv` one plot per sensor (their units differ), `dem/dem_timeseries.csv`
-/// the particles' kinetic energy and each loaded wall's displacement, velocity and contact
-/// force. Returns the files written.
+/// After a run: PNGs of the nodes' time series in `<out>/plots/`. A FEM node's
+/// `fem_probes.csv` gives one plot per probe (ux, uy, uz) and per strain gauge (its three strain
+/// measures), the DEM's `dem_sensors.csv` one plot per sensor (their units differ),
+/// `dem_timeseries.csv` the particles' kinetic energy and each loaded wall's displacement,
+/// velocity and contact force. Every node folder `<out>/<node>/` is looked at; the plots of a
+/// node other than `dem` and `fem` (one of several structures) are named after it. Returns the
+/// files written.
 pub fn run_plots(out_dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
     let mut written = Vec::new();
     let dir = out_dir.join("plots");
-    for (csv, layout) in [
-        (out_dir.join("fem").join("fem_probes.csv"), Layout::Grouped),
-        (
-            out_dir.join("dem").join("dem_sensors.csv"),
-            Layout::EachColumn,
-        ),
-        (
-            out_dir.join("dem").join("dem_timeseries.csv"),
-            Layout::DemTimeSeries,
-        ),
-    ] {
+    let mut nodes: Vec<String> = std::fs::read_dir(out_dir)
+        .map(|d| {
+            d.flatten()
+                .filter(|e| e.path().is_dir())
+                .filter_map(|e| e.file_name().to_str().map(String::from))
+                .collect()
+        })
+        .unwrap_or_default();
+    nodes.sort();
+    let mut sources = Vec::new();
+    for node in &nodes {
+        let prefix = if node == "dem" || node == "fem" {
+            String::new()
+        } else {
+            format!("{node}.")
+        };
+        for (file, layout) in [
+            ("fem_probes.csv", Layout::Grouped),
+            ("dem_sensors.csv", Layout::EachColumn),
+            ("dem_timeseries.csv", Layout::DemTimeSeries),
+        ] {
+            sources.push((out_dir.join(node).join(file), layout, prefix.clone()));
+        }
+    }
+    for (csv, layout, prefix) in sources {
         if !csv.exists() {
             continue;
         }
@@ -396,7 +412,7 @@ pub fn run_plots(out_dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
             if series.iter().all(|(_, p)| p.is_empty()) {
                 continue;
             }
-            let file = dir.join(format!("{key}.png"));
+            let file = dir.join(format!("{prefix}{key}.png"));
             let source = csv
                 .strip_prefix(out_dir)
                 .unwrap_or(&csv)

@@ -8,12 +8,12 @@ use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, bail, Context};
 use proto::participant::{CoordinatorLink, Event, Monitor};
-use proto::{CommandBody, Init, LinkConfig, LinkMode, Role, StatusBody};
+use proto::{CommandBody, Init, LinkConfig, LinkMode, NodeKind, StatusBody};
 use serde::{Deserialize, Serialize};
 
 use crate::launch::NodeProcess;
 use crate::scene::{Scene, ScheduleKind};
-use crate::schedule::{substeps, Action, Scheduler, SchedulerConfig};
+use crate::schedule::{substeps, Action, Scheduler, SchedulerConfig, Topology};
 use crate::stability::StabilityMonitor;
 
 /// How to run.
@@ -79,8 +79,10 @@ pub struct Timing {
     pub windows_wall_s: f64,
     pub shutdown_s: f64,
     pub dem_compute_s: f64,
+    /// Sum over the FEM nodes.
     pub fem_compute_s: f64,
-    /// Windows wall time − DEM compute − FEM compute: transport, waiting, coordinator.
+    /// Windows wall time − DEM compute − the slowest FEM node's compute (the FEM nodes of
+    /// several structures compute at the same time): transport, waiting, coordinator.
     pub coupling_overhead_s: f64,
     pub coupling_overhead_fraction: f64,
 }
@@ -127,14 +129,6 @@ fn make_run_id(name: &str) -> String {
     format!("{base}-{tag:06x}")
 }
 
-fn role_of(node: &str) -> Option<Role> {
-    match node {
-        "dem" => Some(Role::Dem),
-        "fem" => Some(Role::Fem),
-        _ => None,
-    }
-}
-
 struct Run<'a> {
     scene: &'a Scene,
     link: CoordinatorLink,
@@ -145,6 +139,9 @@ struct Run<'a> {
     gone: BTreeMap<String, (Instant, String)>,
     /// Nodes that reported `stopped` (they may leave).
     stopped: std::collections::BTreeSet<String>,
+    /// Nodes whose `hello` was accepted: a status of another protocol version from one of
+    /// them afterwards is not theirs (a stray or hostile sender) and is only logged.
+    greeted: std::collections::BTreeSet<String>,
     /// When the windows (of this process) began, and the windows' wall time of the run
     /// before a resume.
     windows_started: Instant,
@@ -162,6 +159,15 @@ struct Run<'a> {
 }
 
 impl Run<'_> {
+    /// The kind the scene gives node `name`.
+    fn kind_of(&self, name: &str) -> Option<NodeKind> {
+        self.scene
+            .nodes
+            .iter()
+            .find(|n| n.id == name)
+            .map(|n| n.kind)
+    }
+
     fn node_mut(&mut self, name: &str) -> Option<&mut NodeProcess> {
         self.nodes.iter_mut().find(|n| n.name == name)
     }
@@ -266,6 +272,23 @@ impl Run<'_> {
                     }
                     return Ok(Event::Status(st));
                 }
+                Ok(Event::WrongVersion {
+                    node: Some(node),
+                    got,
+                    expected,
+                }) if self.nodes.iter().any(|n| n.name == node)
+                    && !self.greeted.contains(&node) =>
+                {
+                    bail!(
+                        "node `{node}` speaks protocol version {got}; this coordinator speaks version {expected} (proto/PROTOCOL.md §9 lists the changes): update the node"
+                    );
+                }
+                Ok(Event::WrongVersion { node, got, expected }) => {
+                    tracing::warn!(
+                        "refused a status message of node `{}`: it speaks protocol version {got}, this coordinator speaks version {expected}",
+                        node.unwrap_or_default()
+                    );
+                }
                 Ok(Event::Rejected { key, error }) => {
                     tracing::warn!("refused a message on `{key}`: {error}");
                 }
@@ -292,11 +315,21 @@ impl Run<'_> {
             let what = format!("hello from {}", waiting.join(", "));
             if let Event::Status(st) = self.next(deadline, &what, None).await? {
                 if let StatusBody::Hello(h) = &st.body {
-                    let expected = role_of(&st.node);
-                    if expected != Some(h.role) {
-                        bail!("node `{}` says it is a {} node", st.node, h.role);
+                    match self.kind_of(&st.node) {
+                        Some(k) if k == h.kind => {}
+                        Some(k) => bail!(
+                            "node `{}` says it is a {} node; the scene makes it a {k} node",
+                            st.node,
+                            h.kind
+                        ),
+                        None => bail!(
+                            "node `{}` ({} node) is not a node of the scene",
+                            st.node,
+                            h.kind
+                        ),
                     }
                     tracing::info!(node = %st.node, "hello from {} (pid {})", h.software, h.pid);
+                    self.greeted.insert(st.node.clone());
                     self.summary
                         .nodes
                         .entry(st.node.clone())
@@ -306,15 +339,20 @@ impl Run<'_> {
                 }
             }
         }
-        let init = Init {
-            scene_path: self.scene.path.display().to_string(),
-            scene_toml: self.scene.text.clone(),
-            out_dir: self.out_dir.display().to_string(),
-            interfaces: self.scene.interfaces.clone(),
-            check_only,
-            trace: self.scene.trace_interfaces,
-        };
-        self.broadcast(CommandBody::Init(init)).await?;
+        let names: Vec<String> = self.nodes.iter().map(|n| n.name.clone()).collect();
+        for name in names {
+            // every node reads the scene's table of its id
+            let init = Init {
+                scene_path: self.scene.path.display().to_string(),
+                scene_toml: self.scene.text.clone(),
+                table: name.clone(),
+                out_dir: self.out_dir.display().to_string(),
+                interfaces: self.scene.interfaces.clone(),
+                check_only,
+                trace: self.scene.trace_interfaces,
+            };
+            self.link.send(&name, CommandBody::Init(init)).await?;
+        }
         let mut waiting: Vec<String> = self.nodes.iter().map(|n| n.name.clone()).collect();
         while !waiting.is_empty() {
             let what = format!("`ready` from {}", waiting.join(", "));
@@ -338,11 +376,30 @@ impl Run<'_> {
     /// fails the run before its first window, unless `coupling.allow_beyond_limits`.
     async fn check_limits(&mut self, check_only: bool) -> anyhow::Result<()> {
         let facts = crate::limits::SceneFacts::from(self.scene);
-        let findings = crate::limits::assess(
-            &facts,
-            self.summary.nodes.get("dem").map(|n| &n.limits),
-            self.summary.nodes.get("fem").map(|n| &n.limits),
-        );
+        let dem = self
+            .scene
+            .dem_node()
+            .and_then(|d| self.summary.nodes.get(d))
+            .map(|n| &n.limits);
+        let fems: Vec<&str> = self.scene.fem_nodes().collect();
+        let mut findings = Vec::new();
+        if fems.is_empty() {
+            findings = crate::limits::assess(&facts, dem, None);
+        }
+        for (i, fem) in fems.iter().enumerate() {
+            let limits = self.summary.nodes.get(*fem).map(|n| &n.limits);
+            for mut f in crate::limits::assess(&facts, dem, limits) {
+                // the DEM's own limits once; the rest per structure when there are several
+                let dem_only = f.limit.starts_with("DEM ");
+                if dem_only && i > 0 {
+                    continue;
+                }
+                if !dem_only && fems.len() > 1 {
+                    f.limit = format!("{} (node `{fem}`)", f.limit);
+                }
+                findings.push(f);
+            }
+        }
         let mut refusals = Vec::new();
         for f in &findings {
             match f.level {
@@ -383,6 +440,37 @@ impl Run<'_> {
         self.total_wall_base + self.started.elapsed().as_secs_f64()
     }
 
+    /// n^D = Δt^C / Δt^D from the DEM node's `time_step` (1 without a DEM).
+    fn dem_substeps(&self) -> anyhow::Result<u32> {
+        let Some(dem) = self.scene.dem_node() else {
+            return Ok(1);
+        };
+        let dt = self.limit(dem, "time_step").ok_or_else(|| {
+            anyhow!("the DEM node `{dem}` did not report its `time_step` in `ready`")
+        })?;
+        substeps(self.scene.window, dt)
+            .map_err(|e| anyhow!("{}: coupling.window: {e}", self.scene.path.display()))
+    }
+
+    /// The node that publishes `kind` (`forces` or `kinematics`) data of `interface`: forces
+    /// come from its users (the DEM), kinematics from its provider.
+    fn sender_of(&self, interface: &str, kind: &str) -> String {
+        let decl = self.scene.interfaces.iter().find(|i| i.name == interface);
+        match (decl, kind) {
+            (Some(d), "kinematics") => d.provider.clone(),
+            (Some(d), _) => d.users.join(", "),
+            (None, _) => "unknown".into(),
+        }
+    }
+
+    /// [`Self::sender_of`] from a data key `cosim/<run>/iface/<name>/<kind>`.
+    fn sender_of_key(&self, key: &str) -> String {
+        let mut parts = key.rsplit('/');
+        let kind = parts.next().unwrap_or_default();
+        let interface = parts.next().unwrap_or_default();
+        self.sender_of(interface, kind)
+    }
+
     fn limit(&self, node: &str, key: &str) -> Option<f64> {
         self.summary
             .nodes
@@ -398,46 +486,54 @@ impl Run<'_> {
         resume: Option<(PathBuf, crate::checkpoint::CheckpointState)>,
     ) -> anyhow::Result<()> {
         let scene = self.scene;
-        let n_sub = if scene.has_dem {
-            let dt = self
-                .limit("dem", "time_step")
-                .ok_or_else(|| anyhow!("the DEM node did not report its `time_step` in `ready`"))?;
-            substeps(scene.window, dt)
-                .map_err(|e| anyhow!("{}: coupling.window: {e}", scene.path.display()))?
-        } else {
-            1
+        self.summary.dem_substeps = self.dem_substeps()?;
+        let topology = Topology {
+            dem: scene.dem_node().map(String::from),
+            fems: scene.fem_nodes().map(String::from).collect(),
         };
-        self.summary.dem_substeps = n_sub;
         let scheduler = Scheduler::new(SchedulerConfig {
             kind: scene.schedule,
             window: scene.window,
             windows: scene.windows,
-            substeps: n_sub,
-            force_averaging: scene.force_averaging,
-            has_dem: scene.has_dem,
-            has_fem: scene.has_fem,
+            topology,
             steady_kinetic_energy: scene.steady_kinetic_energy,
             steady_windows: scene.steady_windows,
         })
         .map_err(|e| anyhow!(e))?;
         let timeout = Duration::from_secs_f64(scene.window_timeout);
         let csv_path = self.out_dir.join("windows.csv");
-        let header =
-            "window,t_end_s,wall_s,dem_compute_s,fem_compute_s,overhead_s,dem_kinetic_energy_j";
+        // `dem_compute_s` (the DEM node's), `fem_compute_s` (the sum over the FEM nodes), and
+        // with several structures one `<node>_compute_s` column per FEM node
+        let fem_ids: Vec<String> = scene.fem_nodes().map(String::from).collect();
+        let per_structure: Vec<String> = if fem_ids.iter().any(|f| f != "fem") {
+            fem_ids.clone()
+        } else {
+            Vec::new()
+        };
+        let header = format!(
+            "window,t_end_s,wall_s,dem_compute_s,fem_compute_s,{}overhead_s,dem_kinetic_energy_j",
+            per_structure
+                .iter()
+                .map(|n| format!("{n}_compute_s,"))
+                .collect::<String>()
+        );
         let (mut scheduler, mut stability, mut actions, done_rows) = match resume {
             None => {
                 let mut scheduler = scheduler;
                 let actions = scheduler.start();
                 let mut stability = StabilityMonitor::new(scene.max_force_growth);
                 // the drift check needs the interfaces' size (their bounding-box diagonal)
-                for name in &scene.interfaces {
-                    let mesh = self.link.read_mesh(name, timeout).await?;
+                for iface in &scene.interfaces {
+                    let mesh = self.link.read_mesh(&iface.name, timeout).await?;
                     let size = crate::stability::bounding_diagonal(mesh.positions.as_slice());
                     stability.mesh_size =
                         Some(stability.mesh_size.map_or(size, |s: f64| s.min(size)));
                 }
                 if matches!(scene.schedule, ScheduleKind::Jit | ScheduleKind::Predictive) {
-                    if let Some(r) = self.limit("dem", "particle_radius_min") {
+                    if let Some(r) = scene
+                        .dem_node()
+                        .and_then(|d| self.limit(d, "particle_radius_min"))
+                    {
                         stability.step_limit = Some((scene.window, r));
                     }
                 }
@@ -490,15 +586,18 @@ impl Run<'_> {
         write!(csv, "{header}\n{done_rows}")?;
         csv.flush()?;
         let mut window_start = Instant::now();
-        let mut row: BTreeMap<&'static str, f64> = BTreeMap::new();
+        // this window's compute time per node, end time and DEM kinetic energy
+        let mut computed: BTreeMap<String, f64> = BTreeMap::new();
+        let mut row_t_end: Option<f64> = None;
+        let mut row_ke: Option<f64> = None;
         loop {
             for a in std::mem::take(&mut actions) {
                 match a {
-                    Action::Send(role, body) => self.link.send(&role.to_string(), body).await?,
+                    Action::Send(node, body) => self.link.send(&node, body).await?,
                     Action::Finish { reason } => {
                         tracing::info!("{reason}");
                         if let (Some(e), Some(limit)) = (
-                            scheduler.unsettled_kinetic_energy,
+                            scheduler.unsettled_kinetic_energy(),
                             scene.steady_kinetic_energy,
                         ) {
                             let w = format!(
@@ -518,11 +617,7 @@ impl Run<'_> {
             let k = scheduler.window();
             let what = format!(
                 "window {k} from {}",
-                scheduler
-                    .pending()
-                    .map(|r| r.to_string())
-                    .collect::<Vec<_>>()
-                    .join(", ")
+                scheduler.pending().collect::<Vec<_>>().join(", ")
             );
             let ev = self.next(Instant::now() + timeout, &what, Some(k)).await?;
             for d in monitor.drain() {
@@ -534,7 +629,7 @@ impl Run<'_> {
                         if let Some((field, index)) = d.non_finite {
                             bail!(
                                 "invalid interface data from the {} node: the {} of interface `{}` for window {} carry a non-finite value ({field}, value {index})",
-                                sender_of(d.kind),
+                                self.sender_of(&d.interface, d.kind),
                                 d.kind,
                                 d.interface,
                                 d.window
@@ -551,7 +646,7 @@ impl Run<'_> {
                     }
                     Err((key, e)) => bail!(
                         "invalid interface data from the {} node on `{key}` at window {k}: {e}",
-                        sender_of(&key)
+                        self.sender_of_key(&key)
                     ),
                 }
             }
@@ -567,26 +662,28 @@ impl Run<'_> {
                 tracing::debug!(node = %st.node, "ignoring {:?}", st.body);
                 continue;
             };
-            let role = role_of(&st.node).ok_or_else(|| anyhow!("unknown node `{}`", st.node))?;
+            let kind = self
+                .kind_of(&st.node)
+                .ok_or_else(|| anyhow!("unknown node `{}`", st.node))?;
             if let Some((name, v)) = values.iter().find(|(_, v)| !v.is_finite()) {
                 self.summary.status = "unstable".into();
-                bail!("unstable at window {window} (t = {t_end:.6e} s): the {role} node reports {name} = {v}");
+                bail!("unstable at window {window} (t = {t_end:.6e} s): node `{}` reports {name} = {v}", st.node);
             }
             let ns = self.summary.nodes.entry(st.node.clone()).or_default();
             ns.compute_s += compute_s;
             ns.wait_s += wait_s;
-            row.insert(if role == Role::Dem { "dem" } else { "fem" }, compute_s);
+            *computed.entry(st.node.clone()).or_default() += compute_s;
             // a static solve does not advance the FEM clock: the window ends at the latest time
-            let t_end = row.get("t_end").copied().unwrap_or(t_end).max(t_end);
-            row.insert("t_end", t_end);
-            if let Some(e) = values.get("kinetic_energy") {
-                row.insert("ke", *e);
-            }
-            let ke = (role == Role::Dem)
+            let t_end = row_t_end.unwrap_or(t_end).max(t_end);
+            row_t_end = Some(t_end);
+            let ke = (kind == NodeKind::Dem)
                 .then(|| values.get("kinetic_energy").copied())
                 .flatten();
+            if ke.is_some() {
+                row_ke = ke;
+            }
             actions = scheduler
-                .on_window_done(role, window, ke)
+                .on_window_done(&st.node, window, ke)
                 .map_err(|e| anyhow!(e))?;
             if scheduler.window() != window
                 || scheduler.is_done()
@@ -594,17 +691,26 @@ impl Run<'_> {
             {
                 // the window is complete
                 let wall = window_start.elapsed().as_secs_f64();
-                let dem = row.remove("dem").unwrap_or(0.0);
-                let fem = row.remove("fem").unwrap_or(0.0);
-                row.remove("t_end");
+                let of = |n: &str| computed.get(n).copied().unwrap_or(0.0);
+                let dem = scene.dem_node().map(of).unwrap_or(0.0);
+                let fem: f64 = fem_ids.iter().map(|f| of(f)).sum();
+                let mut line = format!("{window},{t_end:.9e},{wall:.6e},{dem:.6e},{fem:.6e}");
+                for n in &per_structure {
+                    line.push_str(&format!(",{:.6e}", of(n)));
+                }
+                // the FEM nodes compute at the same time: the critical path is the DEM's time
+                // plus the slowest structure's
+                let critical = dem + fem_ids.iter().map(|f| of(f)).fold(0.0f64, f64::max);
                 writeln!(
                     csv,
-                    "{window},{t_end:.9e},{wall:.6e},{dem:.6e},{fem:.6e},{:.6e},{}",
-                    (wall - dem - fem).max(0.0),
-                    row.remove("ke")
+                    "{line},{:.6e},{}",
+                    (wall - critical).max(0.0),
+                    row_ke.take()
                         .map(|e| format!("{e:.6e}"))
                         .unwrap_or_default()
                 )?;
+                computed.clear();
+                row_t_end = None;
                 csv.flush()?;
                 self.summary.windows_done = window + 1;
                 self.summary.simulated_time_s = t_end;
@@ -754,17 +860,6 @@ fn progress_bar(show: bool, windows: u64) -> indicatif::ProgressBar {
     bar
 }
 
-/// The node that publishes interface data, from its key (`.../forces`) or kind (`forces`):
-/// forces come from the DEM, kinematics from the FEM.
-fn sender_of(key_or_kind: &str) -> &'static str {
-    if key_or_kind.ends_with("forces") {
-        "dem"
-    } else if key_or_kind.ends_with("kinematics") {
-        "fem"
-    } else {
-        "unknown"
-    }
-}
 
 fn write_summary(out_dir: &Path, summary: &Summary) -> anyhow::Result<PathBuf> {
     let path = out_dir.join("summary.json");
@@ -857,14 +952,25 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
         .parent()
         .map(Path::to_path_buf)
         .unwrap_or_default();
+    if let Some(bad) = opts
+        .external
+        .iter()
+        .find(|e| !scene.nodes.iter().any(|n| &n.id == *e))
+    {
+        let ids: Vec<&str> = scene.nodes.iter().map(|n| n.id.as_str()).collect();
+        let e = anyhow!(
+            "--external {bad}: the scene has no node `{bad}` (its nodes: {})",
+            ids.join(", ")
+        );
+        summary.status = "failed".into();
+        summary.error = Some(format!("{e:#}"));
+        write_summary(&out_dir, &summary)?;
+        return Err(e);
+    }
     let mut started: Vec<String> = ports.iter().cloned().collect();
-    for (role, present, launch) in [
-        (Role::Dem, scene.has_dem, scene.nodes.dem.as_ref()),
-        (Role::Fem, scene.has_fem, scene.nodes.fem.as_ref()),
-    ] {
-        if !present {
-            continue;
-        }
+    for scene_node in &scene.nodes {
+        let (kind, id) = (scene_node.kind, scene_node.id.as_str());
+        let launch = Some(&scene_node.launch);
         let (listen, connect) = if ports.is_some() {
             let p = proto::link::free_loopback_port()?;
             (vec![format!("tcp/127.0.0.1:{p}")], started.clone())
@@ -872,16 +978,18 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
             (Vec::new(), Vec::new())
         };
         let external = crate::scene::NodeLaunch {
+            kind: None,
             command: None,
             external: true,
         };
-        let launch = if opts.external.iter().any(|n| n == &role.to_string()) {
+        let launch = if opts.external.iter().any(|n| n == id) {
             Some(&external)
         } else {
             launch
         };
         let node = match NodeProcess::spawn(
-            role,
+            kind,
+            id,
             launch,
             &run_id,
             listen.clone(),
@@ -899,7 +1007,7 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
         };
         if node.child.is_none() {
             eprintln!(
-                "waiting for the external {role} node: start it with --run-id {run_id} --node {role}{}",
+                "waiting for the external {kind} node `{id}`: start it with --run-id {run_id} --node {id}{}",
                 node.connect.iter().map(|c| format!(" --connect {c}")).collect::<String>()
             );
         }
@@ -914,6 +1022,7 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
         out_dir: out_dir.clone(),
         gone: BTreeMap::new(),
         stopped: Default::default(),
+        greeted: Default::default(),
         windows_started: Instant::now(),
         windows_wall_base: 0.0,
         started: t0,
@@ -965,11 +1074,7 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
         run.check_limits(opts.check_only).await?;
         if opts.check_only {
             if scene.has_dem {
-                let dt = run
-                    .limit("dem", "time_step")
-                    .ok_or_else(|| anyhow!("the DEM node did not report `time_step`"))?;
-                run.summary.dem_substeps = substeps(scene.window, dt)
-                    .map_err(|e| anyhow!("{}: coupling.window: {e}", scene.path.display()))?;
+                run.summary.dem_substeps = run.dem_substeps()?;
             }
             run.stop("check done", true).await?;
             run.summary.status = "checked".into();
@@ -1016,13 +1121,17 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
     }
     let total_wall = run.total_wall();
     let mut summary = run.summary;
-    let dem = summary.nodes.get("dem").map(|n| n.compute_s).unwrap_or(0.0);
-    let fem = summary.nodes.get("fem").map(|n| n.compute_s).unwrap_or(0.0);
+    let compute = |id: &str| summary.nodes.get(id).map(|n| n.compute_s).unwrap_or(0.0);
+    let dem = scene.dem_node().map(compute).unwrap_or(0.0);
+    let fems: Vec<f64> = scene.fem_nodes().map(compute).collect();
+    // several structures compute at the same time: the slowest one is on the critical path
+    let fem = fems.iter().sum::<f64>();
+    let fem_critical = fems.iter().fold(0.0f64, |a, &b| a.max(b));
     let t = &mut summary.timing;
     t.total_wall_s = total_wall;
     t.dem_compute_s = dem;
     t.fem_compute_s = fem;
-    t.coupling_overhead_s = (t.windows_wall_s - dem - fem).max(0.0);
+    t.coupling_overhead_s = (t.windows_wall_s - dem - fem_critical).max(0.0);
     t.coupling_overhead_fraction = if t.windows_wall_s > 0.0 {
         t.coupling_overhead_s / t.windows_wall_s
     } else {

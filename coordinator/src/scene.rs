@@ -1,10 +1,13 @@
 //! Scene files (TOML): what exists in a run. The coordinator reads `[scene]`, `[coupling]`,
-//! `[output]` and `[nodes]`; the `[dem]` and `[fem]` tables belong to the nodes, which parse
-//! and validate them (they get the whole file in their `init` command and report errors with
-//! line numbers of this file). Every error names the file, line and field.
+//! `[output]` and `[nodes]`; every other top-level table belongs to a solver node of that id —
+//! `[dem]` and `[fem]`, and further structures declared in `[nodes.<id>]` with a `kind` —
+//! which parses and validates it (the nodes get the whole file in their `init` command and
+//! report errors with line numbers of this file). Every error names the file, line and field.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+use proto::{InterfaceDecl, InterfaceKind, NodeKind};
 use serde::Deserialize;
 use toml::Spanned;
 
@@ -26,14 +29,7 @@ pub struct SceneError {
     pub message: String,
 }
 
-/// 1-based line and column of a byte offset.
-pub fn line_col(text: &str, offset: usize) -> (usize, usize) {
-    let offset = offset.min(text.len());
-    let before = &text[..offset];
-    let line = before.matches('\n').count() + 1;
-    let column = before.rfind('\n').map(|i| offset - i).unwrap_or(offset + 1);
-    (line, column)
-}
+pub use scenefile::line_col;
 
 /// The coupling schedule (Ullrich ch. 3).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, serde::Serialize)]
@@ -59,8 +55,24 @@ pub struct SceneSection {
     pub end_time: Spanned<Seconds>,
 }
 
-fn default_interfaces() -> Vec<String> {
-    vec!["interface".to_string()]
+/// An entry of `coupling.interfaces`: a name (its provider is the scene's only FEM node) or a
+/// table naming the provider.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(untagged)]
+pub enum InterfaceEntry {
+    Name(String),
+    Table(InterfaceTable),
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InterfaceTable {
+    pub name: String,
+    /// The FEM node that owns the surface (default: the only FEM node).
+    pub provider: Option<String>,
+    /// `surface` (default); `volume` is reserved for volume coupling.
+    #[serde(default)]
+    pub kind: InterfaceKind,
 }
 
 fn default_timeout() -> Seconds {
@@ -85,9 +97,11 @@ pub struct CouplingSection {
     /// FEM gets the mean of the DEM forces over the window's substeps (Ullrich (3.8)).
     #[serde(default)]
     pub force_averaging: bool,
-    /// Names of the coupled interfaces (default `["interface"]`).
+    /// The coupled interfaces: names, or `{ name = "...", provider = "<fem node>" }` tables
+    /// (default: one interface per FEM node, named `interface` when there is one FEM node and
+    /// after the node otherwise).
     #[serde(default)]
-    pub interfaces: Vec<Spanned<String>>,
+    pub interfaces: Vec<Spanned<InterfaceEntry>>,
     /// Longest wait for one window's messages before the run is stopped (s).
     #[serde(default = "default_timeout")]
     pub window_timeout: Seconds,
@@ -139,10 +153,13 @@ pub struct OutputSection {
     pub final_state: bool,
 }
 
-/// How a node is started.
+/// A solver node of the scene (`[nodes.<id>]`): its kind and how it is started.
 #[derive(Debug, Clone, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct NodeLaunch {
+    /// `dem` or `fem`; default from the id for `dem` and `fem`, required for other ids (the
+    /// node reads the scene's top-level table of its id, e.g. `[sleeper_left]`).
+    pub kind: Option<Spanned<NodeKind>>,
     /// Command line that starts the node instead of the built-in binary; the coordinator
     /// appends `--run-id`, `--node`, `--listen`, `--connect`.
     pub command: Option<Vec<String>>,
@@ -151,15 +168,17 @@ pub struct NodeLaunch {
     pub external: bool,
 }
 
-#[derive(Debug, Clone, Default, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct NodesSection {
-    pub dem: Option<NodeLaunch>,
-    pub fem: Option<NodeLaunch>,
+/// A solver node of a run.
+#[derive(Debug, Clone)]
+pub struct SceneNode {
+    /// Its id: node name on the wire, its table in the scene, its output folder.
+    pub id: String,
+    pub kind: NodeKind,
+    pub launch: NodeLaunch,
 }
 
+/// The coordinator's tables; every other top-level key is checked to be a node's table.
 #[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
 struct SceneFile {
     scene: SceneSection,
     #[serde(default)]
@@ -167,10 +186,11 @@ struct SceneFile {
     #[serde(default)]
     output: OutputSection,
     #[serde(default)]
-    nodes: NodesSection,
-    dem: Option<toml::Table>,
-    fem: Option<toml::Table>,
+    nodes: BTreeMap<String, NodeLaunch>,
 }
+
+/// Top-level keys the coordinator reads itself.
+const COORDINATOR_TABLES: [&str; 4] = ["scene", "coupling", "output", "nodes"];
 
 /// A validated scene, as far as the coordinator is concerned.
 #[derive(Debug, Clone)]
@@ -186,7 +206,8 @@ pub struct Scene {
     pub window: f64,
     pub windows: u64,
     pub force_averaging: bool,
-    pub interfaces: Vec<String>,
+    /// The coupled interfaces with provider and users (empty for a single solver).
+    pub interfaces: Vec<InterfaceDecl>,
     pub window_timeout: f64,
     pub steady_kinetic_energy: Option<f64>,
     pub steady_windows: u32,
@@ -198,7 +219,34 @@ pub struct Scene {
     pub final_state: bool,
     pub has_dem: bool,
     pub has_fem: bool,
-    pub nodes: NodesSection,
+    /// The solver nodes: the DEM first, then the FEM nodes by id.
+    pub nodes: Vec<SceneNode>,
+}
+
+impl Scene {
+    /// The DEM node's id, if the scene has one.
+    pub fn dem_node(&self) -> Option<&str> {
+        self.nodes
+            .iter()
+            .find(|n| n.kind == NodeKind::Dem)
+            .map(|n| n.id.as_str())
+    }
+
+    /// The FEM nodes' ids.
+    pub fn fem_nodes(&self) -> impl Iterator<Item = &str> + '_ {
+        self.nodes
+            .iter()
+            .filter(|n| n.kind == NodeKind::Fem)
+            .map(|n| n.id.as_str())
+    }
+
+    /// The node that provides interface `name`.
+    pub fn provider_of(&self, name: &str) -> Option<&str> {
+        self.interfaces
+            .iter()
+            .find(|i| i.name == name)
+            .map(|i| i.provider.as_str())
+    }
 }
 
 impl Scene {
@@ -231,8 +279,11 @@ impl Scene {
             let offset = e.span().map(|s| s.start).unwrap_or(0);
             err_at(offset, "", e.message().trim().to_string())
         })?;
-        let has_dem = raw.dem.is_some();
-        let has_fem = raw.fem.is_some();
+        let nodes = solver_nodes(&text, &raw.nodes).map_err(|(offset, field, message)| {
+            err_at(offset, &field, message)
+        })?;
+        let has_dem = nodes.iter().any(|n| n.kind == NodeKind::Dem);
+        let has_fem = nodes.iter().any(|n| n.kind == NodeKind::Fem);
         if !has_dem && !has_fem {
             return Err(err_at(
                 0,
@@ -343,17 +394,23 @@ impl Scene {
                 ),
             ));
         }
-        let mut interfaces = Vec::new();
-        for i in c.interfaces.clone() {
-            proto::keys::validate_name("interface", i.get_ref())
-                .map_err(|e| err_at(i.span().start, "coupling.interfaces", e.to_string()))?;
-            interfaces.push(i.into_inner());
-        }
-        if interfaces.is_empty() {
-            interfaces = default_interfaces();
-        }
-        if !both {
-            interfaces.clear();
+        let interfaces = if both {
+            declare_interfaces(&text, c, &nodes).map_err(|(offset, field, message)| {
+                err_at(offset, &field, message)
+            })?
+        } else {
+            Vec::new()
+        };
+        if !both && nodes.len() > 1 {
+            return Err(err_at(
+                0,
+                "nodes",
+                format!(
+                    "the scene has {} FEM nodes ({}) and no DEM node: structures are coupled through a [dem] bed",
+                    nodes.len(),
+                    nodes.iter().map(|n| format!("`{}`", n.id)).collect::<Vec<_>>().join(", ")
+                ),
+            ));
         }
         let steady = match &c.steady_kinetic_energy {
             Some(s) if s.get_ref().0 <= 0.0 => {
@@ -417,10 +474,140 @@ impl Scene {
             final_state: raw.output.final_state,
             has_dem,
             has_fem,
-            nodes: raw.nodes,
+            nodes,
             text,
         })
     }
+}
+
+/// An error at a byte offset of the scene text, with its field.
+type Located = (usize, String, String);
+
+/// The solver nodes of a scene: every top-level table that is not the coordinator's is a
+/// node's (`[dem]`, `[fem]`, or an id declared in `[nodes.<id>]` with its `kind`).
+fn solver_nodes(text: &str, decls: &BTreeMap<String, NodeLaunch>) -> Result<Vec<SceneNode>, Located> {
+    let root = toml::de::DeTable::parse(text)
+        .map_err(|e| (e.span().map(|s| s.start).unwrap_or(0), String::new(), e.message().to_string()))?;
+    let mut nodes = Vec::new();
+    for (key, value) in root.get_ref().iter() {
+        let id = key.get_ref().to_string();
+        if COORDINATOR_TABLES.contains(&id.as_str()) {
+            continue;
+        }
+        let at = key.span().start;
+        if !matches!(value.get_ref(), toml::de::DeValue::Table(_)) {
+            return Err((at, id.clone(), format!("unknown top-level key `{id}`: a scene has the tables [scene], [coupling], [output], [nodes] and one table per solver node")));
+        }
+        let decl = decls.get(&id);
+        let declared = decl.and_then(|d| d.kind.as_ref()).map(|k| *k.get_ref());
+        let kind = match (id.as_str(), declared) {
+            (_, Some(k)) => k,
+            ("dem", None) => NodeKind::Dem,
+            ("fem", None) => NodeKind::Fem,
+            (_, None) => {
+                return Err((at, id.clone(), format!(
+                    "unknown table [{id}]: a further solver node needs `[nodes.{id}]` with `kind = \"fem\"` (or \"dem\"); the coordinator's tables are [scene], [coupling], [output], [nodes]"
+                )))
+            }
+        };
+        proto::keys::validate_name("node", &id).map_err(|e| (at, id.clone(), e.to_string()))?;
+        if id == proto::participant::COORDINATOR {
+            return Err((at, id.clone(), "`coordinator` is reserved; give the node another id".into()));
+        }
+        nodes.push(SceneNode {
+            id,
+            kind,
+            launch: decl.cloned().unwrap_or_default(),
+        });
+    }
+    // a declared node needs its table (the built-in names without a table are simply absent)
+    for (id, d) in decls {
+        if d.kind.is_some() && !nodes.iter().any(|n| &n.id == id) {
+            let at = d.kind.as_ref().map(|k| k.span().start).unwrap_or(0);
+            return Err((at, format!("nodes.{id}"), format!("node `{id}` has no [{id}] table in the scene")));
+        }
+    }
+    let dems: Vec<&str> = nodes.iter().filter(|n| n.kind == NodeKind::Dem).map(|n| n.id.as_str()).collect();
+    if dems.len() > 1 {
+        return Err((text.find(&format!("[{}]", dems[1])).unwrap_or(0), dems[1].to_string(), format!(
+            "the scene has {} DEM nodes ({}); one DEM node holds the granular bed",
+            dems.len(),
+            dems.join(", ")
+        )));
+    }
+    nodes.sort_by(|a, b| (a.kind, &a.id).cmp(&(b.kind, &b.id)));
+    Ok(nodes)
+}
+
+/// The interfaces of a coupled scene: each FEM node provides one surface, the DEM uses all.
+fn declare_interfaces(
+    text: &str,
+    c: &CouplingSection,
+    nodes: &[SceneNode],
+) -> Result<Vec<InterfaceDecl>, Located> {
+    const F: &str = "coupling.interfaces";
+    let fems: Vec<&str> = nodes.iter().filter(|n| n.kind == NodeKind::Fem).map(|n| n.id.as_str()).collect();
+    let users: Vec<String> = nodes.iter().filter(|n| n.kind == NodeKind::Dem).map(|n| n.id.clone()).collect();
+    let decl = |name: String, provider: String, kind| InterfaceDecl {
+        name,
+        kind,
+        provider,
+        users: users.clone(),
+        force_averaging: c.force_averaging,
+    };
+    let mut out: Vec<InterfaceDecl> = Vec::new();
+    if c.interfaces.is_empty() {
+        for f in &fems {
+            let name = if fems.len() == 1 { "interface".to_string() } else { f.to_string() };
+            out.push(decl(name, f.to_string(), InterfaceKind::Surface));
+        }
+        return Ok(out);
+    }
+    for entry in &c.interfaces {
+        let at = entry.span().start;
+        let (name, provider, kind) = match entry.get_ref() {
+            InterfaceEntry::Name(n) => (n.clone(), None, InterfaceKind::Surface),
+            InterfaceEntry::Table(t) => (t.name.clone(), t.provider.clone(), t.kind),
+        };
+        proto::keys::validate_name("interface", &name).map_err(|e| (at, F.to_string(), e.to_string()))?;
+        if out.iter().any(|i| i.name == name) {
+            return Err((at, F.to_string(), format!("interface `{name}` is listed twice")));
+        }
+        let provider = match provider {
+            Some(p) if fems.contains(&p.as_str()) => p,
+            Some(p) => {
+                return Err((at, F.to_string(), format!(
+                    "interface `{name}`: provider `{p}` is not a FEM node of the scene (FEM nodes: {})",
+                    fems.join(", ")
+                )))
+            }
+            None if fems.len() == 1 => fems[0].to_string(),
+            None => {
+                return Err((at, F.to_string(), format!(
+                    "interface `{name}`: the scene has {} FEM nodes ({}); name the one that provides it: {{ name = \"{name}\", provider = \"{}\" }}",
+                    fems.len(),
+                    fems.join(", "),
+                    fems[0]
+                )))
+            }
+        };
+        if kind != InterfaceKind::Surface {
+            return Err((at, F.to_string(), format!("interface `{name}`: only `surface` interfaces exist so far")));
+        }
+        if let Some(other) = out.iter().find(|i| i.provider == provider) {
+            return Err((at, F.to_string(), format!(
+                "interfaces `{}` and `{name}` are both provided by node `{provider}`; a FEM node provides one surface (give each structure its own node)",
+                other.name
+            )));
+        }
+        out.push(decl(name, provider, kind));
+    }
+    if let Some(idle) = fems.iter().find(|f| !out.iter().any(|i| &i.provider == *f)) {
+        return Err((text.find("interfaces").unwrap_or(0), F.to_string(), format!(
+            "FEM node `{idle}` provides no interface: add {{ name = \"...\", provider = \"{idle}\" }}"
+        )));
+    }
+    Ok(out)
 }
 
 #[cfg(test)]

@@ -27,7 +27,7 @@ import wire  # noqa: E402
 from plate_model import PlateModel, SceneError, UnstableError, parse_fem_table  # noqa: E402
 from wire import ProtocolError  # noqa: E402
 
-SOFTWARE = "python-fem-node 0.1 (scikit-fem, eclipse-zenoh)"
+SOFTWARE = "python-fem-node 0.2 (protocol 2; scikit-fem, eclipse-zenoh)"
 COORDINATOR = "coordinator"
 log = logging.getLogger("fem_node")
 logging.getLogger("skfem").setLevel(logging.WARNING)
@@ -149,7 +149,8 @@ class Participant:
         """Until every data publisher has a matching subscriber (the DEM listens)."""
         start = time.monotonic()
         for name, publisher in self.publishers.items():
-            while not publisher.matching_status:
+            # `.matching`: the MatchingStatus object itself is always truthy
+            while not publisher.matching_status.matching:
                 if time.monotonic() - start > timeout:
                     raise NodeError("timeout", f"no subscriber of `{self.keys.kinematics(name)}` "
                                                f"(the other solver) after {timeout:.0f} s")
@@ -158,9 +159,10 @@ class Participant:
     def write_kinematics(self, name, payload):
         self.publishers[name].put(payload)
 
-    def read_forces(self, name, window, nodes, timeout):
-        """The forces of `window`; watches commands meanwhile (`stop` ends the wait)."""
-        what = f"interface forces of window {window} on `{self.keys.forces(name)}`"
+    def read_forces(self, name, label, nodes, timeout):
+        """The forces labelled `label` ({window, iteration}); watches commands meanwhile (`stop`
+        ends the wait)."""
+        what = f"interface forces of {wire.label_text(label)} on `{self.keys.forces(name)}`"
         deadline = time.monotonic() + timeout
         while True:
             while not self.forces_queue:
@@ -173,7 +175,7 @@ class Participant:
                         raise Stopped(body["reason"])
                     raise ProtocolError(f"received {body['type']} while waiting for {what}")
             try:
-                return wire.decode_forces(self.forces_queue.popleft(), self.run_id, name, window, nodes)
+                return wire.decode_forces(self.forces_queue.popleft(), self.run_id, name, label, nodes)
             except wire.WrongRun as e:
                 log.warning("ignored: %s", e)  # PROTOCOL.md §8: another run's data is not an error
 
@@ -196,9 +198,10 @@ def write_atomically(path, data):
 
 
 def truncate_time_series_after(out_dir, t):
-    """After a restore to time t: every CSV time series in out_dir (header starting with
-    `time`) loses the rows after t, which the interrupted run wrote after the checkpoint and
-    the resumed run writes again (as fem-node and dem-node do; within 1e-8 relative)."""
+    """After a restore or a rollback to time t: every CSV time series in out_dir (header
+    starting with `time`) loses the rows after t, which the interrupted run wrote after the
+    checkpoint and the resumed run (or the repeated window) writes again (as fem-node and
+    dem-node do; within 1e-8 relative)."""
     if not os.path.isdir(out_dir):
         return
     limit = t + 1e-8 * abs(t)
@@ -243,27 +246,50 @@ class FemNode:
         self.p = participant
         self.data_timeout = data_timeout
         self.model = None
-        self.interface = None  # (name, nodes)
+        self.interface = None  # (name, nodes) of the interface this node provides
         self.out_dir = None
+        self.kept = None  # (window, model state) of the last `checkpoint`
         self.trace = None
         self.compute_s = 0.0
         self.wait_s = 0.0
         self.window = None
 
+    def _provided_interface(self, c):
+        """The interface of `init.interfaces` this node provides (PROTOCOL.md §4 InterfaceDecl),
+        or None: a FEM node provides at most one surface and uses none."""
+        node, scene = self.p.node, c["scene_path"]
+        provided = [d for d in c["interfaces"] if d["provider"] == node]
+        used = [d for d in c["interfaces"] if d["provider"] != node and node in d["users"]]
+        if len(provided) > 1:
+            names = ", ".join(f"`{d['name']}`" for d in provided)
+            raise SceneError(f"{scene}: the scene's interfaces name node `{node}` as the provider "
+                             f"of {len(provided)} interfaces ({names}); a FEM node provides one "
+                             "surface (give each structure its own node)")
+        if used:
+            d = used[0]
+            raise SceneError(f"{scene}: interface `{d['name']}` names the FEM node `{node}` as a "
+                             f"user (its provider is `{d['provider']}`); a FEM node provides its "
+                             f"surface (set provider = \"{node}\")")
+        if not provided:
+            return None
+        d = provided[0]
+        if d["kind"] != "surface":
+            raise SceneError(f"{scene}: interface `{d['name']}` is a {d['kind']} interface; the "
+                             f"FEM node `{node}` provides surfaces only")
+        return d
+
     def init(self, c):
-        cfg = parse_fem_table(c["scene_toml"], c["scene_path"])
-        if len(c["interfaces"]) > 1:
-            raise SceneError(f"coupling.interfaces lists {len(c['interfaces'])} interfaces; "
-                             "the FEM node couples one surface")
+        decl = self._provided_interface(c)
+        cfg = parse_fem_table(c["scene_toml"], c["scene_path"], c["table"])
         model = PlateModel(cfg)
-        self.out_dir = os.path.join(c["out_dir"], "fem")
+        self.out_dir = os.path.join(c["out_dir"], self.p.node)  # <out_dir>/<node id>
         try:
             os.makedirs(self.out_dir, exist_ok=True)
         except OSError as e:
             raise NodeError("io", f"creating {self.out_dir}: {e}") from None
         self.trace = Trace() if c["trace"] else None
-        if c["interfaces"]:
-            name = c["interfaces"][0]
+        if decl is not None:
+            name = decl["name"]
             mesh = wire.interface_mesh(self.p.run_id, name, model.node_ids(),
                                        model.interface_positions(), model.triangles)
             self.interface = (name, len(model.iface_nodes))
@@ -283,20 +309,22 @@ class FemNode:
             raise ProtocolError("a window command came before `init`")
         return self.model
 
-    def _publish(self, window, time_, kin):
+    def _publish(self, label, time_, kin):
+        """Publishes the interface's state (P, V, A at `time_`) labelled `label`. How the
+        users move their meshes from it (`motion`) is theirs to compute (PROTOCOL.md §4)."""
         if self.interface is None:
             return
         name = self.interface[0]
         self.p.write_kinematics(name, wire.interface_kinematics(
-            self.p.run_id, name, window, time_, *kin))
+            self.p.run_id, name, label, time_, *kin))
 
     def advance(self, w):
         model = self._model()
         t0 = time.monotonic()
         forces = None
-        if w["input_window"] is not None and self.interface is not None:
+        if w["input"] is not None and self.interface is not None:
             name, nodes = self.interface
-            forces = self.p.read_forces(name, w["input_window"], nodes, self.data_timeout)
+            forces = self.p.read_forces(name, w["input"], nodes, self.data_timeout)
         wait_s = time.monotonic() - t0
         if forces is not None:
             if self.trace is not None:
@@ -305,7 +333,6 @@ class FemNode:
                                [str(forces["window"]), str(forces["averaged"]).lower()],
                                forces["forces"].reshape(-1, 3).sum(axis=0))
             model.set_interface_forces(forces["forces"])
-        start_positions = model.interface_kinematics()[0]
         if w["static_solve"]:
             model.solve_static()
         else:
@@ -318,14 +345,10 @@ class FemNode:
             self.trace.row(path, "window,t_end,positions...,velocities...,accelerations...",
                            [str(w["window"])], np.concatenate([[t_end], pos, vel, acc]))
         speed = float(np.linalg.norm(vel.reshape(-1, 3), axis=1).max()) if vel.size else 0.0
-        if w["output_window"] is not None:
-            if w["motion"] == "linear":
-                # Ullrich (3.4)–(3.7): predictive velocity V = (P_{i+1} − P_i)/Δt^F, A = 0, at the
-                # window start, so that the DEM mesh, moving x = P_i + Vτ, lands on P_{i+1}
-                kin = (start_positions, (pos - start_positions) / w["dt"], np.zeros_like(pos))
-                self._publish(w["output_window"], w["t_start"], kin)
-            else:
-                self._publish(w["output_window"], t_end, (pos, vel, acc))
+        if w["output"] is not None:
+            # always the state at the end of the window, whatever `motion` says: the users
+            # compute the predictive motion (`linear`) from it themselves (PROTOCOL.md §4)
+            self._publish(w["output"], t_end, (pos, vel, acc))
         return wait_s, t_end, {"max_interface_speed": speed}
 
     def serve(self):
@@ -352,7 +375,13 @@ class FemNode:
                                "monitor": wire.floats(monitor)})
             elif kind == "publish":
                 model = self._model()
-                self._publish(c["window"], model.time, model.interface_kinematics())
+                self._publish(c["label"], model.time, model.interface_kinematics())
+            elif kind == "checkpoint":
+                # the start of a window an implicit scheme may repeat: a copy of the whole state
+                # (the model's snapshot copies every array), kept in memory; no reply
+                self.kept = (c["window"], self._model().snapshot())
+            elif kind == "rollback":
+                self.rollback(c["window"])
             elif kind == "snapshot":
                 state = pickle.dumps(self._model().snapshot(), protocol=pickle.HIGHEST_PROTOCOL)
                 try:
@@ -368,15 +397,33 @@ class FemNode:
                     model.restore(state)
                 except (OSError, pickle.UnpicklingError, ValueError, EOFError) as e:
                     raise NodeError("io", f"restoring the FEM state from {c['path']}: {e}") from None
-                try:
-                    truncate_time_series_after(self.out_dir, model.time)
-                except OSError as e:
-                    raise NodeError("io", f"shortening the time series in {self.out_dir}: {e}") from None
+                self._truncate_outputs()
                 self.p.report({"type": "restored", "window": c["window"]})
             elif kind == "stop":
                 log.info("stop: %s", c["reason"])
                 self.p.report(self.stopped())
                 return
+
+    def rollback(self, window):
+        """`rollback`: the state the last `checkpoint` kept, which must be of `window`, comes
+        back; the time-series rows written since are cut, as after `restore`. No reply."""
+        if self.kept is None:
+            raise ProtocolError(f"`rollback` to window {window} without a `checkpoint` before it")
+        kept_window, state = self.kept
+        if kept_window != window:
+            raise ProtocolError(f"`rollback` to window {window}, but the checkpoint kept is of "
+                                f"window {kept_window}")
+        model = self._model()
+        model.restore(state)  # copies the arrays: the kept state serves further rollbacks
+        self._truncate_outputs()
+
+    def _truncate_outputs(self):
+        """After a restore or a rollback: the CSV time series lose the rows after the model's
+        time."""
+        try:
+            truncate_time_series_after(self.out_dir, self._model().time)
+        except OSError as e:
+            raise NodeError("io", f"shortening the time series in {self.out_dir}: {e}") from None
 
     def stopped(self):
         results = self.model.results() if self.model is not None else {}
@@ -433,7 +480,8 @@ def exit_with_coordinator():
 def main(argv=None):
     ap = argparse.ArgumentParser(description="FEM solver node of a cosim run (Python, scikit-fem)")
     ap.add_argument("--run-id", required=True, help="run to join (the coordinator prints it)")
-    ap.add_argument("--node", required=True, help="name of this node in the run (fem)")
+    ap.add_argument("--node", required=True,
+                    help="id of this node in the run (`fem`, or the id the scene gives it)")
     ap.add_argument("--listen", action="append", default=[], help="endpoint to listen on (repeatable)")
     ap.add_argument("--connect", action="append", default=[], help="endpoint to connect to (repeatable)")
     ap.add_argument("--zenoh-config", help="zenoh configuration file (client of a router): see deploy/")
@@ -451,7 +499,7 @@ def main(argv=None):
         return 1
     node = FemNode(p, max(args.data_timeout, 0.001))
     try:
-        p.report({"type": "hello", "software": SOFTWARE, "role": "fem",
+        p.report({"type": "hello", "software": SOFTWARE, "kind": "fem",
                   "capabilities": ["snapshot", "static", "dynamic"], "pid": os.getpid()})
         node.serve()
     except Exception as e:

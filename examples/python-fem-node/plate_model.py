@@ -1,8 +1,9 @@
 """The FEM side of a cosim run in Python: linear elasticity on a generated box with
 scikit-fem, static or Bossak–Newmark dynamics (REFERENCE A6). No zenoh here.
 
-The scene's `[fem]` table is read with the meaning of fem-node/FEM.md, restricted to what a
-generated box needs (see README.md); anything else is refused with a `SceneError` naming the key.
+The node's table of the scene (`[fem]`, or `[<node id>]` when a scene has several structures) is
+read with the meaning of fem-node/FEM.md's `[fem]`, restricted to what a generated box needs (see
+README.md); anything else is refused with a `SceneError` naming the key.
 """
 
 import math
@@ -92,18 +93,33 @@ def _selector(value, key):
     raise SceneError(f"{key}.{kind}: not a selector (plane, box, set)")
 
 
-def parse_fem_table(scene_toml, scene_path):
-    """Reads `[fem]` of a scene; returns a plain dict. Errors name the scene file and the key."""
+def table_key(key, table):
+    """`key` (a path under `fem`, as the checks below name it) under the node's own table:
+    `fem.mesh.size` → `sleeper_left.mesh.size` when the node reads `[sleeper_left]`."""
+    if table == "fem" or not key.startswith("fem"):
+        return key
+    rest = key[len("fem"):]
+    if rest and (rest[0].isalnum() or rest[0] in "_-"):
+        return key  # another word that merely starts with "fem"
+    return table + rest
+
+
+def parse_fem_table(scene_toml, scene_path, table="fem"):
+    """Reads the node's table `[<table>]` of a scene (`[fem]`, or the node's id when a scene has
+    several structures; the schema of `[fem]` either way); returns a plain dict. Errors name the
+    scene file and the key under that table."""
     try:
         scene = tomllib.loads(scene_toml)
     except tomllib.TOMLDecodeError as e:
         raise SceneError(f"{scene_path}: {e}") from None
-    if "fem" not in scene:
-        raise SceneError(f"{scene_path}: the scene has no [fem] table")
+    if table not in scene:
+        raise SceneError(f"{scene_path}: the scene has no [{table}] table")
     try:
-        return _parse(_table(scene["fem"], "fem"))
+        cfg = _parse(_table(scene[table], "fem"))
     except SceneError as e:
-        raise SceneError(f"{scene_path}: {e}") from None
+        raise SceneError(f"{scene_path}: {table_key(str(e), table)}") from None
+    cfg["table"] = table
+    return cfg
 
 
 def _parse(fem):
@@ -263,6 +279,7 @@ class PlateModel:
 
     def __init__(self, cfg):
         self.cfg = cfg
+        self.table = cfg.get("table", "fem")  # the scene table the keys in messages are under
         self.warnings = []
         mc = cfg["mesh"]
         lo = np.array(mc["origin"])
@@ -272,10 +289,12 @@ class PlateModel:
         element = ELEMENTS[mc["element"]]()
         if mc["element"] == "hex8i":
             self.warnings.append(
-                "fem.mesh.element = \"hex8i\": scikit-fem has no incompatible-mode hexahedra; "
-                "using 27-node triquadratic hexahedra (ElementHex2) on the same divisions")
+                f"{self.table}.mesh.element = \"hex8i\": scikit-fem has no incompatible-mode "
+                "hexahedra; using 27-node triquadratic hexahedra (ElementHex2) on the same "
+                "divisions")
         if not cfg["vtu_given"]:
-            self.warnings.append("fem.output.vtu_every: the Python FEM node writes no VTU files")
+            self.warnings.append(
+                f"{self.table}.output.vtu_every: the Python FEM node writes no VTU files")
         # 3×3×3 Gauss points integrate the mass and stiffness of these elements exactly on boxes
         order = 3 if mc["element"] == "hex8" else 5
         self.basis = Basis(self.mesh, element, intorder=order)
@@ -296,7 +315,7 @@ class PlateModel:
 
         fixed = np.zeros(self.n_dofs, dtype=bool)
         for i, (sel, comps) in enumerate(cfg["supports"]):
-            nodes = self.select_nodes(sel, f"fem.supports[{i}].on")
+            nodes = self.select_nodes(sel, f"{self.table}.supports[{i}].on")
             for c in comps:
                 fixed[3 * nodes + c] = True
         self.free = np.flatnonzero(~fixed)
@@ -385,7 +404,7 @@ class PlateModel:
         selected = None
         if selector is not None:
             selected = np.zeros(self.n_nodes, dtype=bool)
-            selected[self.select_nodes(selector, "fem.interface.on")] = True
+            selected[self.select_nodes(selector, f"{self.table}.interface.on")] = True
         quadratic = self.cfg["mesh"]["element"] != "hex8"
         centre_node = self.cfg["mesh"]["element"] == "hex8i"
         tris = []
@@ -411,7 +430,8 @@ class PlateModel:
                 continue
             tris += _face_triangles(corners, mids, centre)
         if not tris:
-            raise SceneError("fem.interface.on: selects no exterior faces of the generated box")
+            raise SceneError(
+                f"{self.table}.interface.on: selects no exterior faces of the generated box")
         tris = np.array(tris, dtype=np.int64)
         nodes = np.unique(tris)
         local = np.full(self.n_nodes, -1, dtype=np.int64)

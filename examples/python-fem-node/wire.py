@@ -1,4 +1,4 @@
-"""The cosim wire protocol, version 1 (proto/PROTOCOL.md), for a Python node.
+"""The cosim wire protocol, version 2 (proto/PROTOCOL.md), for a Python node.
 
 Only what an FEM node needs: MessagePack encoding of the messages it sends, decoding and
 boundary validation of the messages it receives, the key expressions of a run. No zenoh here.
@@ -10,7 +10,7 @@ import re
 import msgpack
 import numpy as np
 
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2
 NAME = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
 
 
@@ -85,12 +85,20 @@ def interface_mesh(run_id, interface, node_ids, positions, triangles):
     })
 
 
-def interface_kinematics(run_id, interface, window, time, positions, velocities, accelerations):
+def label_text(label):
+    """`window 3 iteration 0`: a `Label` as errors and logs name it (always both parts)."""
+    return f"window {label['window']} iteration {label['iteration']}"
+
+
+def interface_kinematics(run_id, interface, label, time, positions, velocities, accelerations):
+    """`InterfaceKinematics`: the provider's state P, V, A at `time`, labelled `label`
+    ({window, iteration}: the window and iteration whose users read it)."""
     return pack({
         "version": PROTOCOL_VERSION,
         "run_id": run_id,
         "interface": interface,
-        "window": int(window),
+        "window": int(label["window"]),
+        "iteration": int(label["iteration"]),
         "time": float(time),
         "positions": f64array(positions),
         "velocities": f64array(velocities),
@@ -107,18 +115,42 @@ def floats(mapping):
 # Decoding with validation at the boundary
 # --------------------------------------------------------------------------------------------
 
+class _U32:
+    """Type marker: a MessagePack unsigned integer below 2³² (`u32`); plain `int` is `u64`."""
+
+    __name__ = "u32"
+
+
+U32 = _U32()
+U64_MAX = 2 ** 64 - 1
+U32_MAX = 2 ** 32 - 1
+
+
+class _Label:
+    """Type marker: a `Label`, the map {window: u64, iteration: u32} (unknown keys ignored)."""
+
+    __name__ = "label {window, iteration}"
+
+
+LABEL = _Label()
+
 COMMAND_FIELDS = {
-    "init": {"scene_path": str, "scene_toml": str, "out_dir": str, "interfaces": list,
-             "check_only": bool, "trace": bool},
-    "advance_window": {"window": int, "t_start": float, "dt": float, "substeps": int,
-                       "motion": str, "force_averaging": bool, "input_window": (int, None),
-                       "output_window": (int, None), "static_solve": bool},
-    "publish": {"window": int, "force_averaging": bool},
+    "init": {"scene_path": str, "scene_toml": str, "table": str, "out_dir": str,
+             "interfaces": list, "check_only": bool, "trace": bool},
+    "advance_window": {"window": int, "iteration": U32, "t_start": float, "dt": float,
+                       "motion": str, "input": (LABEL, None), "output": (LABEL, None),
+                       "static_solve": bool},
+    "publish": {"label": LABEL},
+    "checkpoint": {"window": int},
+    "rollback": {"window": int},
     "snapshot": {"window": int, "path": str},
     "restore": {"window": int, "path": str},
     "stop": {"reason": str},
 }
 MOTIONS = ("quadratic", "linear", "fixed")
+INTERFACE_KINDS = ("surface", "volume")
+INTERFACE_DECL_FIELDS = {"name": str, "kind": str, "provider": str, "users": list,
+                         "force_averaging": bool}
 
 
 def _check_type(what, field, value, kind):
@@ -128,14 +160,55 @@ def _check_type(what, field, value, kind):
             return value
         if k is float and isinstance(value, (int, float)) and not isinstance(value, bool):
             return float(value)  # integers are accepted where a float is expected
-        if k is int and isinstance(value, int) and not isinstance(value, bool):
+        if k in (int, U32) and isinstance(value, int) and not isinstance(value, bool):
             if value < 0:
                 raise ProtocolError(f"{what}: `{field}` must be unsigned, got {value}")
+            limit, name = (U32_MAX, "u32") if k is U32 else (U64_MAX, "u64")
+            if value > limit:
+                raise ProtocolError(f"{what}: `{field}` = {value} does not fit in {name}")
             return value
+        if k is LABEL and isinstance(value, dict):
+            return decode_label(what, field, value)
         if k in (str, bool, list) and isinstance(value, k):
             return value
     names = " or ".join("nil" if k is None else k.__name__ for k in kinds)
     raise ProtocolError(f"{what}: `{field}` must be {names}, got {type(value).__name__} {value!r}")
+
+
+def decode_label(what, field, value):
+    """A `Label` map {window: u64, iteration: u32}; returns a plain dict of the two."""
+    if not isinstance(value, dict):
+        raise ProtocolError(f"{what}: `{field}` must be a label {{window, iteration}}, "
+                            f"got {type(value).__name__} {value!r}")
+    label = {}
+    for part, kind in (("window", int), ("iteration", U32)):
+        if part not in value:
+            raise ProtocolError(f"{what}: `{field}` has no `{part}` (a label is {{window, iteration}})")
+        label[part] = _check_type(what, f"{field}.{part}", value[part], kind)
+    return label
+
+
+def decode_interface_decl(what, index, value):
+    """One `InterfaceDecl` of `init.interfaces`: {name, kind, provider, users,
+    force_averaging}; names are checked, `kind` must be `surface` or `volume`."""
+    field = f"interfaces[{index}]"
+    if not isinstance(value, dict):
+        raise ProtocolError(f"{what}: `{field}` must be an interface declaration map "
+                            f"{{name, kind, provider, users, force_averaging}}, "
+                            f"got {type(value).__name__} {value!r}")
+    decl = {}
+    for key, kind in INTERFACE_DECL_FIELDS.items():
+        if key not in value:
+            raise ProtocolError(f"{what}: `{field}` has no `{key}`")
+        decl[key] = _check_type(what, f"{field}.{key}", value[key], kind)
+    check_name("interface", decl["name"])
+    if decl["kind"] not in INTERFACE_KINDS:
+        raise ProtocolError(f"{what}: `{field}.kind` is `{decl['kind']}`, "
+                            f"expected one of {', '.join(INTERFACE_KINDS)}")
+    for i, user in enumerate(decl["users"]):
+        if not isinstance(user, str):
+            raise ProtocolError(f"{what}: `{field}.users[{i}]` must be a string, got {user!r}")
+    return decl
 
 
 def decode(payload, what, run_id, fields):
@@ -176,8 +249,8 @@ def decode_command(payload, run_id):
     if kind == "advance_window" and body["motion"] not in MOTIONS:
         raise ProtocolError(f"command `advance_window`: unknown motion `{body['motion']}`")
     if kind == "init":
-        for name in body["interfaces"]:
-            check_name("interface", name)
+        body["interfaces"] = [decode_interface_decl("command `init`", i, d)
+                              for i, d in enumerate(body["interfaces"])]
     return msg["seq"], body
 
 
@@ -204,16 +277,19 @@ def decode_f64array(what, field, value, length):
     return arr
 
 
-def decode_forces(payload, run_id, interface, window, nodes):
-    """`InterfaceForces` of `window` for an interface of `nodes` nodes; refuses any other."""
+def decode_forces(payload, run_id, interface, label, nodes):
+    """`InterfaceForces` labelled `label` ({window, iteration}) for an interface of `nodes`
+    nodes; refuses any other label, naming both the one it carries and the one awaited."""
     what = "interface forces"
     msg = decode(payload, what, run_id, {
-        "interface": str, "window": int, "time": float, "forces": None,
-        "averaged": bool, "substeps": int})
+        "interface": str, "window": int, "iteration": U32, "time": float, "forces": None,
+        "averaged": bool, "samples": U32})
     if msg["interface"] != interface:
         raise ProtocolError(f"{what}: for interface `{msg['interface']}`, expected `{interface}`")
-    if msg["window"] != window:
-        raise ProtocolError(f"{what}: carries window {msg['window']}, expected window {window}")
+    got = {"window": msg["window"], "iteration": msg["iteration"]}
+    if got != {"window": label["window"], "iteration": label["iteration"]}:
+        raise ProtocolError(f"{what} on interface `{interface}`: carries {label_text(got)}, "
+                            f"expected {label_text(label)}")
     if not math.isfinite(msg["time"]):
         raise ProtocolError(f"{what}: time is {msg['time']}")
     msg["forces"] = decode_f64array(what, "forces", msg["forces"], 3 * nodes)

@@ -615,6 +615,12 @@ pub enum Event {
     Left(String),
     /// A message that failed decoding or validation; the run decides what to do.
     Rejected { key: String, error: String },
+    /// A status message of another protocol version (from `node`, by its key).
+    WrongVersion {
+        node: Option<String>,
+        got: u32,
+        expected: u32,
+    },
 }
 
 /// The coordinator's end of the wire: commands out, status and liveliness in.
@@ -695,6 +701,7 @@ impl CoordinatorLink {
                     return Ok(match decode::<Status>(&payload(&sample), self.keys.run_id()) {
                         Ok(st) if self.keys.node_of(&key).as_deref() == Some(st.node.as_str()) => Event::Status(st),
                         Ok(st) => Event::Rejected { key, error: format!("status claims node `{}` on another node's key", st.node) },
+                        Err(ProtoError::Version { got, expected, .. }) => Event::WrongVersion { node: self.keys.node_of(&key), got, expected },
                         Err(e) => Event::Rejected { key, error: e.to_string() },
                     });
                 }

@@ -4,12 +4,15 @@ use std::time::{Duration, Instant};
 
 use proto::link::free_loopback_port;
 use proto::participant::Participant;
-use proto::{Hello, InterfaceKinematics, LinkConfig, ProtoError, Role, PROTOCOL_VERSION};
+use proto::{
+    Hello, InterfaceDecl, InterfaceKind, InterfaceKinematics, Label, LinkConfig, NodeKind,
+    ProtoError, PROTOCOL_VERSION,
+};
 
-fn hello(role: Role) -> Hello {
+fn hello(kind: NodeKind) -> Hello {
     Hello {
         software: "link-test".into(),
-        role,
+        kind,
         capabilities: vec![],
         pid: std::process::id(),
     }
@@ -22,6 +25,7 @@ fn kinematics(run: &str, window: u64, nodes: usize) -> InterfaceKinematics {
         run_id: run.into(),
         interface: "top".into(),
         window,
+        iteration: 0,
         time: w * 1e-4,
         positions: (0..3 * nodes)
             .map(|i| w + i as f64 * 1e-6)
@@ -32,20 +36,31 @@ fn kinematics(run: &str, window: u64, nodes: usize) -> InterfaceKinematics {
     }
 }
 
+/// Interface `top`, provided by `fem`, used by `dem`.
+fn top() -> Vec<InterfaceDecl> {
+    vec![InterfaceDecl {
+        name: "top".into(),
+        kind: InterfaceKind::Surface,
+        provider: "fem".into(),
+        users: vec!["dem".into()],
+        force_averaging: false,
+    }]
+}
+
 /// A FEM and a DEM participant on loopback with interface `top` open and matched.
 async fn coupled_pair(run: &str) -> (Participant, Participant) {
     let (pf, pd) = (free_loopback_port().unwrap(), free_loopback_port().unwrap());
-    let ifaces = vec!["top".to_string()];
+    let ifaces = top();
     let fem_link = LinkConfig::loopback_peer(Some(pf), &[]);
-    let mut fem = Participant::connect(&fem_link, run, "fem", hello(Role::Fem))
+    let mut fem = Participant::connect(&fem_link, run, "fem", hello(NodeKind::Fem))
         .await
         .unwrap();
     let dem_link = LinkConfig::loopback_peer(Some(pd), &[pf]);
-    let mut dem = Participant::connect(&dem_link, run, "dem", hello(Role::Dem))
+    let mut dem = Participant::connect(&dem_link, run, "dem", hello(NodeKind::Dem))
         .await
         .unwrap();
-    fem.open_interfaces(Role::Fem, &ifaces).await.unwrap();
-    dem.open_interfaces(Role::Dem, &ifaces).await.unwrap();
+    fem.open_interfaces(&ifaces).await.unwrap();
+    dem.open_interfaces(&ifaces).await.unwrap();
     fem.wait_for_peers(Duration::from_secs(10)).await.unwrap();
     dem.wait_for_peers(Duration::from_secs(10)).await.unwrap();
     (fem, dem)
@@ -70,7 +85,7 @@ async fn thousand_windows_of_10k_node_kinematics_arrive_in_order_none_lost_none_
     for k in 0..WINDOWS {
         // read_kinematics refuses any other window index: a lost or duplicated message fails here
         let got = dem
-            .read_kinematics("top", k, NODES, Duration::from_secs(20))
+            .read_kinematics("top", Label::window(k), NODES, Duration::from_secs(20))
             .await
             .unwrap();
         assert_eq!(got, kinematics(run, k, NODES), "window {k}");
@@ -83,7 +98,7 @@ async fn thousand_windows_of_10k_node_kinematics_arrive_in_order_none_lost_none_
     );
     // nothing more is queued: no duplicate arrived after the last window
     let extra = dem
-        .read_kinematics("top", WINDOWS, NODES, Duration::from_millis(300))
+        .read_kinematics("top", Label::window(WINDOWS), NODES, Duration::from_millis(300))
         .await;
     assert!(
         matches!(extra, Err(ProtoError::Timeout { .. })),
@@ -101,16 +116,14 @@ async fn a_missing_peer_is_a_timeout_error_not_a_hang() {
         &LinkConfig::loopback_peer(Some(p), &[]),
         run,
         "dem",
-        hello(Role::Dem),
+        hello(NodeKind::Dem),
     )
     .await
     .unwrap();
-    dem.open_interfaces(Role::Dem, &["top".to_string()])
-        .await
-        .unwrap();
+    dem.open_interfaces(&top()).await.unwrap();
     let t0 = Instant::now();
     let e = dem
-        .read_kinematics("top", 0, 10, Duration::from_millis(500))
+        .read_kinematics("top", Label::window(0), 10, Duration::from_millis(500))
         .await
         .unwrap_err();
     assert!(matches!(e, ProtoError::Timeout { .. }), "{e}");
@@ -135,15 +148,21 @@ async fn wrong_window_and_bad_sizes_are_refused_at_the_boundary() {
     let (fem, mut dem) = coupled_pair(run).await;
     fem.write_kinematics(&kinematics(run, 5, 4)).await.unwrap();
     let e = dem
-        .read_kinematics("top", 4, 4, Duration::from_secs(5))
+        .read_kinematics("top", Label::window(4), 4, Duration::from_secs(5))
         .await
         .unwrap_err();
     assert!(
         matches!(
             e,
             ProtoError::WrongWindow {
-                got: 5,
-                expected: 4,
+                got: Label {
+                    window: 5,
+                    iteration: 0
+                },
+                expected: Label {
+                    window: 4,
+                    iteration: 0
+                },
                 ..
             }
         ),
@@ -151,7 +170,7 @@ async fn wrong_window_and_bad_sizes_are_refused_at_the_boundary() {
     );
     fem.write_kinematics(&kinematics(run, 6, 4)).await.unwrap();
     let e = dem
-        .read_kinematics("top", 6, 5, Duration::from_secs(5))
+        .read_kinematics("top", Label::window(6), 5, Duration::from_secs(5))
         .await
         .unwrap_err();
     assert!(
@@ -193,7 +212,7 @@ async fn a_node_never_publishes_its_own_nan_it_reports_an_instability() {
     assert_eq!(n.code, proto::ErrorCode::Unstable);
     // nothing was sent
     let e = dem
-        .read_kinematics("top", 0, 4, Duration::from_millis(300))
+        .read_kinematics("top", Label::window(0), 4, Duration::from_millis(300))
         .await
         .unwrap_err();
     assert!(matches!(e, ProtoError::Timeout { .. }), "{e}");

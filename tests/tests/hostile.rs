@@ -58,10 +58,11 @@ fn forces(run_id: &str, window: u64, value: f64) -> InterfaceForces {
         run_id: run_id.into(),
         interface: "top".into(),
         window,
+        iteration: 0,
         time: 0.0,
         forces: vec![value; 3 * 169].into(),
         averaged: false,
-        substeps: 10,
+        samples: 1,
     }
 }
 

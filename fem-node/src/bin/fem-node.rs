@@ -184,7 +184,11 @@ impl Solver for FemNode {
         self.config = Some((cfg.clone(), base.to_path_buf()));
         self.out_dir = init.node_out_dir(p.node())?;
         self.trace = init.trace.then(Trace::default);
-        let mine: Vec<_> = init.interfaces_of(p.node()).collect();
+        let mine: Vec<_> = init
+            .interfaces
+            .iter()
+            .filter(|i| i.provider == p.node())
+            .collect();
         if mine.len() > 1 {
             return Err(scene_error(format!(
                 "{}: coupling.interfaces gives node `{}` {} interfaces ({}); a FEM node provides one surface (give each structure its own node)",

@@ -1,0 +1,620 @@
+//! The coupling schedules as pure state machines over node ids (Ullrich ch. 3, Algorithm 3).
+//!
+//! A [`Scheduler`] is told what happened (a node finished a window) and answers with the
+//! commands to send. It never touches the network, so every schedule is unit-tested here.
+//! Each schedule is a [`Scheme`] in its own module (`alone`, `one_way`, `jit`, `predictive`):
+//! the commands before window 0, the commands of window k, the data to publish again after a
+//! restore, and what follows a completed window. Adding a schedule adds a module and a
+//! variant of [`SchemeState`].
+//!
+//! Data dependencies do the sequencing: every node gets its window command at once; the one
+//! that needs another's data waits for it (matched by label). With several FEM nodes (one
+//! structure each) every FEM node gets the same commands for its own interface.
+
+use std::collections::BTreeSet;
+
+use proto::{AdvanceWindow, CommandBody, Label, MotionRule};
+
+use crate::scene::ScheduleKind;
+use crate::units::format_seconds;
+
+mod alone;
+mod jit;
+mod one_way;
+mod predictive;
+
+/// Integer number of DEM substeps in a coupling window: Δt^C = n^D Δt^D (Ullrich ch. 3.3).
+pub fn substeps(window: f64, dem_time_step: f64) -> Result<u32, String> {
+    if !(dem_time_step > 0.0 && dem_time_step.is_finite()) {
+        return Err(format!(
+            "the DEM time step must be positive, got {}",
+            format_seconds(dem_time_step)
+        ));
+    }
+    proto::motion::whole_substeps(window, dem_time_step).map_err(|ratio| {
+        let n = ratio.round();
+        if n > u32::MAX as f64 {
+            return format!("{n:.3e} substeps per window is too many");
+        }
+        format!(
+            "the coupling window Δt^C = {} is not a whole multiple of the DEM time step Δt^D = {} (ratio {ratio:.4}); choose Δt^C = n·Δt^D, e.g. {} or {}",
+            format_seconds(window),
+            format_seconds(dem_time_step),
+            format_seconds(n.max(1.0) * dem_time_step),
+            format_seconds((n + 1.0) * dem_time_step)
+        )
+    })
+}
+
+/// The nodes of a run by kind: at most one DEM node (the interfaces' user), any number of
+/// FEM nodes (each the provider of one interface).
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct Topology {
+    pub dem: Option<String>,
+    pub fems: Vec<String>,
+}
+
+impl Topology {
+    /// Every node, the DEM first.
+    pub fn all(&self) -> impl Iterator<Item = &str> + '_ {
+        self.dem.iter().chain(&self.fems).map(String::as_str)
+    }
+}
+
+/// Commands for nodes.
+pub type Sends = Vec<(String, CommandBody)>;
+
+/// The windows of a run.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+pub struct Windows {
+    /// Δt^C (s).
+    pub length: f64,
+    pub count: u64,
+}
+
+impl Windows {
+    pub fn is_last(&self, k: u64) -> bool {
+        k + 1 == self.count
+    }
+
+    /// `advance_window` of window k, iteration 0, with input and output labelled by window.
+    pub fn advance(
+        &self,
+        k: u64,
+        motion: MotionRule,
+        input: Option<u64>,
+        output: Option<u64>,
+        static_solve: bool,
+    ) -> CommandBody {
+        CommandBody::AdvanceWindow(AdvanceWindow {
+            window: k,
+            iteration: 0,
+            t_start: k as f64 * self.length,
+            dt: self.length,
+            motion,
+            input: input.map(Label::window),
+            output: output.map(Label::window),
+            static_solve,
+        })
+    }
+}
+
+/// What follows a window every node has finished.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Next {
+    /// The next window (or the end after the last).
+    Continue,
+    /// A last step (e.g. one-way's static solve): send these; when the nodes that got an
+    /// `advance_window` among them are done, the run finishes with `reason`.
+    Final { sends: Sends, reason: String },
+}
+
+/// One coupling schedule.
+pub trait Scheme {
+    /// Commands before window 0.
+    fn prologue(&self, t: &Topology) -> Sends;
+    /// Commands of window k (each node's `advance_window`).
+    fn window(&self, t: &Topology, w: &Windows, k: u64) -> Sends;
+    /// After a restore from a checkpoint taken between window k − 1 and k: the interface data
+    /// that was in flight then, published again from the restored states.
+    fn replay(&self, t: &Topology, k: u64) -> Sends;
+    /// Every node finished window k (`kinetic_energy`: the DEM's, if reported).
+    fn after_window(
+        &mut self,
+        t: &Topology,
+        w: &Windows,
+        k: u64,
+        kinetic_energy: Option<f64>,
+    ) -> Next;
+    /// One-way: the DEM's kinetic energy when the end time forced the solve on a moving bed.
+    fn unsettled_kinetic_energy(&self) -> Option<f64> {
+        None
+    }
+}
+
+/// The schedule of a run with its state (serialisable: checkpoints store it).
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+#[serde(tag = "scheme", rename_all = "kebab-case")]
+pub enum SchemeState {
+    None(alone::Alone),
+    OneWay(one_way::OneWay),
+    Jit(jit::Jit),
+    Predictive(predictive::Predictive),
+}
+
+impl SchemeState {
+    fn scheme(&mut self) -> &mut dyn Scheme {
+        match self {
+            SchemeState::None(s) => s,
+            SchemeState::OneWay(s) => s,
+            SchemeState::Jit(s) => s,
+            SchemeState::Predictive(s) => s,
+        }
+    }
+}
+
+/// What the coordinator must do next.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Action {
+    Send(String, CommandBody),
+    /// The schedule is complete.
+    Finish {
+        reason: String,
+    },
+}
+
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+pub struct SchedulerConfig {
+    pub kind: ScheduleKind,
+    pub window: f64,
+    pub windows: u64,
+    pub topology: Topology,
+    /// One-way: kinetic energy (J) below which the DEM is steady ...
+    pub steady_kinetic_energy: Option<f64>,
+    /// ... for this many consecutive windows.
+    pub steady_windows: u32,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+enum Phase {
+    Idle,
+    Window,
+    Final,
+    Done,
+}
+
+/// The state machine of one run (serialisable: checkpoints store it).
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+pub struct Scheduler {
+    topology: Topology,
+    windows: Windows,
+    scheme: SchemeState,
+    phase: Phase,
+    window: u64,
+    pending: BTreeSet<String>,
+    /// The DEM's kinetic energy at the end of the current window, once reported.
+    #[serde(default)]
+    window_kinetic_energy: Option<f64>,
+    /// Why the run finishes after the final step.
+    final_reason: String,
+}
+
+impl Scheduler {
+    pub fn new(cfg: SchedulerConfig) -> Result<Scheduler, String> {
+        let t = &cfg.topology;
+        let both = t.dem.is_some() && !t.fems.is_empty();
+        match cfg.kind {
+            ScheduleKind::None if both => return Err("two solvers need a coupling schedule".into()),
+            ScheduleKind::None if t.all().count() == 0 => return Err("no solver to run".into()),
+            ScheduleKind::None if t.all().count() > 1 => {
+                return Err("schedule `none` runs a single solver".into())
+            }
+            ScheduleKind::OneWay | ScheduleKind::Jit | ScheduleKind::Predictive if !both => {
+                return Err(format!(
+                    "schedule {:?} needs a DEM node and at least one FEM node",
+                    cfg.kind
+                ))
+            }
+            _ => {}
+        }
+        if cfg.windows == 0 {
+            return Err("the run has no coupling window".into());
+        }
+        let scheme = match cfg.kind {
+            ScheduleKind::None => SchemeState::None(alone::Alone),
+            ScheduleKind::OneWay => SchemeState::OneWay(one_way::OneWay::new(
+                cfg.steady_kinetic_energy,
+                cfg.steady_windows,
+            )),
+            ScheduleKind::Jit => SchemeState::Jit(jit::Jit),
+            ScheduleKind::Predictive => SchemeState::Predictive(predictive::Predictive),
+        };
+        Ok(Scheduler {
+            topology: cfg.topology,
+            windows: Windows {
+                length: cfg.window,
+                count: cfg.windows,
+            },
+            scheme,
+            phase: Phase::Idle,
+            window: 0,
+            pending: BTreeSet::new(),
+            window_kinetic_energy: None,
+            final_reason: String::new(),
+        })
+    }
+
+    /// The window now running (or next to run).
+    pub fn window(&self) -> u64 {
+        self.window
+    }
+
+    pub fn is_done(&self) -> bool {
+        self.phase == Phase::Done
+    }
+
+    /// Nodes whose reply the scheduler waits for.
+    pub fn pending(&self) -> impl Iterator<Item = &str> + '_ {
+        self.pending.iter().map(String::as_str)
+    }
+
+    /// One-way: the DEM's kinetic energy when the end time forced the solve on a moving bed.
+    pub fn unsettled_kinetic_energy(&mut self) -> Option<f64> {
+        self.scheme.scheme().unsettled_kinetic_energy()
+    }
+
+    /// Sends as actions; the nodes that got an `advance_window` become pending.
+    fn issue(&mut self, sends: Sends) -> Vec<Action> {
+        for (node, body) in &sends {
+            if matches!(body, CommandBody::AdvanceWindow(_)) {
+                self.pending.insert(node.clone());
+            }
+        }
+        sends
+            .into_iter()
+            .map(|(n, b)| Action::Send(n, b))
+            .collect()
+    }
+
+    /// Commands of window k.
+    fn window_actions(&mut self, k: u64) -> Vec<Action> {
+        self.phase = Phase::Window;
+        self.window = k;
+        self.window_kinetic_energy = None;
+        let sends = self
+            .scheme
+            .scheme()
+            .window(&self.topology, &self.windows, k);
+        self.issue(sends)
+    }
+
+    /// The first commands of the run.
+    pub fn start(&mut self) -> Vec<Action> {
+        assert_eq!(self.phase, Phase::Idle, "start() called twice");
+        let prologue = self.scheme.scheme().prologue(&self.topology);
+        let mut out = self.issue(prologue);
+        out.extend(self.window_actions(0));
+        out
+    }
+
+    /// After a restore from a checkpoint taken between window k − 1 and window k (this
+    /// scheduler's state at that moment): the interface data that was in flight at the
+    /// checkpoint, published again from the restored states, then window k's commands.
+    pub fn replay_actions(&mut self) -> Result<Vec<Action>, String> {
+        if self.phase != Phase::Window || self.window == 0 {
+            return Err(format!(
+                "cannot resume a schedule in phase {:?} at window {}",
+                self.phase, self.window
+            ));
+        }
+        let k = self.window;
+        self.pending.clear();
+        let replay = self.scheme.scheme().replay(&self.topology, k);
+        let mut out = self.issue(replay);
+        out.extend(self.window_actions(k));
+        Ok(out)
+    }
+
+    /// Node `node` finished window `window`; `kinetic_energy` is the DEM's, if it reported one.
+    pub fn on_window_done(
+        &mut self,
+        node: &str,
+        window: u64,
+        kinetic_energy: Option<f64>,
+    ) -> Result<Vec<Action>, String> {
+        if !matches!(self.phase, Phase::Window | Phase::Final)
+            || window != self.window
+            || !self.pending.contains(node)
+        {
+            return Err(format!(
+                "unexpected `window_done` from node `{node}` for window {window} (the run is at window {}, waiting for {:?})",
+                self.window, self.pending
+            ));
+        }
+        self.pending.remove(node);
+        if kinetic_energy.is_some() {
+            self.window_kinetic_energy = kinetic_energy;
+        }
+        if !self.pending.is_empty() {
+            return Ok(Vec::new());
+        }
+        if self.phase == Phase::Final {
+            self.phase = Phase::Done;
+            return Ok(vec![Action::Finish {
+                reason: std::mem::take(&mut self.final_reason),
+            }]);
+        }
+        let next = self.scheme.scheme().after_window(
+            &self.topology,
+            &self.windows,
+            window,
+            self.window_kinetic_energy,
+        );
+        match next {
+            Next::Final { sends, reason } => {
+                self.phase = Phase::Final;
+                self.final_reason = reason;
+                Ok(self.issue(sends))
+            }
+            Next::Continue if self.windows.is_last(window) => {
+                self.phase = Phase::Done;
+                Ok(vec![Action::Finish {
+                    reason: format!("end time reached after {} windows", window + 1),
+                }])
+            }
+            Next::Continue => Ok(self.window_actions(window + 1)),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const DEM: &str = "dem";
+    const FEM: &str = "fem";
+
+    fn cfg(kind: ScheduleKind, windows: u64) -> SchedulerConfig {
+        SchedulerConfig {
+            kind,
+            window: 1e-4,
+            windows,
+            topology: Topology {
+                dem: Some(DEM.into()),
+                fems: if kind == ScheduleKind::None {
+                    vec![]
+                } else {
+                    vec![FEM.into()]
+                },
+            },
+            steady_kinetic_energy: Some(1e-6),
+            steady_windows: 2,
+        }
+    }
+
+    fn advance(a: &Action) -> (&str, AdvanceWindow) {
+        match a {
+            Action::Send(r, CommandBody::AdvanceWindow(w)) => (r.as_str(), w.clone()),
+            other => panic!("not an advance: {other:?}"),
+        }
+    }
+
+    fn publish(node: &str, window: u64) -> Action {
+        Action::Send(
+            node.into(),
+            CommandBody::Publish {
+                label: Label::window(window),
+            },
+        )
+    }
+
+    fn l(window: u64) -> Option<Label> {
+        Some(Label::window(window))
+    }
+
+    #[test]
+    fn substeps_must_be_whole() {
+        assert_eq!(substeps(1e-4, 1e-6).unwrap(), 100);
+        assert_eq!(substeps(1e-5, 1e-6).unwrap(), 10);
+        let e = substeps(1e-4, 3e-6).unwrap_err();
+        assert!(
+            e.contains("Δt^C = 100 µs") && e.contains("Δt^D = 3 µs (ratio 33.3333)"),
+            "{e}"
+        );
+        assert!(e.contains("not a whole multiple"), "{e}");
+    }
+
+    #[test]
+    fn jit_moves_dem_by_the_last_fem_kinematics_and_fem_by_this_windows_forces() {
+        let mut s = Scheduler::new(cfg(ScheduleKind::Jit, 3)).unwrap();
+        let a = s.start();
+        assert_eq!(
+            a[0],
+            publish(FEM, 0)
+        );
+        let (r, d) = advance(&a[1]);
+        assert_eq!(
+            (r, d.input, d.output, d.motion),
+            (DEM, l(0), l(0), MotionRule::Quadratic)
+        );
+        let (r, f) = advance(&a[2]);
+        assert_eq!(
+            (r, f.input, f.output),
+            (FEM, l(0), l(1))
+        );
+        assert!(s.on_window_done(DEM, 0, None).unwrap().is_empty());
+        let a = s.on_window_done(FEM, 0, None).unwrap();
+        assert_eq!(advance(&a[0]).1.window, 1);
+        s.on_window_done(FEM, 1, None).unwrap();
+        let a = s.on_window_done(DEM, 1, None).unwrap();
+        let (_, f) = advance(&a[1]);
+        assert_eq!(
+            (f.window, f.output),
+            (2, None),
+            "no kinematics after the last window"
+        );
+        s.on_window_done(DEM, 2, None).unwrap();
+        let a = s.on_window_done(FEM, 2, None).unwrap();
+        assert!(matches!(a[0], Action::Finish { .. }));
+        assert!(s.is_done());
+    }
+
+    #[test]
+    fn predictive_runs_fem_first_with_the_previous_dem_forces() {
+        let mut s = Scheduler::new(cfg(ScheduleKind::Predictive, 2)).unwrap();
+        let a = s.start();
+        let (r, f) = advance(&a[0]);
+        assert_eq!(
+            (r, f.input, f.output, f.motion),
+            (FEM, None, l(0), MotionRule::Linear)
+        );
+        let (r, d) = advance(&a[1]);
+        assert_eq!(
+            (r, d.input, d.output),
+            (DEM, l(0), l(0))
+        );
+        s.on_window_done(FEM, 0, None).unwrap();
+        let a = s.on_window_done(DEM, 0, None).unwrap();
+        let (_, f) = advance(&a[0]);
+        assert_eq!(
+            (f.window, f.input, f.output),
+            (1, l(0), l(1))
+        );
+        let (_, d) = advance(&a[1]);
+        assert_eq!((d.window, d.output), (1, None));
+    }
+
+    #[test]
+    fn one_way_solves_statically_once_the_dem_is_steady() {
+        let mut s = Scheduler::new(cfg(ScheduleKind::OneWay, 100)).unwrap();
+        let a = s.start();
+        assert_eq!(a.len(), 1);
+        let a = s.on_window_done(DEM, 0, Some(1.0)).unwrap();
+        assert_eq!(advance(&a[0]).1.window, 1);
+        let a = s.on_window_done(DEM, 1, Some(1e-7)).unwrap();
+        assert_eq!(advance(&a[0]).1.window, 2, "calm for one window only");
+        let a = s.on_window_done(DEM, 2, Some(1e-5)).unwrap();
+        assert_eq!(advance(&a[0]).1.window, 3, "a kick resets the count");
+        s.on_window_done(DEM, 3, Some(1e-7)).unwrap();
+        let a = s.on_window_done(DEM, 4, Some(1e-7)).unwrap();
+        assert_eq!(
+            a[0],
+            publish(DEM, 4)
+        );
+        let (r, f) = advance(&a[1]);
+        assert_eq!(
+            (r, f.static_solve, f.input),
+            (FEM, true, l(4))
+        );
+        assert!(
+            s.on_window_done(DEM, 4, None).is_err(),
+            "the DEM is not pending any more"
+        );
+        let a = s.on_window_done(FEM, 4, None).unwrap();
+        assert!(matches!(a[0], Action::Finish { .. }));
+    }
+
+    #[test]
+    fn one_way_says_when_the_end_time_forced_the_solve_on_a_moving_bed() {
+        let mut s = Scheduler::new(cfg(ScheduleKind::OneWay, 3)).unwrap();
+        s.start();
+        s.on_window_done(DEM, 0, Some(1.0)).unwrap();
+        s.on_window_done(DEM, 1, Some(1e-7)).unwrap();
+        let a = s.on_window_done(DEM, 2, Some(1e-3)).unwrap();
+        assert!(advance(&a[1]).1.static_solve);
+        assert_eq!(s.unsettled_kinetic_energy(), Some(1e-3));
+        // settled in time: nothing to say
+        let mut s = Scheduler::new(cfg(ScheduleKind::OneWay, 100)).unwrap();
+        s.start();
+        s.on_window_done(DEM, 0, Some(1e-7)).unwrap();
+        s.on_window_done(DEM, 1, Some(1e-7)).unwrap();
+        assert_eq!(s.unsettled_kinetic_energy(), None);
+    }
+
+    #[test]
+    fn a_restored_scheduler_republishes_the_data_in_flight_then_continues() {
+        for (kind, role, window) in [
+            (ScheduleKind::Jit, FEM, 2),
+            (ScheduleKind::Predictive, DEM, 1),
+        ] {
+            let mut s = Scheduler::new(cfg(kind, 5)).unwrap();
+            s.start();
+            s.on_window_done(DEM, 0, None).unwrap();
+            s.on_window_done(FEM, 0, None).unwrap();
+            s.on_window_done(DEM, 1, None).unwrap();
+            let expected = s.on_window_done(FEM, 1, None).unwrap();
+            // a checkpoint here, then a restore from its JSON
+            let mut restored: Scheduler =
+                serde_json::from_str(&serde_json::to_string(&s).unwrap()).unwrap();
+            let a = restored.replay_actions().unwrap();
+            assert_eq!(
+                a[0],
+                publish(role, window),
+                "{kind:?}"
+            );
+            assert_eq!(&a[1..], &expected[..], "{kind:?}");
+        }
+    }
+
+    #[test]
+    fn out_of_order_window_done_is_refused() {
+        let mut s = Scheduler::new(cfg(ScheduleKind::None, 5)).unwrap();
+        s.start();
+        let e = s.on_window_done(DEM, 3, None).unwrap_err();
+        assert!(e.contains("window 3") && e.contains("window 0"), "{e}");
+        assert!(s.on_window_done(FEM, 0, None).is_err());
+    }
+
+    #[test]
+    fn schedules_refuse_the_wrong_solver_set() {
+        let mut c = cfg(ScheduleKind::Jit, 2);
+        c.topology.fems.clear();
+        assert!(Scheduler::new(c).is_err());
+    }
+
+    #[test]
+    fn several_structures_each_get_their_own_commands_and_the_window_waits_for_all() {
+        for kind in [ScheduleKind::Jit, ScheduleKind::Predictive, ScheduleKind::OneWay] {
+            let mut c = cfg(kind, 3);
+            c.topology.fems = vec!["left".into(), "right".into()];
+            let mut s = Scheduler::new(c).unwrap();
+            let a = s.start();
+            let advanced: Vec<&str> = a
+                .iter()
+                .filter_map(|a| match a {
+                    Action::Send(n, CommandBody::AdvanceWindow(_)) => Some(n.as_str()),
+                    _ => None,
+                })
+                .collect();
+            let expected: Vec<&str> = match kind {
+                ScheduleKind::Jit => vec![DEM, "left", "right"],
+                ScheduleKind::Predictive => vec!["left", "right", DEM],
+                _ => vec![DEM],
+            };
+            assert_eq!(advanced, expected, "{kind:?}");
+            if kind == ScheduleKind::Jit {
+                assert_eq!(&a[..2], &[publish("left", 0), publish("right", 0)]);
+            }
+            if kind == ScheduleKind::OneWay {
+                s.on_window_done(DEM, 0, Some(1e-9)).unwrap();
+                let a = s.on_window_done(DEM, 1, Some(1e-9)).unwrap();
+                assert_eq!(a[0], publish(DEM, 1));
+                assert_eq!(
+                    a[1..].iter().map(|x| advance(x).0).collect::<Vec<_>>(),
+                    vec!["left", "right"]
+                );
+                assert!(s.on_window_done("left", 1, None).unwrap().is_empty());
+                let a = s.on_window_done("right", 1, None).unwrap();
+                assert!(matches!(a[0], Action::Finish { .. }));
+                continue;
+            }
+            for n in [DEM, "left"] {
+                assert!(s.on_window_done(n, 0, None).unwrap().is_empty());
+            }
+            let e = s.on_window_done("middle", 0, None).unwrap_err();
+            assert!(e.contains("`middle`"), "{e}");
+            let a = s.on_window_done("right", 0, None).unwrap();
+            assert_eq!(advance(&a[0]).1.window, 1, "{kind:?}");
+        }
+    }
+}
