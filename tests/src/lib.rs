@@ -81,9 +81,16 @@ pub fn run_scene(dir: &Path, name: &str, text: &str) -> serde_json::Value {
         .arg(&out);
     let o = run(c);
     if !o.status.success() {
-        for node in ["dem", "fem"] {
-            if let Ok(log) = std::fs::read_to_string(out.join(format!("logs/{node}.log"))) {
-                eprintln!("--- {node}.log\n{log}");
+        let mut logs: Vec<_> = std::fs::read_dir(out.join("logs"))
+            .into_iter()
+            .flatten()
+            .flatten()
+            .map(|e| e.path())
+            .collect();
+        logs.sort();
+        for log in logs {
+            if let Ok(text) = std::fs::read_to_string(&log) {
+                eprintln!("--- {}\n{text}", log.display());
             }
         }
         panic!("{name} failed");
