@@ -117,6 +117,28 @@ pub struct Summary {
     /// counts (up to the checkpoint each part was resumed from).
     #[serde(default)]
     pub resumes: u32,
+    /// The interface energy audit, per interface (docs/coupling.md, "Energy audit").
+    #[serde(default)]
+    pub interface_work: BTreeMap<String, InterfaceWork>,
+}
+
+/// The work of one interface's forces on its structure, summed over the windows, as each side
+/// computed it: the DEM Σ_steps Δt Σ_nodes f·v on the mesh motion it was given, the FEM f·Δx
+/// over its step with the forces it holds. `dem_j − fem_j` is the energy the coupling
+/// created (> 0) or lost (< 0) at the interface.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct InterfaceWork {
+    pub dem_j: f64,
+    pub fem_j: f64,
+    /// Σ (dem − fem) over the windows: the coupling's energy error.
+    pub energy_error_j: f64,
+    /// The largest |dem − fem| of one window.
+    pub max_window_error_j: f64,
+    /// Windows where both sides reported.
+    pub windows: u64,
+    /// The window where the mismatch's growth raised the early warning, if it did.
+    #[serde(default)]
+    pub growth_warning_window: Option<u64>,
 }
 
 fn make_run_id(name: &str) -> String {
@@ -510,11 +532,21 @@ impl Run<'_> {
         } else {
             Vec::new()
         };
+        // the interface energy audit: per interface the work of its forces on the structure
+        // in the window as the DEM and the FEM computed it, and the FEM's work of the forces it
+        // received over the displacement they were computed on
+        let iface_names: Vec<String> = scene.interfaces.iter().map(|i| i.name.clone()).collect();
         let header = format!(
-            "window,t_end_s,wall_s,dem_compute_s,fem_compute_s,{}overhead_s,dem_kinetic_energy_j",
+            "window,t_end_s,wall_s,dem_compute_s,fem_compute_s,{}overhead_s,dem_kinetic_energy_j{}",
             per_structure
                 .iter()
                 .map(|n| format!("{n}_compute_s,"))
+                .collect::<String>(),
+            iface_names
+                .iter()
+                .map(|n| format!(
+                    ",interface_work_dem.{n}_j,interface_work_fem.{n}_j,interface_work_received.{n}_j"
+                ))
                 .collect::<String>()
         );
         let (mut scheduler, mut stability, mut actions, done_rows) = match resume {
@@ -590,6 +622,8 @@ impl Run<'_> {
         let mut computed: BTreeMap<String, f64> = BTreeMap::new();
         let mut row_t_end: Option<f64> = None;
         let mut row_ke: Option<f64> = None;
+        // the audit's values of this window: (`dem` | `fem` | `received`, interface) → J
+        let mut work: BTreeMap<(&'static str, String), f64> = BTreeMap::new();
         loop {
             for a in std::mem::take(&mut actions) {
                 match a {
@@ -682,6 +716,17 @@ impl Run<'_> {
             if ke.is_some() {
                 row_ke = ke;
             }
+            for (key, v) in &values {
+                let side = match (kind, key.split_once('.')) {
+                    (NodeKind::Dem, Some(("interface_work", i))) => Some(("dem", i)),
+                    (NodeKind::Fem, Some(("interface_work", i))) => Some(("fem", i)),
+                    (NodeKind::Fem, Some(("interface_work_received", i))) => Some(("received", i)),
+                    _ => None,
+                };
+                if let Some((side, iface)) = side {
+                    work.insert((side, iface.to_string()), *v);
+                }
+            }
             actions = scheduler
                 .on_window_done(&st.node, window, ke)
                 .map_err(|e| anyhow!(e))?;
@@ -701,9 +746,37 @@ impl Run<'_> {
                 // the FEM nodes compute at the same time: the critical path is the DEM's time
                 // plus the slowest structure's
                 let critical = dem + fem_ids.iter().map(|f| of(f)).fold(0.0f64, f64::max);
+                let mut audit = String::new();
+                for name in &iface_names {
+                    let get = |side: &'static str| work.get(&(side, name.clone())).copied();
+                    for v in [get("dem"), get("fem"), get("received")] {
+                        audit.push(',');
+                        if let Some(v) = v {
+                            audit.push_str(&format!("{v:.9e}"));
+                        }
+                    }
+                    if let (Some(d), Some(f)) = (get("dem"), get("fem")) {
+                        if let Some(w) = stability.observe_work(name, window, d, f) {
+                            tracing::warn!("{w}");
+                            self.summary.warnings.push(w);
+                            self.summary
+                                .interface_work
+                                .entry(name.clone())
+                                .or_default()
+                                .growth_warning_window = Some(window);
+                        }
+                        let a = self.summary.interface_work.entry(name.clone()).or_default();
+                        a.dem_j += d;
+                        a.fem_j += f;
+                        a.energy_error_j += d - f;
+                        a.max_window_error_j = a.max_window_error_j.max((d - f).abs());
+                        a.windows += 1;
+                    }
+                }
+                work.clear();
                 writeln!(
                     csv,
-                    "{line},{:.6e},{}",
+                    "{line},{:.6e},{}{audit}",
                     (wall - critical).max(0.0),
                     row_ke.take()
                         .map(|e| format!("{e:.6e}"))

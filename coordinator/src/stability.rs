@@ -18,7 +18,23 @@ pub struct StabilityMonitor {
     #[serde(default)]
     pub step_limit: Option<(f64, f64)>,
     reference_centre: std::collections::BTreeMap<String, [f64; 3]>,
+    /// The energy audit's early warning, per interface.
+    #[serde(default)]
+    energy: std::collections::BTreeMap<String, EnergyWatch>,
 }
+
+/// Per interface: the last windows' energy mismatches |W_DEM − W_FEM| and the largest work of
+/// one window so far, for [`StabilityMonitor::observe_work`].
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
+struct EnergyWatch {
+    mismatch: std::collections::VecDeque<f64>,
+    largest_work: f64,
+    growing: bool,
+    warned: bool,
+}
+
+/// Windows of mismatch history the early warning looks at.
+const ENERGY_HISTORY: usize = 8;
 
 /// Why a run was stopped.
 #[derive(Debug, Clone, PartialEq)]
@@ -62,7 +78,44 @@ impl StabilityMonitor {
             mesh_size: None,
             step_limit: None,
             reference_centre: Default::default(),
+            energy: Default::default(),
         }
+    }
+
+    /// The energy audit's early warning: the interface's energy mismatch of window `window`,
+    /// |W_DEM − W_FEM|, looked at over the last windows. Its envelope over pairs of windows
+    /// (explicit schemes diverge with an odd–even oscillation) growing monotonically, by 8× or
+    /// more over six windows, beyond the largest work any single window exchanged so far, in
+    /// two windows running, says the coupling is diverging — measured on sleeper-ci with a
+    /// too-long just-in-time window, 87 windows before the motion check stopped it, and on
+    /// none of the stable scenes (docs/coupling.md). Returns the warning once.
+    pub fn observe_work(&mut self, interface: &str, window: u64, dem: f64, fem: f64) -> Option<String> {
+        let w = self.energy.entry(interface.to_string()).or_default();
+        w.mismatch.push_back((dem - fem).abs());
+        if w.mismatch.len() > ENERGY_HISTORY {
+            w.mismatch.pop_front();
+        }
+        let m = &w.mismatch;
+        let growing = m.len() == ENERGY_HISTORY && {
+            // envelope e_j = max(m_j, m_{j−1}) at the last window and 2, 4, 6 windows before
+            let e = |back: usize| {
+                let i = m.len() - 1 - back;
+                m[i].max(m[i - 1])
+            };
+            let (e0, e2, e4, e6) = (e(0), e(2), e(4), e(6));
+            e0 > e2 && e2 > e4 && e4 > e6 && e0 >= 8.0 * e6 && e0 > w.largest_work
+        };
+        let fire = growing && w.growing && !w.warned;
+        w.growing = growing;
+        w.largest_work = w.largest_work.max(dem.abs()).max(fem.abs());
+        if fire {
+            w.warned = true;
+            let e = m.back().copied().unwrap_or(0.0);
+            return Some(format!(
+                "energy audit: the work mismatch at interface `{interface}` grows window after window (|W_DEM − W_FEM| = {e:.3e} J at window {window}, more than any window's work so far): the coupling may be diverging; reduce the coupling window or use the predictive schedule"
+            ));
+        }
+        None
     }
 
     /// Looks at one digest; `Some` when the run must stop.
@@ -169,6 +222,35 @@ mod tests {
             e.to_string().starts_with("unstable at window 3 (t = 3.0"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn a_growing_work_mismatch_warns_once_and_a_single_spike_does_not() {
+        // sleeper-ci, just-in-time at 10 µs, windows 349–366 (W_DEM, W_FEM in J): an odd–even
+        // oscillation whose envelope doubles every two windows
+        let diverging = [
+            (-0.2217, -0.5018), (-0.3646, -0.5301), (-0.5092, -0.4474), (-0.2841, -0.1640),
+            (-0.2457, -0.1049), (-0.1542, -0.05844), (-0.2453, -0.05658), (-0.2154, -0.1109),
+            (-0.6924, -0.2033), (-0.9813, -0.5406), (-2.541, -0.3452), (-2.804, -0.7933),
+            (-7.652, 0.7621), (-5.558, -0.05758), (-17.50, 4.138), (-9.113, 1.588),
+            (-25.71, 8.715), (-12.15, 3.822),
+        ];
+        let mut m = StabilityMonitor::new(1e3);
+        let warned: Vec<u64> = diverging
+            .iter()
+            .enumerate()
+            .filter_map(|(i, (d, f))| m.observe_work("bottom", 349 + i as u64, *d, *f).map(|_| 349 + i as u64))
+            .collect();
+        assert_eq!(warned, vec![362], "once, 11 windows before the run was stopped");
+        // steady work with a one-window spike (sheet-ci, predictive, window 5464)
+        let mut m = StabilityMonitor::new(1e3);
+        let mut warnings = 0;
+        for k in 0..40u64 {
+            let spike = if k == 30 { 6e-5 } else { 0.0 };
+            let d = 5e-6 + 1e-6 * (k % 3) as f64 + spike;
+            warnings += m.observe_work("sheet", k, d, 4e-6).is_some() as usize;
+        }
+        assert_eq!(warnings, 0);
     }
 
     #[test]

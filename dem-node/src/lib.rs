@@ -951,6 +951,7 @@ impl Engine {
         m.move_to(0.0);
         m.nodal_force_sum.iter_mut().for_each(|f| *f = V3::zeros());
         m.window_substeps = 0;
+        m.window_work = 0.0;
         // The lists stay valid while no node moved d_V/2 since the build (checked every step,
         // eq. 4.10) and the contact patches are unchanged; new patch ids must reach the
         // candidate lists, so a deformation that changes them forces a rebuild.
@@ -1330,6 +1331,7 @@ impl Engine {
                 &s.records,
                 if dt > 0.0 { weight } else { 0.0 },
                 dt > 0.0 && ends_step,
+                dt,
             );
         }
         self.loaded_wall_forces();
@@ -1402,6 +1404,12 @@ impl Engine {
         } else {
             flat(&m.nodal_force_last, 1.0)
         }
+    }
+
+    /// Work the particles did on a coupled mesh since its window kinematics were set,
+    /// Σ Δt Σ_nodes f·v over the steps [J] (0 for an unknown index).
+    pub fn interface_work(&self, mesh: usize) -> f64 {
+        self.coupled_mesh(mesh).map_or(0.0, |m| m.window_work)
     }
 
     /// Current node positions of a coupled mesh (flat xyz); empty for an unknown index.

@@ -581,7 +581,9 @@ fn wall_forces(
 /// Distributes the recorded forces on coupled meshes to their nodes, f_K = N_K f
 /// (Wellmann eqs. 4.3–4.4), in particle order, and updates the window accumulators: the
 /// nodal forces are added to the window sum with `weight` (1 per step; 1/N per impact
-/// sub-step; 0 for a pure evaluation), and `count_step` counts one more window substep.
+/// sub-step; 0 for a pure evaluation), `count_step` counts one more window substep, and the
+/// forces' power on the moving nodes times `dt` (the step's length; 0 for an evaluation) is
+/// added to the window's interface work.
 pub fn accumulate_nodal_forces(
     meshes: &mut [Mesh],
     lists: &NeighbourLists,
@@ -589,6 +591,7 @@ pub fn accumulate_nodal_forces(
     records: &[MeshForceRecord],
     weight: f64,
     count_step: bool,
+    dt: f64,
 ) {
     for m in meshes.iter_mut().filter(|m| m.coupled) {
         m.nodal_force_step.iter_mut().for_each(|f| *f = V3::zeros());
@@ -634,6 +637,15 @@ pub fn accumulate_nodal_forces(
         }
         if count_step {
             m.window_substeps += 1;
+        }
+        if dt > 0.0 {
+            let power: f64 = m
+                .nodal_force_step
+                .iter()
+                .zip(&m.velocities)
+                .map(|(f, v)| f.dot(v))
+                .sum();
+            m.window_work += dt * power;
         }
     }
 }

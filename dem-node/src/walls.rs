@@ -242,6 +242,10 @@ pub struct Mesh {
     pub nodal_force_last: Vec<V3>,
     pub nodal_force_sum: Vec<V3>,
     pub window_substeps: u64,
+    /// Work the particles' forces did on the mesh since the window kinematics were set,
+    /// Σ_steps Δt Σ_nodes f·v (the DEM side of the interface energy audit) [J].
+    #[serde(default)]
+    pub window_work: f64,
     /// Node positions at the last neighbour-list build (Wellmann eq. 4.10).
     pub positions_at_build: Vec<V3>,
     /// False once a static wall was removed (`remove_at`): no contacts.
@@ -275,6 +279,7 @@ impl Mesh {
             nodal_force_last: vec![V3::zeros(); n],
             nodal_force_sum: vec![V3::zeros(); n],
             window_substeps: 0,
+            window_work: 0.0,
             positions_at_build: positions.clone(),
             positions,
             active: true,

@@ -197,5 +197,6 @@ async fn nan_forces_stop_the_run_cleanly_naming_the_field() {
     }
     // what was written so far is intact
     let csv = std::fs::read_to_string(dir.path().join("out/windows.csv")).unwrap();
-    assert!(csv.lines().skip(1).all(|l| l.split(',').count() == 7));
+    let columns = csv.lines().next().unwrap().split(',').count();
+    assert!(csv.lines().skip(1).all(|l| l.split(',').count() == columns));
 }

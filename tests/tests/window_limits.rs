@@ -66,6 +66,40 @@ fn predictive_allows_a_coupling_window_ten_times_the_just_in_time_one() {
             .unwrap()
     };
     assert_ne!(status("jit", "1e-5"), "completed", "{csv}");
+    // the energy audit warned of the too-long just-in-time window before it was stopped
+    // (docs/coupling.md): the interface work mismatch grew window after window first; and it
+    // stayed quiet on every stable run
+    let summary_of = |schedule: &str, window: &str| -> serde_json::Value {
+        let run = csv
+            .lines()
+            .map(|l| l.split(',').collect::<Vec<_>>())
+            .find(|r| r[1] == window && r[2] == schedule)
+            .map(|r| r[0].to_string())
+            .unwrap();
+        serde_json::from_str(&std::fs::read_to_string(out.join(run).join("summary.json")).unwrap())
+            .unwrap()
+    };
+    let s = summary_of("jit", "1e-5");
+    let stopped: u64 = s["error"]
+        .as_str()
+        .and_then(|e| e.split("unstable at window ").nth(1))
+        .and_then(|r| r.split_whitespace().next())
+        .and_then(|w| w.parse().ok())
+        .unwrap_or_else(|| panic!("{s}"));
+    let warned = s["interface_work"]["bottom"]["growth_warning_window"]
+        .as_u64()
+        .unwrap_or_else(|| panic!("no energy warning: {}", s["interface_work"]));
+    eprintln!("JIT 10 µs: energy warning at window {warned}, stopped at window {stopped}");
+    assert!(warned < stopped, "{warned} vs {stopped}");
+    for (schedule, window) in [("jit", "5e-6"), ("predictive", "5e-6"), ("predictive", "1e-4")] {
+        let s = summary_of(schedule, window);
+        assert_eq!(s["status"], "completed");
+        assert!(
+            s["interface_work"]["bottom"]["growth_warning_window"].is_null(),
+            "{schedule} {window}: {}",
+            s["interface_work"]
+        );
+    }
     assert_ne!(status("predictive", "2e-4"), "completed", "{csv}");
     for plot in ["error_vs_wall.png", "stability.png"] {
         assert!(out.join(plot).exists(), "{plot}");

@@ -39,6 +39,21 @@ struct FemNode {
     reference: BTreeMap<String, f64>,
     /// Model time of the last output row, so that `finish` does not repeat it.
     last_output_time: Option<f64>,
+    /// The interface energy audit: the window index and interface displacement (flat xyz,
+    /// end − start) of the last window, to pair forces that arrive a window later with the
+    /// motion they were computed on (predictive). Part of the node's snapshot.
+    last_displacement: Option<(u64, Vec<f64>)>,
+}
+
+/// What a FEM node's snapshot holds: the model's state and the audit's memory.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct NodeState {
+    model: Vec<u8>,
+    last_displacement: Option<(u64, Vec<f64>)>,
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
 /// Ullrich ch. 4 / REFERENCE A3: the pure-FEM solution under the same total interface load
@@ -259,11 +274,13 @@ impl Solver for FemNode {
         let model = self.model.as_mut().ok_or_else(|| {
             NodeError::new(ErrorCode::Protocol, "a window command came before `init`")
         })?;
+        let received = forces.as_ref().map(|f| f.window);
         if let Some(f) = forces {
             model
                 .set_interface_forces(f.forces.as_slice())
                 .map_err(|e| fem_error(ErrorCode::Protocol, e))?;
         }
+        let start_positions = model.interface_kinematics().0;
         if w.static_solve {
             model
                 .solve_static()
@@ -283,6 +300,26 @@ impl Solver for FemNode {
         let t_end = model.time();
         self.last_output_time = Some(t_end);
         let (pos, vel, acc) = model.interface_kinematics();
+        // the interface energy audit: the work of the interface loads over this step (they are
+        // held constant through it), f · Δx; and the work of the forces just received over
+        // the displacement of the window they were computed in (this one for just-in-time,
+        // the previous one for predictive): with force averaging and predictive motion the
+        // DEM's own account of its work equals the latter to round-off (docs/coupling.md)
+        let displacement: Vec<f64> = pos.iter().zip(&start_positions).map(|(e, s)| e - s).collect();
+        let mut audit = Vec::new();
+        if let Some((name, _)) = &self.interface {
+            let held = model.held_interface_forces();
+            audit.push((format!("interface_work.{name}"), dot(held, &displacement)));
+            let paired = match (received, &self.last_displacement) {
+                (Some(k), _) if k == w.window => Some(&displacement),
+                (Some(k), Some((j, d))) if k == *j => Some(d),
+                _ => None,
+            };
+            if let Some(d) = paired {
+                audit.push((format!("interface_work_received.{name}"), dot(held, d)));
+            }
+        }
+        self.last_displacement = Some((w.window, displacement));
         if let (Some(trace), Some((name, _))) = (self.trace.as_mut(), &self.interface) {
             let path = out_dir.join(format!("trace_{name}_mesh.csv"));
             let mut row = vec![t_end];
@@ -294,12 +331,13 @@ impl Solver for FemNode {
                 &row,
             )?;
         }
-        let monitor = BTreeMap::from([(
+        let mut monitor = BTreeMap::from([(
             "max_interface_speed".to_string(),
             vel.chunks_exact(3)
                 .map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt())
                 .fold(0.0, f64::max),
         )]);
+        monitor.extend(audit);
         if let Some(label) = w.output {
             self.write_kinematics(p, label, t_end, (pos, vel, acc))
                 .await?;
@@ -319,16 +357,27 @@ impl Solver for FemNode {
     }
 
     fn snapshot(&self) -> Result<Vec<u8>, NodeError> {
-        self.model
+        let model = self
+            .model
             .as_ref()
             .map(|m| m.snapshot())
-            .ok_or_else(|| NodeError::new(ErrorCode::Protocol, "snapshot before `init`"))
+            .ok_or_else(|| NodeError::new(ErrorCode::Protocol, "snapshot before `init`"))?;
+        let state = NodeState {
+            model,
+            last_displacement: self.last_displacement.clone(),
+        };
+        rmp_serde::to_vec(&state)
+            .map_err(|e| fem_error(ErrorCode::Internal, format!("encoding the FEM node state: {e}")))
     }
 
     fn restore(&mut self, bytes: &[u8]) -> Result<(), NodeError> {
+        let state: NodeState = rmp_serde::from_slice(bytes)
+            .map_err(|e| fem_error(ErrorCode::Io, format!("restoring the FEM state: {e}")))?;
         self.model()?
-            .restore(bytes)
-            .map_err(|e| fem_error(ErrorCode::Io, format!("restoring the FEM state: {e}")))
+            .restore(&state.model)
+            .map_err(|e| fem_error(ErrorCode::Io, format!("restoring the FEM state: {e}")))?;
+        self.last_displacement = state.last_displacement;
+        Ok(())
     }
 
     fn time_series(&self) -> Option<(&Path, f64)> {
@@ -375,6 +424,7 @@ fn main() -> std::process::ExitCode {
         config: None,
         reference: BTreeMap::new(),
         last_output_time: None,
+        last_displacement: None,
     };
     main_with(args.node, hello, node)
 }

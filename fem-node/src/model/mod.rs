@@ -544,6 +544,12 @@ impl Model {
         self.static_solve_at(t)
     }
 
+    /// The interface forces held since the last `set_interface_forces` (flat xyz, interface
+    /// node order) [N].
+    pub fn held_interface_forces(&self) -> &[f64] {
+        &self.st.interface_forces
+    }
+
     /// Current positions (reference + u), velocities and accelerations of the interface nodes.
     pub fn interface_kinematics(&self) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
         let n = self.iface.nodes.len();
@@ -571,7 +577,19 @@ impl Model {
         *self.crit.get_or_init(|| {
             let lam = self.max_eigenvalue()?;
             let w = lam.sqrt();
-            let (ra, rb) = self.rayleigh();
+            let (ra, rb) = match self.analysis {
+                Analysis::Dynamic {
+                    rayleigh_a,
+                    rayleigh_b,
+                    ..
+                }
+                | Analysis::Explicit {
+                    rayleigh_a,
+                    rayleigh_b,
+                    ..
+                } => (rayleigh_a, rayleigh_b),
+                Analysis::Static => (0.0, 0.0),
+            };
             let xi = ra / (2.0 * w) + rb * w / 2.0;
             Some(2.0 / w * ((1.0 + xi * xi).sqrt() - xi))
         })
