@@ -9,13 +9,14 @@ use std::time::{Duration, Instant};
 
 use cosim_tests::{bin, bin_dir, cosim, root, run, summary, wait_for_windows, Reaper};
 
-/// Router configuration: usrpwd authentication and an ACL that lets only `coordinator`, `dem`
-/// and `fem` use `cosim/<run>/**` (the shape of deploy/router.json5, on TCP).
+/// Router configuration: usrpwd authentication and an ACL that lets only the run's nodes
+/// (`coordinator`, `dem`, `fem`, and the structures `left`, `right`) use `cosim/<run>/**` (the
+/// shape of deploy/router.json5, on TCP).
 fn router_config(dir: &Path, endpoints: &[String], run_id: &str) -> PathBuf {
     let creds = dir.join("credentials.txt");
     std::fs::write(
         &creds,
-        "coordinator:pw-c\ndem:pw-d\nfem:pw-f\nmallory:pw-m\n",
+        "coordinator:pw-c\ndem:pw-d\nfem:pw-f\nleft:pw-l\nright:pw-r\nmallory:pw-m\n",
     )
     .unwrap();
     let text = format!(
@@ -36,7 +37,7 @@ fn router_config(dir: &Path, endpoints: &[String], run_id: &str) -> PathBuf {
                  "liveliness_token", "declare_liveliness_subscriber", "liveliness_query"],
       key_exprs: ["cosim/{run_id}/**"],
     }}],
-    subjects: [{{ id: "run-nodes", usernames: ["coordinator", "dem", "fem"] }}],
+    subjects: [{{ id: "run-nodes", usernames: ["coordinator", "dem", "fem", "left", "right"] }}],
     policies: [{{ rules: ["run-traffic"], subjects: ["run-nodes"] }}],
   }},
 }}"#,
@@ -177,12 +178,12 @@ impl Netns {
         }
     }
 
-    /// Router namespace `r` with 10.77.1.1 towards `d` (10.77.1.2) and 10.77.2.1 towards `f`
-    /// (10.77.2.2).
-    fn create(tag: &str) -> Result<Netns, String> {
+    /// Router namespace `r` and `hosts` more (`h1`, `h2`, …), host i joined to the router by
+    /// a veth pair: 10.77.i.1 on the router's side, 10.77.i.2 on the host's.
+    fn create(tag: &str, hosts: usize) -> Result<Netns, String> {
         let n = Netns {
-            names: ["r", "d", "f"]
-                .iter()
+            names: std::iter::once("r".to_string())
+                .chain((1..=hosts).map(|i| format!("h{i}")))
                 .map(|x| format!("cosim-{x}-{tag}"))
                 .collect(),
         };
@@ -190,7 +191,7 @@ impl Netns {
             Self::sh(&["netns", "add", ns])?;
             Self::sh(&["-n", ns, "link", "set", "lo", "up"])?;
         }
-        for (i, peer) in [(1, &n.names[1]), (2, &n.names[2])] {
+        for (i, peer) in n.names.iter().enumerate().skip(1) {
             let (a, b) = (format!("cv{i}a{tag}"), format!("cv{i}b{tag}"));
             Self::sh(&[
                 "link",
@@ -248,38 +249,30 @@ fn in_netns(ns: &str, program: PathBuf) -> Command {
     c
 }
 
-/// Router and coordinator in the first namespace, the DEM and FEM nodes in the other two, all
-/// authenticated, the router's ACL open to this run only. Returns the coordinator (stderr
-/// piped) and the other processes.
+/// Router and coordinator in the first namespace, node i of `nodes` (id, kind, password) in
+/// host namespace i + 1, all authenticated, the router's ACL open to this run only. Returns the
+/// coordinator (stderr piped) and the other processes.
 fn run_over_namespaces(
     net: &Netns,
     dir: &Path,
     run_id: &str,
     scene: &Path,
     out: &Path,
+    nodes: &[(&str, &str, &str)],
 ) -> (Child, Reaper) {
-    let endpoints = vec![
-        "tcp/10.77.1.1:7447".to_string(),
-        "tcp/10.77.2.1:7447".to_string(),
-    ];
+    let endpoints: Vec<String> = (1..=nodes.len())
+        .map(|i| format!("tcp/10.77.{i}.1:7447"))
+        .collect();
     let router_cfg = router_config(dir, &endpoints, run_id);
     let coord_cfg = client_config(dir, Some(("coordinator", "pw-c")), "tcp/10.77.1.1:7447");
-    let dem_cfg = client_config(dir, Some(("dem", "pw-d")), "tcp/10.77.1.1:7447");
-    let fem_cfg = client_config(dir, Some(("fem", "pw-f")), "tcp/10.77.2.1:7447");
     let mut procs = Reaper(vec![start_router(&router_cfg, Some(&net.names[0]))]);
     let mut coordinator = in_netns(&net.names[0], bin("cosim"));
+    coordinator.arg("run").arg(scene).arg("--no-progress");
+    for (node, ..) in nodes {
+        coordinator.args(["--external", node]);
+    }
     coordinator
-        .arg("run")
-        .arg(scene)
-        .args([
-            "--no-progress",
-            "--external",
-            "dem",
-            "--external",
-            "fem",
-            "--run-id",
-            run_id,
-        ])
+        .args(["--run-id", run_id])
         .arg("--config")
         .arg(&coord_cfg)
         .arg("--out")
@@ -287,27 +280,28 @@ fn run_over_namespaces(
         .stdout(Stdio::null())
         .stderr(Stdio::piped());
     let coordinator = coordinator.spawn().unwrap();
-    for (ns, node, cfg) in [
-        (&net.names[1], "dem", &dem_cfg),
-        (&net.names[2], "fem", &fem_cfg),
-    ] {
-        let mut c = in_netns(ns, bin(&format!("{node}-node")));
+    for (i, (node, kind, password)) in nodes.iter().enumerate() {
+        let cfg = client_config(dir, Some((node, password)), &endpoints[i]);
+        let mut c = in_netns(&net.names[i + 1], bin(&format!("{kind}-node")));
         c.args(["--run-id", run_id, "--node", node])
             .arg("--zenoh-config")
-            .arg(cfg);
+            .arg(&cfg);
         c.stdout(Stdio::null()).stderr(Stdio::null());
         procs.0.push(c.spawn().unwrap());
     }
     (coordinator, procs)
 }
 
+/// The nodes of a one-structure scene: (id, kind, password).
+const DEM_AND_FEM: &[(&str, &str, &str)] = &[("dem", "dem", "pw-d"), ("fem", "fem", "pw-f")];
+
 /// Needs root (CI runs it with `--run-ignored all`; elsewhere it is reported as skipped).
 #[test]
 #[ignore = "needs root to create network namespaces: run with --run-ignored all"]
 fn beam_over_three_network_namespaces_matches_the_local_run_bitwise() {
     let tag = format!("{}", std::process::id() % 100_000);
-    let net =
-        Netns::create(&tag).unwrap_or_else(|e| panic!("cannot create network namespaces: {e}"));
+    let net = Netns::create(&tag, 2)
+        .unwrap_or_else(|e| panic!("cannot create network namespaces: {e}"));
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("netns");
     let (coordinator, _procs) = run_over_namespaces(
@@ -316,6 +310,7 @@ fn beam_over_three_network_namespaces_matches_the_local_run_bitwise() {
         &format!("beam-netns-{tag}"),
         &root().join("scenes/beam-layer.toml"),
         &out,
+        DEM_AND_FEM,
     );
     let o = coordinator.wait_with_output().unwrap();
     eprintln!("{}", String::from_utf8_lossy(&o.stderr));
@@ -339,8 +334,8 @@ fn beam_over_three_network_namespaces_matches_the_local_run_bitwise() {
 #[ignore = "needs root to create network namespaces: run with --run-ignored all"]
 fn a_cut_link_ends_the_run_within_5_s_naming_node_and_window() {
     let tag = format!("{}", (std::process::id() + 7) % 100_000);
-    let net =
-        Netns::create(&tag).unwrap_or_else(|e| panic!("cannot create network namespaces: {e}"));
+    let net = Netns::create(&tag, 2)
+        .unwrap_or_else(|e| panic!("cannot create network namespaces: {e}"));
     let dir = tempfile::tempdir().unwrap();
     let text = std::fs::read_to_string(root().join("scenes/plate.toml"))
         .unwrap()
@@ -348,7 +343,14 @@ fn a_cut_link_ends_the_run_within_5_s_naming_node_and_window() {
     let scene = cosim_tests::write_scene(dir.path(), "plate.toml", &text);
     let out = dir.path().join("out");
     let (mut coordinator, _procs) =
-        run_over_namespaces(&net, dir.path(), &format!("plate-cut-{tag}"), &scene, &out);
+        run_over_namespaces(
+            &net,
+            dir.path(),
+            &format!("plate-cut-{tag}"),
+            &scene,
+            &out,
+            DEM_AND_FEM,
+        );
     wait_for_windows(&out, 19, &mut coordinator, Duration::from_secs(60));
     // pull the DEM machine's cable
     Netns::sh(&[
@@ -380,4 +382,43 @@ fn a_cut_link_ends_the_run_within_5_s_naming_node_and_window() {
     assert!(!status.success());
     assert!(err.contains("dem") && err.contains("window"), "{err}");
     assert_eq!(summary(&out)["status"], "failed");
+}
+
+/// Needs root. Two structures under one bed on four machines: router and coordinator, the DEM,
+/// and each plate's FEM node in a namespace of its own; the results match the local run to the
+/// last bit.
+#[test]
+#[ignore = "needs root to create network namespaces: run with --run-ignored all"]
+fn two_structures_over_four_network_namespaces_match_the_local_run_bitwise() {
+    let tag = format!("{}", (std::process::id() + 13) % 100_000);
+    let net = Netns::create(&tag, 3)
+        .unwrap_or_else(|e| panic!("cannot create network namespaces: {e}"));
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("netns");
+    let (coordinator, _procs) = run_over_namespaces(
+        &net,
+        dir.path(),
+        &format!("plates-netns-{tag}"),
+        &root().join("scenes/two-plates.toml"),
+        &out,
+        &[
+            ("dem", "dem", "pw-d"),
+            ("left", "fem", "pw-l"),
+            ("right", "fem", "pw-r"),
+        ],
+    );
+    let o = coordinator.wait_with_output().unwrap();
+    eprintln!("{}", String::from_utf8_lossy(&o.stderr));
+    assert!(o.status.success(), "the run over namespaces failed");
+    let local = dir.path().join("local");
+    let mut c = cosim();
+    c.args(["run", "scenes/two-plates.toml", "--no-progress", "--out"])
+        .arg(&local);
+    assert!(run(c).status.success());
+    let (a, b) = (summary(&out), summary(&local));
+    assert_eq!(a["status"], "completed");
+    assert_eq!(a["results"], b["results"]);
+    assert_eq!(a["interface_work"], b["interface_work"]);
+    assert!(a["results"]["left.probe.centre.uz"].as_f64().unwrap() < 0.0);
+    assert!(a["results"]["right.probe.centre.uz"].as_f64().unwrap() < 0.0);
 }
