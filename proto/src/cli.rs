@@ -11,7 +11,7 @@ pub struct NodeArgs {
     /// Run to join (the coordinator prints it).
     #[arg(long)]
     pub run_id: String,
-    /// Name of this node in the run (`dem` or `fem`).
+    /// Id of this node in the run (`dem`, `fem`, or a structure's id the scene declares).
     #[arg(long)]
     pub node: String,
     /// Endpoint to listen on, e.g. tcp/127.0.0.1:7448 (repeatable).

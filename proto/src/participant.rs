@@ -49,6 +49,23 @@ async fn put<M: Message>(publisher: &Publisher<'static>, msg: &M) -> Result<(), 
     publisher.put(bytes).await.map_err(ProtoError::zenoh)
 }
 
+/// Interface data: labelled with window and iteration.
+trait Data: Message {
+    fn data_label(&self) -> Label;
+}
+
+impl Data for InterfaceKinematics {
+    fn data_label(&self) -> Label {
+        self.label()
+    }
+}
+
+impl Data for InterfaceForces {
+    fn data_label(&self) -> Label {
+        self.label()
+    }
+}
+
 /// Name of a command as written on the wire (`type`).
 pub fn command_name(c: &CommandBody) -> &'static str {
     match c {
@@ -514,7 +531,7 @@ impl Participant {
 
     /// Waits for data on `key`, watching the coordinator meanwhile: a `stop` command or the
     /// coordinator's disappearance ends the wait at once instead of at the timeout.
-    async fn read<M: Message>(
+    async fn read<M: Data>(
         &mut self,
         key: &str,
         label: Label,
@@ -543,6 +560,15 @@ impl Participant {
                     // refused and logged; the real message is still awaited
                     Err(e @ ProtoError::WrongRun { .. }) => {
                         tracing::warn!("refused on `{key}`: {e}")
+                    }
+                    // data of an iteration an implicit scheme abandoned (rolled back) before
+                    // it was read: obsolete, skipped (PROTOCOL.md §4, Label)
+                    Ok(m) if m.data_label().iteration < label.iteration => {
+                        tracing::debug!(
+                            "skipped obsolete {} of {} on `{key}` (awaiting {label})",
+                            M::WHAT,
+                            m.data_label()
+                        )
                     }
                     other => return other,
                 }
