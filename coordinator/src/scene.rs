@@ -17,18 +17,9 @@ use crate::units::{format_seconds, Joules, Seconds};
 /// messages; beyond this the scene is almost certainly a typo (a window in s meant as ms).
 pub const MAX_WINDOWS: f64 = 1e8;
 
-/// A scene error with its place in the file (line 0: the file as a whole, e.g. unreadable).
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{file}{place}: {field}{sep}{message}", place = if *line == 0 { String::new() } else { format!(":{line}:{column}") }, sep = if field.is_empty() { "" } else { ": " })]
-pub struct SceneError {
-    pub file: String,
-    pub line: usize,
-    pub column: usize,
-    /// Dotted path of the field, e.g. `coupling.window` (empty when unknown).
-    pub field: String,
-    pub message: String,
-}
-
+/// A scene error with its place in the file (line 0: the file as a whole, e.g. unreadable):
+/// the one scene error type of every crate.
+pub use scenefile::SceneError;
 pub use scenefile::line_col;
 
 /// The coupling schedule (Ullrich ch. 3).

@@ -8,7 +8,6 @@
 use crate::resources::format_number;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
-use std::fmt;
 
 /// Default safety fraction of the Rayleigh time step (Ullrich eq. 2.27). LIGGGHTS and EDEM
 /// guides recommend 20–40 % of Δt_R for dense packings; 0.3 lets the REFERENCE D dense bed
@@ -17,25 +16,9 @@ pub const DEFAULT_RAYLEIGH_FRACTION: f64 = 0.3;
 /// Largest `impact_substeps`.
 pub const MAX_IMPACT_SUBSTEPS: usize = 1024;
 
-/// A scene-file error with a 1-based position in the whole scene text.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct SceneError {
-    pub line: usize,
-    pub column: usize,
-    pub message: String,
-}
-
-impl fmt::Display for SceneError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(
-            f,
-            "line {}, column {}: {}",
-            self.line, self.column, self.message
-        )
-    }
-}
-
-impl std::error::Error for SceneError {}
+/// A scene-file error with a 1-based position in the whole scene text (the one type of every
+/// crate).
+pub use scenefile::SceneError;
 
 /// The `[dem]` table.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -606,32 +589,12 @@ impl Default for OutputConfig {
 }
 
 /// A path into the TOML document: keys and array indices.
-#[derive(Debug, Clone)]
-pub(crate) enum Seg {
-    Key(String),
-    Index(usize),
-}
+pub(crate) use scenefile::{path_string, Seg};
 
 #[derive(Debug, Clone)]
 pub(crate) struct ValueError {
     pub path: Vec<Seg>,
     pub message: String,
-}
-
-pub(crate) fn path_string(path: &[Seg]) -> String {
-    let mut s = String::new();
-    for seg in path {
-        match seg {
-            Seg::Key(k) => {
-                if !s.is_empty() {
-                    s.push('.');
-                }
-                s.push_str(k);
-            }
-            Seg::Index(i) => s.push_str(&format!("[{i}]")),
-        }
-    }
-    s
 }
 
 struct Check {
@@ -1427,55 +1390,6 @@ impl DemConfig {
     }
 }
 
-/// 1-based (line, column) of a byte offset.
-pub(crate) fn line_column(text: &str, offset: usize) -> (usize, usize) {
-    let offset = offset.min(text.len());
-    let before = &text[..offset];
-    let line = before.matches('\n').count() + 1;
-    let line_start = before.rfind('\n').map(|i| i + 1).unwrap_or(0);
-    let column = text[line_start..offset].chars().count() + 1;
-    (line, column)
-}
-
-/// Span of the value at `path` in the TOML text (falls back to the deepest existing prefix).
-fn locate(text: &str, path: &[Seg]) -> Option<std::ops::Range<usize>> {
-    use toml::de::{DeTable, DeValue};
-    let doc = DeTable::parse(text).ok()?;
-    let mut best = doc.span();
-    let mut cur: Option<&toml::Spanned<DeValue>> = None;
-    let root = doc.get_ref();
-    for (depth, seg) in path.iter().enumerate() {
-        let next = match (seg, cur) {
-            (Seg::Key(k), None) if depth == 0 => root
-                .iter()
-                .find(|(key, _)| key.get_ref().as_ref() == k.as_str())
-                .map(|(key, v)| {
-                    best = key.span();
-                    v
-                }),
-            (Seg::Key(k), Some(v)) => v.get_ref().as_table().and_then(|t| {
-                t.iter()
-                    .find(|(key, _)| key.get_ref().as_ref() == k.as_str())
-                    .map(|(key, v)| {
-                        best = key.span();
-                        v
-                    })
-            }),
-            (Seg::Index(i), Some(v)) => v.get_ref().as_array().and_then(|a| {
-                a.get(*i).inspect(|v| {
-                    best = v.span();
-                })
-            }),
-            _ => None,
-        };
-        match next {
-            Some(v) => cur = Some(v),
-            None => break,
-        }
-    }
-    Some(best)
-}
-
 /// The string value a serde message quotes (`invalid type: string "big", expected f64`).
 fn quoted_value(message: &str) -> Option<String> {
     let rest = message.split_once("string \"")?.1;
@@ -1494,8 +1408,13 @@ fn looks_like_quantity(value: &str) -> bool {
 /// The field path (`dem.particles[0].radius`) and byte offset of the value an error span
 /// points at: the leaf whose string equals the value the message quotes, inside the span
 /// (internally tagged tables report the span of the whole table), else the innermost key or
-/// value containing the span's start. Only paths under `dem` count.
-fn field_at(text: &str, span: std::ops::Range<usize>, message: &str) -> Option<(String, usize)> {
+/// value containing the span's start. Only paths under the DEM's table `table` count.
+fn field_at(
+    text: &str,
+    table: &str,
+    span: std::ops::Range<usize>,
+    message: &str,
+) -> Option<(String, usize)> {
     use toml::de::{DeTable, DeValue};
     fn walk<'a>(
         v: &'a toml::Spanned<DeValue<'a>>,
@@ -1523,9 +1442,9 @@ fn field_at(text: &str, span: std::ops::Range<usize>, message: &str) -> Option<(
     let dem = doc
         .get_ref()
         .iter()
-        .find(|(k, _)| k.get_ref().as_ref() == "dem")?;
+        .find(|(k, _)| k.get_ref().as_ref() == table)?;
     let mut nodes = Vec::new();
-    walk(dem.1, "dem".into(), dem.0.span().start, &mut nodes);
+    walk(dem.1, table.into(), dem.0.span().start, &mut nodes);
     // innermost: the last node (depth-first order) whose key or value contains the start
     let (inner, at) = nodes
         .iter()
@@ -1638,7 +1557,7 @@ pub fn parse_scene_table(text: &str, table: &str) -> Result<Option<DemConfig>, S
             } else {
                 e.span().unwrap_or(start..start)
             };
-            if let Some((path, at)) = field_at(text, span, &message) {
+            if let Some((path, at)) = field_at(text, table, span, &message) {
                 if !moved {
                     start = at;
                 }
@@ -1650,24 +1569,20 @@ pub fn parse_scene_table(text: &str, table: &str) -> Result<Option<DemConfig>, S
                 "; [dem] takes plain numbers in SI units (m, s, kg, Pa), not strings with a unit",
             );
         }
-        let (line, column) = line_column(text, start);
         // toml's message names the offending key, e.g. "unknown field `radiuss`, expected ...".
-        SceneError {
-            line,
-            column,
-            message,
-        }
+        SceneError::at(text, start, "", message)
     })?;
     let Some(cfg) = doc else { return Ok(None) };
-    if let Some(err) = cfg.validate_values().into_iter().next() {
-        let (line, column) = locate(text, &err.path)
-            .map(|s| line_column(text, s.start))
-            .unwrap_or((1, 1));
-        return Err(SceneError {
-            line,
-            column,
-            message: err.message,
-        });
+    if let Some(mut err) = cfg.validate_values().into_iter().next() {
+        // the checks name paths under `dem`; this table may have another name
+        if table != "dem" && err.path.first() == Some(&Seg::Key("dem".into())) {
+            err.path[0] = Seg::Key(table.into());
+            if let Some(rest) = err.message.strip_prefix("dem") {
+                err.message = format!("{table}{rest}");
+            }
+        }
+        let at = scenefile::locate(text, &err.path).map_or(0, |s| s.start);
+        return Err(SceneError::at(text, at, "", err.message));
     }
     Ok(Some(cfg))
 }

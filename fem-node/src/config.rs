@@ -8,25 +8,8 @@ use serde::{Deserialize, Deserializer, Serialize};
 use std::collections::BTreeMap;
 use std::fmt;
 
-/// A scene-file error with its 1-based position.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct SceneError {
-    pub line: usize,
-    pub column: usize,
-    pub message: String,
-}
-
-impl fmt::Display for SceneError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(
-            f,
-            "line {}, column {}: {}",
-            self.line, self.column, self.message
-        )
-    }
-}
-
-impl std::error::Error for SceneError {}
+/// A scene-file error with its 1-based position (the one type of every crate).
+pub use scenefile::SceneError;
 
 /// `[fem]`: the structure of a scene.
 #[derive(Clone, Debug, Deserialize, Serialize)]
@@ -637,18 +620,13 @@ pub fn parse_scene_section(text: &str) -> Result<Option<FemConfig>, SceneError> 
 pub fn parse_scene_table(text: &str, table: &str) -> Result<Option<FemConfig>, SceneError> {
     let parsed: Option<FemConfig> = scenefile::named_table(text, table).map_err(|e| {
         let offset = e.span().map(|s| s.start).unwrap_or(0);
-        let (line, column) = line_col(text, offset);
         let mut message = e.message().trim().to_string();
-        if let Some(path) = spans::path_at(text, offset) {
+        if let Some(path) = scenefile::path_at(text, offset) {
             if !message.contains(&path) {
                 message = format!("{path}: {message}");
             }
         }
-        SceneError {
-            line,
-            column,
-            message,
-        }
+        SceneError::at(text, offset, "", message)
     })?;
     let Some(cfg) = parsed else {
         return Ok(None);
@@ -659,12 +637,8 @@ pub fn parse_scene_table(text: &str, table: &str) -> Result<Option<FemConfig>, S
             Some(rest) if table != "fem" => format!("{table}{rest}"),
             _ => path,
         };
-        let (line, column) = spans::locate(text, &path);
-        return Err(SceneError {
-            line,
-            column,
-            message: format!("{path}: {msg}"),
-        });
+        let at = scenefile::locate(text, &scenefile::split_path(&path)).map_or(0, |r| r.start);
+        return Err(SceneError::at(text, at, "", format!("{path}: {msg}")));
     }
     Ok(Some(cfg))
 }
@@ -784,17 +758,6 @@ fn check_material(base: &str, m: &MaterialSpec) -> Result<(), (String, String)> 
             .map_err(|(field, msg)| (format!("{base}.{field}"), msg))
         }
     }
-}
-
-fn line_col(text: &str, offset: usize) -> (usize, usize) {
-    let offset = offset.min(text.len());
-    let before = &text[..offset];
-    let line = before.matches('\n').count() + 1;
-    let col = before
-        .rfind('\n')
-        .map_or(before.chars().count(), |p| before[p + 1..].chars().count())
-        + 1;
-    (line, col)
 }
 
 impl FemConfig {
@@ -1267,123 +1230,3 @@ fn check_selector(s: &Selector, path: &str) -> Result<(), (String, String)> {
     Ok(())
 }
 
-/// Locating field paths in the TOML text via toml's spanned document tree.
-mod spans {
-    use toml::de::{DeTable, DeValue};
-    use toml::Spanned;
-
-    /// (line, column) of the value at a path such as `fem.loads[2].on.box`; falls back to the
-    /// deepest existing prefix, then to the start of the file.
-    pub fn locate(text: &str, path: &str) -> (usize, usize) {
-        let Ok(root) = DeTable::parse(text) else {
-            return (1, 1);
-        };
-        let segs = split(path);
-        let mut best: Option<std::ops::Range<usize>> = None;
-        let mut cur_table: Option<&DeTable> = Some(root.get_ref());
-        let mut cur_array: Option<&[Spanned<DeValue>]> = None;
-        for seg in &segs {
-            let next: Option<&Spanned<DeValue>> = match (seg, cur_table, cur_array) {
-                (Seg::Key(k), Some(t), _) => t
-                    .iter()
-                    .find(|(key, _)| key.get_ref().as_ref() == k.as_str())
-                    .map(|(key, v)| {
-                        best = Some(key.span());
-                        v
-                    }),
-                (Seg::Index(i), _, Some(a)) => a.get(*i),
-                _ => None,
-            };
-            let Some(v) = next else { break };
-            if matches!(seg, Seg::Index(_)) {
-                best = Some(v.span());
-            }
-            cur_table = None;
-            cur_array = None;
-            match v.get_ref() {
-                DeValue::Table(t) => cur_table = Some(t),
-                DeValue::Array(a) => cur_array = Some(&a[..]),
-                _ => {}
-            }
-        }
-        match best {
-            Some(r) => super::line_col(text, r.start),
-            None => (1, 1),
-        }
-    }
-
-    /// Dotted path of the innermost key whose key or value span contains `offset` (the whole
-    /// tree is searched: tables opened by separate headers do not nest by span).
-    pub fn path_at(text: &str, offset: usize) -> Option<String> {
-        let root = DeTable::parse(text).ok()?;
-        let mut best: Option<(usize, String)> = None;
-        walk_table(root.get_ref(), offset, "", 0, &mut best);
-        best.map(|(_, p)| p)
-    }
-
-    fn walk_table(
-        t: &DeTable,
-        offset: usize,
-        prefix: &str,
-        depth: usize,
-        best: &mut Option<(usize, String)>,
-    ) {
-        for (k, v) in t.iter() {
-            let path = if prefix.is_empty() {
-                k.get_ref().to_string()
-            } else {
-                format!("{prefix}.{}", k.get_ref())
-            };
-            if (k.span().contains(&offset) || v.span().contains(&offset))
-                && best.as_ref().is_none_or(|(d, _)| depth >= *d)
-            {
-                *best = Some((depth, path.clone()));
-            }
-            walk_value(v, offset, &path, depth + 1, best);
-        }
-    }
-
-    fn walk_value(
-        v: &Spanned<DeValue>,
-        offset: usize,
-        path: &str,
-        depth: usize,
-        best: &mut Option<(usize, String)>,
-    ) {
-        match v.get_ref() {
-            DeValue::Table(t) => walk_table(t, offset, path, depth, best),
-            DeValue::Array(a) => {
-                for (i, e) in a.iter().enumerate() {
-                    walk_value(e, offset, &format!("{path}[{i}]"), depth, best);
-                }
-            }
-            _ => {}
-        }
-    }
-
-    enum Seg {
-        Key(String),
-        Index(usize),
-    }
-
-    fn split(path: &str) -> Vec<Seg> {
-        let mut out = Vec::new();
-        for part in path.split('.') {
-            let mut rest = part;
-            if let Some(p) = rest.find('[') {
-                out.push(Seg::Key(rest[..p].to_string()));
-                rest = &rest[p..];
-                while let Some(stripped) = rest.strip_prefix('[') {
-                    let end = stripped.find(']').unwrap_or(stripped.len());
-                    if let Ok(i) = stripped[..end].parse() {
-                        out.push(Seg::Index(i));
-                    }
-                    rest = stripped.get(end + 1..).unwrap_or("");
-                }
-            } else {
-                out.push(Seg::Key(rest.to_string()));
-            }
-        }
-        out
-    }
-}

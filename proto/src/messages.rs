@@ -192,7 +192,8 @@ pub enum MotionRule {
 pub struct Hello {
     pub software: String,
     pub kind: NodeKind,
-    /// Optional features: `snapshot`, `force_averaging`, `static`, `dynamic`, ...
+    /// Optional features, informative: `snapshot` (snapshot/restore), `checkpoint`
+    /// (checkpoint/rollback), `static`, `dynamic`, ...
     pub capabilities: Vec<String>,
     pub pid: u32,
 }

@@ -547,13 +547,6 @@ impl Init {
             })
     }
 
-    /// The interfaces of the run this node takes part in.
-    pub fn interfaces_of<'a>(&'a self, node: &'a str) -> impl Iterator<Item = &'a InterfaceDecl> + 'a {
-        self.interfaces
-            .iter()
-            .filter(move |i| i.provider == node || i.users.iter().any(|u| u == node))
-    }
-
     /// This node's output folder `<out_dir>/<node>`, created.
     pub fn node_out_dir(&self, node: &str) -> Result<PathBuf, NodeError> {
         let dir = PathBuf::from(&self.out_dir).join(node);

@@ -262,7 +262,8 @@ impl Participant {
 
     /// Declares what this node exchanges on the interfaces of the run that name it: as a
     /// provider it subscribes to the forces and publishes kinematics, as a user the other way
-    /// round. Returns the interfaces this node takes part in, in the order given. Call before
+    /// round (surface data; whether the node can couple an interface's kind is its own check).
+    /// Returns the interfaces this node takes part in, in the order given. Call before
     /// reporting `ready`.
     pub async fn open_interfaces(
         &mut self,
@@ -279,15 +280,6 @@ impl Participant {
             } else {
                 continue;
             };
-            if decl.kind != InterfaceKind::Surface {
-                return Err(ProtoError::Invalid {
-                    what: "init",
-                    reason: format!(
-                        "interface `{name}` is a {:?} interface; node `{}` couples surfaces only",
-                        decl.kind, self.node
-                    ),
-                });
-            }
             let (read, write) = match side {
                 Side::User => (self.keys.kinematics(name), self.keys.forces(name)),
                 Side::Provider => (self.keys.forces(name), self.keys.kinematics(name)),

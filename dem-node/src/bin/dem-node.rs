@@ -105,6 +105,12 @@ impl Solver for DemNode {
                     p.node()
                 )));
             }
+            if decl.kind != proto::InterfaceKind::Surface {
+                return Err(scene_error(format!(
+                    "{}: interface `{name}` is a {:?} interface; the DEM node couples surfaces",
+                    init.scene_path, decl.kind
+                )));
+            }
             let mesh = p.read_mesh(name, self.data_timeout).await?;
             let id = engine
                 .add_coupled_mesh(name, mesh.positions.as_slice(), &mesh.triangles)
@@ -278,7 +284,7 @@ fn main() -> std::process::ExitCode {
     let hello = Hello {
         software: format!("dem-node {}", env!("CARGO_PKG_VERSION")),
         kind: NodeKind::Dem,
-        capabilities: vec!["snapshot".into(), "force_averaging".into()],
+        capabilities: vec!["snapshot".into(), "checkpoint".into()],
         pid: std::process::id(),
     };
     let data_timeout = args.node.data_timeout();

@@ -225,6 +225,12 @@ impl Solver for FemNode {
                 )));
             }
             let name = &decl.name;
+            if decl.kind != proto::InterfaceKind::Surface {
+                return Err(scene_error(format!(
+                    "{}: interface `{name}` is a {:?} interface; the FEM node provides surfaces",
+                    init.scene_path, decl.kind
+                )));
+            }
             let m = model.interface_mesh();
             let mesh = InterfaceMesh {
                 version: PROTOCOL_VERSION,
@@ -411,7 +417,12 @@ fn main() -> std::process::ExitCode {
     let hello = Hello {
         software: format!("fem-node {}", env!("CARGO_PKG_VERSION")),
         kind: NodeKind::Fem,
-        capabilities: vec!["snapshot".into(), "static".into(), "dynamic".into()],
+        capabilities: vec![
+            "snapshot".into(),
+            "checkpoint".into(),
+            "static".into(),
+            "dynamic".into(),
+        ],
         pid: std::process::id(),
     };
     let data_timeout = args.node.data_timeout();
