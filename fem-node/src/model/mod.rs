@@ -577,19 +577,7 @@ impl Model {
         *self.crit.get_or_init(|| {
             let lam = self.max_eigenvalue()?;
             let w = lam.sqrt();
-            let (ra, rb) = match self.analysis {
-                Analysis::Dynamic {
-                    rayleigh_a,
-                    rayleigh_b,
-                    ..
-                }
-                | Analysis::Explicit {
-                    rayleigh_a,
-                    rayleigh_b,
-                    ..
-                } => (rayleigh_a, rayleigh_b),
-                Analysis::Static => (0.0, 0.0),
-            };
+            let (ra, rb) = self.rayleigh();
             let xi = ra / (2.0 * w) + rb * w / 2.0;
             Some(2.0 / w * ((1.0 + xi * xi).sqrt() - xi))
         })
