@@ -300,32 +300,43 @@ const DEM_AND_FEM: &[(&str, &str, &str)] = &[("dem", "dem", "pw-d"), ("fem", "fe
 #[ignore = "needs root to create network namespaces: run with --run-ignored all"]
 fn beam_over_three_network_namespaces_matches_the_local_run_bitwise() {
     let tag = format!("{}", std::process::id() % 100_000);
-    let net = Netns::create(&tag, 2)
+    over_namespaces_and_locally(&tag, "beam-layer", DEM_AND_FEM);
+}
+
+/// Runs `scenes/<scene>.toml` with each of `nodes` in a network namespace of its own (and the
+/// router and coordinator in another), then locally; the two runs' results must be the same to
+/// the last bit (JSON prints the shortest exact decimal). Returns the namespaced run's summary.
+fn over_namespaces_and_locally(
+    tag: &str,
+    scene: &str,
+    nodes: &[(&str, &str, &str)],
+) -> serde_json::Value {
+    let net = Netns::create(tag, nodes.len())
         .unwrap_or_else(|e| panic!("cannot create network namespaces: {e}"));
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("netns");
+    let file = format!("scenes/{scene}.toml");
     let (coordinator, _procs) = run_over_namespaces(
         &net,
         dir.path(),
-        &format!("beam-netns-{tag}"),
-        &root().join("scenes/beam-layer.toml"),
+        &format!("{scene}-netns-{tag}"),
+        &root().join(&file),
         &out,
-        DEM_AND_FEM,
+        nodes,
     );
     let o = coordinator.wait_with_output().unwrap();
     eprintln!("{}", String::from_utf8_lossy(&o.stderr));
     assert!(o.status.success(), "the run over namespaces failed");
-
     let local = dir.path().join("local");
     let mut c = cosim();
-    c.args(["run", "scenes/beam-layer.toml", "--no-progress", "--out"])
-        .arg(&local);
+    c.args(["run", &file, "--no-progress", "--out"]).arg(&local);
     assert!(run(c).status.success());
     let (a, b) = (summary(&out), summary(&local));
     assert_eq!(a["status"], "completed");
-    // every result number, to the last bit (JSON prints the shortest exact decimal)
     assert_eq!(a["results"], b["results"]);
+    assert_eq!(a["interface_work"], b["interface_work"]);
     assert_eq!(a["windows_done"], b["windows_done"]);
+    a
 }
 
 /// Needs root. A cut link (the DEM machine's cable pulled mid-run) ends the run within 5 s,
@@ -391,34 +402,15 @@ fn a_cut_link_ends_the_run_within_5_s_naming_node_and_window() {
 #[ignore = "needs root to create network namespaces: run with --run-ignored all"]
 fn two_structures_over_four_network_namespaces_match_the_local_run_bitwise() {
     let tag = format!("{}", (std::process::id() + 13) % 100_000);
-    let net = Netns::create(&tag, 3)
-        .unwrap_or_else(|e| panic!("cannot create network namespaces: {e}"));
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("netns");
-    let (coordinator, _procs) = run_over_namespaces(
-        &net,
-        dir.path(),
-        &format!("plates-netns-{tag}"),
-        &root().join("scenes/two-plates.toml"),
-        &out,
+    let a = over_namespaces_and_locally(
+        &tag,
+        "two-plates",
         &[
             ("dem", "dem", "pw-d"),
             ("left", "fem", "pw-l"),
             ("right", "fem", "pw-r"),
         ],
     );
-    let o = coordinator.wait_with_output().unwrap();
-    eprintln!("{}", String::from_utf8_lossy(&o.stderr));
-    assert!(o.status.success(), "the run over namespaces failed");
-    let local = dir.path().join("local");
-    let mut c = cosim();
-    c.args(["run", "scenes/two-plates.toml", "--no-progress", "--out"])
-        .arg(&local);
-    assert!(run(c).status.success());
-    let (a, b) = (summary(&out), summary(&local));
-    assert_eq!(a["status"], "completed");
-    assert_eq!(a["results"], b["results"]);
-    assert_eq!(a["interface_work"], b["interface_work"]);
     assert!(a["results"]["left.probe.centre.uz"].as_f64().unwrap() < 0.0);
     assert!(a["results"]["right.probe.centre.uz"].as_f64().unwrap() < 0.0);
 }
