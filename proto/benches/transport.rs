@@ -8,14 +8,17 @@ use std::time::{Duration, Instant};
 
 use proto::link::free_loopback_port;
 use proto::participant::Participant;
-use proto::{Hello, InterfaceForces, InterfaceKinematics, LinkConfig, Role, PROTOCOL_VERSION};
+use proto::{
+    Hello, InterfaceDecl, InterfaceForces, InterfaceKind, InterfaceKinematics, Label, LinkConfig,
+    NodeKind, PROTOCOL_VERSION,
+};
 
 const RUN: &str = "bench-transport";
 
-fn hello(role: Role) -> Hello {
+fn hello(kind: NodeKind) -> Hello {
     Hello {
         software: "transport-bench".into(),
-        role,
+        kind,
         capabilities: vec![],
         pid: std::process::id(),
     }
@@ -28,19 +31,19 @@ async fn echo(listen: u16, connect: u16, sizes: &[usize], rounds: usize) {
         &LinkConfig::loopback_peer(Some(listen), &[connect]),
         RUN,
         "dem",
-        hello(Role::Dem),
+        hello(NodeKind::Dem),
     )
     .await
     .expect("echo connects");
     let ifaces: Vec<String> = sizes.iter().map(|n| format!("n{n}")).collect();
-    dem.open_interfaces(Role::Dem, &ifaces).await.expect("open");
+    dem.open_interfaces(&decls(&ifaces)).await.expect("open");
     dem.wait_for_peers(Duration::from_secs(30))
         .await
         .expect("peer");
     for (&n, name) in sizes.iter().zip(&ifaces) {
         for k in 0..(rounds + 10) as u64 {
             let kin = dem
-                .read_kinematics(name, k, n, Duration::from_secs(60))
+                .read_kinematics(name, Label::window(k), n, Duration::from_secs(60))
                 .await
                 .expect("kinematics");
             let f = InterfaceForces {
@@ -48,15 +51,30 @@ async fn echo(listen: u16, connect: u16, sizes: &[usize], rounds: usize) {
                 run_id: RUN.into(),
                 interface: name.clone(),
                 window: k,
+                iteration: 0,
                 time: kin.time,
                 forces: kin.positions,
                 averaged: false,
-                substeps: 1,
+                samples: 1,
             };
             dem.write_forces(&f).await.expect("forces");
         }
     }
     dem.finish().await.ok();
+}
+
+/// The bench's interfaces, provided by `fem`, used by `dem`.
+fn decls(names: &[String]) -> Vec<InterfaceDecl> {
+    names
+        .iter()
+        .map(|name| InterfaceDecl {
+            name: name.clone(),
+            kind: InterfaceKind::Surface,
+            provider: "fem".into(),
+            users: vec!["dem".into()],
+            force_averaging: false,
+        })
+        .collect()
 }
 
 fn median(v: &mut [f64]) -> f64 {
@@ -93,12 +111,12 @@ async fn bench() {
         &LinkConfig::loopback_peer(Some(pf), &[]),
         RUN,
         "fem",
-        hello(Role::Fem),
+        hello(NodeKind::Fem),
     )
     .await
     .unwrap();
     let ifaces: Vec<String> = sizes.iter().map(|n| format!("n{n}")).collect();
-    fem.open_interfaces(Role::Fem, &ifaces).await.unwrap();
+    fem.open_interfaces(&decls(&ifaces)).await.unwrap();
     let mut child = std::process::Command::new(std::env::current_exe().unwrap())
         .env("COSIM_BENCH_ECHO", format!("{pd},{pf}"))
         .spawn()
@@ -118,6 +136,7 @@ async fn bench() {
                 run_id: RUN.into(),
                 interface: name.clone(),
                 window: k,
+                iteration: 0,
                 time: k as f64,
                 positions: vec![k as f64; 3 * n].into(),
                 velocities: vec![1.0; 3 * n].into(),
@@ -126,7 +145,7 @@ async fn bench() {
             let t = Instant::now();
             fem.write_kinematics(&kin).await.unwrap();
             let f = fem
-                .read_forces(name, k, n, Duration::from_secs(60))
+                .read_forces(name, Label::window(k), n, Duration::from_secs(60))
                 .await
                 .unwrap();
             let dt = t.elapsed().as_secs_f64();
@@ -156,6 +175,7 @@ async fn bench() {
             run_id: RUN.into(),
             interface: name.clone(),
             window: 0,
+            iteration: 0,
             time: 0.0,
             positions: vec![1.0; 3 * n].into(),
             velocities: vec![1.0; 3 * n].into(),
@@ -166,10 +186,11 @@ async fn bench() {
             run_id: RUN.into(),
             interface: name.clone(),
             window: 0,
+            iteration: 0,
             time: 0.0,
             forces: vec![1.0; 3 * n].into(),
             averaged: false,
-            substeps: 1,
+            samples: 1,
         };
         let (mut enc, mut dec) = (Vec::new(), Vec::new());
         for _ in 0..50 {
