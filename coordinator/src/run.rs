@@ -120,6 +120,14 @@ pub struct Summary {
     /// The interface energy audit, per interface (docs/coupling.md, "Energy audit").
     #[serde(default)]
     pub interface_work: BTreeMap<String, InterfaceWork>,
+    /// Implicit schedule: coupling iterations over the run, the most in one window, and the
+    /// windows that ended unconverged (`continue_unconverged`).
+    #[serde(default)]
+    pub coupling_iterations: u64,
+    #[serde(default)]
+    pub max_window_iterations: u32,
+    #[serde(default)]
+    pub unconverged_windows: Vec<u64>,
 }
 
 /// The work of one interface's forces on its structure, summed over the windows, as each side
@@ -175,6 +183,8 @@ struct Run<'a> {
     startup_base: f64,
     /// SIGINT / SIGTERM (crate::interrupt).
     signals: crate::interrupt::Watch,
+    /// Implicit schedules: the reliable tap on the users' forces.
+    tap: Option<proto::participant::ForcesTap>,
     /// While windows run, the first signal is kept here and acted on at the window's end.
     defer_interrupt: bool,
     pending_interrupt: Option<i32>,
@@ -513,6 +523,15 @@ impl Run<'_> {
             dem: scene.dem_node().map(String::from),
             fems: scene.fem_nodes().map(String::from).collect(),
         };
+        let timeout = Duration::from_secs_f64(scene.window_timeout);
+        // every interface's node count (the implicit scheme's vectors, its forces' sizes) and
+        // size (the drift check: the bounding-box diagonal)
+        let mut meshes: Vec<(String, usize, f64)> = Vec::new();
+        for iface in &scene.interfaces {
+            let mesh = self.link.read_mesh(&iface.name, timeout).await?;
+            let size = crate::stability::bounding_diagonal(mesh.positions.as_slice());
+            meshes.push((iface.name.clone(), mesh.num_nodes(), size));
+        }
         let scheduler = Scheduler::new(SchedulerConfig {
             kind: scene.schedule,
             window: scene.window,
@@ -520,9 +539,18 @@ impl Run<'_> {
             topology,
             steady_kinetic_energy: scene.steady_kinetic_energy,
             steady_windows: scene.steady_windows,
+            implicit: scene.implicit.clone().map(|settings| {
+                let interfaces = scene
+                    .interfaces
+                    .iter()
+                    .zip(&meshes)
+                    .map(|(i, (_, nodes, _))| (i.name.clone(), *nodes, i.provider.clone()))
+                    .collect();
+                (settings, interfaces)
+            }),
         })
         .map_err(|e| anyhow!(e))?;
-        let timeout = Duration::from_secs_f64(scene.window_timeout);
+        let implicit = scene.implicit.is_some();
         let csv_path = self.out_dir.join("windows.csv");
         // `dem_compute_s` (the DEM node's), `fem_compute_s` (the sum over the FEM nodes), and
         // with several structures one `<node>_compute_s` column per FEM node
@@ -537,7 +565,7 @@ impl Run<'_> {
         // received over the displacement they were computed on
         let iface_names: Vec<String> = scene.interfaces.iter().map(|i| i.name.clone()).collect();
         let header = format!(
-            "window,t_end_s,wall_s,dem_compute_s,fem_compute_s,{}overhead_s,dem_kinetic_energy_j{}",
+            "window,t_end_s,wall_s,dem_compute_s,fem_compute_s,{}overhead_s,dem_kinetic_energy_j{}{}",
             per_structure
                 .iter()
                 .map(|n| format!("{n}_compute_s,"))
@@ -547,21 +575,26 @@ impl Run<'_> {
                 .map(|n| format!(
                     ",interface_work_dem.{n}_j,interface_work_fem.{n}_j,interface_work_received.{n}_j"
                 ))
-                .collect::<String>()
+                .collect::<String>(),
+            if implicit {
+                ",iterations,residual"
+            } else {
+                ""
+            }
         );
         let (mut scheduler, mut stability, mut actions, done_rows) = match resume {
             None => {
                 let mut scheduler = scheduler;
                 let actions = scheduler.start();
                 let mut stability = StabilityMonitor::new(scene.max_force_growth);
-                // the drift check needs the interfaces' size (their bounding-box diagonal)
-                for iface in &scene.interfaces {
-                    let mesh = self.link.read_mesh(&iface.name, timeout).await?;
-                    let size = crate::stability::bounding_diagonal(mesh.positions.as_slice());
+                for (_, _, size) in &meshes {
                     stability.mesh_size =
-                        Some(stability.mesh_size.map_or(size, |s: f64| s.min(size)));
+                        Some(stability.mesh_size.map_or(*size, |s: f64| s.min(*size)));
                 }
-                if matches!(scene.schedule, ScheduleKind::Jit | ScheduleKind::Predictive) {
+                if matches!(
+                    scene.schedule,
+                    ScheduleKind::Jit | ScheduleKind::Predictive | ScheduleKind::Implicit
+                ) {
                     if let Some(r) = scene
                         .dem_node()
                         .and_then(|d| self.limit(d, "particle_radius_min"))
@@ -624,12 +657,46 @@ impl Run<'_> {
         let mut row_ke: Option<f64> = None;
         // the audit's values of this window: (`dem` | `fem` | `received`, interface) → J
         let mut work: BTreeMap<(&'static str, String), f64> = BTreeMap::new();
+        // implicit: this window's iterations and its last residual
+        let (mut row_iterations, mut row_residual) = (0u32, 0.0f64);
         loop {
             for a in std::mem::take(&mut actions) {
                 match a {
                     Action::Send(node, body) => self.link.send(&node, body).await?,
+                    Action::PublishForces {
+                        interface,
+                        label,
+                        forces,
+                    } => {
+                        let msg = proto::InterfaceForces {
+                            version: proto::PROTOCOL_VERSION,
+                            run_id: self.link.keys().run_id().to_string(),
+                            interface,
+                            window: label.window,
+                            iteration: label.iteration,
+                            time: label.window as f64 * scene.window,
+                            forces: forces.into(),
+                            averaged: true,
+                            samples: 1,
+                        };
+                        self.link.publish_relaxed(&msg, timeout).await?;
+                    }
+                    Action::NeedForces { .. } => {
+                        bail!("internal: forces asked for outside a window's end")
+                    }
                     Action::Finish { reason } => {
                         tracing::info!("{reason}");
+                        let unconverged = scheduler.unconverged_windows().to_vec();
+                        if !unconverged.is_empty() {
+                            let w = format!(
+                                "implicit coupling: {} window(s) ended unconverged (continue_unconverged = true): {:?}",
+                                unconverged.len(),
+                                unconverged
+                            );
+                            tracing::warn!("{w}");
+                            self.summary.warnings.push(w);
+                        }
+                        self.summary.unconverged_windows = unconverged;
                         if let (Some(e), Some(limit)) = (
                             scheduler.unsettled_kinetic_energy(),
                             scene.steady_kinetic_energy,
@@ -730,6 +797,34 @@ impl Run<'_> {
             actions = scheduler
                 .on_window_done(&st.node, window, ke)
                 .map_err(|e| anyhow!(e))?;
+            // implicit: every node finished an iteration; its forces decide what follows
+            while let [Action::NeedForces { label }] = actions.as_slice() {
+                let label = *label;
+                let tap = self
+                    .tap
+                    .as_mut()
+                    .ok_or_else(|| anyhow!("internal: no forces tap for the implicit schedule"))?;
+                let mut forces = BTreeMap::new();
+                for (name, nodes, _) in &meshes {
+                    let f = tap.read(name, label, *nodes, timeout).await.map_err(|e| {
+                        anyhow!("implicit coupling, interface `{name}`, {label}: {e}")
+                    })?;
+                    forces.insert(name.clone(), f.forces.0);
+                }
+                actions = scheduler.on_forces(&forces).map_err(|e| anyhow!(e))?;
+                for r in scheduler.take_iterations() {
+                    tracing::debug!(
+                        "window {} iteration {}: residual {:.3e}, ω {:.3}",
+                        r.window,
+                        r.iteration,
+                        r.residual,
+                        r.relaxation
+                    );
+                    row_iterations += 1;
+                    row_residual = r.residual;
+                    self.summary.coupling_iterations += 1;
+                }
+            }
             if scheduler.window() != window
                 || scheduler.is_done()
                 || actions.iter().any(|a| matches!(a, Action::Finish { .. }))
@@ -774,6 +869,12 @@ impl Run<'_> {
                     }
                 }
                 work.clear();
+                if implicit {
+                    audit.push_str(&format!(",{row_iterations},{row_residual:.3e}"));
+                    self.summary.max_window_iterations =
+                        self.summary.max_window_iterations.max(row_iterations);
+                    row_iterations = 0;
+                }
                 writeln!(
                     csv,
                     "{line},{:.6e},{}{audit}",
@@ -1009,6 +1110,11 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
     let link = CoordinatorLink::open(&coord_link, &run_id)
         .await
         .context("opening the coordinator's zenoh session")?;
+    // implicit schedules read every iteration's forces: the tap is in place before the nodes
+    let tap = match scene.schedule {
+        ScheduleKind::Implicit if !opts.check_only => Some(link.forces_tap().await?),
+        _ => None,
+    };
     let mut summary = Summary {
         scene: scene.name.clone(),
         scene_file: scene.path.display().to_string(),
@@ -1102,6 +1208,7 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
         total_wall_base: 0.0,
         startup_base: 0.0,
         signals: crate::interrupt::Watch::new(),
+        tap,
         defer_interrupt: false,
         pending_interrupt: None,
     };

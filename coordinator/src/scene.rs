@@ -34,6 +34,45 @@ pub enum ScheduleKind {
     Jit,
     /// Predictive: FEM first with the last DEM forces, DEM follows the predicted motion.
     Predictive,
+    /// Implicit: each window iterated until the interface forces are a fixed point
+    /// (`[coupling.implicit]`; docs/coupling.md).
+    Implicit,
+}
+
+fn default_tolerance() -> f64 {
+    1e-3
+}
+fn default_max_iterations() -> u32 {
+    30
+}
+fn default_relaxation() -> f64 {
+    0.5
+}
+
+/// `[coupling.implicit]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ImplicitSection {
+    /// Relative force residual ‖f̄ − F‖/‖f̄‖ below which a window is converged (default 1e-3).
+    #[serde(default = "default_tolerance")]
+    pub tolerance: f64,
+    /// Most iterations of a window (default 30).
+    #[serde(default = "default_max_iterations")]
+    pub max_iterations: u32,
+    /// `aitken` (default) or `constant`.
+    #[serde(default = "default_acceleration")]
+    pub acceleration: crate::schedule::implicit::Acceleration,
+    /// ω of `constant`, the first ω of each window with `aitken` (default 0.5).
+    #[serde(default = "default_relaxation")]
+    pub relaxation: f64,
+    /// Go on (with a warning) when a window does not converge in `max_iterations`, instead of
+    /// stopping the run with the residual history.
+    #[serde(default)]
+    pub continue_unconverged: bool,
+}
+
+fn default_acceleration() -> crate::schedule::implicit::Acceleration {
+    crate::schedule::implicit::Acceleration::Aitken
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -109,6 +148,8 @@ pub struct CouplingSection {
     /// warning; the stability monitor still stops a diverging run).
     #[serde(default)]
     pub allow_beyond_limits: bool,
+    /// The implicit schedule's settings.
+    pub implicit: Option<Spanned<ImplicitSection>>,
 }
 
 impl Default for CouplingSection {
@@ -123,6 +164,7 @@ impl Default for CouplingSection {
             steady_windows: default_steady_windows(),
             max_force_growth: default_growth(),
             allow_beyond_limits: false,
+            implicit: None,
         }
     }
 }
@@ -204,6 +246,8 @@ pub struct Scene {
     pub steady_windows: u32,
     pub max_force_growth: f64,
     pub allow_beyond_limits: bool,
+    /// The implicit schedule's settings (`schedule = "implicit"`).
+    pub implicit: Option<crate::schedule::implicit::ImplicitSettings>,
     pub out_dir: PathBuf,
     pub trace_interfaces: bool,
     pub checkpoint_every: u64,
@@ -316,7 +360,7 @@ impl Scene {
             Some(s) => {
                 let k = *s.get_ref();
                 if both && k == ScheduleKind::None {
-                    return Err(err_at(s.span().start, "coupling.schedule", "the scene has both [dem] and [fem]: choose `one-way`, `jit` or `predictive`".into()));
+                    return Err(err_at(s.span().start, "coupling.schedule", "the scene has both [dem] and [fem]: choose `one-way`, `jit`, `predictive` or `implicit`".into()));
                 }
                 if !both && k != ScheduleKind::None {
                     return Err(err_at(
@@ -335,7 +379,7 @@ impl Scene {
                 k
             }
             None if both => {
-                return Err(err_at(text.find("[coupling]").unwrap_or(0), "coupling.schedule", "the scene couples [dem] and [fem]: set `schedule` to `one-way`, `jit` or `predictive`".into()));
+                return Err(err_at(text.find("[coupling]").unwrap_or(0), "coupling.schedule", "the scene couples [dem] and [fem]: set `schedule` to `one-way`, `jit`, `predictive` or `implicit`".into()));
             }
             None => ScheduleKind::None,
         };
@@ -438,6 +482,48 @@ impl Scene {
                 "must be positive (s)".into(),
             ));
         }
+        let implicit = match (&c.implicit, schedule) {
+            (Some(i), ScheduleKind::Implicit) => {
+                let v = i.get_ref();
+                let at = i.span().start;
+                if !(v.tolerance > 0.0 && v.tolerance < 1.0) {
+                    return Err(err_at(at, "coupling.implicit.tolerance", format!("must lie in (0, 1) (a relative force residual), got {}", v.tolerance)));
+                }
+                if v.max_iterations == 0 {
+                    return Err(err_at(at, "coupling.implicit.max_iterations", "must be at least 1".into()));
+                }
+                if !(v.relaxation > 0.0 && v.relaxation <= 1.0) {
+                    return Err(err_at(at, "coupling.implicit.relaxation", format!("must lie in (0, 1], got {}", v.relaxation)));
+                }
+                Some(crate::schedule::implicit::ImplicitSettings {
+                    tolerance: v.tolerance,
+                    max_iterations: v.max_iterations,
+                    acceleration: v.acceleration,
+                    relaxation: v.relaxation,
+                    continue_unconverged: v.continue_unconverged,
+                })
+            }
+            (None, ScheduleKind::Implicit) => Some(crate::schedule::implicit::ImplicitSettings {
+                tolerance: default_tolerance(),
+                max_iterations: default_max_iterations(),
+                acceleration: default_acceleration(),
+                relaxation: default_relaxation(),
+                continue_unconverged: false,
+            }),
+            (Some(i), _) => {
+                return Err(err_at(i.span().start, "coupling.implicit", "settings of the implicit schedule, but `schedule` is not \"implicit\"".into()));
+            }
+            (None, _) => None,
+        };
+        let mut interfaces = interfaces;
+        if implicit.is_some() {
+            // the iteration works on the mean forces of the window; the provider gets the
+            // coordinator's estimates
+            for i in &mut interfaces {
+                i.force_averaging = true;
+                i.relaxed_forces = true;
+            }
+        }
         let out_dir = raw
             .output
             .dir
@@ -459,6 +545,7 @@ impl Scene {
             steady_windows: c.steady_windows,
             max_force_growth: c.max_force_growth,
             allow_beyond_limits: c.allow_beyond_limits,
+            implicit,
             out_dir,
             trace_interfaces: raw.output.trace_interfaces,
             checkpoint_every: raw.output.checkpoint_every,
@@ -545,6 +632,7 @@ fn declare_interfaces(
         provider,
         users: users.clone(),
         force_averaging: c.force_averaging,
+        relaxed_forces: false,
     };
     let mut out: Vec<InterfaceDecl> = Vec::new();
     if c.interfaces.is_empty() {

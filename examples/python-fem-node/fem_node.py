@@ -128,11 +128,13 @@ class Participant:
             if kind == "forces":
                 self.forces_queue.append(value)
 
-    def open_interface(self, name, mesh_bytes):
-        """FEM side of §5.3: subscribe to `forces`, declare the `kinematics` publisher (reliable,
+    def open_interface(self, name, mesh_bytes, relaxed=False):
+        """FEM side of §5.3: subscribe to `forces` (or, with `relaxed_forces`, to the
+        coordinator's `forces_relaxed`), declare the `kinematics` publisher (reliable,
         congestion control Block), serve `mesh`."""
+        key = self.keys.relaxed_forces(name) if relaxed else self.keys.forces(name)
         self.entities.append(self.session.declare_subscriber(
-            self.keys.forces(name), lambda s: self.events.put(("forces", s.payload.to_bytes()))))
+            key, lambda s: self.events.put(("forces", s.payload.to_bytes()))))
         self.publishers[name] = self.session.declare_publisher(
             self.keys.kinematics(name), congestion_control=zenoh.CongestionControl.BLOCK,
             reliability=zenoh.Reliability.RELIABLE)
@@ -293,7 +295,7 @@ class FemNode:
             mesh = wire.interface_mesh(self.p.run_id, name, model.node_ids(),
                                        model.interface_positions(), model.triangles)
             self.interface = (name, len(model.iface_nodes))
-            self.p.open_interface(name, mesh)
+            self.p.open_interface(name, mesh, decl["relaxed_forces"])
             self.p.wait_for_peers(self.data_timeout)
         limits = {"dofs": model.n_dofs}
         crit = model.critical_time_step()

@@ -54,6 +54,9 @@ class Keys:
     def forces(self, interface):
         return f"cosim/{self.run}/iface/{interface}/forces"
 
+    def relaxed_forces(self, interface):
+        return f"cosim/{self.run}/iface/{interface}/forces_relaxed"
+
 
 # --------------------------------------------------------------------------------------------
 # Encoding
@@ -208,6 +211,9 @@ def decode_interface_decl(what, index, value):
     for i, user in enumerate(decl["users"]):
         if not isinstance(user, str):
             raise ProtocolError(f"{what}: `{field}.users[{i}]` must be a string, got {user!r}")
+    # optional (absent: false): the provider reads the coordinator's accelerated forces
+    decl["relaxed_forces"] = _check_type(what, f"{field}.relaxed_forces",
+                                         value.get("relaxed_forces", False), bool)
     return decl
 
 

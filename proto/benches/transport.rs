@@ -73,6 +73,7 @@ fn decls(names: &[String]) -> Vec<InterfaceDecl> {
             provider: "fem".into(),
             users: vec!["dem".into()],
             force_averaging: false,
+            relaxed_forces: false,
         })
         .collect()
 }

@@ -122,6 +122,7 @@ mod tests {
                     provider: "fem".into(),
                     users: vec!["dem".into()],
                     force_averaging: true,
+                    relaxed_forces: false,
                 }],
                 check_only: false,
                 trace: true,

@@ -79,6 +79,17 @@ impl Keys {
         format!("cosim/{}/iface/{}/forces", self.run_id, interface)
     }
 
+    /// Interface forces accelerated by the coordinator (implicit schemes), coordinator → the
+    /// interface's provider.
+    pub fn relaxed_forces(&self, interface: &str) -> String {
+        format!("cosim/{}/iface/{}/forces_relaxed", self.run_id, interface)
+    }
+
+    /// The users' interface forces of every interface (the coordinator's reliable tap).
+    pub fn forces_all(&self) -> String {
+        format!("cosim/{}/iface/*/forces", self.run_id)
+    }
+
     /// Interface kinematics, FEM → DEM.
     pub fn kinematics(&self, interface: &str) -> String {
         format!("cosim/{}/iface/{}/kinematics", self.run_id, interface)

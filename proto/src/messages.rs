@@ -144,6 +144,11 @@ pub struct InterfaceDecl {
     /// Users send the mean of their forces over the window's substeps instead of the last
     /// substep's (Ullrich (3.8)).
     pub force_averaging: bool,
+    /// The provider reads its forces on the interface's `forces_relaxed` key, where the
+    /// coordinator publishes the estimates its acceleration computes (implicit schemes),
+    /// instead of the users' `forces` (which then go to the coordinator only). Absent: false.
+    #[serde(default)]
+    pub relaxed_forces: bool,
 }
 
 /// Labels interface data: the coupling window and, within it, the iteration (0 for explicit

@@ -101,6 +101,8 @@ pub struct Participant {
     /// Per used interface: the provider's last end position (start of the next predictive
     /// motion).
     motion_start: std::collections::BTreeMap<String, Vec<f64>>,
+    /// Provided interfaces whose forces come from the coordinator (`relaxed_forces`).
+    relaxed: std::collections::BTreeSet<String>,
 }
 
 /// A node's part in an interface.
@@ -160,6 +162,7 @@ impl Participant {
             queryables: Vec::new(),
             hello: None,
             motion_start: Default::default(),
+            relaxed: Default::default(),
         };
         p.report(StatusBody::Hello(hello.clone())).await?;
         p.hello = Some(hello);
@@ -282,6 +285,11 @@ impl Participant {
             };
             let (read, write) = match side {
                 Side::User => (self.keys.kinematics(name), self.keys.forces(name)),
+                // implicit schemes: the coordinator's accelerated forces, not the users'
+                Side::Provider if decl.relaxed_forces => {
+                    self.relaxed.insert(name.clone());
+                    (self.keys.relaxed_forces(name), self.keys.kinematics(name))
+                }
                 Side::Provider => (self.keys.forces(name), self.keys.kinematics(name)),
             };
             let sub = self
@@ -507,7 +515,8 @@ impl Participant {
         Ok(motion)
     }
 
-    /// Waits for and validates the forces labelled `label` (provider side).
+    /// Waits for and validates the forces labelled `label` (provider side): the users' own,
+    /// or, where the interface says so, the coordinator's accelerated ones (implicit schemes).
     pub async fn read_forces(
         &mut self,
         interface: &str,
@@ -515,7 +524,11 @@ impl Participant {
         nodes: usize,
         timeout: Duration,
     ) -> Result<InterfaceForces, ProtoError> {
-        let key = self.keys.forces(interface);
+        let key = if self.relaxed.contains(interface) {
+            self.keys.relaxed_forces(interface)
+        } else {
+            self.keys.forces(interface)
+        };
         let f: InterfaceForces = self.read(&key, label, timeout).await?;
         f.validate(nodes, label)?;
         Ok(f)
@@ -649,6 +662,8 @@ pub struct CoordinatorLink {
     status: Subscriber<FifoChannelHandler<Sample>>,
     alive: Subscriber<FifoChannelHandler<Sample>>,
     commands: HashMap<String, (Publisher<'static>, u64)>,
+    /// Publishers of accelerated forces, by key (implicit schemes).
+    relaxed: HashMap<String, Publisher<'static>>,
 }
 
 impl CoordinatorLink {
@@ -679,6 +694,7 @@ impl CoordinatorLink {
             status,
             alive,
             commands: HashMap::new(),
+            relaxed: HashMap::new(),
         })
     }
 
@@ -766,8 +782,108 @@ impl CoordinatorLink {
         })
     }
 
+    /// A reliable tap on every interface's forces (implicit schemes read each iteration's
+    /// forces here). Declare it before the nodes start, so that it is in place before the first
+    /// window's forces are published.
+    pub async fn forces_tap(&self) -> Result<ForcesTap, ProtoError> {
+        let sub = self
+            .session
+            .declare_subscriber(self.keys.forces_all())
+            .with(zenoh::handlers::FifoChannel::new(1024))
+            .await
+            .map_err(ProtoError::zenoh)?;
+        Ok(ForcesTap {
+            sub,
+            run_id: self.keys.run_id().to_string(),
+            early: Vec::new(),
+        })
+    }
+
+    /// Publishes accelerated forces for an interface's provider (implicit schemes); the first
+    /// time waits (up to `timeout`) until the provider listens.
+    pub async fn publish_relaxed(
+        &mut self,
+        f: &InterfaceForces,
+        timeout: Duration,
+    ) -> Result<(), ProtoError> {
+        let key = self.keys.relaxed_forces(&f.interface);
+        if !self.relaxed.contains_key(&key) {
+            let p = declare_data_publisher(&self.session, key.clone()).await?;
+            let start = Instant::now();
+            while !p.matching_status().await.map_err(ProtoError::zenoh)?.matching() {
+                if start.elapsed() > timeout {
+                    return Err(ProtoError::Timeout {
+                        what: format!("the provider of interface `{}` to listen on `{key}`", f.interface),
+                        waited: timeout,
+                    });
+                }
+                tokio::time::sleep(Duration::from_millis(5)).await;
+            }
+            self.relaxed.insert(key.clone(), p);
+        }
+        put(&self.relaxed[&key], f).await
+    }
+
     pub async fn close(self) -> Result<(), ProtoError> {
         self.session.close().await.map_err(ProtoError::zenoh)
+    }
+}
+
+/// The coordinator's reliable tap on the users' forces (implicit schemes).
+pub struct ForcesTap {
+    sub: Subscriber<FifoChannelHandler<Sample>>,
+    run_id: String,
+    /// Messages that arrived before they were asked for (another interface's, or later).
+    early: Vec<InterfaceForces>,
+}
+
+impl ForcesTap {
+    /// The forces of `interface` labelled `label`, validated for `nodes` nodes. Data of an
+    /// earlier label is dropped (an explicit window's, or an abandoned iteration's); data of
+    /// another interface or a later label is kept for its turn.
+    pub async fn read(
+        &mut self,
+        interface: &str,
+        label: Label,
+        nodes: usize,
+        timeout: Duration,
+    ) -> Result<InterfaceForces, ProtoError> {
+        self.early
+            .retain(|f| f.interface != interface || f.label() >= label);
+        if let Some(i) = self
+            .early
+            .iter()
+            .position(|f| f.interface == interface && f.label() == label)
+        {
+            let f = self.early.remove(i);
+            f.validate(nodes, label)?;
+            return Ok(f);
+        }
+        let deadline = tokio::time::Instant::now() + timeout;
+        loop {
+            let sample = tokio::time::timeout_at(deadline, self.sub.recv_async())
+                .await
+                .map_err(|_| ProtoError::Timeout {
+                    what: format!("interface forces of {label} on `{interface}`"),
+                    waited: timeout,
+                })?
+                .map_err(|_| ProtoError::Closed)?;
+            let f: InterfaceForces = match decode(&payload(&sample), &self.run_id) {
+                Ok(f) => f,
+                Err(e @ ProtoError::WrongRun { .. }) => {
+                    tracing::warn!("refused forces: {e}");
+                    continue;
+                }
+                Err(e) => return Err(e),
+            };
+            if f.interface == interface && f.label() == label {
+                f.validate(nodes, label)?;
+                return Ok(f);
+            }
+            if f.interface != interface || f.label() > label {
+                self.early.push(f);
+            }
+        }
     }
 }
 

@@ -44,6 +44,7 @@ fn top() -> Vec<InterfaceDecl> {
         provider: "fem".into(),
         users: vec!["dem".into()],
         force_averaging: false,
+        relaxed_forces: false,
     }]
 }
 

@@ -107,6 +107,7 @@ async fn rollback_repeats_a_predictive_window_bitwise_in_both_rust_nodes() {
         provider: "fem".into(),
         users: vec!["dem".into()],
         force_averaging: true,
+        relaxed_forces: false,
     };
     let mut link = link;
     for node in nodes {

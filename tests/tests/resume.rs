@@ -153,6 +153,13 @@ fn jit_run_with_fem_killed_resumes_bitwise_equal() {
 }
 
 #[test]
+fn implicit_run_with_fem_killed_resumes_bitwise_equal() {
+    // the acceleration's state (the next window's force estimate) is in the coordinator's
+    // checkpoint, the nodes' window checkpoints are not needed across a restart
+    killed_and_resumed_equals_uninterrupted("implicit", "fem");
+}
+
+#[test]
 fn run_with_the_coordinator_killed_resumes_bitwise_equal() {
     killed_and_resumed_equals_uninterrupted("predictive", "cosim");
 }

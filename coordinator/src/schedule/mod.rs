@@ -19,6 +19,7 @@ use crate::scene::ScheduleKind;
 use crate::units::format_seconds;
 
 mod alone;
+pub mod implicit;
 mod jit;
 mod one_way;
 mod predictive;
@@ -140,6 +141,7 @@ pub enum SchemeState {
     OneWay(one_way::OneWay),
     Jit(jit::Jit),
     Predictive(predictive::Predictive),
+    Implicit(implicit::Implicit),
 }
 
 impl SchemeState {
@@ -149,6 +151,7 @@ impl SchemeState {
             SchemeState::OneWay(s) => s,
             SchemeState::Jit(s) => s,
             SchemeState::Predictive(s) => s,
+            SchemeState::Implicit(s) => s,
         }
     }
 }
@@ -157,6 +160,17 @@ impl SchemeState {
 #[derive(Debug, Clone, PartialEq)]
 pub enum Action {
     Send(String, CommandBody),
+    /// Publish forces for an interface's provider (implicit schemes: the accelerated estimate).
+    PublishForces {
+        interface: String,
+        label: Label,
+        forces: Vec<f64>,
+    },
+    /// Read the users' forces of this label on every interface and give them to
+    /// [`Scheduler::on_forces`] (implicit schemes, after every node finished an iteration).
+    NeedForces {
+        label: Label,
+    },
     /// The schedule is complete.
     Finish {
         reason: String,
@@ -173,12 +187,16 @@ pub struct SchedulerConfig {
     pub steady_kinetic_energy: Option<f64>,
     /// ... for this many consecutive windows.
     pub steady_windows: u32,
+    /// Implicit: the settings, and the interfaces (name, nodes, provider).
+    pub implicit: Option<(implicit::ImplicitSettings, Vec<(String, usize, String)>)>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 enum Phase {
     Idle,
     Window,
+    /// Implicit: every node finished an iteration; the forces are awaited.
+    Forces,
     Final,
     Done,
 }
@@ -209,7 +227,12 @@ impl Scheduler {
             ScheduleKind::None if t.all().count() > 1 => {
                 return Err("schedule `none` runs a single solver".into())
             }
-            ScheduleKind::OneWay | ScheduleKind::Jit | ScheduleKind::Predictive if !both => {
+            ScheduleKind::OneWay
+            | ScheduleKind::Jit
+            | ScheduleKind::Predictive
+            | ScheduleKind::Implicit
+                if !both =>
+            {
                 return Err(format!(
                     "schedule {:?} needs a DEM node and at least one FEM node",
                     cfg.kind
@@ -228,6 +251,13 @@ impl Scheduler {
             )),
             ScheduleKind::Jit => SchemeState::Jit(jit::Jit),
             ScheduleKind::Predictive => SchemeState::Predictive(predictive::Predictive),
+            ScheduleKind::Implicit => {
+                let (settings, interfaces) = cfg
+                    .implicit
+                    .clone()
+                    .ok_or("the implicit schedule needs its settings and interfaces")?;
+                SchemeState::Implicit(implicit::Implicit::new(settings, interfaces))
+            }
         };
         Ok(Scheduler {
             topology: cfg.topology,
@@ -263,6 +293,34 @@ impl Scheduler {
         self.scheme.scheme().unsettled_kinetic_energy()
     }
 
+    /// Implicit: the iterations since the last call (window, iteration, residual, ω).
+    pub fn take_iterations(&mut self) -> Vec<implicit::IterationRecord> {
+        match &mut self.scheme {
+            SchemeState::Implicit(s) => std::mem::take(&mut s.records),
+            _ => Vec::new(),
+        }
+    }
+
+    /// Implicit: the windows that ended unconverged (`continue_unconverged`).
+    pub fn unconverged_windows(&self) -> &[u64] {
+        match &self.scheme {
+            SchemeState::Implicit(s) => &s.unconverged,
+            _ => &[],
+        }
+    }
+
+    /// Forces to publish as actions.
+    fn publish(relaxed: Vec<(String, Label, Vec<f64>)>) -> Vec<Action> {
+        relaxed
+            .into_iter()
+            .map(|(interface, label, forces)| Action::PublishForces {
+                interface,
+                label,
+                forces,
+            })
+            .collect()
+    }
+
     /// Sends as actions; the nodes that got an `advance_window` become pending.
     fn issue(&mut self, sends: Sends) -> Vec<Action> {
         for (node, body) in &sends {
@@ -281,11 +339,17 @@ impl Scheduler {
         self.phase = Phase::Window;
         self.window = k;
         self.window_kinetic_energy = None;
+        // implicit: the window's first force estimate goes out with its commands
+        let mut out = match &self.scheme {
+            SchemeState::Implicit(s) => Self::publish(s.window_estimates(k)),
+            _ => Vec::new(),
+        };
         let sends = self
             .scheme
             .scheme()
             .window(&self.topology, &self.windows, k);
-        self.issue(sends)
+        out.extend(self.issue(sends));
+        out
     }
 
     /// The first commands of the run.
@@ -344,6 +408,43 @@ impl Scheduler {
                 reason: std::mem::take(&mut self.final_reason),
             }]);
         }
+        if let SchemeState::Implicit(s) = &self.scheme {
+            self.phase = Phase::Forces;
+            return Ok(vec![Action::NeedForces {
+                label: Label {
+                    window,
+                    iteration: s.iteration(),
+                },
+            }]);
+        }
+        self.next_after(window)
+    }
+
+    /// Implicit: the users' forces of the iteration just finished, per interface.
+    pub fn on_forces(
+        &mut self,
+        forces: &std::collections::BTreeMap<String, Vec<f64>>,
+    ) -> Result<Vec<Action>, String> {
+        let k = self.window;
+        let SchemeState::Implicit(s) = &mut self.scheme else {
+            return Err("forces given to an explicit schedule".into());
+        };
+        if self.phase != Phase::Forces {
+            return Err(format!("forces of window {k} given out of turn"));
+        }
+        match s.on_forces(&self.topology, &self.windows, k, forces)? {
+            implicit::Iterate::Converged => self.next_after(k),
+            implicit::Iterate::Repeat { sends, relaxed } => {
+                self.phase = Phase::Window;
+                let mut out = Self::publish(relaxed);
+                out.extend(self.issue(sends));
+                Ok(out)
+            }
+        }
+    }
+
+    /// Window `window` is complete: what the scheme says follows.
+    fn next_after(&mut self, window: u64) -> Result<Vec<Action>, String> {
         let next = self.scheme.scheme().after_window(
             &self.topology,
             &self.windows,
@@ -389,6 +490,7 @@ mod tests {
             },
             steady_kinetic_energy: Some(1e-6),
             steady_windows: 2,
+            implicit: None,
         }
     }
 
@@ -616,5 +718,154 @@ mod tests {
             let a = s.on_window_done("right", 0, None).unwrap();
             assert_eq!(advance(&a[0]).1.window, 1, "{kind:?}");
         }
+    }
+
+    fn implicit_cfg(
+        acceleration: implicit::Acceleration,
+        max_iterations: u32,
+        continue_unconverged: bool,
+    ) -> SchedulerConfig {
+        let mut c = cfg(ScheduleKind::Implicit, 3);
+        c.implicit = Some((
+            implicit::ImplicitSettings {
+                tolerance: 1e-6,
+                max_iterations,
+                acceleration,
+                relaxation: 0.5,
+                continue_unconverged,
+            },
+            vec![("top".into(), 2, FEM.into())],
+        ));
+        c
+    }
+
+    /// The users' response to a force estimate F: H(F) = −0.8 F + (1, 2, …) per component
+    /// (a contracting fixed point that plain substitution (ω = 1) would approach slowly and
+    /// oscillating).
+    fn respond(estimate: &[f64]) -> BTreeMap<String, Vec<f64>> {
+        let h = estimate
+            .iter()
+            .enumerate()
+            .map(|(i, f)| -0.8 * f + (i + 1) as f64)
+            .collect();
+        BTreeMap::from([("top".to_string(), h)])
+    }
+
+    fn published(a: &[Action]) -> Vec<(Label, Vec<f64>)> {
+        a.iter()
+            .filter_map(|a| match a {
+                Action::PublishForces { label, forces, .. } => Some((*label, forces.clone())),
+                _ => None,
+            })
+            .collect()
+    }
+
+    use std::collections::BTreeMap;
+
+    /// Runs window 0 to convergence; returns the iterations taken and the next window's actions.
+    fn iterate_window(s: &mut Scheduler, first: Vec<Action>) -> (u32, Vec<Action>) {
+        let mut actions = first;
+        for j in 0..100u32 {
+            let (estimate_label, estimate) = published(&actions).pop().expect("an estimate");
+            assert_eq!(estimate_label.iteration, j);
+            // both nodes were told to compute iteration j (after a rollback for j > 0)
+            let advances: Vec<(String, AdvanceWindow)> = actions
+                .iter()
+                .filter_map(|a| match a {
+                    Action::Send(n, CommandBody::AdvanceWindow(w)) => Some((n.clone(), w.clone())),
+                    _ => None,
+                })
+                .collect();
+            assert_eq!(advances.len(), 2);
+            for (_, w) in &advances {
+                assert_eq!((w.iteration, w.input, w.output), (j, Some(estimate_label), Some(estimate_label)));
+            }
+            let rollbacks = actions
+                .iter()
+                .filter(|a| matches!(a, Action::Send(_, CommandBody::Rollback { window: 0 })))
+                .count();
+            let checkpoints = actions
+                .iter()
+                .filter(|a| matches!(a, Action::Send(_, CommandBody::Checkpoint { window: 0 })))
+                .count();
+            assert_eq!((rollbacks, checkpoints), if j == 0 { (0, 2) } else { (2, 0) });
+            assert!(s.on_window_done(DEM, 0, None).unwrap().is_empty());
+            let a = s.on_window_done(FEM, 0, None).unwrap();
+            assert_eq!(a, vec![Action::NeedForces { label: estimate_label }]);
+            let next = s.on_forces(&respond(&estimate)).unwrap();
+            if s.window() == 1 {
+                return (j + 1, next);
+            }
+            actions = next;
+        }
+        panic!("no convergence")
+    }
+
+    #[test]
+    fn implicit_iterates_a_window_with_rollbacks_until_the_forces_are_a_fixed_point() {
+        // the fixed point of H(F) = −0.8 F + c is F = c / 1.8
+        let mut counts = Vec::new();
+        for acc in [implicit::Acceleration::Aitken, implicit::Acceleration::Constant] {
+            let mut s = Scheduler::new(implicit_cfg(acc, 100, false)).unwrap();
+            let first = s.start();
+            // window 0 starts from zero forces
+            assert_eq!(published(&first), vec![(Label::window(0), vec![0.0; 6])]);
+            let (iterations, next) = iterate_window(&mut s, first);
+            // window 1 starts from window 0's converged forces, after a checkpoint
+            let (label, f) = published(&next).pop().unwrap();
+            assert_eq!(label, Label::window(1));
+            for (i, v) in f.iter().enumerate() {
+                assert!((v - (i + 1) as f64 / 1.8).abs() < 1e-5 * (i + 1) as f64, "{f:?}");
+            }
+            assert!(next
+                .iter()
+                .any(|a| matches!(a, Action::Send(_, CommandBody::Checkpoint { window: 1 }))));
+            let records = s.take_iterations();
+            assert_eq!(records.len() as u32, iterations);
+            assert!(records.last().unwrap().residual <= 1e-6);
+            counts.push(iterations);
+        }
+        // Aitken finds the linear fixed point in a couple of steps; ω = 0.5 contracts by 0.1
+        // per iteration
+        eprintln!("iterations: Aitken {}, constant {}", counts[0], counts[1]);
+        assert!(counts[0] <= 4, "{counts:?}");
+        assert!(counts[1] > counts[0], "{counts:?}");
+    }
+
+    #[test]
+    fn implicit_stops_at_max_iterations_with_the_residuals_or_goes_on_when_allowed() {
+        let mut s = Scheduler::new(implicit_cfg(implicit::Acceleration::Constant, 3, false)).unwrap();
+        let mut actions = s.start();
+        let mut err = None;
+        for _ in 0..3 {
+            let (_, estimate) = published(&actions).pop().unwrap();
+            s.on_window_done(DEM, 0, None).unwrap();
+            s.on_window_done(FEM, 0, None).unwrap();
+            match s.on_forces(&respond(&estimate)) {
+                Ok(a) => actions = a,
+                Err(e) => {
+                    err = Some(e);
+                    break;
+                }
+            }
+        }
+        let e = err.expect("not converged in 3 iterations");
+        assert!(e.contains("window 0 did not converge in 3 iterations"), "{e}");
+        assert!(e.matches("e").count() > 3 && e.contains("tolerance 1.0e-6"), "{e}");
+
+        let mut s = Scheduler::new(implicit_cfg(implicit::Acceleration::Constant, 3, true)).unwrap();
+        let mut actions = s.start();
+        for _ in 0..3 {
+            let (_, estimate) = published(&actions).pop().unwrap();
+            s.on_window_done(DEM, 0, None).unwrap();
+            s.on_window_done(FEM, 0, None).unwrap();
+            actions = s.on_forces(&respond(&estimate)).unwrap();
+        }
+        assert_eq!(s.window(), 1);
+        assert_eq!(s.unconverged_windows(), &[0]);
+        // a restored scheduler publishes the window's first estimate again and continues
+        let mut restored: Scheduler =
+            serde_json::from_str(&serde_json::to_string(&s).unwrap()).unwrap();
+        assert_eq!(restored.replay_actions().unwrap(), actions);
     }
 }
