@@ -68,3 +68,56 @@ fn killing_the_dem_node_mid_run_ends_the_run_within_5_s_naming_the_node_and_wind
         assert_eq!(row.split(',').count(), 7, "{row}");
     }
 }
+
+#[test]
+fn killing_the_fem_node_mid_iteration_of_an_implicit_run_ends_it_naming_node_and_window() {
+    let dir = tempfile::tempdir().unwrap();
+    // the plate, implicit, long enough to be killed while its windows iterate
+    let text = std::fs::read_to_string(root().join("scenes/plate.toml"))
+        .unwrap()
+        .replace(
+            "schedule = \"predictive\"",
+            "schedule = \"implicit\"\nforce_averaging = true",
+        )
+        .replace("end_time = \"30 ms\"", "end_time = \"10 s\"");
+    let scene = write_scene(dir.path(), "implicit.toml", &text);
+    let out = dir.path().join("out");
+    let run_id = format!("kill-implicit-{}", std::process::id());
+    let mut c = cosim();
+    c.arg("run")
+        .arg(&scene)
+        .args(["--no-progress", "--run-id", &run_id, "--out"])
+        .arg(&out);
+    let mut child = c
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // past the first impacts (window 68 and on iterate several times)
+    wait_for_windows(&out, 75, &mut child, Duration::from_secs(120));
+    let pid = pid_of(&["fem-node", &run_id]).expect("the fem-node process");
+    let killed = Instant::now();
+    kill(pid);
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        assert!(
+            killed.elapsed() < Duration::from_secs(5),
+            "cosim still running 5 s after the FEM node was killed"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let mut err = String::new();
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut err)
+        .unwrap();
+    eprintln!("exited {status}:\n{err}");
+    assert!(!status.success());
+    assert!(err.contains("node `fem`") && err.contains("window"), "{err}");
+    let s = summary(&out);
+    assert_eq!(s["status"], "failed");
+}
