@@ -59,7 +59,7 @@ pub struct ImplicitSection {
     /// Most iterations of a window (default 30).
     #[serde(default = "default_max_iterations")]
     pub max_iterations: u32,
-    /// `aitken` (default) or `constant`.
+    /// `aitken` (default), `constant` or `iqn-ils`.
     #[serde(default = "default_acceleration")]
     pub acceleration: crate::schedule::implicit::Acceleration,
     /// ω of `constant`, the first ω of each window with `aitken` (default 0.5).
@@ -69,7 +69,17 @@ pub struct ImplicitSection {
     /// stopping the run with the residual history.
     #[serde(default)]
     pub continue_unconverged: bool,
+    /// `iqn-ils`: the secants of this many earlier windows are reused (default 0: contacts
+    /// open and close between windows, and older secants mislead; docs/coupling.md).
+    #[serde(default = "default_reuse")]
+    pub reuse: u32,
+    /// `iqn-ils`: the QR filter (a secant nearly dependent on newer ones is dropped; default
+    /// 1e-3).
+    #[serde(default = "default_filter")]
+    pub filter: f64,
 }
+
+use crate::schedule::implicit::{default_filter, default_reuse};
 
 fn default_acceleration() -> crate::schedule::implicit::Acceleration {
     crate::schedule::implicit::Acceleration::Aitken
@@ -495,12 +505,17 @@ impl Scene {
                 if !(v.relaxation > 0.0 && v.relaxation <= 1.0) {
                     return Err(err_at(at, "coupling.implicit.relaxation", format!("must lie in (0, 1], got {}", v.relaxation)));
                 }
+                if !(v.filter > 0.0 && v.filter < 1.0) {
+                    return Err(err_at(at, "coupling.implicit.filter", format!("must lie in (0, 1), got {}", v.filter)));
+                }
                 Some(crate::schedule::implicit::ImplicitSettings {
                     tolerance: v.tolerance,
                     max_iterations: v.max_iterations,
                     acceleration: v.acceleration,
                     relaxation: v.relaxation,
                     continue_unconverged: v.continue_unconverged,
+                    reuse: v.reuse,
+                    filter: v.filter,
                 })
             }
             (None, ScheduleKind::Implicit) => Some(crate::schedule::implicit::ImplicitSettings {
@@ -509,6 +524,8 @@ impl Scene {
                 acceleration: default_acceleration(),
                 relaxation: default_relaxation(),
                 continue_unconverged: false,
+                reuse: default_reuse(),
+                filter: default_filter(),
             }),
             (Some(i), _) => {
                 return Err(err_at(i.span().start, "coupling.implicit", "settings of the implicit schedule, but `schedule` is not \"implicit\"".into()));
