@@ -1111,8 +1111,10 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
         .await
         .context("opening the coordinator's zenoh session")?;
     // implicit schedules read every iteration's forces: the tap is in place before the nodes
+    // (a check too: the DEM's forces have no other subscriber, and a node reports `ready` only
+    // once its publishers are matched)
     let tap = match scene.schedule {
-        ScheduleKind::Implicit if !opts.check_only => Some(link.forces_tap().await?),
+        ScheduleKind::Implicit => Some(link.forces_tap().await?),
         _ => None,
     };
     let mut summary = Summary {

@@ -112,3 +112,36 @@ fn iqn_ils_converges_the_plate_and_constant_relaxation_says_when_it_cannot() {
     assert!(e.contains("did not converge in 20 iterations"), "{e}");
     assert!(e.matches("e").count() >= 20, "the residual history: {e}");
 }
+
+#[test]
+fn cosim_check_and_study_take_the_implicit_keys() {
+    // a check starts the nodes too: the DEM's forces must find the coordinator's tap, or it
+    // would never report `ready`
+    let dir = tempfile::tempdir().unwrap();
+    let text = plate("implicit", "0.1 ms", "").replace("end_time = \"30 ms\"", "end_time = \"8 ms\"");
+    let scene = cosim_tests::write_scene(dir.path(), "plate.toml", &text);
+    let mut c = cosim_tests::cosim();
+    c.arg("check").arg(&scene);
+    let o = cosim_tests::run(c);
+    assert!(o.status.success());
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("implicit: no window limit"), "{stdout}");
+    // a study varies them like any other key
+    let out = dir.path().join("study");
+    let mut c = cosim_tests::cosim();
+    c.arg("study")
+        .arg(&scene)
+        .args([
+            "--vary",
+            "coupling.implicit.acceleration=aitken,iqn-ils",
+            "--series",
+            "fem/fem_probes.csv:probe.centre.uz",
+            "--jobs",
+            "1",
+            "--out",
+        ])
+        .arg(&out);
+    assert!(cosim_tests::run(c).status.success());
+    let csv = std::fs::read_to_string(out.join("study.csv")).unwrap();
+    assert_eq!(csv.matches(",completed,").count(), 2, "{csv}");
+}
