@@ -315,7 +315,11 @@ impl Run<'_> {
                         "node `{node}` speaks protocol version {got}; this coordinator speaks version {expected} (proto/PROTOCOL.md §9 lists the changes): update the node"
                     );
                 }
-                Ok(Event::WrongVersion { node, got, expected }) => {
+                Ok(Event::WrongVersion {
+                    node,
+                    got,
+                    expected,
+                }) => {
                     tracing::warn!(
                         "refused a status message of node `{}`: it speaks protocol version {got}, this coordinator speaks version {expected}",
                         node.unwrap_or_default()
@@ -879,7 +883,8 @@ impl Run<'_> {
                     csv,
                     "{line},{:.6e},{}{audit}",
                     (wall - critical).max(0.0),
-                    row_ke.take()
+                    row_ke
+                        .take()
                         .map(|e| format!("{e:.6e}"))
                         .unwrap_or_default()
                 )?;
@@ -1033,7 +1038,6 @@ fn progress_bar(show: bool, windows: u64) -> indicatif::ProgressBar {
     );
     bar
 }
-
 
 fn write_summary(out_dir: &Path, summary: &Summary) -> anyhow::Result<PathBuf> {
     let path = out_dir.join("summary.json");

@@ -17,10 +17,10 @@ use crate::units::{format_seconds, Joules, Seconds};
 /// messages; beyond this the scene is almost certainly a typo (a window in s meant as ms).
 pub const MAX_WINDOWS: f64 = 1e8;
 
+pub use scenefile::line_col;
 /// A scene error with its place in the file (line 0: the file as a whole, e.g. unreadable):
 /// the one scene error type of every crate.
 pub use scenefile::SceneError;
-pub use scenefile::line_col;
 
 /// The coupling schedule (Ullrich ch. 3).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, serde::Serialize)]
@@ -324,9 +324,8 @@ impl Scene {
             let offset = e.span().map(|s| s.start).unwrap_or(0);
             err_at(offset, "", e.message().trim().to_string())
         })?;
-        let nodes = solver_nodes(&text, &raw.nodes).map_err(|(offset, field, message)| {
-            err_at(offset, &field, message)
-        })?;
+        let nodes = solver_nodes(&text, &raw.nodes)
+            .map_err(|(offset, field, message)| err_at(offset, &field, message))?;
         let has_dem = nodes.iter().any(|n| n.kind == NodeKind::Dem);
         let has_fem = nodes.iter().any(|n| n.kind == NodeKind::Fem);
         if !has_dem && !has_fem {
@@ -440,9 +439,8 @@ impl Scene {
             ));
         }
         let interfaces = if both {
-            declare_interfaces(&text, c, &nodes).map_err(|(offset, field, message)| {
-                err_at(offset, &field, message)
-            })?
+            declare_interfaces(&text, c, &nodes)
+                .map_err(|(offset, field, message)| err_at(offset, &field, message))?
         } else {
             Vec::new()
         };
@@ -497,16 +495,35 @@ impl Scene {
                 let v = i.get_ref();
                 let at = i.span().start;
                 if !(v.tolerance > 0.0 && v.tolerance < 1.0) {
-                    return Err(err_at(at, "coupling.implicit.tolerance", format!("must lie in (0, 1) (a relative force residual), got {}", v.tolerance)));
+                    return Err(err_at(
+                        at,
+                        "coupling.implicit.tolerance",
+                        format!(
+                            "must lie in (0, 1) (a relative force residual), got {}",
+                            v.tolerance
+                        ),
+                    ));
                 }
                 if v.max_iterations == 0 {
-                    return Err(err_at(at, "coupling.implicit.max_iterations", "must be at least 1".into()));
+                    return Err(err_at(
+                        at,
+                        "coupling.implicit.max_iterations",
+                        "must be at least 1".into(),
+                    ));
                 }
                 if !(v.relaxation > 0.0 && v.relaxation <= 1.0) {
-                    return Err(err_at(at, "coupling.implicit.relaxation", format!("must lie in (0, 1], got {}", v.relaxation)));
+                    return Err(err_at(
+                        at,
+                        "coupling.implicit.relaxation",
+                        format!("must lie in (0, 1], got {}", v.relaxation),
+                    ));
                 }
                 if !(v.filter > 0.0 && v.filter < 1.0) {
-                    return Err(err_at(at, "coupling.implicit.filter", format!("must lie in (0, 1), got {}", v.filter)));
+                    return Err(err_at(
+                        at,
+                        "coupling.implicit.filter",
+                        format!("must lie in (0, 1), got {}", v.filter),
+                    ));
                 }
                 Some(crate::schedule::implicit::ImplicitSettings {
                     tolerance: v.tolerance,
@@ -528,7 +545,11 @@ impl Scene {
                 filter: default_filter(),
             }),
             (Some(i), _) => {
-                return Err(err_at(i.span().start, "coupling.implicit", "settings of the implicit schedule, but `schedule` is not \"implicit\"".into()));
+                return Err(err_at(
+                    i.span().start,
+                    "coupling.implicit",
+                    "settings of the implicit schedule, but `schedule` is not \"implicit\"".into(),
+                ));
             }
             (None, _) => None,
         };
@@ -580,9 +601,17 @@ type Located = (usize, String, String);
 
 /// The solver nodes of a scene: every top-level table that is not the coordinator's is a
 /// node's (`[dem]`, `[fem]`, or an id declared in `[nodes.<id>]` with its `kind`).
-fn solver_nodes(text: &str, decls: &BTreeMap<String, NodeLaunch>) -> Result<Vec<SceneNode>, Located> {
-    let root = toml::de::DeTable::parse(text)
-        .map_err(|e| (e.span().map(|s| s.start).unwrap_or(0), String::new(), e.message().to_string()))?;
+fn solver_nodes(
+    text: &str,
+    decls: &BTreeMap<String, NodeLaunch>,
+) -> Result<Vec<SceneNode>, Located> {
+    let root = toml::de::DeTable::parse(text).map_err(|e| {
+        (
+            e.span().map(|s| s.start).unwrap_or(0),
+            String::new(),
+            e.message().to_string(),
+        )
+    })?;
     let mut nodes = Vec::new();
     for (key, value) in root.get_ref().iter() {
         let id = key.get_ref().to_string();
@@ -607,7 +636,11 @@ fn solver_nodes(text: &str, decls: &BTreeMap<String, NodeLaunch>) -> Result<Vec<
         };
         proto::keys::validate_name("node", &id).map_err(|e| (at, id.clone(), e.to_string()))?;
         if id == proto::participant::COORDINATOR {
-            return Err((at, id.clone(), "`coordinator` is reserved; give the node another id".into()));
+            return Err((
+                at,
+                id.clone(),
+                "`coordinator` is reserved; give the node another id".into(),
+            ));
         }
         nodes.push(SceneNode {
             id,
@@ -619,16 +652,28 @@ fn solver_nodes(text: &str, decls: &BTreeMap<String, NodeLaunch>) -> Result<Vec<
     for (id, d) in decls {
         if d.kind.is_some() && !nodes.iter().any(|n| &n.id == id) {
             let at = d.kind.as_ref().map(|k| k.span().start).unwrap_or(0);
-            return Err((at, format!("nodes.{id}"), format!("node `{id}` has no [{id}] table in the scene")));
+            return Err((
+                at,
+                format!("nodes.{id}"),
+                format!("node `{id}` has no [{id}] table in the scene"),
+            ));
         }
     }
-    let dems: Vec<&str> = nodes.iter().filter(|n| n.kind == NodeKind::Dem).map(|n| n.id.as_str()).collect();
+    let dems: Vec<&str> = nodes
+        .iter()
+        .filter(|n| n.kind == NodeKind::Dem)
+        .map(|n| n.id.as_str())
+        .collect();
     if dems.len() > 1 {
-        return Err((text.find(&format!("[{}]", dems[1])).unwrap_or(0), dems[1].to_string(), format!(
-            "the scene has {} DEM nodes ({}); one DEM node holds the granular bed",
-            dems.len(),
-            dems.join(", ")
-        )));
+        return Err((
+            text.find(&format!("[{}]", dems[1])).unwrap_or(0),
+            dems[1].to_string(),
+            format!(
+                "the scene has {} DEM nodes ({}); one DEM node holds the granular bed",
+                dems.len(),
+                dems.join(", ")
+            ),
+        ));
     }
     nodes.sort_by(|a, b| (a.kind, &a.id).cmp(&(b.kind, &b.id)));
     Ok(nodes)
@@ -641,8 +686,16 @@ fn declare_interfaces(
     nodes: &[SceneNode],
 ) -> Result<Vec<InterfaceDecl>, Located> {
     const F: &str = "coupling.interfaces";
-    let fems: Vec<&str> = nodes.iter().filter(|n| n.kind == NodeKind::Fem).map(|n| n.id.as_str()).collect();
-    let users: Vec<String> = nodes.iter().filter(|n| n.kind == NodeKind::Dem).map(|n| n.id.clone()).collect();
+    let fems: Vec<&str> = nodes
+        .iter()
+        .filter(|n| n.kind == NodeKind::Fem)
+        .map(|n| n.id.as_str())
+        .collect();
+    let users: Vec<String> = nodes
+        .iter()
+        .filter(|n| n.kind == NodeKind::Dem)
+        .map(|n| n.id.clone())
+        .collect();
     let decl = |name: String, provider: String, kind| InterfaceDecl {
         name,
         kind,
@@ -654,7 +707,11 @@ fn declare_interfaces(
     let mut out: Vec<InterfaceDecl> = Vec::new();
     if c.interfaces.is_empty() {
         for f in &fems {
-            let name = if fems.len() == 1 { "interface".to_string() } else { f.to_string() };
+            let name = if fems.len() == 1 {
+                "interface".to_string()
+            } else {
+                f.to_string()
+            };
             out.push(decl(name, f.to_string(), InterfaceKind::Surface));
         }
         return Ok(out);
@@ -665,9 +722,14 @@ fn declare_interfaces(
             InterfaceEntry::Name(n) => (n.clone(), None, InterfaceKind::Surface),
             InterfaceEntry::Table(t) => (t.name.clone(), t.provider.clone(), t.kind),
         };
-        proto::keys::validate_name("interface", &name).map_err(|e| (at, F.to_string(), e.to_string()))?;
+        proto::keys::validate_name("interface", &name)
+            .map_err(|e| (at, F.to_string(), e.to_string()))?;
         if out.iter().any(|i| i.name == name) {
-            return Err((at, F.to_string(), format!("interface `{name}` is listed twice")));
+            return Err((
+                at,
+                F.to_string(),
+                format!("interface `{name}` is listed twice"),
+            ));
         }
         let provider = match provider {
             Some(p) if fems.contains(&p.as_str()) => p,
@@ -688,7 +750,11 @@ fn declare_interfaces(
             }
         };
         if kind != InterfaceKind::Surface {
-            return Err((at, F.to_string(), format!("interface `{name}`: only `surface` interfaces exist so far")));
+            return Err((
+                at,
+                F.to_string(),
+                format!("interface `{name}`: only `surface` interfaces exist so far"),
+            ));
         }
         if let Some(other) = out.iter().find(|i| i.provider == provider) {
             return Err((at, F.to_string(), format!(

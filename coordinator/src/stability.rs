@@ -89,7 +89,13 @@ impl StabilityMonitor {
     /// two windows running, says the coupling is diverging — measured on sleeper-ci with a
     /// too-long just-in-time window, 87 windows before the motion check stopped it, and on
     /// none of the stable scenes (docs/coupling.md). Returns the warning once.
-    pub fn observe_work(&mut self, interface: &str, window: u64, dem: f64, fem: f64) -> Option<String> {
+    pub fn observe_work(
+        &mut self,
+        interface: &str,
+        window: u64,
+        dem: f64,
+        fem: f64,
+    ) -> Option<String> {
         let w = self.energy.entry(interface.to_string()).or_default();
         w.mismatch.push_back((dem - fem).abs());
         if w.mismatch.len() > ENERGY_HISTORY {
@@ -229,19 +235,39 @@ mod tests {
         // sleeper-ci, just-in-time at 10 µs, windows 349–366 (W_DEM, W_FEM in J): an odd–even
         // oscillation whose envelope doubles every two windows
         let diverging = [
-            (-0.2217, -0.5018), (-0.3646, -0.5301), (-0.5092, -0.4474), (-0.2841, -0.1640),
-            (-0.2457, -0.1049), (-0.1542, -0.05844), (-0.2453, -0.05658), (-0.2154, -0.1109),
-            (-0.6924, -0.2033), (-0.9813, -0.5406), (-2.541, -0.3452), (-2.804, -0.7933),
-            (-7.652, 0.7621), (-5.558, -0.05758), (-17.50, 4.138), (-9.113, 1.588),
-            (-25.71, 8.715), (-12.15, 3.822),
+            (-0.2217, -0.5018),
+            (-0.3646, -0.5301),
+            (-0.5092, -0.4474),
+            (-0.2841, -0.1640),
+            (-0.2457, -0.1049),
+            (-0.1542, -0.05844),
+            (-0.2453, -0.05658),
+            (-0.2154, -0.1109),
+            (-0.6924, -0.2033),
+            (-0.9813, -0.5406),
+            (-2.541, -0.3452),
+            (-2.804, -0.7933),
+            (-7.652, 0.7621),
+            (-5.558, -0.05758),
+            (-17.50, 4.138),
+            (-9.113, 1.588),
+            (-25.71, 8.715),
+            (-12.15, 3.822),
         ];
         let mut m = StabilityMonitor::new(1e3);
         let warned: Vec<u64> = diverging
             .iter()
             .enumerate()
-            .filter_map(|(i, (d, f))| m.observe_work("bottom", 349 + i as u64, *d, *f).map(|_| 349 + i as u64))
+            .filter_map(|(i, (d, f))| {
+                m.observe_work("bottom", 349 + i as u64, *d, *f)
+                    .map(|_| 349 + i as u64)
+            })
             .collect();
-        assert_eq!(warned, vec![362], "once, 11 windows before the run was stopped");
+        assert_eq!(
+            warned,
+            vec![362],
+            "once, 11 windows before the run was stopped"
+        );
         // steady work with a one-window spike (sheet-ci, predictive, window 5464)
         let mut m = StabilityMonitor::new(1e3);
         let mut warnings = 0;

@@ -1229,4 +1229,3 @@ fn check_selector(s: &Selector, path: &str) -> Result<(), (String, String)> {
     }
     Ok(())
 }
-

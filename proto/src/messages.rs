@@ -258,13 +258,19 @@ pub enum CommandBody {
     /// Publish the node's current interface output without stepping, labelled `label`
     /// (providers: their state, e.g. the initial state before window 0 of just-in-time; users:
     /// their forces of the last window, averaged when the interface says so).
-    Publish { label: Label },
+    Publish {
+        label: Label,
+    },
     AdvanceWindow(AdvanceWindow),
     /// Keep the current state in memory as the start of window `window` (implicit schemes
     /// repeat a window from here). No reply.
-    Checkpoint { window: u64 },
+    Checkpoint {
+        window: u64,
+    },
     /// Put the state of the last `checkpoint` back (it must be of window `window`). No reply.
-    Rollback { window: u64 },
+    Rollback {
+        window: u64,
+    },
     /// Write the full state to `path` (atomically), reply `snapshot_done`.
     Snapshot {
         window: u64,

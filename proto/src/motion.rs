@@ -39,7 +39,12 @@ pub struct MeshMotion {
 
 /// The motion of a window of length `dt` under `rule`, from the provider's kinematics `k` and
 /// its previous end position `start` (same length as `k`'s arrays; checked by the caller).
-pub fn mesh_motion(rule: MotionRule, start: &[f64], k: &InterfaceKinematics, dt: f64) -> MeshMotion {
+pub fn mesh_motion(
+    rule: MotionRule,
+    start: &[f64],
+    k: &InterfaceKinematics,
+    dt: f64,
+) -> MeshMotion {
     let p = k.positions.as_slice();
     match rule {
         MotionRule::Quadratic => MeshMotion {
@@ -66,7 +71,9 @@ impl MeshMotion {
     pub fn at(&self, tau: f64) -> Vec<f64> {
         (0..self.positions.len())
             .map(|i| {
-                self.positions[i] + self.velocities[i] * tau + 0.5 * self.accelerations[i] * tau * tau
+                self.positions[i]
+                    + self.velocities[i] * tau
+                    + 0.5 * self.accelerations[i] * tau * tau
             })
             .collect()
     }
@@ -117,7 +124,11 @@ mod tests {
 
     #[test]
     fn just_in_time_extrapolates_the_providers_state() {
-        let k = kin(vec![1.0, 2.0, 3.0], vec![0.5, 0.0, -1.0], vec![2.0, 0.0, 4.0]);
+        let k = kin(
+            vec![1.0, 2.0, 3.0],
+            vec![0.5, 0.0, -1.0],
+            vec![2.0, 0.0, 4.0],
+        );
         let m = mesh_motion(MotionRule::Quadratic, &[0.0; 3], &k, 1e-3);
         assert_eq!(m.at(0.5), vec![1.0 + 0.25 + 0.25, 2.0, 3.0 - 0.5 + 0.5]);
         let f = mesh_motion(MotionRule::Fixed, &[0.0; 3], &k, 1e-3);

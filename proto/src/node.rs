@@ -542,7 +542,10 @@ impl Init {
             .ok_or_else(|| {
                 NodeError::new(
                     ErrorCode::Scene,
-                    format!("{}: the scene has no [{}] table", self.scene_path, self.table),
+                    format!(
+                        "{}: the scene has no [{}] table",
+                        self.scene_path, self.table
+                    ),
                 )
             })
     }
@@ -564,7 +567,10 @@ mod tests {
     #[test]
     fn snapshots_pack_and_unpack_and_foreign_files_are_named() {
         let packed = pack_snapshot(b"abc", b"state bytes");
-        assert_eq!(unpack_snapshot(&packed).unwrap(), (&b"abc"[..], &b"state bytes"[..]));
+        assert_eq!(
+            unpack_snapshot(&packed).unwrap(),
+            (&b"abc"[..], &b"state bytes"[..])
+        );
         let e = unpack_snapshot(b"DEM1 old snapshot").unwrap_err();
         assert!(e.contains("protocol version 2"), "{e}");
         let e = unpack_snapshot(&packed[..SNAPSHOT_MAGIC.len() + 9]).unwrap_err();

@@ -501,7 +501,9 @@ impl Participant {
         nodes: usize,
         timeout: Duration,
     ) -> Result<crate::motion::MeshMotion, ProtoError> {
-        let k = self.read_kinematics(interface, label, nodes, timeout).await?;
+        let k = self
+            .read_kinematics(interface, label, nodes, timeout)
+            .await?;
         let start = self
             .motion_start
             .get(interface)
@@ -810,10 +812,18 @@ impl CoordinatorLink {
         if !self.relaxed.contains_key(&key) {
             let p = declare_data_publisher(&self.session, key.clone()).await?;
             let start = Instant::now();
-            while !p.matching_status().await.map_err(ProtoError::zenoh)?.matching() {
+            while !p
+                .matching_status()
+                .await
+                .map_err(ProtoError::zenoh)?
+                .matching()
+            {
                 if start.elapsed() > timeout {
                     return Err(ProtoError::Timeout {
-                        what: format!("the provider of interface `{}` to listen on `{key}`", f.interface),
+                        what: format!(
+                            "the provider of interface `{}` to listen on `{key}`",
+                            f.interface
+                        ),
                         waited: timeout,
                     });
                 }

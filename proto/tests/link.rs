@@ -99,7 +99,12 @@ async fn thousand_windows_of_10k_node_kinematics_arrive_in_order_none_lost_none_
     );
     // nothing more is queued: no duplicate arrived after the last window
     let extra = dem
-        .read_kinematics("top", Label::window(WINDOWS), NODES, Duration::from_millis(300))
+        .read_kinematics(
+            "top",
+            Label::window(WINDOWS),
+            NODES,
+            Duration::from_millis(300),
+        )
         .await;
     assert!(
         matches!(extra, Err(ProtoError::Timeout { .. })),

@@ -25,7 +25,12 @@ pub struct SceneError {
 
 impl SceneError {
     /// An error at byte `offset` of `text`.
-    pub fn at(text: &str, offset: usize, field: impl Into<String>, message: impl Into<String>) -> Self {
+    pub fn at(
+        text: &str,
+        offset: usize,
+        field: impl Into<String>,
+        message: impl Into<String>,
+    ) -> Self {
         let (line, column) = line_col(text, offset);
         SceneError {
             file: String::new(),
@@ -54,9 +59,17 @@ impl std::fmt::Display for SceneError {
         };
         match (self.file.is_empty(), self.line) {
             (true, 0) => write!(f, "{field}{}", self.message),
-            (true, _) => write!(f, "line {}, column {}: {field}{}", self.line, self.column, self.message),
+            (true, _) => write!(
+                f,
+                "line {}, column {}: {field}{}",
+                self.line, self.column, self.message
+            ),
             (false, 0) => write!(f, "{}: {field}{}", self.file, self.message),
-            (false, _) => write!(f, "{}:{}:{}: {field}{}", self.file, self.line, self.column, self.message),
+            (false, _) => write!(
+                f,
+                "{}:{}:{}: {field}{}",
+                self.file, self.line, self.column, self.message
+            ),
         }
     }
 }
@@ -213,7 +226,10 @@ pub fn path_at(text: &str, offset: usize) -> Option<String> {
 /// The top-level table `name` of a whole TOML document, deserialised as `T`; the other tables
 /// are skipped unread. `Ok(None)` when there is no such table. Errors carry spans into `text`
 /// (the document is parsed as a whole, so lines and columns are the file's).
-pub fn named_table<T: DeserializeOwned>(text: &str, name: &str) -> Result<Option<T>, toml::de::Error> {
+pub fn named_table<T: DeserializeOwned>(
+    text: &str,
+    name: &str,
+) -> Result<Option<T>, toml::de::Error> {
     struct Pick<'a, T>(&'a str, std::marker::PhantomData<T>);
     impl<'de, T: DeserializeOwned> Visitor<'de> for Pick<'_, T> {
         type Value = Option<T>;
@@ -267,7 +283,11 @@ mod tests {
         assert_eq!(line_col("ab\ncd", 4), (2, 2));
         assert_eq!(line_col("ab", 99), (1, 3));
         assert_eq!(line_col("µs = 1", 2), (1, 2));
-        assert_eq!(line_col("µs = 1", 1), (1, 1), "inside a character: its start");
+        assert_eq!(
+            line_col("µs = 1", 1),
+            (1, 1),
+            "inside a character: its start"
+        );
     }
 
     #[test]
@@ -280,18 +300,33 @@ mod tests {
         // a missing leaf: the deepest prefix that exists
         let span = locate(text, &split_path("fem.mesh.size")).unwrap();
         assert_eq!(line_col(text, span.start), (2, 1));
-        assert_eq!(path_at(text, text.find("box").unwrap()).as_deref(), Some("fem.loads[1].on.box"));
+        assert_eq!(
+            path_at(text, text.find("box").unwrap()).as_deref(),
+            Some("fem.loads[1].on.box")
+        );
     }
 
     #[test]
     fn errors_read_like_compiler_messages_with_a_file_and_like_node_messages_without() {
         let text = "[scene]\nend_time = 1\n";
         let e = SceneError::at(text, 8, "scene.end_time", "must be positive");
-        assert_eq!(e.to_string(), "line 2, column 1: scene.end_time: must be positive");
+        assert_eq!(
+            e.to_string(),
+            "line 2, column 1: scene.end_time: must be positive"
+        );
         let e = e.in_file("s.toml");
-        assert_eq!(e.to_string(), "s.toml:2:1: scene.end_time: must be positive");
-        let whole = SceneError { line: 0, ..e.clone() };
-        assert_eq!(whole.to_string(), "s.toml: scene.end_time: must be positive");
+        assert_eq!(
+            e.to_string(),
+            "s.toml:2:1: scene.end_time: must be positive"
+        );
+        let whole = SceneError {
+            line: 0,
+            ..e.clone()
+        };
+        assert_eq!(
+            whole.to_string(),
+            "s.toml: scene.end_time: must be positive"
+        );
         // a message that starts with its path does not repeat it
         let e = SceneError::at(text, 0, "dem.x", "dem.x: unknown");
         assert_eq!(e.to_string(), "line 1, column 1: dem.x: unknown");

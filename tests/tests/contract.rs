@@ -9,8 +9,8 @@ use std::time::Duration;
 use cosim_tests::{bin, cosim, root, Reaper};
 use proto::participant::{CoordinatorLink, Event};
 use proto::{
-    AdvanceWindow, CommandBody, Init, InterfaceDecl, InterfaceKind, Label, LinkConfig,
-    MotionRule, StatusBody,
+    AdvanceWindow, CommandBody, Init, InterfaceDecl, InterfaceKind, Label, LinkConfig, MotionRule,
+    StatusBody,
 };
 
 const WAIT: Duration = Duration::from_secs(60);
@@ -126,9 +126,12 @@ async fn rollback_repeats_a_predictive_window_bitwise_in_both_rust_nodes() {
     let done = |b: &StatusBody| matches!(b, StatusBody::WindowDone { .. });
     // predictive windows up to the first contacts (the beads reach the plate at ~7 ms)
     for k in 0..69u64 {
-        link.send("fem", advance(k, 0, k.checked_sub(1).map(Label::window), label(k, 0)))
-            .await
-            .unwrap();
+        link.send(
+            "fem",
+            advance(k, 0, k.checked_sub(1).map(Label::window), label(k, 0)),
+        )
+        .await
+        .unwrap();
         link.send("dem", advance(k, 0, label(k, 0), label(k, 0)))
             .await
             .unwrap();
@@ -195,9 +198,14 @@ async fn rollback_repeats_a_predictive_window_bitwise_in_both_rust_nodes() {
             }
         }
     }
-    link.send("dem", CommandBody::Stop { reason: "done".into() })
-        .await
-        .unwrap();
+    link.send(
+        "dem",
+        CommandBody::Stop {
+            reason: "done".into(),
+        },
+    )
+    .await
+    .unwrap();
     drop(procs);
     let _ = link.close().await;
 }
@@ -210,16 +218,30 @@ fn a_node_of_protocol_version_1_is_refused_naming_both_versions() {
     let run = format!("v1-{}", std::process::id());
     let out = dir.path().join("out");
     let mut c = cosim();
-    c.args(["run", "scenes/plate.toml", "--no-progress", "--external", "fem"])
-        .args(["--run-id", &run, "--listen", &format!("tcp/127.0.0.1:{port}")])
-        .arg("--out")
-        .arg(&out)
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped());
+    c.args([
+        "run",
+        "scenes/plate.toml",
+        "--no-progress",
+        "--external",
+        "fem",
+    ])
+    .args([
+        "--run-id",
+        &run,
+        "--listen",
+        &format!("tcp/127.0.0.1:{port}"),
+    ])
+    .arg("--out")
+    .arg(&out)
+    .stdout(Stdio::null())
+    .stderr(Stdio::piped());
     let mut coordinator = c.spawn().unwrap();
     let rt = tokio::runtime::Runtime::new().unwrap();
     rt.block_on(async {
-        let s = LinkConfig::loopback_peer(None, &[port]).open().await.unwrap();
+        let s = LinkConfig::loopback_peer(None, &[port])
+            .open()
+            .await
+            .unwrap();
         #[derive(serde::Serialize)]
         struct HelloV1 {
             software: &'static str,

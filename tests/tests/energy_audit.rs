@@ -60,7 +60,11 @@ fn predictive_with_force_averaging_pairs_the_two_sides_work_to_round_off() {
     // the summary's totals are the columns' sums, and its energy error their difference
     let t = &a.summary["interface_work"]["top"];
     let (d, f) = (a.dem.iter().sum::<f64>(), a.fem.iter().sum::<f64>());
-    let scale = a.dem.iter().chain(&a.fem).fold(0.0f64, |m, w| m.max(w.abs()));
+    let scale = a
+        .dem
+        .iter()
+        .chain(&a.fem)
+        .fold(0.0f64, |m, w| m.max(w.abs()));
     assert!(scale > 1e-4, "the beads do work on the plate: {scale} J");
     let near = |x: f64, y: f64| (x - y).abs() <= 1e-8 * scale * a.dem.len() as f64;
     assert!(near(t["dem_j"].as_f64().unwrap(), d), "{t}");
@@ -98,7 +102,8 @@ fn predictive_with_force_averaging_pairs_the_two_sides_work_to_round_off() {
 #[test]
 fn without_averaging_or_with_just_in_time_the_sides_differ_and_say_so() {
     // just in time within its window limit on this scene (0.04 T_c)
-    for (schedule, averaging, window) in [("predictive", false, "0.1 ms"), ("jit", true, "0.01 ms")] {
+    for (schedule, averaging, window) in [("predictive", false, "0.1 ms"), ("jit", true, "0.01 ms")]
+    {
         let a = audit(schedule, averaging, window);
         let scale = a.dem.iter().fold(0.0f64, |m, w| m.max(w.abs()));
         // the pairing no longer holds: the FEM receives the last substep's forces (or, just in

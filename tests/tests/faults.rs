@@ -91,6 +91,9 @@ fn killing_the_fem_node_mid_iteration_of_an_implicit_run_ends_it_naming_node_and
         .replace("end_time = \"30 ms\"", "end_time = \"10 s\"");
     let (status, err, out) = kill_mid_run(dir.path(), &text, "fem", 75);
     assert!(!status.success());
-    assert!(err.contains("node `fem`") && err.contains("window"), "{err}");
+    assert!(
+        err.contains("node `fem`") && err.contains("window"),
+        "{err}"
+    );
     assert_eq!(summary(&out)["status"], "failed");
 }

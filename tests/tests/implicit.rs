@@ -24,7 +24,9 @@ fn csv_column(text: &str, name: &str) -> Vec<String> {
         .iter()
         .position(|h| *h == name)
         .unwrap_or_else(|| panic!("no {name} in {header:?}"));
-    lines.map(|l| l.split(',').nth(i).unwrap().to_string()).collect()
+    lines
+        .map(|l| l.split(',').nth(i).unwrap().to_string())
+        .collect()
 }
 
 #[test]
@@ -87,7 +89,11 @@ fn iqn_ils_converges_the_plate_and_constant_relaxation_says_when_it_cannot() {
         let scene = cosim_tests::write_scene(dir.path(), "plate.toml", &text);
         let out = dir.path().join("out");
         let mut c = cosim_tests::cosim();
-        c.arg("run").arg(&scene).arg("--no-progress").arg("--out").arg(&out);
+        c.arg("run")
+            .arg(&scene)
+            .arg("--no-progress")
+            .arg("--out")
+            .arg(&out);
         let o = cosim_tests::run(c);
         (o, cosim_tests::summary(&out))
     };
@@ -118,7 +124,8 @@ fn cosim_check_and_study_take_the_implicit_keys() {
     // a check starts the nodes too: the DEM's forces must find the coordinator's tap, or it
     // would never report `ready`
     let dir = tempfile::tempdir().unwrap();
-    let text = plate("implicit", "0.1 ms", "").replace("end_time = \"30 ms\"", "end_time = \"8 ms\"");
+    let text =
+        plate("implicit", "0.1 ms", "").replace("end_time = \"30 ms\"", "end_time = \"8 ms\"");
     let scene = cosim_tests::write_scene(dir.path(), "plate.toml", &text);
     let mut c = cosim_tests::cosim();
     c.arg("check").arg(&scene);

@@ -345,23 +345,22 @@ fn over_namespaces_and_locally(
 #[ignore = "needs root to create network namespaces: run with --run-ignored all"]
 fn a_cut_link_ends_the_run_within_5_s_naming_node_and_window() {
     let tag = format!("{}", (std::process::id() + 7) % 100_000);
-    let net = Netns::create(&tag, 2)
-        .unwrap_or_else(|e| panic!("cannot create network namespaces: {e}"));
+    let net =
+        Netns::create(&tag, 2).unwrap_or_else(|e| panic!("cannot create network namespaces: {e}"));
     let dir = tempfile::tempdir().unwrap();
     let text = std::fs::read_to_string(root().join("scenes/plate.toml"))
         .unwrap()
         .replace("end_time = \"30 ms\"", "end_time = \"10 s\"");
     let scene = cosim_tests::write_scene(dir.path(), "plate.toml", &text);
     let out = dir.path().join("out");
-    let (mut coordinator, _procs) =
-        run_over_namespaces(
-            &net,
-            dir.path(),
-            &format!("plate-cut-{tag}"),
-            &scene,
-            &out,
-            DEM_AND_FEM,
-        );
+    let (mut coordinator, _procs) = run_over_namespaces(
+        &net,
+        dir.path(),
+        &format!("plate-cut-{tag}"),
+        &scene,
+        &out,
+        DEM_AND_FEM,
+    );
     wait_for_windows(&out, 19, &mut coordinator, Duration::from_secs(60));
     // pull the DEM machine's cable
     Netns::sh(&[

@@ -298,8 +298,8 @@ fn python_fem_node_takes_part_in_an_implicit_run_with_rollback_alone() {
     assert_eq!(s["status"], "completed", "{s}");
     assert_eq!(s["windows_done"], WINDOWS as u64);
     let iterations = s["coupling_iterations"].as_u64().unwrap();
-    let csv = std::fs::read_to_string(dir.path().join("out-plate-py-implicit.toml/windows.csv"))
-        .unwrap();
+    let csv =
+        std::fs::read_to_string(dir.path().join("out-plate-py-implicit.toml/windows.csv")).unwrap();
     let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
     let col = header.iter().position(|h| *h == "residual").unwrap();
     let worst = csv

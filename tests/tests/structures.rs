@@ -154,7 +154,10 @@ fn a_structure_away_from_the_bed_leaves_the_dem_result_unchanged() {
     let one = format!("{head}{}{}", dem_table(particles), plate("fem", 0.0));
     let s2 = run_scene(dir.path(), "two.toml", &two);
     let s1 = run_scene(dir.path(), "one.toml", &one);
-    assert_eq!((&s1["status"], &s2["status"]), (&"completed".into(), &"completed".into()));
+    assert_eq!(
+        (&s1["status"], &s2["status"]),
+        (&"completed".into(), &"completed".into())
+    );
     let read = |out: &str, file: &str| {
         std::fs::read_to_string(dir.path().join(out).join(file))
             .unwrap_or_else(|e| panic!("{out}/{file}: {e}"))
@@ -209,15 +212,14 @@ fn cosim_check_reports_each_structures_limits_and_scene_errors_name_the_node() {
         );
     let scene = write_scene(dir.path(), "bad.toml", &text);
     let mut c = cosim();
-    c.arg("check").arg(&scene).arg("--out").arg(dir.path().join("bad"));
+    c.arg("check")
+        .arg(&scene)
+        .arg("--out")
+        .arg(dir.path().join("bad"));
     let o = run(c);
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
-    let line = text
-        .lines()
-        .position(|l| l == "thickness = 1")
-        .unwrap()
-        + 1;
+    let line = text.lines().position(|l| l == "thickness = 1").unwrap() + 1;
     assert!(
         err.contains(&format!("line {line}")) && err.contains("right.interface.thickness"),
         "{err}"

@@ -91,7 +91,11 @@ fn predictive_allows_a_coupling_window_ten_times_the_just_in_time_one() {
         .unwrap_or_else(|| panic!("no energy warning: {}", s["interface_work"]));
     eprintln!("JIT 10 µs: energy warning at window {warned}, stopped at window {stopped}");
     assert!(warned < stopped, "{warned} vs {stopped}");
-    for (schedule, window) in [("jit", "5e-6"), ("predictive", "5e-6"), ("predictive", "1e-4")] {
+    for (schedule, window) in [
+        ("jit", "5e-6"),
+        ("predictive", "5e-6"),
+        ("predictive", "1e-4"),
+    ] {
         let s = summary_of(schedule, window);
         assert_eq!(s["status"], "completed");
         assert!(

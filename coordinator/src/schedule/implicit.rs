@@ -182,9 +182,9 @@ impl Implicit {
         let j = self.iteration;
         let mut h = Vec::with_capacity(self.estimate.len());
         for (name, nodes, _) in &self.interfaces {
-            let f = forces
-                .get(name)
-                .ok_or_else(|| format!("no forces of interface `{name}` for window {k} iteration {j}"))?;
+            let f = forces.get(name).ok_or_else(|| {
+                format!("no forces of interface `{name}` for window {k} iteration {j}")
+            })?;
             if f.len() != 3 * nodes {
                 return Err(format!(
                     "interface `{name}`: {} force values for {nodes} nodes",
@@ -196,7 +196,11 @@ impl Implicit {
         let r: Vec<f64> = h.iter().zip(&self.estimate).map(|(a, b)| a - b).collect();
         let norm = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
         let (rn, hn) = (norm(&r), norm(&h));
-        let residual = if rn == 0.0 { 0.0 } else { rn / hn.max(f64::MIN_POSITIVE) };
+        let residual = if rn == 0.0 {
+            0.0
+        } else {
+            rn / hn.max(f64::MIN_POSITIVE)
+        };
         let omega = match (self.settings.acceleration, &self.last_residual) {
             (Acceleration::Aitken, Some(prev)) => {
                 let (mut num, mut den) = (0.0, 0.0);
@@ -408,7 +412,9 @@ mod tests {
         let a = [[-0.5, 0.3, 0.0], [0.1, -0.7, 0.2], [0.0, 0.4, 0.6]];
         let c = [1.0, -2.0, 0.5];
         let hmap = |f: &[f64]| -> Vec<f64> {
-            (0..3).map(|i| (0..3).map(|j| a[i][j] * f[j]).sum::<f64>() + c[i]).collect()
+            (0..3)
+                .map(|i| (0..3).map(|j| a[i][j] * f[j]).sum::<f64>() + c[i])
+                .collect()
         };
         let mut f = vec![0.0; 3];
         let mut secants = Vec::new();
@@ -451,7 +457,10 @@ mod tests {
         let r = [0.5, 0.0];
         let h = [1.0, 1.0];
         // the same column twice gives the same step as once (the copy is filtered, no 0/0)
-        assert_eq!(iqn_ils_step(&twice, &r, &h, 1e-3), iqn_ils_step(&one, &r, &h, 1e-3));
+        assert_eq!(
+            iqn_ils_step(&twice, &r, &h, 1e-3),
+            iqn_ils_step(&one, &r, &h, 1e-3)
+        );
         assert_eq!(iqn_ils_step(&one, &r, &h, 1e-3), Some(vec![0.0, 1.0]));
         assert_eq!(iqn_ils_step(&[], &r, &h, 1e-3), None);
     }

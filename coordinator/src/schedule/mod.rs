@@ -328,10 +328,7 @@ impl Scheduler {
                 self.pending.insert(node.clone());
             }
         }
-        sends
-            .into_iter()
-            .map(|(n, b)| Action::Send(n, b))
-            .collect()
+        sends.into_iter().map(|(n, b)| Action::Send(n, b)).collect()
     }
 
     /// Commands of window k.
@@ -530,20 +527,14 @@ mod tests {
     fn jit_moves_dem_by_the_last_fem_kinematics_and_fem_by_this_windows_forces() {
         let mut s = Scheduler::new(cfg(ScheduleKind::Jit, 3)).unwrap();
         let a = s.start();
-        assert_eq!(
-            a[0],
-            publish(FEM, 0)
-        );
+        assert_eq!(a[0], publish(FEM, 0));
         let (r, d) = advance(&a[1]);
         assert_eq!(
             (r, d.input, d.output, d.motion),
             (DEM, l(0), l(0), MotionRule::Quadratic)
         );
         let (r, f) = advance(&a[2]);
-        assert_eq!(
-            (r, f.input, f.output),
-            (FEM, l(0), l(1))
-        );
+        assert_eq!((r, f.input, f.output), (FEM, l(0), l(1)));
         assert!(s.on_window_done(DEM, 0, None).unwrap().is_empty());
         let a = s.on_window_done(FEM, 0, None).unwrap();
         assert_eq!(advance(&a[0]).1.window, 1);
@@ -571,17 +562,11 @@ mod tests {
             (FEM, None, l(0), MotionRule::Linear)
         );
         let (r, d) = advance(&a[1]);
-        assert_eq!(
-            (r, d.input, d.output),
-            (DEM, l(0), l(0))
-        );
+        assert_eq!((r, d.input, d.output), (DEM, l(0), l(0)));
         s.on_window_done(FEM, 0, None).unwrap();
         let a = s.on_window_done(DEM, 0, None).unwrap();
         let (_, f) = advance(&a[0]);
-        assert_eq!(
-            (f.window, f.input, f.output),
-            (1, l(0), l(1))
-        );
+        assert_eq!((f.window, f.input, f.output), (1, l(0), l(1)));
         let (_, d) = advance(&a[1]);
         assert_eq!((d.window, d.output), (1, None));
     }
@@ -599,15 +584,9 @@ mod tests {
         assert_eq!(advance(&a[0]).1.window, 3, "a kick resets the count");
         s.on_window_done(DEM, 3, Some(1e-7)).unwrap();
         let a = s.on_window_done(DEM, 4, Some(1e-7)).unwrap();
-        assert_eq!(
-            a[0],
-            publish(DEM, 4)
-        );
+        assert_eq!(a[0], publish(DEM, 4));
         let (r, f) = advance(&a[1]);
-        assert_eq!(
-            (r, f.static_solve, f.input),
-            (FEM, true, l(4))
-        );
+        assert_eq!((r, f.static_solve, f.input), (FEM, true, l(4)));
         assert!(
             s.on_window_done(DEM, 4, None).is_err(),
             "the DEM is not pending any more"
@@ -649,11 +628,7 @@ mod tests {
             let mut restored: Scheduler =
                 serde_json::from_str(&serde_json::to_string(&s).unwrap()).unwrap();
             let a = restored.replay_actions().unwrap();
-            assert_eq!(
-                a[0],
-                publish(role, window),
-                "{kind:?}"
-            );
+            assert_eq!(a[0], publish(role, window), "{kind:?}");
             assert_eq!(&a[1..], &expected[..], "{kind:?}");
         }
     }
@@ -676,7 +651,11 @@ mod tests {
 
     #[test]
     fn several_structures_each_get_their_own_commands_and_the_window_waits_for_all() {
-        for kind in [ScheduleKind::Jit, ScheduleKind::Predictive, ScheduleKind::OneWay] {
+        for kind in [
+            ScheduleKind::Jit,
+            ScheduleKind::Predictive,
+            ScheduleKind::OneWay,
+        ] {
             let mut c = cfg(kind, 3);
             c.topology.fems = vec!["left".into(), "right".into()];
             let mut s = Scheduler::new(c).unwrap();
@@ -780,7 +759,10 @@ mod tests {
                 .collect();
             assert_eq!(advances.len(), 2);
             for (_, w) in &advances {
-                assert_eq!((w.iteration, w.input, w.output), (j, Some(estimate_label), Some(estimate_label)));
+                assert_eq!(
+                    (w.iteration, w.input, w.output),
+                    (j, Some(estimate_label), Some(estimate_label))
+                );
             }
             let rollbacks = actions
                 .iter()
@@ -790,10 +772,18 @@ mod tests {
                 .iter()
                 .filter(|a| matches!(a, Action::Send(_, CommandBody::Checkpoint { window: 0 })))
                 .count();
-            assert_eq!((rollbacks, checkpoints), if j == 0 { (0, 2) } else { (2, 0) });
+            assert_eq!(
+                (rollbacks, checkpoints),
+                if j == 0 { (0, 2) } else { (2, 0) }
+            );
             assert!(s.on_window_done(DEM, 0, None).unwrap().is_empty());
             let a = s.on_window_done(FEM, 0, None).unwrap();
-            assert_eq!(a, vec![Action::NeedForces { label: estimate_label }]);
+            assert_eq!(
+                a,
+                vec![Action::NeedForces {
+                    label: estimate_label
+                }]
+            );
             let next = s.on_forces(&respond(&estimate)).unwrap();
             if s.window() == 1 {
                 return (j + 1, next);
@@ -821,7 +811,10 @@ mod tests {
             let (label, f) = published(&next).pop().unwrap();
             assert_eq!(label, Label::window(1));
             for (i, v) in f.iter().enumerate() {
-                assert!((v - (i + 1) as f64 / 1.8).abs() < 1e-5 * (i + 1) as f64, "{f:?}");
+                assert!(
+                    (v - (i + 1) as f64 / 1.8).abs() < 1e-5 * (i + 1) as f64,
+                    "{f:?}"
+                );
             }
             assert!(next
                 .iter()
@@ -844,7 +837,8 @@ mod tests {
 
     #[test]
     fn implicit_stops_at_max_iterations_with_the_residuals_or_goes_on_when_allowed() {
-        let mut s = Scheduler::new(implicit_cfg(implicit::Acceleration::Constant, 3, false)).unwrap();
+        let mut s =
+            Scheduler::new(implicit_cfg(implicit::Acceleration::Constant, 3, false)).unwrap();
         let mut actions = s.start();
         let mut err = None;
         for _ in 0..3 {
@@ -860,10 +854,17 @@ mod tests {
             }
         }
         let e = err.expect("not converged in 3 iterations");
-        assert!(e.contains("window 0 did not converge in 3 iterations"), "{e}");
-        assert!(e.matches("e").count() > 3 && e.contains("tolerance 1.0e-6"), "{e}");
+        assert!(
+            e.contains("window 0 did not converge in 3 iterations"),
+            "{e}"
+        );
+        assert!(
+            e.matches("e").count() > 3 && e.contains("tolerance 1.0e-6"),
+            "{e}"
+        );
 
-        let mut s = Scheduler::new(implicit_cfg(implicit::Acceleration::Constant, 3, true)).unwrap();
+        let mut s =
+            Scheduler::new(implicit_cfg(implicit::Acceleration::Constant, 3, true)).unwrap();
         let mut actions = s.start();
         for _ in 0..3 {
             let (_, estimate) = published(&actions).pop().unwrap();

@@ -37,7 +37,12 @@ impl Scheme for OneWay {
     fn window(&self, t: &Topology, w: &Windows, k: u64) -> Sends {
         t.dem
             .iter()
-            .map(|d| (d.clone(), w.advance(k, MotionRule::Fixed, None, None, false)))
+            .map(|d| {
+                (
+                    d.clone(),
+                    w.advance(k, MotionRule::Fixed, None, None, false),
+                )
+            })
             .collect()
     }
 
@@ -77,11 +82,12 @@ impl Scheme for OneWay {
                 )
             })
             .collect();
-        sends.extend(
-            t.fems
-                .iter()
-                .map(|f| (f.clone(), w.advance(k, MotionRule::Fixed, Some(k), None, true))),
-        );
+        sends.extend(t.fems.iter().map(|f| {
+            (
+                f.clone(),
+                w.advance(k, MotionRule::Fixed, Some(k), None, true),
+            )
+        }));
         Next::Final {
             sends,
             reason: format!("static FEM solve with the DEM forces of window {k} done"),

@@ -220,8 +220,7 @@ impl Solver for DemNode {
             .write_outputs(&out_dir)
             .map_err(|e| NodeError::new(ErrorCode::Io, e.to_string()))?;
         let t_end = engine.time();
-        let mut monitor =
-            BTreeMap::from([("kinetic_energy".to_string(), engine.kinetic_energy())]);
+        let mut monitor = BTreeMap::from([("kinetic_energy".to_string(), engine.kinetic_energy())]);
         // the interface energy audit: the work of this window's contact forces on each
         // coupled mesh as it moved in the DEM, Σ_steps Δt Σ_nodes f·v
         for c in &self.coupled {

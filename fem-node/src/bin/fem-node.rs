@@ -261,7 +261,10 @@ impl Solver for FemNode {
         let forces = match (w.input, &self.interface) {
             (Some(label), Some((name, nodes))) => {
                 let (name, nodes) = (name.clone(), *nodes);
-                Some(p.read_forces(&name, label, nodes, self.data_timeout).await?)
+                Some(
+                    p.read_forces(&name, label, nodes, self.data_timeout)
+                        .await?,
+                )
             }
             _ => None,
         };
@@ -311,7 +314,11 @@ impl Solver for FemNode {
         // the displacement of the window they were computed in (this one for just-in-time,
         // the previous one for predictive): with force averaging and predictive motion the
         // DEM's own account of its work equals the latter to round-off (docs/coupling.md)
-        let displacement: Vec<f64> = pos.iter().zip(&start_positions).map(|(e, s)| e - s).collect();
+        let displacement: Vec<f64> = pos
+            .iter()
+            .zip(&start_positions)
+            .map(|(e, s)| e - s)
+            .collect();
         let mut audit = Vec::new();
         if let Some((name, _)) = &self.interface {
             let held = model.held_interface_forces();
@@ -372,8 +379,12 @@ impl Solver for FemNode {
             model,
             last_displacement: self.last_displacement.clone(),
         };
-        rmp_serde::to_vec(&state)
-            .map_err(|e| fem_error(ErrorCode::Internal, format!("encoding the FEM node state: {e}")))
+        rmp_serde::to_vec(&state).map_err(|e| {
+            fem_error(
+                ErrorCode::Internal,
+                format!("encoding the FEM node state: {e}"),
+            )
+        })
     }
 
     fn restore(&mut self, bytes: &[u8]) -> Result<(), NodeError> {
