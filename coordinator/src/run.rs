@@ -149,6 +149,17 @@ pub struct InterfaceWork {
     pub growth_warning_window: Option<u64>,
 }
 
+impl InterfaceWork {
+    /// One window's work as the DEM (`dem`) and the FEM (`fem`) computed it.
+    fn add(&mut self, dem: f64, fem: f64) {
+        self.dem_j += dem;
+        self.fem_j += fem;
+        self.energy_error_j += dem - fem;
+        self.max_window_error_j = self.max_window_error_j.max((dem - fem).abs());
+        self.windows += 1;
+    }
+}
+
 fn make_run_id(name: &str) -> String {
     let nanos = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
@@ -543,15 +554,11 @@ impl Run<'_> {
             topology,
             steady_kinetic_energy: scene.steady_kinetic_energy,
             steady_windows: scene.steady_windows,
-            implicit: scene.implicit.clone().map(|settings| {
-                let interfaces = scene
-                    .interfaces
-                    .iter()
-                    .zip(&meshes)
-                    .map(|(i, (_, nodes, _))| (i.name.clone(), *nodes, i.provider.clone()))
-                    .collect();
-                (settings, interfaces)
-            }),
+            implicit: scene.implicit.clone(),
+            interfaces: meshes
+                .iter()
+                .map(|(name, nodes, _)| (name.clone(), *nodes))
+                .collect(),
         })
         .map_err(|e| anyhow!(e))?;
         let implicit = scene.implicit.is_some();
@@ -864,12 +871,11 @@ impl Run<'_> {
                                 .or_default()
                                 .growth_warning_window = Some(window);
                         }
-                        let a = self.summary.interface_work.entry(name.clone()).or_default();
-                        a.dem_j += d;
-                        a.fem_j += f;
-                        a.energy_error_j += d - f;
-                        a.max_window_error_j = a.max_window_error_j.max((d - f).abs());
-                        a.windows += 1;
+                        self.summary
+                            .interface_work
+                            .entry(name.clone())
+                            .or_default()
+                            .add(d, f);
                     }
                 }
                 work.clear();

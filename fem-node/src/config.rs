@@ -761,6 +761,24 @@ fn check_material(base: &str, m: &MaterialSpec) -> Result<(), (String, String)> 
 }
 
 impl FemConfig {
+    /// `field` names history `h`: it must be one of `[fem.histories]`.
+    fn check_history(&self, field: &str, h: &str) -> Result<(), (String, String)> {
+        if self.histories.contains_key(h) {
+            return Ok(());
+        }
+        Err((
+            field.to_string(),
+            format!(
+                "unknown history '{h}' (defined in [fem.histories]: {})",
+                self.histories
+                    .keys()
+                    .cloned()
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        ))
+    }
+
     /// Value checks; the error carries the field path (e.g. `fem.material.poisson_ratio`).
     pub fn validate(&self) -> Result<(), (String, String)> {
         if let Some(m) = &self.material {
@@ -954,19 +972,7 @@ impl FemConfig {
                         "scales nothing: give a displacement".into(),
                     ));
                 }
-                if !self.histories.contains_key(h) {
-                    return Err((
-                        format!("fem.supports[{i}].history"),
-                        format!(
-                            "unknown history '{h}' (defined in [fem.histories]: {})",
-                            self.histories
-                                .keys()
-                                .cloned()
-                                .collect::<Vec<_>>()
-                                .join(", ")
-                        ),
-                    ));
-                }
+                self.check_history(&format!("fem.supports[{i}].history"), h)?;
             }
         }
         for (name, h) in &self.histories {
@@ -1016,19 +1022,7 @@ impl FemConfig {
                 }
             };
             if let Some(h) = history {
-                if !self.histories.contains_key(h) {
-                    return Err((
-                        format!("{base}.history"),
-                        format!(
-                            "unknown history '{h}' (defined in [fem.histories]: {})",
-                            self.histories
-                                .keys()
-                                .cloned()
-                                .collect::<Vec<_>>()
-                                .join(", ")
-                        ),
-                    ));
-                }
+                self.check_history(&format!("{base}.history"), h)?;
             }
         }
         if let Some(i) = &self.interface {

@@ -217,7 +217,7 @@ pub async fn serve<S: Solver>(
     let mut p = Participant::connect(&args.link(), &args.run_id, &args.node, hello).await?;
     let mut window: Option<u64> = None;
     // the state at the start of the window an implicit scheme may repeat
-    let mut kept: Option<(u64, Vec<u8>, Vec<u8>)> = None;
+    let mut kept: Option<Kept> = None;
     let mut compute_s = 0.0;
     let mut wait_s = 0.0;
     let result: Result<(), NodeError> = async {
@@ -250,12 +250,17 @@ pub async fn serve<S: Solver>(
                 }
                 CommandBody::Publish { label } => solver.publish(&mut p, label).await?,
                 CommandBody::Checkpoint { window: k } => {
-                    kept = Some((k, p.coupling_state(), solver.checkpoint()?));
+                    kept = Some(Kept {
+                        window: k,
+                        coupling: p.coupling_state(),
+                        state: solver.checkpoint()?,
+                        series: time_series_lengths(&solver)?,
+                    });
                 }
                 CommandBody::Rollback { window: k } => {
-                    let (coupling, state) = match &kept {
-                        Some((w, c, s)) if *w == k => (c, s),
-                        Some((w, ..)) => {
+                    let kept = match &kept {
+                        Some(c) if c.window == k => c,
+                        Some(Kept { window: w, .. }) => {
                             return Err(NodeError::new(
                                 ErrorCode::Protocol,
                                 format!("`rollback` to window {k}, but the checkpoint kept is of window {w}"),
@@ -268,9 +273,33 @@ pub async fn serve<S: Solver>(
                             ))
                         }
                     };
-                    p.set_coupling_state(coupling)?;
-                    solver.rollback(state)?;
-                    truncate_outputs(&solver)?;
+                    p.set_coupling_state(&kept.coupling)?;
+                    solver.rollback(&kept.state)?;
+                    // the rows written since the checkpoint go: cut to the lengths then (no
+                    // re-reading of the growing files on every repeat); a time series begun
+                    // since goes entirely
+                    for (path, _) in time_series_lengths(&solver)? {
+                        if !kept.series.iter().any(|(p, _)| *p == path) {
+                            std::fs::remove_file(&path).map_err(|e| {
+                                NodeError::new(
+                                    ErrorCode::Io,
+                                    format!("removing {}: {e}", path.display()),
+                                )
+                            })?;
+                        }
+                    }
+                    for (path, len) in &kept.series {
+                        let cut = std::fs::OpenOptions::new()
+                            .write(true)
+                            .open(path)
+                            .and_then(|f| f.set_len(*len));
+                        cut.map_err(|e| {
+                            NodeError::new(
+                                ErrorCode::Io,
+                                format!("cutting {} back to the checkpoint: {e}", path.display()),
+                            )
+                        })?;
+                    }
                 }
                 CommandBody::Snapshot { window: k, path } => {
                     let bytes = pack_snapshot(&p.coupling_state(), &solver.snapshot()?);
@@ -340,7 +369,52 @@ pub async fn serve<S: Solver>(
     }
 }
 
-/// After a restore or rollback: the node's CSV time series lose the rows after its time.
+/// A window checkpoint in memory: the participant's coupling memory, the solver's state and the
+/// length of each CSV time series then.
+struct Kept {
+    window: u64,
+    coupling: Vec<u8>,
+    state: Vec<u8>,
+    series: Vec<(PathBuf, u64)>,
+}
+
+/// The length of each CSV time series of the node (the files
+/// [`truncate_time_series_after`] cuts), for a rollback to cut them back to. The files are
+/// appended to by reopening, so cutting their length is all a rollback needs.
+fn time_series_lengths<S: Solver>(solver: &S) -> Result<Vec<(PathBuf, u64)>, NodeError> {
+    let Some((dir, _)) = solver.time_series() else {
+        return Ok(Vec::new());
+    };
+    let io = |e: std::io::Error| {
+        NodeError::new(
+            ErrorCode::Io,
+            format!("reading the time series in {}: {e}", dir.display()),
+        )
+    };
+    let mut out = Vec::new();
+    let entries = match std::fs::read_dir(dir) {
+        Ok(e) => e,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(out),
+        Err(e) => return Err(io(e)),
+    };
+    for path in entries.filter_map(|e| e.ok().map(|e| e.path())) {
+        if path.extension().is_none_or(|x| x != "csv") {
+            continue;
+        }
+        let mut header = String::new();
+        std::io::BufRead::read_line(
+            &mut std::io::BufReader::new(std::fs::File::open(&path).map_err(io)?),
+            &mut header,
+        )
+        .map_err(io)?;
+        if header.split(',').next().map(str::trim) == Some("time") {
+            out.push((path.clone(), std::fs::metadata(&path).map_err(io)?.len()));
+        }
+    }
+    Ok(out)
+}
+
+/// After a restore: the node's CSV time series lose the rows after its time.
 fn truncate_outputs<S: Solver>(solver: &S) -> Result<(), NodeError> {
     if let Some((dir, t)) = solver.time_series() {
         truncate_time_series_after(dir, t).map_err(|e| {

@@ -180,6 +180,20 @@ async fn rollback_repeats_a_predictive_window_bitwise_in_both_rust_nodes() {
         eprintln!("{node}: {a:?}");
         assert_eq!(a, b, "{node}: the repeated window differs");
     }
+    // the repeated window's rows replaced the first attempt's: every time series runs forward
+    for file in ["fem/fem_probes.csv", "dem/dem_timeseries.csv"] {
+        let text = std::fs::read_to_string(dir.path().join(file)).unwrap();
+        let times: Vec<f64> = text
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').next().unwrap().parse().unwrap())
+            .collect();
+        assert!(times.len() >= 69, "{file}: {} rows", times.len());
+        assert!(
+            times.windows(2).all(|t| t[0] < t[1]),
+            "{file}: a time appears twice or goes back"
+        );
+    }
     // the window did something: the beads are on the plate
     assert!(monitor(&first["dem"])["interface_work.top"] != 0.0);
     assert!(monitor(&first["fem"])["max_interface_speed"] > 0.0);

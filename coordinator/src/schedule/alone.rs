@@ -2,16 +2,12 @@
 
 use proto::MotionRule;
 
-use super::{Next, Scheme, Sends, Topology, Windows};
+use super::{Scheme, Sends, Topology, Windows};
 
 #[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
 pub struct Alone;
 
 impl Scheme for Alone {
-    fn prologue(&self, _: &Topology) -> Sends {
-        Vec::new()
-    }
-
     fn window(&self, t: &Topology, w: &Windows, k: u64) -> Sends {
         t.all()
             .map(|n| {
@@ -21,13 +17,5 @@ impl Scheme for Alone {
                 )
             })
             .collect()
-    }
-
-    fn replay(&self, _: &Topology, _: u64) -> Sends {
-        Vec::new()
-    }
-
-    fn after_window(&mut self, _: &Topology, _: &Windows, _: u64, _: Option<f64>) -> Next {
-        Next::Continue
     }
 }

@@ -10,6 +10,7 @@
 //!    mean forces f̄⁽ʲ⁾ = H(F⁽ʲ⁾) as (k, j);
 //! 3. the coordinator: r = f̄⁽ʲ⁾ − F⁽ʲ⁾; converged when ‖r‖ ≤ tol ‖f̄⁽ʲ⁾‖ (all interfaces
 //!    together); else F⁽ʲ⁺¹⁾ = F⁽ʲ⁾ + ω_j r with ω constant or by Aitken's Δ² rule.
+//!
 //! The first estimate of window k is the converged f̄ of window k − 1 (zero in window 0). The
 //! acceleration's state is part of the scheduler, so checkpoints hold it and resume is bitwise.
 
@@ -17,7 +18,7 @@ use std::collections::BTreeMap;
 
 use proto::{CommandBody, Label, MotionRule};
 
-use super::{Next, Scheme, Sends, Topology, Windows};
+use super::{Publications, Scheme, Sends, Topology, Windows};
 
 /// How the next force estimate is formed from the residual.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -81,8 +82,8 @@ pub struct IterationRecord {
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Implicit {
     pub settings: ImplicitSettings,
-    /// Interfaces (name, nodes) and the FEM node that provides each.
-    pub interfaces: Vec<(String, usize, String)>,
+    /// Interfaces (name, nodes), in the scene's order.
+    pub interfaces: Vec<(String, usize)>,
     /// The current estimate F⁽ʲ⁾, all interfaces concatenated in `interfaces` order.
     estimate: Vec<f64>,
     /// Aitken's and IQN-ILS's memory: the last residual of this window and its ω ...
@@ -95,20 +96,20 @@ pub struct Implicit {
     #[serde(default)]
     secants: Vec<(u64, Vec<f64>, Vec<f64>)>,
     iteration: u32,
-    /// The iterations of the window now running (the run loop logs and clears them).
+    /// The iterations since the run loop last took them.
     #[serde(default)]
-    pub records: Vec<IterationRecord>,
+    records: Vec<IterationRecord>,
     /// Windows that ended unconverged (with `continue_unconverged`).
     #[serde(default)]
-    pub unconverged: Vec<u64>,
+    unconverged: Vec<u64>,
     /// The residuals of the window now running (for the message when it does not converge).
     #[serde(default)]
     window_residuals: Vec<f64>,
 }
 
 impl Implicit {
-    pub fn new(settings: ImplicitSettings, interfaces: Vec<(String, usize, String)>) -> Self {
-        let n: usize = interfaces.iter().map(|(_, nodes, _)| 3 * nodes).sum();
+    pub fn new(settings: ImplicitSettings, interfaces: Vec<(String, usize)>) -> Self {
+        let n: usize = interfaces.iter().map(|(_, nodes)| 3 * nodes).sum();
         Implicit {
             omega: settings.relaxation,
             settings,
@@ -124,17 +125,12 @@ impl Implicit {
         }
     }
 
-    /// The iteration now running.
-    pub fn iteration(&self) -> u32 {
-        self.iteration
-    }
-
     /// The estimate of each interface, labelled `label`, to publish.
-    fn estimates(&self, label: Label) -> Vec<(String, Label, Vec<f64>)> {
+    fn estimates(&self, label: Label) -> Publications {
         let mut at = 0;
         self.interfaces
             .iter()
-            .map(|(name, nodes, _)| {
+            .map(|(name, nodes)| {
                 let part = self.estimate[at..at + 3 * nodes].to_vec();
                 at += 3 * nodes;
                 (name.clone(), label, part)
@@ -172,7 +168,7 @@ impl Implicit {
 
     /// The users' forces of window k, iteration j arrived (per interface name): converged,
     /// or the next iteration's estimate and commands.
-    pub fn on_forces(
+    fn iterate(
         &mut self,
         t: &Topology,
         w: &Windows,
@@ -181,7 +177,7 @@ impl Implicit {
     ) -> Result<Iterate, String> {
         let j = self.iteration;
         let mut h = Vec::with_capacity(self.estimate.len());
-        for (name, nodes, _) in &self.interfaces {
+        for (name, nodes) in &self.interfaces {
             let f = forces.get(name).ok_or_else(|| {
                 format!("no forces of interface `{name}` for window {k} iteration {j}")
             })?;
@@ -300,10 +296,6 @@ impl Implicit {
         self.omega = self.settings.relaxation;
     }
 
-    /// Forces to publish before window k's commands (iteration 0's estimate).
-    pub fn window_estimates(&self, k: u64) -> Vec<(String, Label, Vec<f64>)> {
-        self.estimates(Label::window(k))
-    }
 }
 
 /// The IQN-ILS estimate h + ΔH α with α = argmin ‖ΔR α + r‖, from the secants newest first
@@ -373,15 +365,11 @@ pub enum Iterate {
     Converged,
     Repeat {
         sends: Sends,
-        relaxed: Vec<(String, Label, Vec<f64>)>,
+        relaxed: Publications,
     },
 }
 
 impl Scheme for Implicit {
-    fn prologue(&self, _: &Topology) -> Sends {
-        Vec::new()
-    }
-
     fn window(&self, t: &Topology, w: &Windows, k: u64) -> Sends {
         let mut out: Sends = t
             .all()
@@ -391,13 +379,31 @@ impl Scheme for Implicit {
         out
     }
 
-    fn replay(&self, _: &Topology, _: u64) -> Sends {
-        // the estimate of the window to come is the scheduler's (published with the window)
-        Vec::new()
+    /// Iteration 0's estimate, before window k's commands.
+    fn window_publications(&self, k: u64) -> Publications {
+        self.estimates(Label::window(k))
     }
 
-    fn after_window(&mut self, _: &Topology, _: &Windows, _: u64, _: Option<f64>) -> Next {
-        Next::Continue
+    fn iteration(&self) -> Option<u32> {
+        Some(self.iteration)
+    }
+
+    fn on_forces(
+        &mut self,
+        t: &Topology,
+        w: &Windows,
+        k: u64,
+        forces: &BTreeMap<String, Vec<f64>>,
+    ) -> Result<Iterate, String> {
+        self.iterate(t, w, k, forces)
+    }
+
+    fn take_iterations(&mut self) -> Vec<IterationRecord> {
+        std::mem::take(&mut self.records)
+    }
+
+    fn unconverged_windows(&self) -> &[u64] {
+        &self.unconverged
     }
 }
 

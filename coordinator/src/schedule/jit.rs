@@ -5,24 +5,15 @@
 
 use proto::{CommandBody, Label, MotionRule};
 
-use super::{Next, Scheme, Sends, Topology, Windows};
+use super::{Scheme, Sends, Topology, Windows};
 
 #[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
 pub struct Jit;
 
 impl Scheme for Jit {
     fn prologue(&self, t: &Topology) -> Sends {
-        t.fems
-            .iter()
-            .map(|f| {
-                (
-                    f.clone(),
-                    CommandBody::Publish {
-                        label: Label::window(0),
-                    },
-                )
-            })
-            .collect()
+        // every FEM node's initial state is kinematics 0
+        self.replay(t, 0)
     }
 
     fn window(&self, t: &Topology, w: &Windows, k: u64) -> Sends {
@@ -61,9 +52,5 @@ impl Scheme for Jit {
                 )
             })
             .collect()
-    }
-
-    fn after_window(&mut self, _: &Topology, _: &Windows, _: u64, _: Option<f64>) -> Next {
-        Next::Continue
     }
 }

@@ -65,6 +65,9 @@ impl Topology {
 /// Commands for nodes.
 pub type Sends = Vec<(String, CommandBody)>;
 
+/// Forces for interfaces' providers: (interface, label, forces).
+pub type Publications = Vec<(String, Label, Vec<f64>)>;
+
 /// The windows of a run.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Windows {
@@ -110,23 +113,58 @@ pub enum Next {
     Final { sends: Sends, reason: String },
 }
 
-/// One coupling schedule.
+/// One coupling schedule. Only [`Scheme::window`] is required; the rest has the defaults of an
+/// explicit schedule without a prologue.
 pub trait Scheme {
-    /// Commands before window 0.
-    fn prologue(&self, t: &Topology) -> Sends;
     /// Commands of window k (each node's `advance_window`).
     fn window(&self, t: &Topology, w: &Windows, k: u64) -> Sends;
+    /// Forces the coordinator publishes with window k's commands (an implicit scheme's first
+    /// estimate).
+    fn window_publications(&self, _k: u64) -> Publications {
+        Vec::new()
+    }
+    /// Commands before window 0.
+    fn prologue(&self, _t: &Topology) -> Sends {
+        Vec::new()
+    }
     /// After a restore from a checkpoint taken between window k − 1 and k: the interface data
     /// that was in flight then, published again from the restored states.
-    fn replay(&self, t: &Topology, k: u64) -> Sends;
+    fn replay(&self, _t: &Topology, _k: u64) -> Sends {
+        Vec::new()
+    }
     /// Every node finished window k (`kinetic_energy`: the DEM's, if reported).
     fn after_window(
         &mut self,
-        t: &Topology,
-        w: &Windows,
+        _t: &Topology,
+        _w: &Windows,
+        _k: u64,
+        _kinetic_energy: Option<f64>,
+    ) -> Next {
+        Next::Continue
+    }
+    /// An iterating scheme's iteration now running: once every node has finished it, the
+    /// users' forces are read and given to [`Scheme::on_forces`].
+    fn iteration(&self) -> Option<u32> {
+        None
+    }
+    /// The users' forces of window k's iteration just finished, per interface.
+    fn on_forces(
+        &mut self,
+        _t: &Topology,
+        _w: &Windows,
         k: u64,
-        kinetic_energy: Option<f64>,
-    ) -> Next;
+        _forces: &std::collections::BTreeMap<String, Vec<f64>>,
+    ) -> Result<implicit::Iterate, String> {
+        Err(format!("forces of window {k} given to a schedule that does not iterate"))
+    }
+    /// The iterations since the last call.
+    fn take_iterations(&mut self) -> Vec<implicit::IterationRecord> {
+        Vec::new()
+    }
+    /// Windows that ended unconverged (`continue_unconverged`).
+    fn unconverged_windows(&self) -> &[u64] {
+        &[]
+    }
     /// One-way: the DEM's kinetic energy when the end time forced the solve on a moving bed.
     fn unsettled_kinetic_energy(&self) -> Option<f64> {
         None
@@ -141,7 +179,7 @@ pub enum SchemeState {
     OneWay(one_way::OneWay),
     Jit(jit::Jit),
     Predictive(predictive::Predictive),
-    Implicit(implicit::Implicit),
+    Implicit(Box<implicit::Implicit>),
 }
 
 impl SchemeState {
@@ -151,7 +189,17 @@ impl SchemeState {
             SchemeState::OneWay(s) => s,
             SchemeState::Jit(s) => s,
             SchemeState::Predictive(s) => s,
-            SchemeState::Implicit(s) => s,
+            SchemeState::Implicit(s) => s.as_mut(),
+        }
+    }
+
+    fn scheme_ref(&self) -> &dyn Scheme {
+        match self {
+            SchemeState::None(s) => s,
+            SchemeState::OneWay(s) => s,
+            SchemeState::Jit(s) => s,
+            SchemeState::Predictive(s) => s,
+            SchemeState::Implicit(s) => s.as_ref(),
         }
     }
 }
@@ -187,8 +235,10 @@ pub struct SchedulerConfig {
     pub steady_kinetic_energy: Option<f64>,
     /// ... for this many consecutive windows.
     pub steady_windows: u32,
-    /// Implicit: the settings, and the interfaces (name, nodes, provider).
-    pub implicit: Option<(implicit::ImplicitSettings, Vec<(String, usize, String)>)>,
+    /// Implicit: the settings.
+    pub implicit: Option<implicit::ImplicitSettings>,
+    /// The interfaces (name, nodes), in the scene's order.
+    pub interfaces: Vec<(String, usize)>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -252,11 +302,14 @@ impl Scheduler {
             ScheduleKind::Jit => SchemeState::Jit(jit::Jit),
             ScheduleKind::Predictive => SchemeState::Predictive(predictive::Predictive),
             ScheduleKind::Implicit => {
-                let (settings, interfaces) = cfg
+                let settings = cfg
                     .implicit
                     .clone()
-                    .ok_or("the implicit schedule needs its settings and interfaces")?;
-                SchemeState::Implicit(implicit::Implicit::new(settings, interfaces))
+                    .ok_or("the implicit schedule needs its settings")?;
+                SchemeState::Implicit(Box::new(implicit::Implicit::new(
+                    settings,
+                    cfg.interfaces.clone(),
+                )))
             }
         };
         Ok(Scheduler {
@@ -295,22 +348,16 @@ impl Scheduler {
 
     /// Implicit: the iterations since the last call (window, iteration, residual, ω).
     pub fn take_iterations(&mut self) -> Vec<implicit::IterationRecord> {
-        match &mut self.scheme {
-            SchemeState::Implicit(s) => std::mem::take(&mut s.records),
-            _ => Vec::new(),
-        }
+        self.scheme.scheme().take_iterations()
     }
 
     /// Implicit: the windows that ended unconverged (`continue_unconverged`).
     pub fn unconverged_windows(&self) -> &[u64] {
-        match &self.scheme {
-            SchemeState::Implicit(s) => &s.unconverged,
-            _ => &[],
-        }
+        self.scheme.scheme_ref().unconverged_windows()
     }
 
     /// Forces to publish as actions.
-    fn publish(relaxed: Vec<(String, Label, Vec<f64>)>) -> Vec<Action> {
+    fn publish(relaxed: Publications) -> Vec<Action> {
         relaxed
             .into_iter()
             .map(|(interface, label, forces)| Action::PublishForces {
@@ -336,11 +383,8 @@ impl Scheduler {
         self.phase = Phase::Window;
         self.window = k;
         self.window_kinetic_energy = None;
-        // implicit: the window's first force estimate goes out with its commands
-        let mut out = match &self.scheme {
-            SchemeState::Implicit(s) => Self::publish(s.window_estimates(k)),
-            _ => Vec::new(),
-        };
+        // e.g. an implicit scheme's first force estimate goes out with the window's commands
+        let mut out = Self::publish(self.scheme.scheme_ref().window_publications(k));
         let sends = self
             .scheme
             .scheme()
@@ -405,13 +449,10 @@ impl Scheduler {
                 reason: std::mem::take(&mut self.final_reason),
             }]);
         }
-        if let SchemeState::Implicit(s) = &self.scheme {
+        if let Some(iteration) = self.scheme.scheme_ref().iteration() {
             self.phase = Phase::Forces;
             return Ok(vec![Action::NeedForces {
-                label: Label {
-                    window,
-                    iteration: s.iteration(),
-                },
+                label: Label { window, iteration },
             }]);
         }
         self.next_after(window)
@@ -423,13 +464,14 @@ impl Scheduler {
         forces: &std::collections::BTreeMap<String, Vec<f64>>,
     ) -> Result<Vec<Action>, String> {
         let k = self.window;
-        let SchemeState::Implicit(s) = &mut self.scheme else {
-            return Err("forces given to an explicit schedule".into());
-        };
         if self.phase != Phase::Forces {
             return Err(format!("forces of window {k} given out of turn"));
         }
-        match s.on_forces(&self.topology, &self.windows, k, forces)? {
+        let next = self
+            .scheme
+            .scheme()
+            .on_forces(&self.topology, &self.windows, k, forces)?;
+        match next {
             implicit::Iterate::Converged => self.next_after(k),
             implicit::Iterate::Repeat { sends, relaxed } => {
                 self.phase = Phase::Window;
@@ -488,6 +530,7 @@ mod tests {
             steady_kinetic_energy: Some(1e-6),
             steady_windows: 2,
             implicit: None,
+            interfaces: Vec::new(),
         }
     }
 
@@ -705,8 +748,8 @@ mod tests {
         continue_unconverged: bool,
     ) -> SchedulerConfig {
         let mut c = cfg(ScheduleKind::Implicit, 3);
-        c.implicit = Some((
-            implicit::ImplicitSettings {
+        c.interfaces = vec![("top".into(), 2)];
+        c.implicit = Some(implicit::ImplicitSettings {
                 tolerance: 1e-6,
                 max_iterations,
                 acceleration,
@@ -714,9 +757,7 @@ mod tests {
                 continue_unconverged,
                 reuse: 0,
                 filter: 1e-3,
-            },
-            vec![("top".into(), 2, FEM.into())],
-        ));
+        });
         c
     }
 

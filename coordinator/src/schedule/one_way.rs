@@ -30,10 +30,6 @@ impl OneWay {
 }
 
 impl Scheme for OneWay {
-    fn prologue(&self, _: &Topology) -> Sends {
-        Vec::new()
-    }
-
     fn window(&self, t: &Topology, w: &Windows, k: u64) -> Sends {
         t.dem
             .iter()
@@ -44,10 +40,6 @@ impl Scheme for OneWay {
                 )
             })
             .collect()
-    }
-
-    fn replay(&self, _: &Topology, _: u64) -> Sends {
-        Vec::new()
     }
 
     fn after_window(

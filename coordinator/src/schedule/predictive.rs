@@ -6,16 +6,12 @@
 
 use proto::{CommandBody, Label, MotionRule};
 
-use super::{Next, Scheme, Sends, Topology, Windows};
+use super::{Scheme, Sends, Topology, Windows};
 
 #[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
 pub struct Predictive;
 
 impl Scheme for Predictive {
-    fn prologue(&self, _: &Topology) -> Sends {
-        Vec::new()
-    }
-
     fn window(&self, t: &Topology, w: &Windows, k: u64) -> Sends {
         let mut out = Vec::new();
         for f in &t.fems {
@@ -52,9 +48,5 @@ impl Scheme for Predictive {
                 )
             })
             .collect()
-    }
-
-    fn after_window(&mut self, _: &Topology, _: &Windows, _: u64, _: Option<f64>) -> Next {
-        Next::Continue
     }
 }

@@ -1058,13 +1058,7 @@ impl Model {
     pub fn external_forces(&self, t: f64) -> Vec<f64> {
         let mut f = vec![0.0; self.num_dofs()];
         for l in &self.loads {
-            let h = match &l.history {
-                Some(name) => self
-                    .histories
-                    .get(name)
-                    .map_or(f64::NAN, |h| h.eval(t, &self.histories)),
-                None => 1.0,
-            };
+            let h = self.history_factor(&l.history, t);
             if h != 0.0 {
                 for (fi, li) in f.iter_mut().zip(&l.f) {
                     *fi += h * li;
@@ -1245,16 +1239,22 @@ impl Model {
     // Solvers
     // ----------------------------------------------------------------------------------------
 
+    /// The factor of a load or moving support at `t`: its named history's value, 1 without
+    /// one (NaN for an unknown name, which the scene's validation excludes).
+    fn history_factor(&self, history: &Option<String>, t: f64) -> f64 {
+        match history {
+            Some(name) => self
+                .histories
+                .get(name)
+                .map_or(f64::NAN, |h| h.eval(t, &self.histories)),
+            None => 1.0,
+        }
+    }
+
     /// Sets the prescribed displacements of the moving supports to their values at `t`.
     fn move_supports(&mut self, t: f64) {
         for ms in &self.moving {
-            let h = match &ms.history {
-                Some(name) => self
-                    .histories
-                    .get(name)
-                    .map_or(f64::NAN, |h| h.eval(t, &self.histories)),
-                None => 1.0,
-            };
+            let h = self.history_factor(&ms.history, t);
             for &(d, v) in &ms.dofs {
                 self.st.prescribed[d] = v * h;
                 if !self.nonlinear {
