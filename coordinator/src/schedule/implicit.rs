@@ -295,7 +295,6 @@ impl Implicit {
         self.last_output = None;
         self.omega = self.settings.relaxation;
     }
-
 }
 
 /// The IQN-ILS estimate h + ΔH α with α = argmin ‖ΔR α + r‖, from the secants newest first
@@ -363,10 +362,7 @@ fn iqn_ils_step(
 #[derive(Debug, Clone, PartialEq)]
 pub enum Iterate {
     Converged,
-    Repeat {
-        sends: Sends,
-        relaxed: Publications,
-    },
+    Repeat { sends: Sends, relaxed: Publications },
 }
 
 impl Scheme for Implicit {

@@ -155,7 +155,9 @@ pub trait Scheme {
         k: u64,
         _forces: &std::collections::BTreeMap<String, Vec<f64>>,
     ) -> Result<implicit::Iterate, String> {
-        Err(format!("forces of window {k} given to a schedule that does not iterate"))
+        Err(format!(
+            "forces of window {k} given to a schedule that does not iterate"
+        ))
     }
     /// The iterations since the last call.
     fn take_iterations(&mut self) -> Vec<implicit::IterationRecord> {
@@ -750,13 +752,13 @@ mod tests {
         let mut c = cfg(ScheduleKind::Implicit, 3);
         c.interfaces = vec![("top".into(), 2)];
         c.implicit = Some(implicit::ImplicitSettings {
-                tolerance: 1e-6,
-                max_iterations,
-                acceleration,
-                relaxation: 0.5,
-                continue_unconverged,
-                reuse: 0,
-                filter: 1e-3,
+            tolerance: 1e-6,
+            max_iterations,
+            acceleration,
+            relaxation: 0.5,
+            continue_unconverged,
+            reuse: 0,
+            filter: 1e-3,
         });
         c
     }
