@@ -19,7 +19,8 @@
 //! largest stone (one of thousands) does not. The constants per schedule were
 //! measured with `cosim study` on the sleeper scene's CI variant (docs/speed-accuracy.md):
 //! the largest stable window was [`JIT_WINDOW_FRACTION`] · T_c for JIT and
-//! [`PREDICTIVE_WINDOW_FRACTION`] · T_c for predictive. Above the limit the run starts
+//! [`PREDICTIVE_WINDOW_FRACTION`] · T_c for predictive, [`CONCURRENT_WINDOW_FRACTION`] · T_c for
+//! concurrent. Above the limit the run starts
 //! with a warning (the stability monitor stops it if it diverges), and refused beyond
 //! [`REFUSE_BEYOND`] times the limit; `coupling.allow_beyond_limits = true` turns refusals into
 //! warnings.
@@ -50,6 +51,10 @@ pub const JIT_WINDOW_FRACTION: f64 = 0.04;
 /// Largest stable predictive window as a fraction of T_c, measured on the same scene: stable
 /// at 100 µs = 0.68 T_c, an oscillation growing 2× per ms at 200 µs.
 pub const PREDICTIVE_WINDOW_FRACTION: f64 = 0.7;
+/// Largest stable concurrent window as a fraction of T_c, measured on the same scene: stable
+/// at 4 µs = 0.027 T_c (but 35 % off the reference; 0.4 % at 2 µs), diverging at 5 µs. Both
+/// solvers lag a window, so the limit lies below JIT's.
+pub const CONCURRENT_WINDOW_FRACTION: f64 = 0.025;
 /// Beyond the limit the run is warned about; beyond this many times the limit it is refused
 /// (the limit is an estimate: T_c uses the stiffness at a 1 % overlap and the lightest node).
 /// Measured: 2× the limit diverged on the sleeper (JIT and predictive), 6.5× on the plate
@@ -132,6 +137,7 @@ pub fn window_limit(
         ScheduleKind::Predictive => PREDICTIVE_WINDOW_FRACTION,
         // implicit: iterated to a fixed point, no window limit of the explicit kind is known
         // (measured in docs/speed-accuracy.md)
+        ScheduleKind::Concurrent => CONCURRENT_WINDOW_FRACTION,
         ScheduleKind::None | ScheduleKind::OneWay | ScheduleKind::Implicit => return None,
     };
     contact_period(dem, fem).map(|t| fraction * t)

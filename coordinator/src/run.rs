@@ -13,6 +13,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::launch::NodeProcess;
 use crate::scene::{Scene, ScheduleKind};
+use crate::schedule::implicit::{Estimate, Outputs};
 use crate::schedule::{substeps, Action, Scheduler, SchedulerConfig, Topology};
 use crate::stability::StabilityMonitor;
 
@@ -81,8 +82,12 @@ pub struct Timing {
     pub dem_compute_s: f64,
     /// Sum over the FEM nodes.
     pub fem_compute_s: f64,
-    /// Windows wall time − DEM compute − the slowest FEM node's compute (the FEM nodes of
-    /// several structures compute at the same time): transport, waiting, coordinator.
+    /// The windows' compute on the critical path, summed per window: DEM + the slowest FEM
+    /// node (the FEM nodes of several structures compute at the same time), or the larger of
+    /// the two when the schedule runs them concurrently.
+    #[serde(default)]
+    pub critical_path_s: f64,
+    /// Windows wall time − the critical path: transport, waiting, coordinator.
     pub coupling_overhead_s: f64,
     pub coupling_overhead_fraction: f64,
 }
@@ -195,7 +200,9 @@ struct Run<'a> {
     /// SIGINT / SIGTERM (crate::interrupt).
     signals: crate::interrupt::Watch,
     /// Implicit schedules: the reliable tap on the users' forces.
-    tap: Option<proto::participant::ForcesTap>,
+    tap: Option<proto::participant::DataTap<proto::InterfaceForces>>,
+    /// The concurrent implicit scheme's tap on the providers' kinematics.
+    kinematics_tap: Option<proto::participant::DataTap<proto::InterfaceKinematics>>,
     /// While windows run, the first signal is kept here and acted on at the window's end.
     defer_interrupt: bool,
     pending_interrupt: Option<i32>,
@@ -542,10 +549,12 @@ impl Run<'_> {
         // every interface's node count (the implicit scheme's vectors, its forces' sizes) and
         // size (the drift check: the bounding-box diagonal)
         let mut meshes: Vec<(String, usize, f64)> = Vec::new();
+        let mut positions = Vec::new();
         for iface in &scene.interfaces {
             let mesh = self.link.read_mesh(&iface.name, timeout).await?;
             let size = crate::stability::bounding_diagonal(mesh.positions.as_slice());
             meshes.push((iface.name.clone(), mesh.num_nodes(), size));
+            positions.extend_from_slice(mesh.positions.as_slice());
         }
         let scheduler = Scheduler::new(SchedulerConfig {
             kind: scene.schedule,
@@ -559,6 +568,7 @@ impl Run<'_> {
                 .iter()
                 .map(|(name, nodes, _)| (name.clone(), *nodes))
                 .collect(),
+            positions,
         })
         .map_err(|e| anyhow!(e))?;
         let implicit = scene.implicit.is_some();
@@ -604,7 +614,10 @@ impl Run<'_> {
                 }
                 if matches!(
                     scene.schedule,
-                    ScheduleKind::Jit | ScheduleKind::Predictive | ScheduleKind::Implicit
+                    ScheduleKind::Jit
+                        | ScheduleKind::Predictive
+                        | ScheduleKind::Concurrent
+                        | ScheduleKind::Implicit
                 ) {
                     if let Some(r) = scene
                         .dem_node()
@@ -674,10 +687,10 @@ impl Run<'_> {
             for a in std::mem::take(&mut actions) {
                 match a {
                     Action::Send(node, body) => self.link.send(&node, body).await?,
-                    Action::PublishForces {
+                    Action::Publish {
                         interface,
                         label,
-                        forces,
+                        estimate: Estimate::Forces(forces),
                     } => {
                         let msg = proto::InterfaceForces {
                             version: proto::PROTOCOL_VERSION,
@@ -692,8 +705,31 @@ impl Run<'_> {
                         };
                         self.link.publish_relaxed(&msg, timeout).await?;
                     }
-                    Action::NeedForces { .. } => {
-                        bail!("internal: forces asked for outside a window's end")
+                    Action::Publish {
+                        interface,
+                        label,
+                        estimate:
+                            Estimate::Kinematics {
+                                positions,
+                                velocities,
+                            },
+                    } => {
+                        let msg = proto::InterfaceKinematics {
+                            version: proto::PROTOCOL_VERSION,
+                            run_id: self.link.keys().run_id().to_string(),
+                            interface,
+                            window: label.window,
+                            iteration: label.iteration,
+                            // the estimated end state of the window
+                            time: (label.window + 1) as f64 * scene.window,
+                            accelerations: vec![0.0; positions.len()].into(),
+                            positions: positions.into(),
+                            velocities: velocities.into(),
+                        };
+                        self.link.publish_relaxed_kinematics(&msg, timeout).await?;
+                    }
+                    Action::NeedOutputs { .. } => {
+                        bail!("internal: outputs asked for outside a window's end")
                     }
                     Action::Finish { reason } => {
                         tracing::info!("{reason}");
@@ -808,21 +844,32 @@ impl Run<'_> {
             actions = scheduler
                 .on_window_done(&st.node, window, ke)
                 .map_err(|e| anyhow!(e))?;
-            // implicit: every node finished an iteration; its forces decide what follows
-            while let [Action::NeedForces { label }] = actions.as_slice() {
-                let label = *label;
+            // implicit: every node finished an iteration; its outputs decide what follows
+            while let [Action::NeedOutputs { label, positions }] = actions.as_slice() {
+                let (label, positions) = (*label, *positions);
+                let mut outputs = Outputs::default();
                 let tap = self
                     .tap
                     .as_mut()
                     .ok_or_else(|| anyhow!("internal: no forces tap for the implicit schedule"))?;
-                let mut forces = BTreeMap::new();
                 for (name, nodes, _) in &meshes {
                     let f = tap.read(name, label, *nodes, timeout).await.map_err(|e| {
                         anyhow!("implicit coupling, interface `{name}`, {label}: {e}")
                     })?;
-                    forces.insert(name.clone(), f.forces.0);
+                    outputs.forces.insert(name.clone(), f.forces.0);
                 }
-                actions = scheduler.on_forces(&forces).map_err(|e| anyhow!(e))?;
+                if positions {
+                    let tap = self.kinematics_tap.as_mut().ok_or_else(|| {
+                        anyhow!("internal: no kinematics tap for the concurrent implicit schedule")
+                    })?;
+                    for (name, nodes, _) in &meshes {
+                        let k = tap.read(name, label, *nodes, timeout).await.map_err(|e| {
+                            anyhow!("implicit coupling, interface `{name}`, {label}: {e}")
+                        })?;
+                        outputs.positions.insert(name.clone(), k.positions.0);
+                    }
+                }
+                actions = scheduler.on_outputs(&outputs).map_err(|e| anyhow!(e))?;
                 for r in scheduler.take_iterations() {
                     tracing::debug!(
                         "window {} iteration {}: residual {:.3e}, ω {:.3}",
@@ -850,8 +897,14 @@ impl Run<'_> {
                     line.push_str(&format!(",{:.6e}", of(n)));
                 }
                 // the FEM nodes compute at the same time: the critical path is the DEM's time
-                // plus the slowest structure's
-                let critical = dem + fem_ids.iter().map(|f| of(f)).fold(0.0f64, f64::max);
+                // plus the slowest structure's (concurrent schedules: the larger of the two)
+                let slowest = fem_ids.iter().map(|f| of(f)).fold(0.0f64, f64::max);
+                let critical = if scene.concurrent() {
+                    dem.max(slowest)
+                } else {
+                    dem + slowest
+                };
+                self.summary.timing.critical_path_s += critical;
                 let mut audit = String::new();
                 for name in &iface_names {
                     let get = |side: &'static str| work.get(&(side, name.clone())).copied();
@@ -1127,6 +1180,11 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
         ScheduleKind::Implicit => Some(link.forces_tap().await?),
         _ => None,
     };
+    // ... and the concurrent one every iteration's kinematics (their only subscriber)
+    let kinematics_tap = match &scene.implicit {
+        Some(i) if i.concurrent => Some(link.kinematics_tap().await?),
+        _ => None,
+    };
     let mut summary = Summary {
         scene: scene.name.clone(),
         scene_file: scene.path.display().to_string(),
@@ -1221,6 +1279,7 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
         startup_base: 0.0,
         signals: crate::interrupt::Watch::new(),
         tap,
+        kinematics_tap,
         defer_interrupt: false,
         pending_interrupt: None,
     };
@@ -1315,15 +1374,12 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
     let mut summary = run.summary;
     let compute = |id: &str| summary.nodes.get(id).map(|n| n.compute_s).unwrap_or(0.0);
     let dem = scene.dem_node().map(compute).unwrap_or(0.0);
-    let fems: Vec<f64> = scene.fem_nodes().map(compute).collect();
-    // several structures compute at the same time: the slowest one is on the critical path
-    let fem = fems.iter().sum::<f64>();
-    let fem_critical = fems.iter().fold(0.0f64, |a, &b| a.max(b));
+    let fem: f64 = scene.fem_nodes().map(compute).sum();
     let t = &mut summary.timing;
     t.total_wall_s = total_wall;
     t.dem_compute_s = dem;
     t.fem_compute_s = fem;
-    t.coupling_overhead_s = (t.windows_wall_s - dem - fem_critical).max(0.0);
+    t.coupling_overhead_s = (t.windows_wall_s - t.critical_path_s).max(0.0);
     t.coupling_overhead_fraction = if t.windows_wall_s > 0.0 {
         t.coupling_overhead_s / t.windows_wall_s
     } else {

@@ -37,6 +37,9 @@ pub enum ScheduleKind {
     /// Implicit: each window iterated until the interface forces are a fixed point
     /// (`[coupling.implicit]`; docs/coupling.md).
     Implicit,
+    /// Concurrent (explicit Jacobi): both solvers compute a window at once, each from the
+    /// other's data of the window before.
+    Concurrent,
 }
 
 fn default_tolerance() -> f64 {
@@ -53,15 +56,17 @@ fn default_relaxation() -> f64 {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ImplicitSection {
-    /// Relative force residual ‖f̄ − F‖/‖f̄‖ below which a window is converged (default 1e-3).
+    /// Relative residual ‖f̄ − F‖/max‖f̄‖ (max over the window's iterations) below which a
+    /// window is converged (default 1e-3).
     #[serde(default = "default_tolerance")]
     pub tolerance: f64,
     /// Most iterations of a window (default 30).
     #[serde(default = "default_max_iterations")]
     pub max_iterations: u32,
-    /// `aitken` (default), `constant` or `iqn-ils`.
-    #[serde(default = "default_acceleration")]
-    pub acceleration: crate::schedule::implicit::Acceleration,
+    /// `aitken` (default), `constant` or `iqn-ils` (the default with `concurrent = true`:
+    /// Aitken's single ω barely damps a Jacobi pair).
+    #[serde(default)]
+    pub acceleration: Option<crate::schedule::implicit::Acceleration>,
     /// ω of `constant`, the first ω of each window with `aitken` (default 0.5).
     #[serde(default = "default_relaxation")]
     pub relaxation: f64,
@@ -77,6 +82,11 @@ pub struct ImplicitSection {
     /// 1e-3).
     #[serde(default = "default_filter")]
     pub filter: f64,
+    /// Both solvers compute each iteration at once (block Jacobi), the DEM on the
+    /// coordinator's estimate of the structure's motion; the acceleration acts on forces and
+    /// positions together (default false: FEM first, then the DEM on the FEM's motion).
+    #[serde(default)]
+    pub concurrent: bool,
 }
 
 use crate::schedule::implicit::{default_filter, default_reuse};
@@ -277,6 +287,13 @@ impl Scene {
             .map(|n| n.id.as_str())
     }
 
+    /// The schedule runs the DEM and the FEM at the same time (a window's critical path is the
+    /// slower of the two, not their sum).
+    pub fn concurrent(&self) -> bool {
+        self.schedule == ScheduleKind::Concurrent
+            || self.implicit.as_ref().is_some_and(|i| i.concurrent)
+    }
+
     /// The FEM nodes' ids.
     pub fn fem_nodes(&self) -> impl Iterator<Item = &str> + '_ {
         self.nodes
@@ -369,7 +386,7 @@ impl Scene {
             Some(s) => {
                 let k = *s.get_ref();
                 if both && k == ScheduleKind::None {
-                    return Err(err_at(s.span().start, "coupling.schedule", "the scene has both [dem] and [fem]: choose `one-way`, `jit`, `predictive` or `implicit`".into()));
+                    return Err(err_at(s.span().start, "coupling.schedule", "the scene has both [dem] and [fem]: choose `one-way`, `jit`, `predictive`, `concurrent` or `implicit`".into()));
                 }
                 if !both && k != ScheduleKind::None {
                     return Err(err_at(
@@ -388,7 +405,7 @@ impl Scene {
                 k
             }
             None if both => {
-                return Err(err_at(text.find("[coupling]").unwrap_or(0), "coupling.schedule", "the scene couples [dem] and [fem]: set `schedule` to `one-way`, `jit`, `predictive` or `implicit`".into()));
+                return Err(err_at(text.find("[coupling]").unwrap_or(0), "coupling.schedule", "the scene couples [dem] and [fem]: set `schedule` to `one-way`, `jit`, `predictive`, `concurrent` or `implicit`".into()));
             }
             None => ScheduleKind::None,
         };
@@ -528,11 +545,16 @@ impl Scene {
                 Some(crate::schedule::implicit::ImplicitSettings {
                     tolerance: v.tolerance,
                     max_iterations: v.max_iterations,
-                    acceleration: v.acceleration,
+                    acceleration: v.acceleration.unwrap_or(if v.concurrent {
+                        crate::schedule::implicit::Acceleration::IqnIls
+                    } else {
+                        default_acceleration()
+                    }),
                     relaxation: v.relaxation,
                     continue_unconverged: v.continue_unconverged,
                     reuse: v.reuse,
                     filter: v.filter,
+                    concurrent: v.concurrent,
                 })
             }
             (None, ScheduleKind::Implicit) => Some(crate::schedule::implicit::ImplicitSettings {
@@ -543,6 +565,7 @@ impl Scene {
                 continue_unconverged: false,
                 reuse: default_reuse(),
                 filter: default_filter(),
+                concurrent: false,
             }),
             (Some(i), _) => {
                 return Err(err_at(
@@ -554,12 +577,13 @@ impl Scene {
             (None, _) => None,
         };
         let mut interfaces = interfaces;
-        if implicit.is_some() {
+        if let Some(settings) = &implicit {
             // the iteration works on the mean forces of the window; the provider gets the
-            // coordinator's estimates
+            // coordinator's estimates (concurrent: the users get its estimated kinematics)
             for i in &mut interfaces {
                 i.force_averaging = true;
                 i.relaxed_forces = true;
+                i.relaxed_kinematics = settings.concurrent;
             }
         }
         let out_dir = raw
@@ -703,6 +727,7 @@ fn declare_interfaces(
         users: users.clone(),
         force_averaging: c.force_averaging,
         relaxed_forces: false,
+        relaxed_kinematics: false,
     };
     let mut out: Vec<InterfaceDecl> = Vec::new();
     if c.interfaces.is_empty() {

@@ -1490,6 +1490,10 @@ impl Engine {
             self.state.lists.index_blocks();
         }
         self.place_walls(false);
+        // the row of the restored step was written before the snapshot; the rows after it were
+        // cut (a resume or an implicit scheme's rollback), so the step an abandoned iteration
+        // ended on gets its row again when it is reached again
+        self.output.last_row_step = Some(self.state.steps);
         Ok(())
     }
 

@@ -74,6 +74,7 @@ fn decls(names: &[String]) -> Vec<InterfaceDecl> {
             users: vec!["dem".into()],
             force_averaging: false,
             relaxed_forces: false,
+            relaxed_kinematics: false,
         })
         .collect()
 }

@@ -123,6 +123,7 @@ mod tests {
                     users: vec!["dem".into()],
                     force_averaging: true,
                     relaxed_forces: false,
+                    relaxed_kinematics: false,
                 }],
                 check_only: false,
                 trace: true,

@@ -95,6 +95,20 @@ impl Keys {
         format!("cosim/{}/iface/{}/kinematics", self.run_id, interface)
     }
 
+    /// Interface kinematics estimated by the coordinator (concurrent implicit scheme),
+    /// coordinator → the interface's users.
+    pub fn relaxed_kinematics(&self, interface: &str) -> String {
+        format!(
+            "cosim/{}/iface/{}/kinematics_relaxed",
+            self.run_id, interface
+        )
+    }
+
+    /// The providers' kinematics of every interface (the coordinator's reliable tap).
+    pub fn kinematics_all(&self) -> String {
+        format!("cosim/{}/iface/*/kinematics", self.run_id)
+    }
+
     /// All interface data of the run (the coordinator's monitor).
     pub fn iface_all(&self) -> String {
         format!("cosim/{}/iface/**", self.run_id)

@@ -149,6 +149,12 @@ pub struct InterfaceDecl {
     /// instead of the users' `forces` (which then go to the coordinator only). Absent: false.
     #[serde(default)]
     pub relaxed_forces: bool,
+    /// The users read their kinematics on the interface's `kinematics_relaxed` key, where the
+    /// coordinator publishes its estimate of the provider's end state (the concurrent implicit
+    /// scheme), instead of the provider's `kinematics` (which then go to the coordinator
+    /// only). Absent: false.
+    #[serde(default)]
+    pub relaxed_kinematics: bool,
 }
 
 /// Labels interface data: the coupling window and, within it, the iteration (0 for explicit

@@ -50,7 +50,7 @@ async fn put<M: Message>(publisher: &Publisher<'static>, msg: &M) -> Result<(), 
 }
 
 /// Interface data: labelled with window and iteration.
-trait Data: Message {
+pub trait Data: Message {
     fn data_label(&self) -> Label;
 }
 
@@ -101,7 +101,8 @@ pub struct Participant {
     /// Per used interface: the provider's last end position (start of the next predictive
     /// motion).
     motion_start: std::collections::BTreeMap<String, Vec<f64>>,
-    /// Provided interfaces whose forces come from the coordinator (`relaxed_forces`).
+    /// Interfaces whose input comes from the coordinator: provided ones' forces
+    /// (`relaxed_forces`), used ones' kinematics (`relaxed_kinematics`).
     relaxed: std::collections::BTreeSet<String>,
 }
 
@@ -284,6 +285,11 @@ impl Participant {
                 continue;
             };
             let (read, write) = match side {
+                // the concurrent implicit scheme: the coordinator's estimated kinematics
+                Side::User if decl.relaxed_kinematics => {
+                    self.relaxed.insert(name.clone());
+                    (self.keys.relaxed_kinematics(name), self.keys.forces(name))
+                }
                 Side::User => (self.keys.kinematics(name), self.keys.forces(name)),
                 // implicit schemes: the coordinator's accelerated forces, not the users'
                 Side::Provider if decl.relaxed_forces => {
@@ -483,7 +489,11 @@ impl Participant {
         nodes: usize,
         timeout: Duration,
     ) -> Result<InterfaceKinematics, ProtoError> {
-        let key = self.keys.kinematics(interface);
+        let key = if self.relaxed.contains(interface) {
+            self.keys.relaxed_kinematics(interface)
+        } else {
+            self.keys.kinematics(interface)
+        };
         let k: InterfaceKinematics = self.read(&key, label, timeout).await?;
         k.validate(nodes, label)?;
         Ok(k)
@@ -787,14 +797,24 @@ impl CoordinatorLink {
     /// A reliable tap on every interface's forces (implicit schemes read each iteration's
     /// forces here). Declare it before the nodes start, so that it is in place before the first
     /// window's forces are published.
-    pub async fn forces_tap(&self) -> Result<ForcesTap, ProtoError> {
+    pub async fn forces_tap(&self) -> Result<DataTap<InterfaceForces>, ProtoError> {
+        self.tap(self.keys.forces_all()).await
+    }
+
+    /// A reliable tap on every interface's kinematics (the concurrent implicit scheme), as
+    /// [`CoordinatorLink::forces_tap`].
+    pub async fn kinematics_tap(&self) -> Result<DataTap<InterfaceKinematics>, ProtoError> {
+        self.tap(self.keys.kinematics_all()).await
+    }
+
+    async fn tap<M: TapData>(&self, key: String) -> Result<DataTap<M>, ProtoError> {
         let sub = self
             .session
-            .declare_subscriber(self.keys.forces_all())
+            .declare_subscriber(key)
             .with(zenoh::handlers::FifoChannel::new(1024))
             .await
             .map_err(ProtoError::zenoh)?;
-        Ok(ForcesTap {
+        Ok(DataTap {
             sub,
             run_id: self.keys.run_id().to_string(),
             early: Vec::new(),
@@ -809,6 +829,30 @@ impl CoordinatorLink {
         timeout: Duration,
     ) -> Result<(), ProtoError> {
         let key = self.keys.relaxed_forces(&f.interface);
+        self.publish_estimate(key, &f.interface, "provider", f, timeout)
+            .await
+    }
+
+    /// Publishes estimated kinematics for an interface's users (the concurrent implicit
+    /// scheme); the first time waits (up to `timeout`) until they listen.
+    pub async fn publish_relaxed_kinematics(
+        &mut self,
+        k: &InterfaceKinematics,
+        timeout: Duration,
+    ) -> Result<(), ProtoError> {
+        let key = self.keys.relaxed_kinematics(&k.interface);
+        self.publish_estimate(key, &k.interface, "users", k, timeout)
+            .await
+    }
+
+    async fn publish_estimate<M: Message>(
+        &mut self,
+        key: String,
+        interface: &str,
+        whom: &str,
+        msg: &M,
+        timeout: Duration,
+    ) -> Result<(), ProtoError> {
         if !self.relaxed.contains_key(&key) {
             let p = declare_data_publisher(&self.session, key.clone()).await?;
             let start = Instant::now();
@@ -820,10 +864,7 @@ impl CoordinatorLink {
             {
                 if start.elapsed() > timeout {
                     return Err(ProtoError::Timeout {
-                        what: format!(
-                            "the provider of interface `{}` to listen on `{key}`",
-                            f.interface
-                        ),
+                        what: format!("the {whom} of interface `{interface}` to listen on `{key}`"),
                         waited: timeout,
                     });
                 }
@@ -831,7 +872,7 @@ impl CoordinatorLink {
             }
             self.relaxed.insert(key.clone(), p);
         }
-        put(&self.relaxed[&key], f).await
+        put(&self.relaxed[&key], msg).await
     }
 
     pub async fn close(self) -> Result<(), ProtoError> {
@@ -839,16 +880,41 @@ impl CoordinatorLink {
     }
 }
 
-/// The coordinator's reliable tap on the users' forces (implicit schemes).
-pub struct ForcesTap {
+/// Interface data the coordinator taps: its interface and its check.
+pub trait TapData: Data {
+    fn interface(&self) -> &str;
+    fn check(&self, nodes: usize, label: Label) -> Result<(), ProtoError>;
+}
+
+impl TapData for InterfaceForces {
+    fn interface(&self) -> &str {
+        &self.interface
+    }
+    fn check(&self, nodes: usize, label: Label) -> Result<(), ProtoError> {
+        self.validate(nodes, label)
+    }
+}
+
+impl TapData for InterfaceKinematics {
+    fn interface(&self) -> &str {
+        &self.interface
+    }
+    fn check(&self, nodes: usize, label: Label) -> Result<(), ProtoError> {
+        self.validate(nodes, label)
+    }
+}
+
+/// The coordinator's reliable tap on the users' forces or the providers' kinematics
+/// (implicit schemes).
+pub struct DataTap<M> {
     sub: Subscriber<FifoChannelHandler<Sample>>,
     run_id: String,
     /// Messages that arrived before they were asked for (another interface's, or later).
-    early: Vec<InterfaceForces>,
+    early: Vec<M>,
 }
 
-impl ForcesTap {
-    /// The forces of `interface` labelled `label`, validated for `nodes` nodes. Data of an
+impl<M: TapData> DataTap<M> {
+    /// The data of `interface` labelled `label`, validated for `nodes` nodes. Data of an
     /// earlier label is dropped (an explicit window's, or an abandoned iteration's); data of
     /// another interface or a later label is kept for its turn.
     pub async fn read(
@@ -857,16 +923,16 @@ impl ForcesTap {
         label: Label,
         nodes: usize,
         timeout: Duration,
-    ) -> Result<InterfaceForces, ProtoError> {
+    ) -> Result<M, ProtoError> {
         self.early
-            .retain(|f| f.interface != interface || f.label() >= label);
+            .retain(|f| f.interface() != interface || f.data_label() >= label);
         if let Some(i) = self
             .early
             .iter()
-            .position(|f| f.interface == interface && f.label() == label)
+            .position(|f| f.interface() == interface && f.data_label() == label)
         {
             let f = self.early.remove(i);
-            f.validate(nodes, label)?;
+            f.check(nodes, label)?;
             return Ok(f);
         }
         let deadline = tokio::time::Instant::now() + timeout;
@@ -874,23 +940,23 @@ impl ForcesTap {
             let sample = tokio::time::timeout_at(deadline, self.sub.recv_async())
                 .await
                 .map_err(|_| ProtoError::Timeout {
-                    what: format!("interface forces of {label} on `{interface}`"),
+                    what: format!("{} of {label} on `{interface}`", M::WHAT),
                     waited: timeout,
                 })?
                 .map_err(|_| ProtoError::Closed)?;
-            let f: InterfaceForces = match decode(&payload(&sample), &self.run_id) {
+            let f: M = match decode(&payload(&sample), &self.run_id) {
                 Ok(f) => f,
                 Err(e @ ProtoError::WrongRun { .. }) => {
-                    tracing::warn!("refused forces: {e}");
+                    tracing::warn!("refused {}: {e}", M::WHAT);
                     continue;
                 }
                 Err(e) => return Err(e),
             };
-            if f.interface == interface && f.label() == label {
-                f.validate(nodes, label)?;
+            if f.interface() == interface && f.data_label() == label {
+                f.check(nodes, label)?;
                 return Ok(f);
             }
-            if f.interface != interface || f.label() > label {
+            if f.interface() != interface || f.data_label() > label {
                 self.early.push(f);
             }
         }

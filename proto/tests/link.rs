@@ -45,6 +45,7 @@ fn top() -> Vec<InterfaceDecl> {
         users: vec!["dem".into()],
         force_averaging: false,
         relaxed_forces: false,
+        relaxed_kinematics: false,
     }]
 }
 

@@ -108,6 +108,7 @@ async fn rollback_repeats_a_predictive_window_bitwise_in_both_rust_nodes() {
         users: vec!["dem".into()],
         force_averaging: true,
         relaxed_forces: false,
+        relaxed_kinematics: false,
     };
     let mut link = link;
     for node in nodes {

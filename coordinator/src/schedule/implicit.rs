@@ -8,11 +8,25 @@
 //!    kinematics (k, j);
 //! 2. the DEM moves each mesh linearly from P_k to P⁽ʲ⁾ (the predictive motion) and publishes its
 //!    mean forces f̄⁽ʲ⁾ = H(F⁽ʲ⁾) as (k, j);
-//! 3. the coordinator: r = f̄⁽ʲ⁾ − F⁽ʲ⁾; converged when ‖r‖ ≤ tol ‖f̄⁽ʲ⁾‖ (all interfaces
-//!    together); else F⁽ʲ⁺¹⁾ = F⁽ʲ⁾ + ω_j r with ω constant or by Aitken's Δ² rule.
+//! 3. the coordinator: r = f̄⁽ʲ⁾ − F⁽ʲ⁾; converged when ‖r‖ ≤ tol maxᵢ≤ⱼ ‖f̄⁽ⁱ⁾‖ (all
+//!    interfaces together; the largest forces of the window's iterations, since a contact that
+//!    opens has a fixed point of zero forces); else F⁽ʲ⁺¹⁾ = F⁽ʲ⁾ + ω_j r with ω constant, by
+//!    Aitken's Δ² rule or by IQN-ILS.
 //!
 //! The first estimate of window k is the converged f̄ of window k − 1 (zero in window 0). The
 //! acceleration's state is part of the scheduler, so checkpoints hold it and resume is bitwise.
+//!
+//! Concurrent (`concurrent = true`, preCICE's parallel-implicit; block Jacobi): in iteration j
+//! the coordinator publishes a force estimate F⁽ʲ⁾ for the FEM nodes *and* an estimate
+//! X⁽ʲ⁾ = P_k + u⁽ʲ⁾ of each structure's end position for the DEM (labelled (k, j) on the
+//! interface's `kinematics_relaxed` key), so both compute at once: the FEM gives
+//! P⁽ʲ⁾ = S(F⁽ʲ⁾), the DEM f̄⁽ʲ⁾ = H(X⁽ʲ⁾). The fixed point of (F, u) ↦ (f̄, P − P_k) is
+//! accelerated as one vector, each part scaled by its norm at the window's first iteration
+//! (forces in N, displacements in m). Converged when both relative residuals are below the
+//! tolerance: ‖f̄ − F‖ ≤ tol max‖f̄‖ and ‖(P − P_k) − u‖ ≤ tol max‖P − P_k‖ (max over the
+//! window's iterations). The next window starts
+//! from the converged forces and the FEM's displacement of this window (a constant-velocity
+//! prediction), from the positions the DEM ended on (P_{k+1} = P_k + u).
 
 use std::collections::BTreeMap;
 
@@ -48,10 +62,32 @@ pub(crate) fn default_filter() -> f64 {
     1e-3
 }
 
+/// An estimate the coordinator publishes for an interface.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Estimate {
+    /// Forces for the provider (`forces_relaxed`).
+    Forces(Vec<f64>),
+    /// The provider's end state for the users (`kinematics_relaxed`): positions, and the mean
+    /// velocity of the window (P − P_k)/Δt^C (the users' linear motion needs only positions).
+    Kinematics {
+        positions: Vec<f64>,
+        velocities: Vec<f64>,
+    },
+}
+
+/// What the nodes computed in an iteration, per interface: the users' forces and (concurrent)
+/// the providers' end positions.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Outputs {
+    pub forces: BTreeMap<String, Vec<f64>>,
+    pub positions: BTreeMap<String, Vec<f64>>,
+}
+
 /// The scene's settings of the implicit scheme.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct ImplicitSettings {
-    /// Relative force residual ‖f̄ − F‖ / ‖f̄‖ below which a window is converged.
+    /// Relative force residual ‖f̄ − F‖ / max‖f̄‖ (the largest of the window's iterations) below
+    /// which a window is converged.
     pub tolerance: f64,
     pub max_iterations: u32,
     pub acceleration: Acceleration,
@@ -67,6 +103,9 @@ pub struct ImplicitSettings {
     /// length is dropped (QR filter).
     #[serde(default = "default_filter")]
     pub filter: f64,
+    /// Both solvers compute each iteration at once (module doc).
+    #[serde(default)]
+    pub concurrent: bool,
 }
 
 /// An iteration's outcome, for windows.csv and the summary.
@@ -74,7 +113,8 @@ pub struct ImplicitSettings {
 pub struct IterationRecord {
     pub window: u64,
     pub iteration: u32,
-    /// ‖f̄ − F‖ / ‖f̄‖ (0 when both are zero).
+    /// ‖f̄ − F‖ / max‖f̄‖ (0 when equal; max over the window's iterations so far);
+    /// concurrent: the larger of it and the displacements' ‖(P − P_k) − u‖ / max‖P − P_k‖.
     pub residual: f64,
     pub relaxation: f64,
 }
@@ -105,12 +145,36 @@ pub struct Implicit {
     /// The residuals of the window now running (for the message when it does not converge).
     #[serde(default)]
     window_residuals: Vec<f64>,
+    /// Concurrent: the positions P_k the users start the window from (all interfaces), ...
+    #[serde(default)]
+    start: Vec<f64>,
+    /// ... the estimated displacement u⁽ʲ⁾ of the window ...
+    #[serde(default)]
+    displacement: Vec<f64>,
+    /// ... and the scales of forces and displacements in this window's acceleration.
+    #[serde(default)]
+    scales: Option<(f64, f64)>,
+    /// The largest norms of the users' forces and (concurrent) the FEM's displacements in this
+    /// window's iterations so far: the residuals' denominators.
+    #[serde(default)]
+    largest: (f64, f64),
 }
 
 impl Implicit {
-    pub fn new(settings: ImplicitSettings, interfaces: Vec<(String, usize)>) -> Self {
+    /// `positions`: the interfaces' reference positions, concatenated (the concurrent scheme's
+    /// P_0; unused otherwise).
+    pub fn new(
+        settings: ImplicitSettings,
+        interfaces: Vec<(String, usize)>,
+        positions: Vec<f64>,
+    ) -> Self {
         let n: usize = interfaces.iter().map(|(_, nodes)| 3 * nodes).sum();
+        let concurrent = settings.concurrent;
         Implicit {
+            displacement: if concurrent { vec![0.0; n] } else { Vec::new() },
+            start: if concurrent { positions } else { Vec::new() },
+            scales: None,
+            largest: (0.0, 0.0),
             omega: settings.relaxation,
             settings,
             interfaces,
@@ -125,17 +189,56 @@ impl Implicit {
         }
     }
 
-    /// The estimate of each interface, labelled `label`, to publish.
-    fn estimates(&self, label: Label) -> Publications {
+    /// The estimates of each interface, labelled `label`, to publish: forces, and
+    /// (concurrent) the end positions.
+    fn estimates(&self, label: Label, dt: f64) -> Publications {
+        let mut out = Vec::new();
         let mut at = 0;
-        self.interfaces
-            .iter()
-            .map(|(name, nodes)| {
-                let part = self.estimate[at..at + 3 * nodes].to_vec();
-                at += 3 * nodes;
-                (name.clone(), label, part)
-            })
-            .collect()
+        for (name, nodes) in &self.interfaces {
+            let part = at..at + 3 * nodes;
+            at += 3 * nodes;
+            out.push((
+                name.clone(),
+                label,
+                Estimate::Forces(self.estimate[part.clone()].to_vec()),
+            ));
+            if self.settings.concurrent {
+                let u = &self.displacement[part.clone()];
+                out.push((
+                    name.clone(),
+                    label,
+                    Estimate::Kinematics {
+                        positions: add(&self.start[part], u),
+                        velocities: u.iter().map(|x| x / dt).collect(),
+                    },
+                ));
+            }
+        }
+        out
+    }
+
+    /// The values of every interface in `map`, concatenated in `interfaces` order.
+    fn gather(
+        &self,
+        map: &BTreeMap<String, Vec<f64>>,
+        what: &str,
+        k: u64,
+        j: u32,
+    ) -> Result<Vec<f64>, String> {
+        let mut out = Vec::with_capacity(self.estimate.len());
+        for (name, nodes) in &self.interfaces {
+            let f = map.get(name).ok_or_else(|| {
+                format!("no {what} of interface `{name}` for window {k} iteration {j}")
+            })?;
+            if f.len() != 3 * nodes {
+                return Err(format!(
+                    "interface `{name}`: {} {what} values for {nodes} nodes",
+                    f.len()
+                ));
+            }
+            out.extend_from_slice(f);
+        }
+        Ok(out)
     }
 
     /// The commands of iteration j of window k (after the checkpoint or the rollback).
@@ -166,37 +269,57 @@ impl Implicit {
         out
     }
 
-    /// The users' forces of window k, iteration j arrived (per interface name): converged,
-    /// or the next iteration's estimate and commands.
+    /// The nodes' outputs of window k, iteration j arrived: converged, or the next iteration's
+    /// estimate and commands.
     fn iterate(
         &mut self,
         t: &Topology,
         w: &Windows,
         k: u64,
-        forces: &BTreeMap<String, Vec<f64>>,
+        outputs: &Outputs,
     ) -> Result<Iterate, String> {
         let j = self.iteration;
-        let mut h = Vec::with_capacity(self.estimate.len());
-        for (name, nodes) in &self.interfaces {
-            let f = forces.get(name).ok_or_else(|| {
-                format!("no forces of interface `{name}` for window {k} iteration {j}")
-            })?;
-            if f.len() != 3 * nodes {
-                return Err(format!(
-                    "interface `{name}`: {} force values for {nodes} nodes",
-                    f.len()
-                ));
-            }
-            h.extend_from_slice(f);
-        }
-        let r: Vec<f64> = h.iter().zip(&self.estimate).map(|(a, b)| a - b).collect();
-        let norm = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
-        let (rn, hn) = (norm(&r), norm(&h));
-        let residual = if rn == 0.0 {
-            0.0
+        let h_forces = self.gather(&outputs.forces, "force", k, j)?;
+        // relative to the largest forces of the window's iterations, not only this one's: when
+        // a contact opens the fixed point's forces are zero, and a residual relative to them
+        // alone could never fall below any tolerance
+        self.largest.0 = self.largest.0.max(norm(&h_forces));
+        let force_residual = relative(&h_forces, &self.estimate, self.largest.0);
+        // the fixed-point variable z and its image h = H(z) in the acceleration's space:
+        // the forces, or (concurrent) forces and displacements, each part scaled
+        let (z, h, residual, h_displacement) = if self.settings.concurrent {
+            let p = self.gather(&outputs.positions, "position", k, j)?;
+            let hu: Vec<f64> = p.iter().zip(&self.start).map(|(a, b)| a - b).collect();
+            let (sf, su) = *self.scales.get_or_insert_with(|| {
+                let scale = |v: &[f64]| match norm(v) {
+                    n if n > 0.0 => n,
+                    _ => 1.0,
+                };
+                (scale(&h_forces), scale(&hu))
+            });
+            let join = |f: &[f64], u: &[f64]| -> Vec<f64> {
+                f.iter()
+                    .map(|x| x / sf)
+                    .chain(u.iter().map(|x| x / su))
+                    .collect()
+            };
+            self.largest.1 = self.largest.1.max(norm(&hu));
+            let position_residual = relative(&hu, &self.displacement, self.largest.1);
+            (
+                join(&self.estimate, &self.displacement),
+                join(&h_forces, &hu),
+                force_residual.max(position_residual),
+                Some(hu),
+            )
         } else {
-            rn / hn.max(f64::MIN_POSITIVE)
+            (
+                self.estimate.clone(),
+                h_forces.clone(),
+                force_residual,
+                None,
+            )
         };
+        let r: Vec<f64> = h.iter().zip(&z).map(|(a, b)| a - b).collect();
         let omega = match (self.settings.acceleration, &self.last_residual) {
             (Acceleration::Aitken, Some(prev)) => {
                 let (mut num, mut den) = (0.0, 0.0);
@@ -221,9 +344,7 @@ impl Implicit {
             relaxation: omega,
         });
         if residual <= self.settings.tolerance {
-            // the converged forces start the next window
-            self.estimate = h;
-            self.start_window();
+            self.next_window(h_forces, h_displacement);
             return Ok(Iterate::Converged);
         }
         if j + 1 >= self.settings.max_iterations {
@@ -234,18 +355,22 @@ impl Implicit {
                 .collect();
             if !self.settings.continue_unconverged {
                 return Err(format!(
-                    "implicit coupling: window {k} did not converge in {} iterations (relative force residuals {}; tolerance {:.1e}): raise coupling.implicit.max_iterations, shorten the window, or set continue_unconverged = true",
+                    "implicit coupling: window {k} did not converge in {} iterations (relative {} residuals {}; tolerance {:.1e}): raise coupling.implicit.max_iterations, shorten the window, or set continue_unconverged = true",
                     self.settings.max_iterations,
+                    if self.settings.concurrent {
+                        "force and displacement (the larger)"
+                    } else {
+                        "force"
+                    },
                     history.join(", "),
                     self.settings.tolerance
                 ));
             }
             self.unconverged.push(k);
-            self.estimate = h;
-            self.start_window();
+            self.next_window(h_forces, h_displacement);
             return Ok(Iterate::Converged);
         }
-        match self.settings.acceleration {
+        let next = match self.settings.acceleration {
             Acceleration::IqnIls => {
                 if let (Some(rp), Some(hp)) = (&self.last_residual, &self.last_output) {
                     let dr = r.iter().zip(rp).map(|(a, b)| a - b).collect();
@@ -254,20 +379,18 @@ impl Implicit {
                 }
                 let oldest = k.saturating_sub(self.settings.reuse as u64);
                 self.secants.retain(|(w, ..)| *w >= oldest);
-                match iqn_ils_step(&self.secants, &r, &h, self.settings.filter) {
-                    Some(next) => self.estimate = next,
-                    None => {
-                        for (e, ri) in self.estimate.iter_mut().zip(&r) {
-                            *e += omega * ri;
-                        }
-                    }
-                }
+                iqn_ils_step(&self.secants, &r, &h, self.settings.filter)
+                    .unwrap_or_else(|| relax(&z, &r, omega))
             }
-            _ => {
-                for (e, ri) in self.estimate.iter_mut().zip(&r) {
-                    *e += omega * ri;
-                }
+            _ => relax(&z, &r, omega),
+        };
+        match self.scales {
+            Some((sf, su)) if self.settings.concurrent => {
+                let n = self.estimate.len();
+                self.estimate = next[..n].iter().map(|x| x * sf).collect();
+                self.displacement = next[n..].iter().map(|x| x * su).collect();
             }
+            _ => self.estimate = next,
         }
         self.omega = omega;
         self.last_residual = Some(r);
@@ -284,17 +407,55 @@ impl Implicit {
         sends.extend(self.iteration_sends(t, w, k, j + 1));
         Ok(Iterate::Repeat {
             sends,
-            relaxed: self.estimates(label),
+            relaxed: self.estimates(label, w.length),
         })
     }
 
-    fn start_window(&mut self) {
+    /// The window is over (`forces`: the users' last; `displacement`: concurrent, the FEM's
+    /// last): the next one starts from those forces, from the positions the users ended on,
+    /// and with the FEM's displacement as its first estimate.
+    fn next_window(&mut self, forces: Vec<f64>, displacement: Option<Vec<f64>>) {
+        self.estimate = forces;
+        if let Some(u) = displacement {
+            self.start = add(&self.start, &self.displacement);
+            self.displacement = u;
+        }
+        self.scales = None;
+        self.largest = (0.0, 0.0);
         self.iteration = 0;
         self.window_residuals.clear();
         self.last_residual = None;
         self.last_output = None;
         self.omega = self.settings.relaxation;
     }
+}
+
+fn norm(v: &[f64]) -> f64 {
+    v.iter().map(|x| x * x).sum::<f64>().sqrt()
+}
+
+/// ‖h − e‖ / `scale` (0 when h = e).
+fn relative(h: &[f64], e: &[f64], scale: f64) -> f64 {
+    let d = h
+        .iter()
+        .zip(e)
+        .map(|(a, b)| (a - b) * (a - b))
+        .sum::<f64>()
+        .sqrt();
+    if d == 0.0 {
+        0.0
+    } else {
+        d / scale.max(f64::MIN_POSITIVE)
+    }
+}
+
+fn add(a: &[f64], b: &[f64]) -> Vec<f64> {
+    a.iter().zip(b).map(|(x, y)| x + y).collect()
+}
+
+/// z + ω r.
+fn relax(z: &[f64], r: &[f64], omega: f64) -> Vec<f64> {
+    z.iter().zip(r).map(|(x, y)| x + omega * y).collect()
 }
 
 /// The IQN-ILS estimate h + ΔH α with α = argmin ‖ΔR α + r‖, from the secants newest first
@@ -376,22 +537,26 @@ impl Scheme for Implicit {
     }
 
     /// Iteration 0's estimate, before window k's commands.
-    fn window_publications(&self, k: u64) -> Publications {
-        self.estimates(Label::window(k))
+    fn window_publications(&self, w: &Windows, k: u64) -> Publications {
+        self.estimates(Label::window(k), w.length)
     }
 
     fn iteration(&self) -> Option<u32> {
         Some(self.iteration)
     }
 
-    fn on_forces(
+    fn needs_positions(&self) -> bool {
+        self.settings.concurrent
+    }
+
+    fn on_outputs(
         &mut self,
         t: &Topology,
         w: &Windows,
         k: u64,
-        forces: &BTreeMap<String, Vec<f64>>,
+        outputs: &Outputs,
     ) -> Result<Iterate, String> {
-        self.iterate(t, w, k, forces)
+        self.iterate(t, w, k, outputs)
     }
 
     fn take_iterations(&mut self) -> Vec<IterationRecord> {

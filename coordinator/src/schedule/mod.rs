@@ -2,7 +2,8 @@
 //!
 //! A [`Scheduler`] is told what happened (a node finished a window) and answers with the
 //! commands to send. It never touches the network, so every schedule is unit-tested here.
-//! Each schedule is a [`Scheme`] in its own module (`alone`, `one_way`, `jit`, `predictive`):
+//! Each schedule is a [`Scheme`] in its own module (`alone`, `one_way`, `jit`, `predictive`,
+//! `concurrent`, `implicit`):
 //! the commands before window 0, the commands of window k, the data to publish again after a
 //! restore, and what follows a completed window. Adding a schedule adds a module and a
 //! variant of [`SchemeState`].
@@ -19,6 +20,7 @@ use crate::scene::ScheduleKind;
 use crate::units::format_seconds;
 
 mod alone;
+mod concurrent;
 pub mod implicit;
 mod jit;
 mod one_way;
@@ -65,8 +67,8 @@ impl Topology {
 /// Commands for nodes.
 pub type Sends = Vec<(String, CommandBody)>;
 
-/// Forces for interfaces' providers: (interface, label, forces).
-pub type Publications = Vec<(String, Label, Vec<f64>)>;
+/// Estimates for interfaces' nodes (implicit schemes): (interface, label, estimate).
+pub type Publications = Vec<(String, Label, implicit::Estimate)>;
 
 /// The windows of a run.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
@@ -118,9 +120,9 @@ pub enum Next {
 pub trait Scheme {
     /// Commands of window k (each node's `advance_window`).
     fn window(&self, t: &Topology, w: &Windows, k: u64) -> Sends;
-    /// Forces the coordinator publishes with window k's commands (an implicit scheme's first
-    /// estimate).
-    fn window_publications(&self, _k: u64) -> Publications {
+    /// Estimates the coordinator publishes with window k's commands (an implicit scheme's
+    /// first).
+    fn window_publications(&self, _w: &Windows, _k: u64) -> Publications {
         Vec::new()
     }
     /// Commands before window 0.
@@ -143,20 +145,25 @@ pub trait Scheme {
         Next::Continue
     }
     /// An iterating scheme's iteration now running: once every node has finished it, the
-    /// users' forces are read and given to [`Scheme::on_forces`].
+    /// users' forces (and, if [`Scheme::needs_positions`], the providers' end positions) are
+    /// read and given to [`Scheme::on_outputs`].
     fn iteration(&self) -> Option<u32> {
         None
     }
-    /// The users' forces of window k's iteration just finished, per interface.
-    fn on_forces(
+    /// The iteration's outputs include the providers' end positions.
+    fn needs_positions(&self) -> bool {
+        false
+    }
+    /// The outputs of window k's iteration just finished, per interface.
+    fn on_outputs(
         &mut self,
         _t: &Topology,
         _w: &Windows,
         k: u64,
-        _forces: &std::collections::BTreeMap<String, Vec<f64>>,
+        _outputs: &implicit::Outputs,
     ) -> Result<implicit::Iterate, String> {
         Err(format!(
-            "forces of window {k} given to a schedule that does not iterate"
+            "outputs of window {k} given to a schedule that does not iterate"
         ))
     }
     /// The iterations since the last call.
@@ -182,6 +189,7 @@ pub enum SchemeState {
     Jit(jit::Jit),
     Predictive(predictive::Predictive),
     Implicit(Box<implicit::Implicit>),
+    Concurrent(concurrent::Concurrent),
 }
 
 impl SchemeState {
@@ -192,6 +200,7 @@ impl SchemeState {
             SchemeState::Jit(s) => s,
             SchemeState::Predictive(s) => s,
             SchemeState::Implicit(s) => s.as_mut(),
+            SchemeState::Concurrent(s) => s,
         }
     }
 
@@ -202,6 +211,7 @@ impl SchemeState {
             SchemeState::Jit(s) => s,
             SchemeState::Predictive(s) => s,
             SchemeState::Implicit(s) => s.as_ref(),
+            SchemeState::Concurrent(s) => s,
         }
     }
 }
@@ -210,16 +220,19 @@ impl SchemeState {
 #[derive(Debug, Clone, PartialEq)]
 pub enum Action {
     Send(String, CommandBody),
-    /// Publish forces for an interface's provider (implicit schemes: the accelerated estimate).
-    PublishForces {
+    /// Publish an estimate for an interface's nodes (implicit schemes: the accelerated
+    /// forces for the provider; concurrent, the estimated kinematics for the users).
+    Publish {
         interface: String,
         label: Label,
-        forces: Vec<f64>,
+        estimate: implicit::Estimate,
     },
-    /// Read the users' forces of this label on every interface and give them to
-    /// [`Scheduler::on_forces`] (implicit schemes, after every node finished an iteration).
-    NeedForces {
+    /// Read the users' forces of this label on every interface (and, with `positions`, the
+    /// providers' kinematics) and give them to [`Scheduler::on_outputs`] (implicit schemes,
+    /// after every node finished an iteration).
+    NeedOutputs {
         label: Label,
+        positions: bool,
     },
     /// The schedule is complete.
     Finish {
@@ -239,16 +252,19 @@ pub struct SchedulerConfig {
     pub steady_windows: u32,
     /// Implicit: the settings.
     pub implicit: Option<implicit::ImplicitSettings>,
-    /// The interfaces (name, nodes), in the scene's order.
+    /// The interfaces (name, nodes), in the scene's order ...
     pub interfaces: Vec<(String, usize)>,
+    /// ... and their reference positions, concatenated.
+    pub positions: Vec<f64>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 enum Phase {
     Idle,
     Window,
-    /// Implicit: every node finished an iteration; the forces are awaited.
-    Forces,
+    /// Implicit: every node finished an iteration; its outputs are awaited.
+    #[serde(alias = "Forces")]
+    Outputs,
     Final,
     Done,
 }
@@ -283,6 +299,7 @@ impl Scheduler {
             | ScheduleKind::Jit
             | ScheduleKind::Predictive
             | ScheduleKind::Implicit
+            | ScheduleKind::Concurrent
                 if !both =>
             {
                 return Err(format!(
@@ -303,6 +320,7 @@ impl Scheduler {
             )),
             ScheduleKind::Jit => SchemeState::Jit(jit::Jit),
             ScheduleKind::Predictive => SchemeState::Predictive(predictive::Predictive),
+            ScheduleKind::Concurrent => SchemeState::Concurrent(concurrent::Concurrent),
             ScheduleKind::Implicit => {
                 let settings = cfg
                     .implicit
@@ -311,6 +329,7 @@ impl Scheduler {
                 SchemeState::Implicit(Box::new(implicit::Implicit::new(
                     settings,
                     cfg.interfaces.clone(),
+                    cfg.positions.clone(),
                 )))
             }
         };
@@ -362,10 +381,10 @@ impl Scheduler {
     fn publish(relaxed: Publications) -> Vec<Action> {
         relaxed
             .into_iter()
-            .map(|(interface, label, forces)| Action::PublishForces {
+            .map(|(interface, label, estimate)| Action::Publish {
                 interface,
                 label,
-                forces,
+                estimate,
             })
             .collect()
     }
@@ -386,7 +405,11 @@ impl Scheduler {
         self.window = k;
         self.window_kinetic_energy = None;
         // e.g. an implicit scheme's first force estimate goes out with the window's commands
-        let mut out = Self::publish(self.scheme.scheme_ref().window_publications(k));
+        let mut out = Self::publish(
+            self.scheme
+                .scheme_ref()
+                .window_publications(&self.windows, k),
+        );
         let sends = self
             .scheme
             .scheme()
@@ -451,28 +474,27 @@ impl Scheduler {
                 reason: std::mem::take(&mut self.final_reason),
             }]);
         }
-        if let Some(iteration) = self.scheme.scheme_ref().iteration() {
-            self.phase = Phase::Forces;
-            return Ok(vec![Action::NeedForces {
+        let scheme = self.scheme.scheme_ref();
+        if let Some(iteration) = scheme.iteration() {
+            self.phase = Phase::Outputs;
+            return Ok(vec![Action::NeedOutputs {
                 label: Label { window, iteration },
+                positions: scheme.needs_positions(),
             }]);
         }
         self.next_after(window)
     }
 
-    /// Implicit: the users' forces of the iteration just finished, per interface.
-    pub fn on_forces(
-        &mut self,
-        forces: &std::collections::BTreeMap<String, Vec<f64>>,
-    ) -> Result<Vec<Action>, String> {
+    /// Implicit: the outputs of the iteration just finished, per interface.
+    pub fn on_outputs(&mut self, outputs: &implicit::Outputs) -> Result<Vec<Action>, String> {
         let k = self.window;
-        if self.phase != Phase::Forces {
-            return Err(format!("forces of window {k} given out of turn"));
+        if self.phase != Phase::Outputs {
+            return Err(format!("outputs of window {k} given out of turn"));
         }
         let next = self
             .scheme
             .scheme()
-            .on_forces(&self.topology, &self.windows, k, forces)?;
+            .on_outputs(&self.topology, &self.windows, k, outputs)?;
         match next {
             implicit::Iterate::Converged => self.next_after(k),
             implicit::Iterate::Repeat { sends, relaxed } => {
@@ -533,6 +555,7 @@ mod tests {
             steady_windows: 2,
             implicit: None,
             interfaces: Vec::new(),
+            positions: Vec::new(),
         }
     }
 
@@ -617,6 +640,43 @@ mod tests {
     }
 
     #[test]
+    fn concurrent_gives_both_their_window_at_once_each_with_the_others_previous_data() {
+        let mut s = Scheduler::new(cfg(ScheduleKind::Concurrent, 3)).unwrap();
+        let a = s.start();
+        assert_eq!(
+            a[0],
+            publish(FEM, 0),
+            "the FEM's initial state is kinematics 0"
+        );
+        let (r, d) = advance(&a[1]);
+        assert_eq!(
+            (r, d.input, d.output, d.motion),
+            (DEM, l(0), l(0), MotionRule::Quadratic)
+        );
+        let (r, f) = advance(&a[2]);
+        assert_eq!((r, f.input, f.output), (FEM, None, l(1)));
+        // either may finish first; the next window waits for both
+        assert!(s.on_window_done(FEM, 0, None).unwrap().is_empty());
+        let a = s.on_window_done(DEM, 0, None).unwrap();
+        let (_, d) = advance(&a[0]);
+        let (_, f) = advance(&a[1]);
+        assert_eq!((d.window, d.input, d.output), (1, l(1), l(1)));
+        assert_eq!((f.window, f.input, f.output), (1, l(0), l(2)));
+        s.on_window_done(DEM, 1, None).unwrap();
+        let a = s.on_window_done(FEM, 1, None).unwrap();
+        let (_, d) = advance(&a[0]);
+        let (_, f) = advance(&a[1]);
+        assert_eq!(
+            (d.output, f.input, f.output),
+            (None, l(1), None),
+            "nothing is published in the last window"
+        );
+        s.on_window_done(FEM, 2, None).unwrap();
+        let a = s.on_window_done(DEM, 2, None).unwrap();
+        assert!(matches!(a[0], Action::Finish { .. }));
+    }
+
+    #[test]
     fn one_way_solves_statically_once_the_dem_is_steady() {
         let mut s = Scheduler::new(cfg(ScheduleKind::OneWay, 100)).unwrap();
         let a = s.start();
@@ -659,9 +719,13 @@ mod tests {
 
     #[test]
     fn a_restored_scheduler_republishes_the_data_in_flight_then_continues() {
-        for (kind, role, window) in [
-            (ScheduleKind::Jit, FEM, 2),
-            (ScheduleKind::Predictive, DEM, 1),
+        for (kind, replayed) in [
+            (ScheduleKind::Jit, vec![publish(FEM, 2)]),
+            (ScheduleKind::Predictive, vec![publish(DEM, 1)]),
+            (
+                ScheduleKind::Concurrent,
+                vec![publish(FEM, 2), publish(DEM, 1)],
+            ),
         ] {
             let mut s = Scheduler::new(cfg(kind, 5)).unwrap();
             s.start();
@@ -673,8 +737,9 @@ mod tests {
             let mut restored: Scheduler =
                 serde_json::from_str(&serde_json::to_string(&s).unwrap()).unwrap();
             let a = restored.replay_actions().unwrap();
-            assert_eq!(a[0], publish(role, window), "{kind:?}");
-            assert_eq!(&a[1..], &expected[..], "{kind:?}");
+            let n = replayed.len();
+            assert_eq!(&a[..n], &replayed[..], "{kind:?}");
+            assert_eq!(&a[n..], &expected[..], "{kind:?}");
         }
     }
 
@@ -699,6 +764,7 @@ mod tests {
         for kind in [
             ScheduleKind::Jit,
             ScheduleKind::Predictive,
+            ScheduleKind::Concurrent,
             ScheduleKind::OneWay,
         ] {
             let mut c = cfg(kind, 3);
@@ -713,12 +779,12 @@ mod tests {
                 })
                 .collect();
             let expected: Vec<&str> = match kind {
-                ScheduleKind::Jit => vec![DEM, "left", "right"],
+                ScheduleKind::Jit | ScheduleKind::Concurrent => vec![DEM, "left", "right"],
                 ScheduleKind::Predictive => vec!["left", "right", DEM],
                 _ => vec![DEM],
             };
             assert_eq!(advanced, expected, "{kind:?}");
-            if kind == ScheduleKind::Jit {
+            if matches!(kind, ScheduleKind::Jit | ScheduleKind::Concurrent) {
                 assert_eq!(&a[..2], &[publish("left", 0), publish("right", 0)]);
             }
             if kind == ScheduleKind::OneWay {
@@ -759,6 +825,7 @@ mod tests {
             continue_unconverged,
             reuse: 0,
             filter: 1e-3,
+            concurrent: false,
         });
         c
     }
@@ -766,19 +833,26 @@ mod tests {
     /// The users' response to a force estimate F: H(F) = −0.8 F + (1, 2, …) per component
     /// (a contracting fixed point that plain substitution (ω = 1) would approach slowly and
     /// oscillating).
-    fn respond(estimate: &[f64]) -> BTreeMap<String, Vec<f64>> {
+    fn respond(estimate: &[f64]) -> implicit::Outputs {
         let h = estimate
             .iter()
             .enumerate()
             .map(|(i, f)| -0.8 * f + (i + 1) as f64)
             .collect();
-        BTreeMap::from([("top".to_string(), h)])
+        implicit::Outputs {
+            forces: BTreeMap::from([("top".to_string(), h)]),
+            positions: BTreeMap::new(),
+        }
     }
 
     fn published(a: &[Action]) -> Vec<(Label, Vec<f64>)> {
         a.iter()
             .filter_map(|a| match a {
-                Action::PublishForces { label, forces, .. } => Some((*label, forces.clone())),
+                Action::Publish {
+                    label,
+                    estimate: implicit::Estimate::Forces(forces),
+                    ..
+                } => Some((*label, forces.clone())),
                 _ => None,
             })
             .collect()
@@ -823,11 +897,12 @@ mod tests {
             let a = s.on_window_done(FEM, 0, None).unwrap();
             assert_eq!(
                 a,
-                vec![Action::NeedForces {
-                    label: estimate_label
+                vec![Action::NeedOutputs {
+                    label: estimate_label,
+                    positions: false
                 }]
             );
-            let next = s.on_forces(&respond(&estimate)).unwrap();
+            let next = s.on_outputs(&respond(&estimate)).unwrap();
             if s.window() == 1 {
                 return (j + 1, next);
             }
@@ -888,7 +963,7 @@ mod tests {
             let (_, estimate) = published(&actions).pop().unwrap();
             s.on_window_done(DEM, 0, None).unwrap();
             s.on_window_done(FEM, 0, None).unwrap();
-            match s.on_forces(&respond(&estimate)) {
+            match s.on_outputs(&respond(&estimate)) {
                 Ok(a) => actions = a,
                 Err(e) => {
                     err = Some(e);
@@ -913,7 +988,7 @@ mod tests {
             let (_, estimate) = published(&actions).pop().unwrap();
             s.on_window_done(DEM, 0, None).unwrap();
             s.on_window_done(FEM, 0, None).unwrap();
-            actions = s.on_forces(&respond(&estimate)).unwrap();
+            actions = s.on_outputs(&respond(&estimate)).unwrap();
         }
         assert_eq!(s.window(), 1);
         assert_eq!(s.unconverged_windows(), &[0]);
@@ -921,5 +996,106 @@ mod tests {
         let mut restored: Scheduler =
             serde_json::from_str(&serde_json::to_string(&s).unwrap()).unwrap();
         assert_eq!(restored.replay_actions().unwrap(), actions);
+    }
+
+    /// The estimates of `a` by kind: (forces, positions) of interface `top`.
+    fn estimates(a: &[Action]) -> (Vec<f64>, Option<Vec<f64>>) {
+        let mut forces = None;
+        let mut positions = None;
+        for a in a {
+            match a {
+                Action::Publish {
+                    estimate: implicit::Estimate::Forces(f),
+                    ..
+                } => forces = Some(f.clone()),
+                Action::Publish {
+                    estimate: implicit::Estimate::Kinematics { positions: p, .. },
+                    ..
+                } => positions = Some(p.clone()),
+                _ => {}
+            }
+        }
+        (forces.expect("a force estimate"), positions)
+    }
+
+    #[test]
+    fn concurrent_implicit_estimates_forces_and_positions_and_converges_both() {
+        // a linear Jacobi pair: the structure moves u = c F from P_k under the force estimate,
+        // the particles push back f = g − κ (X − P_k) against the position estimate X; the
+        // fixed point is F = g / (1 + κ c), u = c F
+        // κc = 1.6: the plain Jacobi iteration's eigenvalues ±i√(κc) lie outside the unit
+        // circle. (Aitken's single ω barely helps a Jacobi pair: at κc = 0.2 it needs 28
+        // iterations for 1e-6, more than plain substitution; IQN-ILS is the concurrent
+        // default.)
+        let g = [10.0, -20.0, 30.0, 5.0, 0.0, -15.0];
+        let reference = vec![0.0, 0.0, 1.0, 1.0, 0.0, 1.0];
+        let (c, kappa) = (2e-6, 8e5);
+        {
+            let acc = implicit::Acceleration::IqnIls;
+            let mut cfg = implicit_cfg(acc, 50, false);
+            cfg.positions = reference.clone();
+            if let Some(i) = cfg.implicit.as_mut() {
+                i.concurrent = true;
+            }
+            let mut s = Scheduler::new(cfg).unwrap();
+            let mut actions = s.start();
+            let mut start = reference.clone();
+            for k in 0..2u64 {
+                let mut iterations = 0;
+                loop {
+                    let (f, x) = estimates(&actions);
+                    let x = x.expect("a position estimate for the DEM");
+                    if iterations == 0 && k == 0 {
+                        assert_eq!((f.clone(), x.clone()), (vec![0.0; 6], reference.clone()));
+                    }
+                    for a in &actions {
+                        if let Action::Send(_, CommandBody::AdvanceWindow(w)) = a {
+                            assert_eq!(w.input, w.output);
+                            assert_eq!(w.input.unwrap().iteration, iterations);
+                        }
+                    }
+                    s.on_window_done(FEM, k, None).unwrap();
+                    let a = s.on_window_done(DEM, k, None).unwrap();
+                    assert!(matches!(
+                        a.as_slice(),
+                        [Action::NeedOutputs {
+                            positions: true,
+                            ..
+                        }]
+                    ));
+                    let p: Vec<f64> = (0..6).map(|i| start[i] + c * f[i]).collect();
+                    let h: Vec<f64> = (0..6).map(|i| g[i] - kappa * (x[i] - start[i])).collect();
+                    let out = implicit::Outputs {
+                        forces: BTreeMap::from([("top".to_string(), h)]),
+                        positions: BTreeMap::from([("top".to_string(), p)]),
+                    };
+                    actions = s.on_outputs(&out).unwrap();
+                    iterations += 1;
+                    if s.window() != k {
+                        // the next window starts where the DEM ended, from the converged forces
+                        let (f, x) = estimates(&actions);
+                        let x = x.unwrap();
+                        for i in 0..6 {
+                            let exact = g[i] / (1.0 + kappa * c);
+                            assert!((f[i] - exact).abs() < 1e-5 * g[0], "{f:?}");
+                            // the first position estimate extrapolates the FEM's displacement
+                            let moved = c * exact;
+                            assert!((x[i] - (start[i] + 2.0 * moved)).abs() < 1e-9, "{x:?}");
+                        }
+                        for i in 0..6 {
+                            start[i] += c * g[i] / (1.0 + kappa * c);
+                        }
+                        break;
+                    }
+                    assert!(iterations < 50, "{acc:?}: no convergence");
+                }
+                // a linear pair of rank 6: at most one relaxation and six secant steps
+                assert!(iterations <= 8, "{iterations} iterations");
+            }
+            // resume: a restored scheduler republishes the same estimates
+            let mut restored: Scheduler =
+                serde_json::from_str(&serde_json::to_string(&s).unwrap()).unwrap();
+            assert_eq!(restored.replay_actions().unwrap(), actions);
+        }
     }
 }
