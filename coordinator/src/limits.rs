@@ -55,6 +55,11 @@ pub const PREDICTIVE_WINDOW_FRACTION: f64 = 0.7;
 /// at 4 µs = 0.027 T_c (but 35 % off the reference; 0.4 % at 2 µs), diverging at 5 µs. Both
 /// solvers lag a window, so the limit lies below JIT's.
 pub const CONCURRENT_WINDOW_FRACTION: f64 = 0.025;
+// the concurrent schedule lags on both sides: its limit is the tightest
+const _: () = assert!(CONCURRENT_WINDOW_FRACTION < JIT_WINDOW_FRACTION);
+/// The longest implicit window measured stable, as a fraction of T_c (sleeper-ci: 1 ms =
+/// 6.8 T_c, serial and concurrent; no limit found).
+pub const IMPLICIT_STABLE_TESTED: f64 = 6.8;
 /// Beyond the limit the run is warned about; beyond this many times the limit it is refused
 /// (the limit is an estimate: T_c uses the stiffness at a 1 % overlap and the lightest node).
 /// Measured: 2× the limit diverged on the sleeper (JIT and predictive), 6.5× on the plate
@@ -236,6 +241,31 @@ pub fn assess(
                     format!("{name}: no window limit (T_c = {tc:.3e} s)"),
                 ),
             }
+            // every schedule's limit, for choosing one
+            let all: Vec<String> = [
+                ScheduleKind::Concurrent,
+                ScheduleKind::Jit,
+                ScheduleKind::Predictive,
+            ]
+            .iter()
+            .filter_map(|&k| {
+                window_limit(k, d, f).map(|l| {
+                    format!(
+                        "{} ≤ {l:.3e} s ({:.3} T_c)",
+                        crate::run::schedule_name(k),
+                        l / tc
+                    )
+                })
+            })
+            .collect();
+            push(
+                Level::Info,
+                "window limits by schedule",
+                format!(
+                    "{}; implicit: none known (stable to {IMPLICIT_STABLE_TESTED} T_c, measured), each window costs its iterations",
+                    all.join(", ")
+                ),
+            );
             if let Some(&mp) = d.get("particle_mass_max") {
                 let ratio = mp / m;
                 if !(1e-4..=1e4).contains(&ratio) {
@@ -338,6 +368,27 @@ mod tests {
         // one-way coupling has no window limit
         let o = assess(&facts(ScheduleKind::OneWay, 1.0), Some(&d), Some(&f));
         assert!(o.iter().all(|x| x.level != Level::Refuse), "{o:?}");
+        // ... and whatever the schedule, the check lists every schedule's limit
+        for k in [
+            ScheduleKind::OneWay,
+            ScheduleKind::Implicit,
+            ScheduleKind::Jit,
+        ] {
+            let all = assess(&facts(k, 1e-6), Some(&d), Some(&f));
+            let l = all
+                .iter()
+                .find(|x| x.limit == "window limits by schedule")
+                .expect("the table of limits");
+            for (name, fraction) in [
+                ("concurrent", CONCURRENT_WINDOW_FRACTION),
+                ("jit", JIT_WINDOW_FRACTION),
+                ("predictive", PREDICTIVE_WINDOW_FRACTION),
+            ] {
+                let expected = format!("{name} ≤ {:.3e} s", fraction * tc);
+                assert!(l.message.contains(&expected), "{expected}: {l}");
+            }
+            assert!(l.message.contains("implicit: none known"), "{l}");
+        }
     }
 
     #[test]

@@ -133,6 +133,17 @@ pub struct Summary {
     pub max_window_iterations: u32,
     #[serde(default)]
     pub unconverged_windows: Vec<u64>,
+    /// Adaptive windows: the shortest and longest window used and how often the length
+    /// changed (each change is in the log; windows.csv has every window's `window_s`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub adaptive_windows: Option<AdaptiveWindows>,
+}
+
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct AdaptiveWindows {
+    pub shortest_s: f64,
+    pub longest_s: f64,
+    pub changes: u64,
 }
 
 /// The work of one interface's forces on its structure, summed over the windows, as each side
@@ -556,6 +567,25 @@ impl Run<'_> {
             meshes.push((iface.name.clone(), mesh.num_nodes(), size));
             positions.extend_from_slice(mesh.positions.as_slice());
         }
+        // adaptive windows: the limits the controller keeps, from the nodes' `ready` numbers
+        // (the tightest structure's stiffness limit)
+        let adaptive = scene.adaptive.clone().map(|settings| {
+            let dem_limits = scene
+                .dem_node()
+                .and_then(|d| self.summary.nodes.get(d))
+                .map(|n| n.limits.clone())
+                .unwrap_or_default();
+            let loaded = scene
+                .fem_nodes()
+                .filter_map(|f| self.summary.nodes.get(f))
+                .filter_map(|n| crate::limits::window_limit(scene.schedule, &dem_limits, &n.limits))
+                .fold(None, |a: Option<f64>, b| Some(a.map_or(b, |a| a.min(b))));
+            let limits = crate::schedule::adaptive::Limits {
+                loaded,
+                radius_min: dem_limits.get("particle_radius_min").copied(),
+            };
+            (settings, limits, scene.end_time)
+        });
         let scheduler = Scheduler::new(SchedulerConfig {
             kind: scene.schedule,
             window: scene.window,
@@ -569,6 +599,7 @@ impl Run<'_> {
                 .map(|(name, nodes, _)| (name.clone(), *nodes))
                 .collect(),
             positions,
+            adaptive,
         })
         .map_err(|e| anyhow!(e))?;
         let implicit = scene.implicit.is_some();
@@ -597,10 +628,11 @@ impl Run<'_> {
                     ",interface_work_dem.{n}_j,interface_work_fem.{n}_j,interface_work_received.{n}_j"
                 ))
                 .collect::<String>(),
-            if implicit {
-                ",iterations,residual"
-            } else {
-                ""
+            match (implicit, scene.adaptive.is_some()) {
+                (true, true) => ",iterations,residual,window_s",
+                (true, false) => ",iterations,residual",
+                (false, true) => ",window_s",
+                (false, false) => "",
             }
         );
         let (mut scheduler, mut stability, mut actions, done_rows) = match resume {
@@ -623,7 +655,12 @@ impl Run<'_> {
                         .dem_node()
                         .and_then(|d| self.limit(d, "particle_radius_min"))
                     {
-                        stability.step_limit = Some((scene.window, r));
+                        // adaptive: the longest window the controller may choose
+                        let w = scene
+                            .adaptive
+                            .as_ref()
+                            .map_or(scene.window, |a| a.max_window);
+                        stability.step_limit = Some((w, r));
                     }
                 }
                 (scheduler, stability, actions, String::new())
@@ -666,7 +703,7 @@ impl Run<'_> {
             }
         };
         self.defer_interrupt = true;
-        let bar = progress_bar(progress, scene.windows);
+        let bar = progress_bar(progress, scene.windows, scene.adaptive.is_some());
         bar.set_position(self.summary.windows_done);
         let mut csv = std::io::BufWriter::new(
             std::fs::File::create(&csv_path)
@@ -683,6 +720,8 @@ impl Run<'_> {
         let mut work: BTreeMap<(&'static str, String), f64> = BTreeMap::new();
         // implicit: this window's iterations and its last residual
         let (mut row_iterations, mut row_residual) = (0u32, 0.0f64);
+        // adaptive: this window's length
+        let mut row_length = scheduler.window_span().1;
         loop {
             for a in std::mem::take(&mut actions) {
                 match a {
@@ -698,7 +737,7 @@ impl Run<'_> {
                             interface,
                             window: label.window,
                             iteration: label.iteration,
-                            time: label.window as f64 * scene.window,
+                            time: scheduler.window_span().0,
                             forces: forces.into(),
                             averaged: true,
                             samples: 1,
@@ -721,7 +760,10 @@ impl Run<'_> {
                             window: label.window,
                             iteration: label.iteration,
                             // the estimated end state of the window
-                            time: (label.window + 1) as f64 * scene.window,
+                            time: {
+                                let (start, length) = scheduler.window_span();
+                                start + length
+                            },
                             accelerations: vec![0.0; positions.len()].into(),
                             positions: positions.into(),
                             velocities: velocities.into(),
@@ -841,6 +883,7 @@ impl Run<'_> {
                     work.insert((side, iface.to_string()), *v);
                 }
             }
+            scheduler.observe(&st.node, kind == NodeKind::Dem, &values);
             actions = scheduler
                 .on_window_done(&st.node, window, ke)
                 .map_err(|e| anyhow!(e))?;
@@ -938,6 +981,30 @@ impl Run<'_> {
                         self.summary.max_window_iterations.max(row_iterations);
                     row_iterations = 0;
                 }
+                if scene.adaptive.is_some() {
+                    audit.push_str(&format!(",{row_length:.6e}"));
+                    let a = self
+                        .summary
+                        .adaptive_windows
+                        .get_or_insert(AdaptiveWindows {
+                            shortest_s: row_length,
+                            longest_s: row_length,
+                            changes: 0,
+                        });
+                    a.shortest_s = a.shortest_s.min(row_length);
+                    a.longest_s = a.longest_s.max(row_length);
+                    for c in scheduler.take_window_changes() {
+                        tracing::info!(
+                            "adaptive window: Δt^C {} → {} from window {} ({})",
+                            crate::units::format_seconds(c.from),
+                            crate::units::format_seconds(c.to),
+                            c.window,
+                            c.reason
+                        );
+                        a.changes += 1;
+                    }
+                    row_length = scheduler.window_span().1;
+                }
                 writeln!(
                     csv,
                     "{line},{:.6e},{}{audit}",
@@ -952,7 +1019,11 @@ impl Run<'_> {
                 csv.flush()?;
                 self.summary.windows_done = window + 1;
                 self.summary.simulated_time_s = t_end;
-                bar.set_position(window + 1);
+                bar.set_position(if scene.adaptive.is_some() {
+                    (t_end / scene.end_time * scene.windows as f64).round() as u64
+                } else {
+                    window + 1
+                });
                 bar.set_message(format!("t = {t_end:.4e} s"));
                 let finishing = actions.iter().any(|a| matches!(a, Action::Finish { .. }));
                 let due = scene.checkpoint_every > 0 && (window + 1) % scene.checkpoint_every == 0;
@@ -1083,15 +1154,19 @@ impl Run<'_> {
     }
 }
 
-fn progress_bar(show: bool, windows: u64) -> indicatif::ProgressBar {
+/// The run's progress: by window, or (adaptive windows, whose number is not known ahead) by
+/// simulated time in steps of the first window.
+fn progress_bar(show: bool, windows: u64, adaptive: bool) -> indicatif::ProgressBar {
     if !show {
         return indicatif::ProgressBar::hidden();
     }
     let bar = indicatif::ProgressBar::new(windows);
     bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{elapsed_precise} [{bar:40}] window {pos}/{len} {msg} (ETA {eta})",
-        )
+        indicatif::ProgressStyle::with_template(if adaptive {
+            "{elapsed_precise} [{bar:40}] {percent}% {msg} (ETA {eta})"
+        } else {
+            "{elapsed_precise} [{bar:40}] window {pos}/{len} {msg} (ETA {eta})"
+        })
         .expect("valid template")
         .progress_chars("=> "),
     );

@@ -170,6 +170,32 @@ pub struct CouplingSection {
     pub allow_beyond_limits: bool,
     /// The implicit schedule's settings.
     pub implicit: Option<Spanned<ImplicitSection>>,
+    /// Adaptive windows (`window` is then the first one).
+    pub adaptive: Option<Spanned<AdaptiveSection>>,
+}
+
+fn default_adaptive_tolerance() -> f64 {
+    0.05
+}
+fn default_adaptive_iterations() -> u32 {
+    4
+}
+
+/// `[coupling.adaptive]`: the window chosen after each window (schedule/adaptive.rs).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AdaptiveSection {
+    /// Shortest window: the ladder's base (windows are min_window × 2^i), a whole number of
+    /// DEM steps, and end_time a whole number of it.
+    pub min_window: Seconds,
+    /// Longest window.
+    pub max_window: Seconds,
+    /// Explicit schedules: the relative energy mismatch per window aimed at (default 0.05).
+    #[serde(default = "default_adaptive_tolerance")]
+    pub tolerance: f64,
+    /// Implicit: the iterations per window aimed at (default 4).
+    #[serde(default = "default_adaptive_iterations")]
+    pub iterations: u32,
 }
 
 impl Default for CouplingSection {
@@ -185,6 +211,7 @@ impl Default for CouplingSection {
             max_force_growth: default_growth(),
             allow_beyond_limits: false,
             implicit: None,
+            adaptive: None,
         }
     }
 }
@@ -268,6 +295,8 @@ pub struct Scene {
     pub allow_beyond_limits: bool,
     /// The implicit schedule's settings (`schedule = "implicit"`).
     pub implicit: Option<crate::schedule::implicit::ImplicitSettings>,
+    /// Adaptive windows (`[coupling.adaptive]`).
+    pub adaptive: Option<crate::schedule::adaptive::AdaptiveSettings>,
     pub out_dir: PathBuf,
     pub trace_interfaces: bool,
     pub checkpoint_every: u64,
@@ -429,9 +458,91 @@ impl Scene {
                 return Err(err_at(text.find("[coupling]").unwrap_or(0), "coupling.window", "missing: the coupling window Δt^C in s (for a single solver: the reporting interval)".into()));
             }
         };
+        let adaptive = match &c.adaptive {
+            None => None,
+            Some(a) => {
+                let at = a.span().start;
+                let v = a.get_ref();
+                let (min, max) = (v.min_window.0, v.max_window.0);
+                if !matches!(
+                    schedule,
+                    ScheduleKind::Jit
+                        | ScheduleKind::Predictive
+                        | ScheduleKind::Concurrent
+                        | ScheduleKind::Implicit
+                ) {
+                    return Err(err_at(
+                        at,
+                        "coupling.adaptive",
+                        "adaptive windows need a two-way schedule: jit, predictive, concurrent or implicit".into(),
+                    ));
+                }
+                if !(min > 0.0 && min <= max) {
+                    return Err(err_at(
+                        at,
+                        "coupling.adaptive.min_window",
+                        format!(
+                            "must be positive and at most max_window = {}, got {}",
+                            format_seconds(max),
+                            format_seconds(min)
+                        ),
+                    ));
+                }
+                let steps = window / min;
+                let n = steps.round();
+                if n < 1.0
+                    || (steps - n).abs() > 1e-6 * n
+                    || !(n as u64).is_power_of_two()
+                    || window > max * (1.0 + 1e-9)
+                {
+                    return Err(err_at(
+                        c.window.as_ref().map_or(at, |w| w.span().start),
+                        "coupling.window",
+                        format!(
+                            "with adaptive windows the first window must be min_window × 2^i and at most max_window = {}: got {} (min_window = {})",
+                            format_seconds(max),
+                            format_seconds(window),
+                            format_seconds(min)
+                        ),
+                    ));
+                }
+                let whole = end_time / min;
+                if (whole - whole.round()).abs() > 1e-6 * whole.max(1.0) {
+                    return Err(err_at(
+                        at,
+                        "coupling.adaptive.min_window",
+                        format!(
+                            "end_time / min_window = {} / {} = {whole:.6} is not a whole number",
+                            format_seconds(end_time),
+                            format_seconds(min)
+                        ),
+                    ));
+                }
+                if !(v.tolerance > 0.0 && v.tolerance < 1.0) {
+                    return Err(err_at(
+                        at,
+                        "coupling.adaptive.tolerance",
+                        format!("must lie in (0, 1), got {}", v.tolerance),
+                    ));
+                }
+                if v.iterations == 0 {
+                    return Err(err_at(
+                        at,
+                        "coupling.adaptive.iterations",
+                        "must be at least 1".into(),
+                    ));
+                }
+                Some(crate::schedule::adaptive::AdaptiveSettings {
+                    min_window: min,
+                    max_window: max,
+                    tolerance: v.tolerance,
+                    iterations: v.iterations,
+                })
+            }
+        };
         let ratio = end_time / window;
         let windows = ratio.round();
-        if (ratio - windows).abs() > 1e-9 * ratio.max(1.0) {
+        if adaptive.is_none() && (ratio - windows).abs() > 1e-9 * ratio.max(1.0) {
             let w = c.window.as_ref().expect("checked above");
             return Err(err_at(
                 w.span().start,
@@ -608,6 +719,7 @@ impl Scene {
             max_force_growth: c.max_force_growth,
             allow_beyond_limits: c.allow_beyond_limits,
             implicit,
+            adaptive,
             out_dir,
             trace_interfaces: raw.output.trace_interfaces,
             checkpoint_every: raw.output.checkpoint_every,

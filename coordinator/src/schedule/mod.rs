@@ -19,6 +19,7 @@ use proto::{AdvanceWindow, CommandBody, Label, MotionRule};
 use crate::scene::ScheduleKind;
 use crate::units::format_seconds;
 
+pub mod adaptive;
 mod alone;
 mod concurrent;
 pub mod implicit;
@@ -73,14 +74,55 @@ pub type Publications = Vec<(String, Label, implicit::Estimate)>;
 /// The windows of a run.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Windows {
-    /// Δt^C (s).
+    /// Δt^C (s) of the current window.
     pub length: f64,
+    /// Fixed windows: how many.
     pub count: u64,
+    /// Adaptive windows: the clock and the controller.
+    #[serde(default)]
+    pub adaptive: Option<Box<Clock>>,
+}
+
+/// Adaptive windows' time, counted in ladder bases (adaptive.rs), and the controller.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+pub struct Clock {
+    pub controller: adaptive::Adaptive,
+    /// The current window's start and length, and the end time, in bases.
+    start: u64,
+    steps: u64,
+    total: u64,
+    /// What the nodes reported of the current window, and its iterations (implicit).
+    observation: adaptive::Observation,
+    iterations: u32,
+    /// Changes of the window length not yet taken by the run loop.
+    changes: Vec<WindowChange>,
+}
+
+/// A change of the adaptive window's length, for the log.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct WindowChange {
+    /// The first window with the new length.
+    pub window: u64,
+    pub from: f64,
+    pub to: f64,
+    pub reason: String,
 }
 
 impl Windows {
+    /// Window k is the last (k: the current window).
     pub fn is_last(&self, k: u64) -> bool {
-        k + 1 == self.count
+        match &self.adaptive {
+            Some(c) => c.start + c.steps >= c.total,
+            None => k + 1 == self.count,
+        }
+    }
+
+    /// The start time of window k (k: the current window).
+    pub fn t_start(&self, k: u64) -> f64 {
+        match &self.adaptive {
+            Some(c) => c.start as f64 * c.controller.settings.min_window,
+            None => k as f64 * self.length,
+        }
     }
 
     /// `advance_window` of window k, iteration 0, with input and output labelled by window.
@@ -95,7 +137,7 @@ impl Windows {
         CommandBody::AdvanceWindow(AdvanceWindow {
             window: k,
             iteration: 0,
-            t_start: k as f64 * self.length,
+            t_start: self.t_start(k),
             dt: self.length,
             motion,
             input: input.map(Label::window),
@@ -256,6 +298,9 @@ pub struct SchedulerConfig {
     pub interfaces: Vec<(String, usize)>,
     /// ... and their reference positions, concatenated.
     pub positions: Vec<f64>,
+    /// Adaptive windows: the settings, the limits the nodes reported, and the end time (s);
+    /// `window` is then the first window's length.
+    pub adaptive: Option<(adaptive::AdaptiveSettings, adaptive::Limits, f64)>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -333,11 +378,62 @@ impl Scheduler {
                 )))
             }
         };
+        let clock = match cfg.adaptive {
+            None => None,
+            Some(_) if !matches!(
+                cfg.kind,
+                ScheduleKind::Jit
+                    | ScheduleKind::Predictive
+                    | ScheduleKind::Concurrent
+                    | ScheduleKind::Implicit
+            ) =>
+            {
+                return Err(format!(
+                    "adaptive windows need a two-way schedule (jit, predictive, concurrent or implicit), not {:?}",
+                    cfg.kind
+                ))
+            }
+            Some(_) if cfg.implicit.as_ref().is_some_and(|i| i.concurrent) => {
+                return Err("adaptive windows do not work with the concurrent implicit scheme yet (its position estimate extrapolates the last window's displacement over a window of the same length)".into())
+            }
+            Some((settings, limits, end_time)) => {
+                let base = settings.min_window;
+                let whole = |t: f64, what: &str| -> Result<u64, String> {
+                    let n = (t / base).round();
+                    if n < 1.0 || (t / base - n).abs() > 1e-6 * n {
+                        return Err(format!(
+                            "{what} = {} is not a whole number of min_window = {}",
+                            format_seconds(t),
+                            format_seconds(base)
+                        ));
+                    }
+                    Ok(n as u64)
+                };
+                let steps = whole(cfg.window, "the first window")?;
+                if !steps.is_power_of_two() {
+                    return Err(format!(
+                        "the first window {} must be min_window × 2^i (min_window = {})",
+                        format_seconds(cfg.window),
+                        format_seconds(base)
+                    ));
+                }
+                Some(Box::new(Clock {
+                    controller: adaptive::Adaptive::new(settings, limits),
+                    start: 0,
+                    steps,
+                    total: whole(end_time, "end_time")?,
+                    observation: Default::default(),
+                    iterations: 0,
+                    changes: Vec::new(),
+                }))
+            }
+        };
         Ok(Scheduler {
             topology: cfg.topology,
             windows: Windows {
                 length: cfg.window,
                 count: cfg.windows,
+                adaptive: clock,
             },
             scheme,
             phase: Phase::Idle,
@@ -375,6 +471,61 @@ impl Scheduler {
     /// Implicit: the windows that ended unconverged (`continue_unconverged`).
     pub fn unconverged_windows(&self) -> &[u64] {
         self.scheme.scheme_ref().unconverged_windows()
+    }
+
+    /// The current window's start time and length (s).
+    pub fn window_span(&self) -> (f64, f64) {
+        (self.windows.t_start(self.window), self.windows.length)
+    }
+
+    /// Adaptive windows: a node's `window_done` numbers of the current window (the last
+    /// iteration's count).
+    pub fn observe(
+        &mut self,
+        node: &str,
+        dem: bool,
+        values: &std::collections::BTreeMap<String, f64>,
+    ) {
+        if let Some(c) = self.windows.adaptive.as_mut() {
+            c.observation.record(node, dem, values);
+        }
+    }
+
+    /// Adaptive windows: the changes of the window length since the last call.
+    pub fn take_window_changes(&mut self) -> Vec<WindowChange> {
+        self.windows
+            .adaptive
+            .as_mut()
+            .map(|c| std::mem::take(&mut c.changes))
+            .unwrap_or_default()
+    }
+
+    /// Adaptive windows: the next window's length, chosen after window k.
+    fn choose_next_window(&mut self, k: u64) {
+        let iterates = self.scheme.scheme_ref().iteration().is_some();
+        let Some(c) = self.windows.adaptive.as_mut() else {
+            return;
+        };
+        c.start += c.steps;
+        let observation = std::mem::take(&mut c.observation);
+        let iterations = std::mem::take(&mut c.iterations);
+        let choice = c.controller.next(
+            c.steps,
+            c.total - c.start,
+            &observation,
+            iterates.then_some(iterations),
+        );
+        let base = c.controller.settings.min_window;
+        if choice.steps != c.steps {
+            c.changes.push(WindowChange {
+                window: k + 1,
+                from: c.steps as f64 * base,
+                to: choice.steps as f64 * base,
+                reason: choice.reason,
+            });
+        }
+        c.steps = choice.steps;
+        self.windows.length = c.steps as f64 * base;
     }
 
     /// Forces to publish as actions.
@@ -491,6 +642,9 @@ impl Scheduler {
         if self.phase != Phase::Outputs {
             return Err(format!("outputs of window {k} given out of turn"));
         }
+        if let Some(c) = self.windows.adaptive.as_mut() {
+            c.iterations += 1;
+        }
         let next = self
             .scheme
             .scheme()
@@ -526,7 +680,10 @@ impl Scheduler {
                     reason: format!("end time reached after {} windows", window + 1),
                 }])
             }
-            Next::Continue => Ok(self.window_actions(window + 1)),
+            Next::Continue => {
+                self.choose_next_window(window);
+                Ok(self.window_actions(window + 1))
+            }
         }
     }
 }
@@ -556,6 +713,7 @@ mod tests {
             implicit: None,
             interfaces: Vec::new(),
             positions: Vec::new(),
+            adaptive: None,
         }
     }
 
@@ -1097,5 +1255,73 @@ mod tests {
                 serde_json::from_str(&serde_json::to_string(&s).unwrap()).unwrap();
             assert_eq!(restored.replay_actions().unwrap(), actions);
         }
+    }
+
+    #[test]
+    fn adaptive_windows_grow_in_free_flight_shrink_under_load_and_end_on_the_end_time() {
+        let mut c = cfg(ScheduleKind::Predictive, 32);
+        c.window = 1e-5;
+        c.adaptive = Some((
+            adaptive::AdaptiveSettings {
+                min_window: 1e-5,
+                max_window: 8e-5,
+                tolerance: 0.05,
+                iterations: 4,
+            },
+            adaptive::Limits {
+                loaded: Some(2.5e-5),
+                radius_min: Some(1e-3),
+            },
+            // 32 bases: the last windows are cut to the time left
+            3.2e-4,
+        ));
+        let mut s = Scheduler::new(c).unwrap();
+        let mut actions = s.start();
+        let mut spans = Vec::new();
+        let mut changes = Vec::new();
+        for k in 0.. {
+            let (_, f) = advance(&actions[0]);
+            assert_eq!(f.window, k);
+            spans.push((f.t_start, f.dt));
+            // windows 3–5 carry contact forces: the stiffness limit holds them at 20 µs
+            let loaded = (3..6).contains(&k);
+            let dem_values = BTreeMap::from([
+                ("interface_work.top".to_string(), 1.0),
+                (
+                    "interface_force_max.top".to_string(),
+                    if loaded { 2.0 } else { 0.0 },
+                ),
+            ]);
+            let fem_values = BTreeMap::from([("interface_work.top".to_string(), 1.0)]);
+            s.observe(FEM, false, &fem_values);
+            s.on_window_done(FEM, k, None).unwrap();
+            s.observe(DEM, true, &dem_values);
+            actions = s.on_window_done(DEM, k, None).unwrap();
+            changes.extend(s.take_window_changes());
+            if matches!(actions[0], Action::Finish { .. }) {
+                break;
+            }
+        }
+        let dts: Vec<f64> = spans.iter().map(|x| x.1).collect();
+        let base = 1e-5;
+        let expected: Vec<f64> = [1, 2, 4, 8, 2, 2, 2, 4, 4, 2, 1]
+            .iter()
+            .map(|&n| n as f64 * base)
+            .collect();
+        assert_eq!(dts, expected, "{spans:?}");
+        // contiguous, exactly on the ladder, ending on the end time
+        for w in spans.windows(2) {
+            assert_eq!(w[1].0, w[0].0 + w[0].1);
+        }
+        let (t, dt) = *spans.last().unwrap();
+        assert!((t + dt - 3.2e-4).abs() < 1e-15);
+        assert!(changes
+            .iter()
+            .any(|c| c.window == 4 && c.reason.contains("stiffness")));
+        assert!(changes.iter().any(|c| c.reason == "the time left"));
+        // the clock and the controller are in the checkpoint
+        let restored: Scheduler =
+            serde_json::from_str(&serde_json::to_string(&s).unwrap()).unwrap();
+        assert_eq!(restored.window_span(), s.window_span());
     }
 }

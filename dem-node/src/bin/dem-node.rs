@@ -228,6 +228,14 @@ impl Solver for DemNode {
                 format!("interface_work.{}", c.name),
                 engine.interface_work(c.mesh),
             );
+            // whether the interface carries contacts now (adaptive windows keep the stiffness
+            // limit while it does): the largest nodal force of the window
+            let largest = engine
+                .interface_forces(c.mesh, c.force_averaging)
+                .chunks_exact(3)
+                .map(|f| (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt())
+                .fold(0.0f64, f64::max);
+            monitor.insert(format!("interface_force_max.{}", c.name), largest);
         }
         if let Some(label) = w.output {
             self.write_forces(p, label).await?;
