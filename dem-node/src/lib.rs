@@ -1419,6 +1419,40 @@ impl Engine {
             .unwrap_or_default()
     }
 
+    /// The shortest time in which a particle not yet near a coupled mesh could reach the
+    /// mesh's bounding box at the present speeds (the particle's radius taken off, the mesh's
+    /// fastest node closing in too), s: 0 when a particle is within reach now, `None` when no
+    /// particle approaches. Adaptive coupling windows shorten ahead of an impact with it.
+    pub fn interface_approach_time(&self, mesh: usize) -> Option<f64> {
+        let m = self.coupled_mesh(mesh)?;
+        let (mut lo, mut hi) = (V3::repeat(f64::INFINITY), V3::repeat(f64::NEG_INFINITY));
+        for p in &m.positions {
+            lo = lo.inf(p);
+            hi = hi.sup(p);
+        }
+        let mesh_speed = m.velocities.iter().fold(0.0f64, |a, v| a.max(v.norm()));
+        let ps = &self.state.particles;
+        let mut best: Option<f64> = None;
+        for i in 0..ps.position.len() {
+            let c = ps.position[i];
+            let nearest = c.sup(&lo).inf(&hi);
+            let gap = c - nearest;
+            let d = gap.norm();
+            let clearance = d - ps.radius[i];
+            let t = if clearance <= 0.0 {
+                0.0
+            } else {
+                let closing = -ps.velocity[i].dot(&(gap / d)) + mesh_speed;
+                if closing <= 0.0 {
+                    continue;
+                }
+                clearance / closing
+            };
+            best = Some(best.map_or(t, |b: f64| b.min(t)));
+        }
+        best
+    }
+
     /// Translational plus rotational kinetic energy, J.
     pub fn kinetic_energy(&self) -> f64 {
         self.state.particles.kinetic_energy()

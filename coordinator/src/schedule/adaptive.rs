@@ -15,7 +15,10 @@
 //! - **the stiffness limit while the interface is loaded** (some interface node carries a force
 //!   in the DEM's report): the schedule's fraction of T_c = 2π √(M/k_c) (limits.rs), with the
 //!   interface mass and contact stiffness the nodes reported when they started. An unloaded
-//!   interface has no contact spring, and the window may grow.
+//!   interface has no contact spring, and the window may grow beyond it,
+//! - **but only to half the time in which the nearest approaching particle could reach the
+//!   unloaded interface's bounding box** (the DEM's `interface_approach_time`): the window
+//!   halves as a particle approaches, so an impact starts in a short window.
 //! - **the speed limit**: the fastest interface node (the FEM's report) may move at most a tenth
 //!   of the smallest particle radius in one window.
 //!
@@ -57,6 +60,10 @@ pub struct Observation {
     pub force: BTreeMap<String, f64>,
     /// Per FEM node: its fastest interface node (m/s).
     pub speed: BTreeMap<String, f64>,
+    /// Per interface: the shortest time in which a particle could reach it (s; absent: none
+    /// approaches).
+    #[serde(default)]
+    pub approach: BTreeMap<String, f64>,
 }
 
 impl Observation {
@@ -75,6 +82,9 @@ impl Observation {
                 }
                 Some(("interface_force_max", i)) => {
                     self.force.insert(i.to_string(), v);
+                }
+                Some(("interface_approach_time", i)) => {
+                    self.approach.insert(i.to_string(), v);
                 }
                 _ if key == "max_interface_speed" => {
                     self.speed.insert(node.to_string(), v);
@@ -174,8 +184,18 @@ impl Adaptive {
             }
         }
         let loaded = obs.force.values().any(|&f| f > 0.0);
-        if let (true, Some(limit)) = (loaded, self.limits.loaded) {
-            candidates.push((limit, "the stiffness limit of a loaded interface".into()));
+        let approach = obs.approach.values().fold(f64::INFINITY, |a, &b| a.min(b));
+        match (loaded, self.limits.loaded) {
+            (true, Some(limit)) => {
+                candidates.push((limit, "the stiffness limit of a loaded interface".into()))
+            }
+            // no particle may reach an unloaded interface within two windows: the window
+            // halves as one approaches, so an impact starts in a short window
+            (false, _) if approach.is_finite() => candidates.push((
+                0.5 * approach,
+                format!("a particle {approach:.3e} s from the interface"),
+            )),
+            _ => {}
         }
         let speed = obs.speed.values().fold(0.0f64, |a, &b| a.max(b));
         if let (Some(r), true) = (self.limits.radius_min, speed > 0.0) {
@@ -255,6 +275,18 @@ mod tests {
         // fast interface nodes: 0.1 r / v = 2e-5 s
         let c = a.next(4, 1000, &obs(Some((1.0, 1.0)), 0.0, 5.0), None);
         assert_eq!(c.steps, 2);
+        // unloaded, a particle 1e-4 s away: half of it on the ladder, 4 bases = 40 µs; one
+        // about to touch: the shortest window
+        let mut o = obs(None, 0.0, 0.0);
+        o.approach.insert("top".into(), 1e-4);
+        let c = a.next(16, 1000, &o, None);
+        assert_eq!(c.steps, 4);
+        o.approach.insert("top".into(), 0.0);
+        assert_eq!(a.next(4, 1000, &o, None).steps, 1);
+        assert!(c.reason.contains("from the interface"), "{}", c.reason);
+        // ... far away: free growth
+        o.approach.insert("top".into(), 1.0);
+        assert_eq!(a.next(4, 1000, &o, None).steps, 8);
         // the last windows end on the end time
         let c = a.next(4, 3, &obs(None, 0.0, 0.0), None);
         assert_eq!((c.steps, c.reason.as_str()), (2, "the time left"));

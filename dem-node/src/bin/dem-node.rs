@@ -236,6 +236,9 @@ impl Solver for DemNode {
                 .map(|f| (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt())
                 .fold(0.0f64, f64::max);
             monitor.insert(format!("interface_force_max.{}", c.name), largest);
+            if let Some(t) = engine.interface_approach_time(c.mesh) {
+                monitor.insert(format!("interface_approach_time.{}", c.name), t);
+            }
         }
         if let Some(label) = w.output {
             self.write_forces(p, label).await?;
