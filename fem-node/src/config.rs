@@ -354,6 +354,10 @@ pub enum Analysis {
         rayleigh_b: f64,
         /// Consistent (default) or lumped mass matrix.
         lumped_mass: bool,
+        /// Longest step (s): a longer coupling window is stepped in equal substeps no longer
+        /// than this (the interface forces held), so the structure's own dynamics do not
+        /// depend on the window (adaptive windows). None: one step per window.
+        max_step: Option<f64>,
     },
     /// Central differences with lumped mass; substeps of `safety` × critical Δt.
     Explicit {
@@ -373,6 +377,8 @@ struct AnalysisTable {
     rayleigh_b: Option<f64>,
     mass: Option<String>,
     safety: Option<f64>,
+    /// s.
+    max_step: Option<f64>,
 }
 
 fn analysis_from(t: AnalysisTable) -> Result<Analysis, String> {
@@ -383,6 +389,7 @@ fn analysis_from(t: AnalysisTable) -> Result<Analysis, String> {
             ("rayleigh_b", t.rayleigh_b.is_some()),
             ("mass", t.mass.is_some()),
             ("safety", t.safety.is_some()),
+            ("max_step", t.max_step.is_some()),
         ];
         for (name, set) in given {
             if set && !allowed.contains(&name) {
@@ -400,7 +407,12 @@ fn analysis_from(t: AnalysisTable) -> Result<Analysis, String> {
             Ok(Analysis::Static)
         }
         "dynamic" => {
-            only(&["alpha_b", "rayleigh_a", "rayleigh_b", "mass"])?;
+            only(&["alpha_b", "rayleigh_a", "rayleigh_b", "mass", "max_step"])?;
+            if let Some(h) = t.max_step {
+                if !(h > 0.0 && h.is_finite()) {
+                    return Err(format!("analysis.max_step: must be a positive time in s, got {h}"));
+                }
+            }
             let lumped = match t.mass.as_deref() {
                 None | Some("consistent") => false,
                 Some("lumped") => true,
@@ -411,6 +423,7 @@ fn analysis_from(t: AnalysisTable) -> Result<Analysis, String> {
                 rayleigh_a: t.rayleigh_a.unwrap_or(0.0),
                 rayleigh_b: t.rayleigh_b.unwrap_or(0.0),
                 lumped_mass: lumped,
+                max_step: t.max_step,
             })
         }
         "explicit" => {
@@ -441,6 +454,7 @@ impl<'de> Deserialize<'de> for Analysis {
                     rayleigh_b: None,
                     mass: None,
                     safety: None,
+                    max_step: None,
                 })
                 .map_err(E::custom)
             }

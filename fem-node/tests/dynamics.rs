@@ -167,3 +167,36 @@ fn explicit_advance_substeps_within_limit() {
         "{w_min:e} vs {w_static:e}"
     );
 }
+
+/// `max_step`: a long window is stepped in equal substeps, so a window of 8 h equals 8 windows
+/// of h (to the round-off of the substep times), and a too-long window alone would not.
+#[test]
+fn max_step_makes_the_structure_independent_of_the_window() {
+    let h = 1e-5;
+    let run = |analysis: &str, windows: &[f64]| -> Vec<f64> {
+        let mut m = small_cantilever(analysis);
+        let mut rng = Rng(7);
+        let u0: Vec<f64> = (0..m.num_dofs()).map(|_| 1e-5 * rng.next()).collect();
+        m.set_initial_conditions(&u0, &vec![0.0; u0.len()]).unwrap();
+        for &w in windows {
+            m.advance(w).unwrap();
+        }
+        m.interface_kinematics().0
+    };
+    let fine = run("[fem.analysis]\ntype = \"dynamic\"", &[h; 16]);
+    let sub = run(
+        "[fem.analysis]\ntype = \"dynamic\"\nmax_step = 1e-5",
+        &[8.0 * h, 4.0 * h, 2.0 * h, h, h],
+    );
+    let coarse = run("[fem.analysis]\ntype = \"dynamic\"", &[8.0 * h, 4.0 * h, 2.0 * h, h, h]);
+    let diff = |a: &[f64], b: &[f64]| {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0f64, f64::max)
+    };
+    let (d_sub, d_coarse) = (diff(&fine, &sub), diff(&fine, &coarse));
+    println!("max_step: {d_sub:.2e} m from 16 steps of h; one step per window: {d_coarse:.2e} m");
+    assert!(d_sub < 1e-15, "{d_sub:e}");
+    assert!(d_coarse > 1e3 * d_sub.max(1e-18), "{d_coarse:e}");
+}

@@ -513,12 +513,22 @@ impl Model {
                 self.static_solve_at(t)?;
                 self.st.time = t;
             }
-            Analysis::Dynamic { .. } => {
-                self.move_supports(self.st.time + dt);
-                if self.nonlinear {
-                    self.bossak_nonlinear(dt)?
-                } else {
-                    self.bossak_step(dt)?
+            Analysis::Dynamic { max_step, .. } => {
+                // equal substeps no longer than max_step, the interface forces held
+                let n = match max_step {
+                    Some(h) if dt > h * (1.0 + 1e-9) => (dt / h * (1.0 - 1e-9)).ceil() as u64,
+                    _ => 1,
+                };
+                let (t0, h) = (self.st.time, dt / n as f64);
+                for i in 1..=n {
+                    let t = if i == n { t0 + dt } else { t0 + i as f64 * h };
+                    self.move_supports(t);
+                    if self.nonlinear {
+                        self.bossak_nonlinear(h)?
+                    } else {
+                        self.bossak_step(h)?
+                    }
+                    self.st.time = t;
                 }
             }
             Analysis::Explicit { safety, .. } => {
