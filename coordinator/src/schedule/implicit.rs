@@ -24,9 +24,9 @@
 //! accelerated as one vector, each part scaled by its norm at the window's first iteration
 //! (forces in N, displacements in m). Converged when both relative residuals are below the
 //! tolerance: ‖f̄ − F‖ ≤ tol max‖f̄‖ and ‖(P − P_k) − u‖ ≤ tol max‖P − P_k‖ (max over the
-//! window's iterations). The next window starts
-//! from the converged forces and the FEM's displacement of this window (a constant-velocity
-//! prediction), from the positions the DEM ended on (P_{k+1} = P_k + u).
+//! window's iterations). The next window starts from the converged forces, from the positions
+//! the DEM ended on (P_{k+1} = P_k + u), and with the FEM's displacement of this window as its
+//! first estimate (a constant-velocity prediction).
 
 use std::collections::BTreeMap;
 
