@@ -188,7 +188,10 @@ fn max_step_makes_the_structure_independent_of_the_window() {
         "[fem.analysis]\ntype = \"dynamic\"\nmax_step = 1e-5",
         &[8.0 * h, 4.0 * h, 2.0 * h, h, h],
     );
-    let coarse = run("[fem.analysis]\ntype = \"dynamic\"", &[8.0 * h, 4.0 * h, 2.0 * h, h, h]);
+    let coarse = run(
+        "[fem.analysis]\ntype = \"dynamic\"",
+        &[8.0 * h, 4.0 * h, 2.0 * h, h, h],
+    );
     let diff = |a: &[f64], b: &[f64]| {
         a.iter()
             .zip(b)

@@ -158,6 +158,9 @@ pub struct Implicit {
     /// window's iterations so far: the residuals' denominators.
     #[serde(default)]
     largest: (f64, f64),
+    /// Concurrent: `largest` when the scales were set (a part whose norm was 0 was scaled by 1).
+    #[serde(default)]
+    scaled_from: (f64, f64),
 }
 
 impl Implicit {
@@ -175,6 +178,7 @@ impl Implicit {
             start: if concurrent { positions } else { Vec::new() },
             scales: None,
             largest: (0.0, 0.0),
+            scaled_from: (0.0, 0.0),
             omega: settings.relaxation,
             settings,
             interfaces,
@@ -290,21 +294,53 @@ impl Implicit {
         let (z, h, residual, h_displacement) = if self.settings.concurrent {
             let p = self.gather(&outputs.positions, "position", k, j)?;
             let hu: Vec<f64> = p.iter().zip(&self.start).map(|(a, b)| a - b).collect();
-            let (sf, su) = *self.scales.get_or_insert_with(|| {
-                let scale = |v: &[f64]| match norm(v) {
-                    n if n > 0.0 => n,
-                    _ => 1.0,
-                };
-                (scale(&h_forces), scale(&hu))
-            });
+            self.largest.1 = self.largest.1.max(norm(&hu));
+            // each part scaled by its largest norm in the window so far (1 while it is zero);
+            // when a part appears (forces as a contact closes) or grows past twice its scale,
+            // the scales are renewed and the acceleration restarts from a relaxation step, its
+            // history being in the old scales
+            let wanted = (
+                if self.largest.0 > 0.0 {
+                    self.largest.0
+                } else {
+                    1.0
+                },
+                if self.largest.1 > 0.0 {
+                    self.largest.1
+                } else {
+                    1.0
+                },
+            );
+            let renew = match self.scales {
+                None => true,
+                Some((sf, su)) => {
+                    let (f0, u0) = self.scaled_from;
+                    (f0 == 0.0 && self.largest.0 > 0.0)
+                        || (u0 == 0.0 && self.largest.1 > 0.0)
+                        || wanted.0 > 2.0 * sf
+                        || wanted.1 > 2.0 * su
+                }
+            };
+            if renew {
+                if self.scales.is_some() {
+                    self.restart_acceleration(k);
+                }
+                self.scales = Some(wanted);
+                self.scaled_from = self.largest;
+            }
+            let (sf, su) = self.scales.expect("set above");
             let join = |f: &[f64], u: &[f64]| -> Vec<f64> {
                 f.iter()
                     .map(|x| x / sf)
                     .chain(u.iter().map(|x| x / su))
                     .collect()
             };
-            self.largest.1 = self.largest.1.max(norm(&hu));
             let position_residual = relative(&hu, &self.displacement, self.largest.1);
+            tracing::debug!(
+                "window {k} iteration {j}: force residual {force_residual:.3e}, displacement residual {position_residual:.3e} (‖f̄‖ {:.3e} N, ‖P − P_k‖ {:.3e} m, scales {sf:.3e}, {su:.3e})",
+                norm(&h_forces),
+                norm(&hu)
+            );
             (
                 join(&self.estimate, &self.displacement),
                 join(&h_forces, &hu),
@@ -373,9 +409,16 @@ impl Implicit {
         let next = match self.settings.acceleration {
             Acceleration::IqnIls => {
                 if let (Some(rp), Some(hp)) = (&self.last_residual, &self.last_output) {
-                    let dr = r.iter().zip(rp).map(|(a, b)| a - b).collect();
+                    let dr: Vec<f64> = r.iter().zip(rp).map(|(a, b)| a - b).collect();
                     let dh = h.iter().zip(hp).map(|(a, b)| a - b).collect();
-                    self.secants.push((k, dr, dh));
+                    if norm(&dr) <= 1e-9 * norm(&r) {
+                        // the nodes answered as before (to round-off): the secant explains
+                        // nothing new and the least-squares step would repeat itself; start
+                        // again from a relaxation step
+                        self.secants.retain(|(w, ..)| *w != k);
+                    } else {
+                        self.secants.push((k, dr, dh));
+                    }
                 }
                 let oldest = k.saturating_sub(self.settings.reuse as u64);
                 self.secants.retain(|(w, ..)| *w >= oldest);
@@ -409,6 +452,14 @@ impl Implicit {
             sends,
             relaxed: self.estimates(label, w.length),
         })
+    }
+
+    /// Forgets this window's acceleration history (secants, last residual, Aitken's ω).
+    fn restart_acceleration(&mut self, k: u64) {
+        self.secants.retain(|(w, ..)| *w != k);
+        self.last_residual = None;
+        self.last_output = None;
+        self.omega = self.settings.relaxation;
     }
 
     /// The window is over (`forces`: the users' last; `displacement`: concurrent, the FEM's

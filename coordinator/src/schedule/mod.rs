@@ -1324,4 +1324,53 @@ mod tests {
             serde_json::from_str(&serde_json::to_string(&s).unwrap()).unwrap();
         assert_eq!(restored.window_span(), s.window_span());
     }
+
+    #[test]
+    fn concurrent_implicit_converges_when_a_contact_closes_within_the_window() {
+        // the structure sags by u_free under its own weight plus c F; the particle pushes only
+        // once the estimated surface has come within reach (u < −gap): the forces appear from
+        // nothing in a later iteration, and the acceleration must not explain them away
+        let (c, kappa, gap, u_free) = (2e-6, 1e5, 7e-5, -1e-4);
+        let mut cfg = implicit_cfg(implicit::Acceleration::IqnIls, 30, false);
+        cfg.positions = vec![0.0; 6];
+        if let Some(i) = cfg.implicit.as_mut() {
+            i.concurrent = true;
+        }
+        let mut s = Scheduler::new(cfg).unwrap();
+        let mut actions = s.start();
+        let mut contact_at = None;
+        for j in 0..30u32 {
+            let (f, x) = estimates(&actions);
+            let x = x.unwrap();
+            let h: Vec<f64> = x
+                .iter()
+                .map(|&u| if u < -gap { kappa * (-gap - u) } else { 0.0 })
+                .collect();
+            if contact_at.is_none() && h.iter().any(|&v| v > 0.0) {
+                contact_at = Some(j);
+            }
+            let p: Vec<f64> = f.iter().map(|&f| u_free + c * f).collect();
+            s.on_window_done(FEM, 0, None).unwrap();
+            s.on_window_done(DEM, 0, None).unwrap();
+            actions = s
+                .on_outputs(&implicit::Outputs {
+                    forces: BTreeMap::from([("top".to_string(), h)]),
+                    positions: BTreeMap::from([("top".to_string(), p)]),
+                })
+                .unwrap_or_else(|e| panic!("{e}"));
+            if s.window() == 1 {
+                let (f, _) = estimates(&actions);
+                let exact = kappa * (-gap - (-c * kappa * gap + u_free) / (1.0 + c * kappa));
+                assert!(
+                    contact_at.unwrap() > 0,
+                    "the contact closes in a later iteration"
+                );
+                for v in f {
+                    assert!((v - exact).abs() < 1e-5 * exact, "{v} vs {exact}");
+                }
+                return;
+            }
+        }
+        panic!("no convergence in 30 iterations");
+    }
 }
