@@ -61,6 +61,33 @@ pub fn summary(out_dir: &Path) -> serde_json::Value {
     serde_json::from_str(&text).expect("summary.json is JSON")
 }
 
+/// scenes/plate.toml with another schedule (and force averaging) and window; `tables` are
+/// appended (e.g. `[coupling.implicit]`).
+pub fn plate_with(schedule: &str, window: &str, tables: &str) -> String {
+    std::fs::read_to_string(root().join("scenes/plate.toml"))
+        .expect("scenes/plate.toml")
+        .replace(
+            "schedule = \"predictive\"",
+            &format!("schedule = \"{schedule}\"\nforce_averaging = true"),
+        )
+        .replace("window = \"0.1 ms\"", &format!("window = \"{window}\""))
+        + "\n"
+        + tables
+}
+
+/// The column `name` of a CSV text, as strings.
+pub fn csv_column(text: &str, name: &str) -> Vec<String> {
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().expect("a header").split(',').collect();
+    let i = header
+        .iter()
+        .position(|h| *h == name)
+        .unwrap_or_else(|| panic!("no {name} in {header:?}"));
+    lines
+        .map(|l| l.split(',').nth(i).expect("a full row").to_string())
+        .collect()
+}
+
 /// Writes a scene into `dir` (with the other files it names copied from `scenes/`).
 pub fn write_scene(dir: &Path, name: &str, text: &str) -> PathBuf {
     let p = dir.join(name);

@@ -3,30 +3,16 @@
 //! scheme (both compute each iteration at once, the DEM on the coordinator's estimate of the
 //! structure's motion).
 
-use cosim_tests::{root, run_scene};
+use cosim_tests::run_scene;
 
-/// The plate scene with another schedule and window; `tables` are appended.
 fn plate(schedule: &str, window: &str, tables: &str) -> String {
-    std::fs::read_to_string(root().join("scenes/plate.toml"))
-        .unwrap()
-        .replace(
-            "schedule = \"predictive\"",
-            &format!("schedule = \"{schedule}\"\nforce_averaging = true"),
-        )
-        .replace("window = \"0.1 ms\"", &format!("window = \"{window}\""))
-        + "\n"
-        + tables
+    cosim_tests::plate_with(schedule, window, tables)
 }
 
 fn column(csv: &str, name: &str) -> Vec<f64> {
-    let mut lines = csv.lines();
-    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    let i = header
+    cosim_tests::csv_column(csv, name)
         .iter()
-        .position(|h| *h == name)
-        .unwrap_or_else(|| panic!("no {name} in {header:?}"));
-    lines
-        .map(|l| l.split(',').nth(i).unwrap().parse().unwrap())
+        .map(|v| v.parse().unwrap())
         .collect()
 }
 

@@ -1,32 +1,10 @@
 //! The implicit schedule end to end (issue 19, first part): each window iterated with rollbacks
 //! until the interface forces are a fixed point, the acceleration in the coordinator.
 
-use cosim_tests::{root, run_scene};
+use cosim_tests::{csv_column, run_scene};
 
-/// The plate scene with another schedule and window; `tables` are appended (e.g.
-/// `[coupling.implicit]`).
 fn plate(schedule: &str, window: &str, tables: &str) -> String {
-    std::fs::read_to_string(root().join("scenes/plate.toml"))
-        .unwrap()
-        .replace(
-            "schedule = \"predictive\"",
-            &format!("schedule = \"{schedule}\"\nforce_averaging = true"),
-        )
-        .replace("window = \"0.1 ms\"", &format!("window = \"{window}\""))
-        + "\n"
-        + tables
-}
-
-fn csv_column(text: &str, name: &str) -> Vec<String> {
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    let i = header
-        .iter()
-        .position(|h| *h == name)
-        .unwrap_or_else(|| panic!("no {name} in {header:?}"));
-    lines
-        .map(|l| l.split(',').nth(i).unwrap().to_string())
-        .collect()
+    cosim_tests::plate_with(schedule, window, tables)
 }
 
 #[test]

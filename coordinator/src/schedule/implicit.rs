@@ -161,6 +161,10 @@ pub struct Implicit {
     /// Concurrent: `largest` when the scales were set (a part whose norm was 0 was scaled by 1).
     #[serde(default)]
     scaled_from: (f64, f64),
+    /// Concurrent: the window length `displacement` was measured over (0: the run's start);
+    /// a window of another length (adaptive windows) scales it, constant velocity.
+    #[serde(default)]
+    displacement_for: f64,
 }
 
 impl Implicit {
@@ -179,6 +183,7 @@ impl Implicit {
             scales: None,
             largest: (0.0, 0.0),
             scaled_from: (0.0, 0.0),
+            displacement_for: 0.0,
             omega: settings.relaxation,
             settings,
             interfaces,
@@ -380,7 +385,7 @@ impl Implicit {
             relaxation: omega,
         });
         if residual <= self.settings.tolerance {
-            self.next_window(h_forces, h_displacement);
+            self.next_window(h_forces, h_displacement, w.length);
             return Ok(Iterate::Converged);
         }
         if j + 1 >= self.settings.max_iterations {
@@ -403,7 +408,7 @@ impl Implicit {
                 ));
             }
             self.unconverged.push(k);
-            self.next_window(h_forces, h_displacement);
+            self.next_window(h_forces, h_displacement, w.length);
             return Ok(Iterate::Converged);
         }
         let next = match self.settings.acceleration {
@@ -465,11 +470,12 @@ impl Implicit {
     /// The window is over (`forces`: the users' last; `displacement`: concurrent, the FEM's
     /// last): the next one starts from those forces, from the positions the users ended on,
     /// and with the FEM's displacement as its first estimate.
-    fn next_window(&mut self, forces: Vec<f64>, displacement: Option<Vec<f64>>) {
+    fn next_window(&mut self, forces: Vec<f64>, displacement: Option<Vec<f64>>, length: f64) {
         self.estimate = forces;
         if let Some(u) = displacement {
             self.start = add(&self.start, &self.displacement);
             self.displacement = u;
+            self.displacement_for = length;
         }
         self.scales = None;
         self.largest = (0.0, 0.0);
@@ -587,8 +593,17 @@ impl Scheme for Implicit {
         out
     }
 
-    /// Iteration 0's estimate, before window k's commands.
-    fn window_publications(&self, w: &Windows, k: u64) -> Publications {
+    /// Iteration 0's estimate, before window k's commands (concurrent: the last window's
+    /// displacement, scaled to this window's length).
+    fn window_publications(&mut self, w: &Windows, k: u64) -> Publications {
+        if self.settings.concurrent
+            && self.displacement_for > 0.0
+            && self.displacement_for != w.length
+        {
+            let ratio = w.length / self.displacement_for;
+            self.displacement.iter_mut().for_each(|u| *u *= ratio);
+            self.displacement_for = w.length;
+        }
         self.estimates(Label::window(k), w.length)
     }
 

@@ -164,7 +164,7 @@ pub trait Scheme {
     fn window(&self, t: &Topology, w: &Windows, k: u64) -> Sends;
     /// Estimates the coordinator publishes with window k's commands (an implicit scheme's
     /// first).
-    fn window_publications(&self, _w: &Windows, _k: u64) -> Publications {
+    fn window_publications(&mut self, _w: &Windows, _k: u64) -> Publications {
         Vec::new()
     }
     /// Commands before window 0.
@@ -393,9 +393,6 @@ impl Scheduler {
                     cfg.kind
                 ))
             }
-            Some(_) if cfg.implicit.as_ref().is_some_and(|i| i.concurrent) => {
-                return Err("adaptive windows do not work with the concurrent implicit scheme yet (its position estimate extrapolates the last window's displacement over a window of the same length)".into())
-            }
             Some((settings, limits, end_time)) => {
                 let base = settings.min_window;
                 let whole = |t: f64, what: &str| -> Result<u64, String> {
@@ -556,11 +553,7 @@ impl Scheduler {
         self.window = k;
         self.window_kinetic_energy = None;
         // e.g. an implicit scheme's first force estimate goes out with the window's commands
-        let mut out = Self::publish(
-            self.scheme
-                .scheme_ref()
-                .window_publications(&self.windows, k),
-        );
+        let mut out = Self::publish(self.scheme.scheme().window_publications(&self.windows, k));
         let sends = self
             .scheme
             .scheme()
@@ -1372,5 +1365,57 @@ mod tests {
             }
         }
         panic!("no convergence in 30 iterations");
+    }
+
+    #[test]
+    fn concurrent_implicit_scales_its_first_position_estimate_to_an_adaptive_window() {
+        // window 0 (10 µs) converges on the linear pair with the interface unloaded by the
+        // controller's reading (no interface_force_max): window 1 is twice as long, and its
+        // first position estimate moves twice the FEM's displacement of window 0
+        let (c, kappa) = (2e-6, 1e5);
+        let g = [10.0, -20.0, 30.0, 5.0, 0.0, -15.0];
+        let mut cfg = implicit_cfg(implicit::Acceleration::IqnIls, 30, false);
+        cfg.positions = vec![0.0; 6];
+        cfg.window = 1e-5;
+        cfg.adaptive = Some((
+            adaptive::AdaptiveSettings {
+                min_window: 1e-5,
+                max_window: 8e-5,
+                tolerance: 0.05,
+                iterations: 30,
+            },
+            adaptive::Limits::default(),
+            3e-5,
+        ));
+        if let Some(i) = cfg.implicit.as_mut() {
+            i.concurrent = true;
+        }
+        let mut s = Scheduler::new(cfg).unwrap();
+        let mut actions = s.start();
+        let mut p = Vec::new();
+        while s.window() == 0 {
+            let (f, x) = estimates(&actions);
+            let x = x.unwrap();
+            p = f.iter().map(|&f| c * f).collect();
+            let h: Vec<f64> = (0..6).map(|i| g[i] - kappa * x[i]).collect();
+            s.on_window_done(FEM, 0, None).unwrap();
+            s.on_window_done(DEM, 0, None).unwrap();
+            actions = s
+                .on_outputs(&implicit::Outputs {
+                    forces: BTreeMap::from([("top".to_string(), h)]),
+                    positions: BTreeMap::from([("top".to_string(), p.clone())]),
+                })
+                .unwrap();
+        }
+        assert_eq!(s.window_span().1, 2e-5);
+        let (_, x) = estimates(&actions);
+        let x = x.unwrap();
+        for i in 0..6 {
+            // start of window 1 ≈ p (converged), plus twice window 0's displacement p
+            assert!(
+                (x[i] - 3.0 * p[i]).abs() < 1e-5 * p[i].abs().max(1e-12),
+                "{x:?} {p:?}"
+            );
+        }
     }
 }
