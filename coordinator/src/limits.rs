@@ -99,6 +99,8 @@ pub struct SceneFacts {
     pub window: f64,
     pub has_dem: bool,
     pub has_fem: bool,
+    /// Adaptive windows: (min_window, max_window).
+    pub adaptive: Option<(f64, f64)>,
 }
 
 impl From<&Scene> for SceneFacts {
@@ -108,6 +110,7 @@ impl From<&Scene> for SceneFacts {
             window: s.window,
             has_dem: s.has_dem,
             has_fem: s.has_fem,
+            adaptive: s.adaptive.as_ref().map(|a| (a.min_window, a.max_window)),
         }
     }
 }
@@ -241,6 +244,22 @@ pub fn assess(
                     format!("{name}: no window limit (T_c = {tc:.3e} s)"),
                 ),
             }
+            if let (Some((min, max)), Some(limit)) =
+                (scene.adaptive, window_limit(scene.schedule, d, f))
+            {
+                push(
+                    Level::Info,
+                    "adaptive windows",
+                    format!(
+                        "Δt^C from {min:.3e} s to {max:.3e} s (min_window × 2^i); while an interface is loaded the controller keeps it ≤ the {name} limit {limit:.3e} s{}",
+                        if min > limit {
+                            " — but min_window is above it: the loaded windows will exceed the limit"
+                        } else {
+                            ""
+                        }
+                    ),
+                );
+            }
             // every schedule's limit, for choosing one
             let all: Vec<String> = [
                 ScheduleKind::Concurrent,
@@ -293,6 +312,7 @@ mod tests {
             window,
             has_dem: true,
             has_fem: true,
+            adaptive: None,
         }
     }
 
@@ -368,6 +388,21 @@ mod tests {
         // one-way coupling has no window limit
         let o = assess(&facts(ScheduleKind::OneWay, 1.0), Some(&d), Some(&f));
         assert!(o.iter().all(|x| x.level != Level::Refuse), "{o:?}");
+        // adaptive windows: the range and the limit the controller keeps while loaded
+        let mut a = facts(ScheduleKind::Predictive, 1e-6);
+        a.adaptive = Some((1e-6, 1.0));
+        let all = assess(&a, Some(&d), Some(&f));
+        let l = all
+            .iter()
+            .find(|x| x.limit == "adaptive windows")
+            .expect("the adaptive range");
+        let p_limit = PREDICTIVE_WINDOW_FRACTION * tc;
+        assert!(l.message.contains(&format!("{p_limit:.3e}")), "{l}");
+        a.adaptive = Some((1.0, 2.0));
+        let all = assess(&a, Some(&d), Some(&f));
+        assert!(all
+            .iter()
+            .any(|x| x.message.contains("min_window is above it")));
         // ... and whatever the schedule, the check lists every schedule's limit
         for k in [
             ScheduleKind::OneWay,
@@ -398,6 +433,7 @@ mod tests {
             window: 1e-3,
             has_dem: true,
             has_fem: false,
+            adaptive: None,
         };
         let d = |tc: f64| {
             m(&[
