@@ -42,59 +42,6 @@ pub enum ScheduleKind {
     Concurrent,
 }
 
-fn default_tolerance() -> f64 {
-    1e-3
-}
-fn default_max_iterations() -> u32 {
-    30
-}
-fn default_relaxation() -> f64 {
-    0.5
-}
-
-/// `[coupling.implicit]`.
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ImplicitSection {
-    /// Relative residual ‖f̄ − F‖/max‖f̄‖ (max over the window's iterations) below which a
-    /// window is converged (default 1e-3).
-    #[serde(default = "default_tolerance")]
-    pub tolerance: f64,
-    /// Most iterations of a window (default 30).
-    #[serde(default = "default_max_iterations")]
-    pub max_iterations: u32,
-    /// `aitken` (default), `constant` or `iqn-ils` (the default with `concurrent = true`:
-    /// Aitken's single ω barely damps a Jacobi pair).
-    #[serde(default)]
-    pub acceleration: Option<crate::schedule::implicit::Acceleration>,
-    /// ω of `constant`, the first ω of each window with `aitken` (default 0.5).
-    #[serde(default = "default_relaxation")]
-    pub relaxation: f64,
-    /// Go on (with a warning) when a window does not converge in `max_iterations`, instead of
-    /// stopping the run with the residual history.
-    #[serde(default)]
-    pub continue_unconverged: bool,
-    /// `iqn-ils`: the secants of this many earlier windows are reused (default 0: contacts
-    /// open and close between windows, and older secants mislead; docs/coupling.md).
-    #[serde(default = "default_reuse")]
-    pub reuse: u32,
-    /// `iqn-ils`: the QR filter (a secant nearly dependent on newer ones is dropped; default
-    /// 1e-3).
-    #[serde(default = "default_filter")]
-    pub filter: f64,
-    /// Both solvers compute each iteration at once (block Jacobi), the DEM on the
-    /// coordinator's estimate of the structure's motion; the acceleration acts on forces and
-    /// positions together (default false: FEM first, then the DEM on the FEM's motion).
-    #[serde(default)]
-    pub concurrent: bool,
-}
-
-use crate::schedule::implicit::{default_filter, default_reuse};
-
-fn default_acceleration() -> crate::schedule::implicit::Acceleration {
-    crate::schedule::implicit::Acceleration::Aitken
-}
-
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SceneSection {
@@ -169,7 +116,7 @@ pub struct CouplingSection {
     #[serde(default)]
     pub allow_beyond_limits: bool,
     /// The implicit schedule's settings.
-    pub implicit: Option<Spanned<ImplicitSection>>,
+    pub implicit: Option<Spanned<crate::schedule::implicit::ImplicitSettings>>,
     /// Adaptive windows (`window` is then the first one).
     pub adaptive: Option<Spanned<AdaptiveSection>>,
 }
@@ -653,31 +600,9 @@ impl Scene {
                         format!("must lie in (0, 1), got {}", v.filter),
                     ));
                 }
-                Some(crate::schedule::implicit::ImplicitSettings {
-                    tolerance: v.tolerance,
-                    max_iterations: v.max_iterations,
-                    acceleration: v.acceleration.unwrap_or(if v.concurrent {
-                        crate::schedule::implicit::Acceleration::IqnIls
-                    } else {
-                        default_acceleration()
-                    }),
-                    relaxation: v.relaxation,
-                    continue_unconverged: v.continue_unconverged,
-                    reuse: v.reuse,
-                    filter: v.filter,
-                    concurrent: v.concurrent,
-                })
+                Some(v.clone())
             }
-            (None, ScheduleKind::Implicit) => Some(crate::schedule::implicit::ImplicitSettings {
-                tolerance: default_tolerance(),
-                max_iterations: default_max_iterations(),
-                acceleration: default_acceleration(),
-                relaxation: default_relaxation(),
-                continue_unconverged: false,
-                reuse: default_reuse(),
-                filter: default_filter(),
-                concurrent: false,
-            }),
+            (None, ScheduleKind::Implicit) => Some(Default::default()),
             (Some(i), _) => {
                 return Err(err_at(
                     i.span().start,

@@ -51,14 +51,14 @@ pub enum Acceleration {
     IqnIls,
 }
 
-pub(crate) fn default_reuse() -> u32 {
+fn default_reuse() -> u32 {
     // contacts open and close between windows: older secants mislead (plate, tolerance 1e-4:
     // reuse 0 converges in 440 iterations over 300 windows, reuse 2 needs up to 22 in one
     // window, reuse 8 diverges at the first impacts)
     0
 }
 
-pub(crate) fn default_filter() -> f64 {
+fn default_filter() -> f64 {
     1e-3
 }
 
@@ -83,29 +83,79 @@ pub struct Outputs {
     pub positions: BTreeMap<String, Vec<f64>>,
 }
 
-/// The scene's settings of the implicit scheme.
+fn default_tolerance() -> f64 {
+    1e-3
+}
+fn default_max_iterations() -> u32 {
+    30
+}
+fn default_relaxation() -> f64 {
+    0.5
+}
+
+/// `[coupling.implicit]`: the scene's settings of the implicit scheme (the scene file's table
+/// as it is; scene.rs checks the ranges).
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ImplicitSettings {
-    /// Relative force residual ‖f̄ − F‖ / max‖f̄‖ (the largest of the window's iterations) below
-    /// which a window is converged.
+    /// Relative residual ‖f̄ − F‖ / max‖f̄‖ (max over the window's iterations) below which a
+    /// window is converged (default 1e-3).
+    #[serde(default = "default_tolerance")]
     pub tolerance: f64,
+    /// Most iterations of a window (default 30).
+    #[serde(default = "default_max_iterations")]
     pub max_iterations: u32,
-    pub acceleration: Acceleration,
-    /// ω of `constant`, ω_0 of `aitken`.
+    /// `aitken`, `constant` or `iqn-ils`; absent: [`ImplicitSettings::acceleration`]'s default.
+    #[serde(default)]
+    pub acceleration: Option<Acceleration>,
+    /// ω of `constant`, the first ω of each window with `aitken` (default 0.5).
+    #[serde(default = "default_relaxation")]
     pub relaxation: f64,
-    /// At `max_iterations` without convergence: go on with the last estimate (a warning)
-    /// instead of stopping the run.
+    /// Go on (with a warning) when a window does not converge in `max_iterations`, instead of
+    /// stopping the run with the residual history.
+    #[serde(default)]
     pub continue_unconverged: bool,
-    /// IQN-ILS: the secants of this many earlier windows are kept.
+    /// IQN-ILS: the secants of this many earlier windows are reused (default 0: contacts open
+    /// and close between windows, and older secants mislead; docs/coupling.md).
     #[serde(default = "default_reuse")]
     pub reuse: u32,
     /// IQN-ILS: a secant whose part orthogonal to the newer ones is below this fraction of its
-    /// length is dropped (QR filter).
+    /// length is dropped (QR filter; default 1e-3).
     #[serde(default = "default_filter")]
     pub filter: f64,
-    /// Both solvers compute each iteration at once (module doc).
+    /// Both solvers compute each iteration at once (block Jacobi), the DEM on the
+    /// coordinator's estimate of the structure's motion; the acceleration acts on forces and
+    /// positions together (module doc; default false: FEM first, then the DEM on the FEM's
+    /// motion).
     #[serde(default)]
     pub concurrent: bool,
+}
+
+impl Default for ImplicitSettings {
+    fn default() -> Self {
+        ImplicitSettings {
+            tolerance: default_tolerance(),
+            max_iterations: default_max_iterations(),
+            acceleration: None,
+            relaxation: default_relaxation(),
+            continue_unconverged: false,
+            reuse: default_reuse(),
+            filter: default_filter(),
+            concurrent: false,
+        }
+    }
+}
+
+impl ImplicitSettings {
+    /// The acceleration: the scene's, else Aitken, or IQN-ILS for the concurrent scheme
+    /// (Aitken's single ω barely damps a Jacobi pair).
+    pub fn acceleration(&self) -> Acceleration {
+        self.acceleration.unwrap_or(if self.concurrent {
+            Acceleration::IqnIls
+        } else {
+            Acceleration::Aitken
+        })
+    }
 }
 
 /// An iteration's outcome, for windows.csv and the summary.
@@ -256,26 +306,20 @@ impl Implicit {
             window: k,
             iteration: j,
         });
-        let mut out = Vec::new();
-        for f in &t.fems {
-            let mut a = w.advance(k, MotionRule::Linear, None, None, false);
-            if let CommandBody::AdvanceWindow(a) = &mut a {
-                a.iteration = j;
-                a.input = label;
-                a.output = label;
-            }
-            out.push((f.clone(), a));
-        }
-        if let Some(d) = &t.dem {
-            let mut a = w.advance(k, MotionRule::Linear, None, None, false);
-            if let CommandBody::AdvanceWindow(a) = &mut a {
-                a.iteration = j;
-                a.input = label;
-                a.output = label;
-            }
-            out.push((d.clone(), a));
-        }
-        out
+        // every node reads and writes the data of (k, j): the FEM nodes first, then the DEM
+        t.fems
+            .iter()
+            .chain(&t.dem)
+            .map(|n| {
+                let mut a = w.advance(k, MotionRule::Linear, None, None, false);
+                if let CommandBody::AdvanceWindow(a) = &mut a {
+                    a.iteration = j;
+                    a.input = label;
+                    a.output = label;
+                }
+                (n.clone(), a)
+            })
+            .collect()
     }
 
     /// The nodes' outputs of window k, iteration j arrived: converged, or the next iteration's
@@ -361,7 +405,7 @@ impl Implicit {
             )
         };
         let r: Vec<f64> = h.iter().zip(&z).map(|(a, b)| a - b).collect();
-        let omega = match (self.settings.acceleration, &self.last_residual) {
+        let omega = match (self.settings.acceleration(), &self.last_residual) {
             (Acceleration::Aitken, Some(prev)) => {
                 let (mut num, mut den) = (0.0, 0.0);
                 for (a, b) in r.iter().zip(prev) {
@@ -411,7 +455,7 @@ impl Implicit {
             self.next_window(h_forces, h_displacement, w.length);
             return Ok(Iterate::Converged);
         }
-        let next = match self.settings.acceleration {
+        let next = match self.settings.acceleration() {
             Acceleration::IqnIls => {
                 if let (Some(rp), Some(hp)) = (&self.last_residual, &self.last_output) {
                     let dr: Vec<f64> = r.iter().zip(rp).map(|(a, b)| a - b).collect();

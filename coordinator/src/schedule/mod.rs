@@ -971,12 +971,9 @@ mod tests {
         c.implicit = Some(implicit::ImplicitSettings {
             tolerance: 1e-6,
             max_iterations,
-            acceleration,
-            relaxation: 0.5,
+            acceleration: Some(acceleration),
             continue_unconverged,
-            reuse: 0,
-            filter: 1e-3,
-            concurrent: false,
+            ..Default::default()
         });
         c
     }
