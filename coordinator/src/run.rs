@@ -294,7 +294,11 @@ impl Run<'_> {
             }
             let left = deadline.saturating_duration_since(Instant::now());
             if left.is_zero() {
-                bail!("timed out waiting for {what}");
+                bail!(
+                    "timed out waiting for {what} (a window may take coupling.window_timeout \
+                     = {} s: raise it if the nodes need longer on this machine)",
+                    self.scene.window_timeout
+                );
             }
             match self
                 .link

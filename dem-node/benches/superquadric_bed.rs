@@ -11,10 +11,12 @@
 //!    narrow phase (every listed pair's detection, timed on its own on the settled state).
 //!    The material is softened (E = 10 MPa instead of 50 GPa, Δt = 4 µs: the cost per step does not
 //!    depend on it, the number of steps to settle does). SQ_BED_THREADS (default: all),
-//!    SQ_BED_SETTLE (settling steps, default 40,000 = 0.16 s).
+//!    SQ_BED_SETTLE (settling steps, default 40,000 = 0.16 s), SQ_BED_CACHE (file: the settled
+//!    state is restored from it when it holds a snapshot of this engine version, else written
+//!    there after settling; one file per SQ_BED_COUNT).
 
 use dem::hertz_mindlin::V3;
-use dem::narrow::superquadric::{detect, SearchSettings, SearchStats, SqBody};
+use dem::narrow::superquadric::{detect, detect_tracked, SearchSettings, SearchStats, SqBody};
 use dem::{parse_scene_section, Engine};
 use std::time::Instant;
 
@@ -132,7 +134,22 @@ fn bed(count: usize) {
         e.time_step()
     );
     let t = Instant::now();
-    e.advance(settle).expect("settling");
+    let cache = std::env::var("SQ_BED_CACHE").ok();
+    let cached = cache
+        .as_ref()
+        .and_then(|path| std::fs::read(path).ok())
+        .is_some_and(|bytes| e.restore(&bytes).is_ok());
+    if cached {
+        println!(
+            "  settled state restored from {}",
+            cache.as_deref().unwrap_or("")
+        );
+    } else {
+        e.advance(settle).expect("settling");
+        if let Some(path) = &cache {
+            std::fs::write(path, e.snapshot()).expect("write the settled-state cache");
+        }
+    }
     println!(
         "  settled {settle} steps in {:.1} s: kinetic energy {:.3e} J, {} contacts, {} wall \
          contacts, packing fraction {}",
@@ -159,7 +176,12 @@ fn bed(count: usize) {
         p.id.iter().enumerate().map(|(k, &i)| (i, k)).collect();
     let mut jobs = Vec::new();
     for (ids, c) in e.shaped_pair_contacts() {
-        jobs.push((idx[&ids[0]], idx[&ids[1]], c.normal));
+        jobs.push((
+            idx[&ids[0]],
+            idx[&ids[1]],
+            c.normal,
+            c.touching().then_some(c.overlap),
+        ));
     }
     let body = |k: usize| {
         let s = p.template(k).expect("superquadric").superquadric;
@@ -174,21 +196,22 @@ fn bed(count: usize) {
     let t = Instant::now();
     let mut iterations = 0u64;
     for _ in 0..rounds {
-        for &(a, b, guess) in &jobs {
+        for &(a, b, guess, tracked) in &jobs {
             let mk = |k: usize| SqBody {
                 shape: &bodies[k].0,
                 position: bodies[k].1,
                 rotation: bodies[k].2,
             };
             let mut st = SearchStats::default();
-            let g = (guess != V3::zeros()).then_some(guess);
-            std::hint::black_box(detect(
-                &mk(a),
-                &mk(b),
-                g,
-                &SearchSettings::default(),
-                &mut st,
-            ));
+            let settings = SearchSettings::default();
+            // as the engine does: the temporal-coherence update for pairs that touched
+            std::hint::black_box(match tracked {
+                Some(overlap) => detect_tracked(&mk(a), &mk(b), guess, overlap, &settings, &mut st),
+                None => {
+                    let g = (guess != V3::zeros()).then_some(guess);
+                    detect(&mk(a), &mk(b), g, &settings, &mut st)
+                }
+            });
             iterations += st.iterations as u64;
         }
     }

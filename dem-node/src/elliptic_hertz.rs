@@ -22,6 +22,7 @@
 //! elliptic integrals of modulus e (fields `k`, `ee`).
 
 use crate::hertz_mindlin::V3;
+use crate::shape::superquadric::hypot_fast;
 use nalgebra::Matrix3;
 use std::f64::consts::{FRAC_PI_2, PI};
 
@@ -259,7 +260,7 @@ pub fn relative_curvature(k1: [[f64; 2]; 2], k2: [[f64; 2]; 2]) -> RelativeCurva
     let q = 0.25 * (k1[0][1] + k1[1][0] + k2[0][1] + k2[1][0]);
     let mean = 0.5 * (p + r);
     let u = 0.5 * (p - r);
-    let h = u.hypot(q);
+    let h = hypot_fast(u, q);
     if h == 0.0 {
         return RelativeCurvature {
             a: mean,
@@ -271,7 +272,7 @@ pub fn relative_curvature(k1: [[f64; 2]; 2], k2: [[f64; 2]; 2]) -> RelativeCurva
     // eigenvector of the larger eigenvalue: (u + h, q) or (q, h − u), whichever has no
     // cancellation (both ∝ (cos θ, sin θ), tan 2θ = q/u)
     let (vx, vy) = if u >= 0.0 { (u + h, q) } else { (q, h - u) };
-    let len = vx.hypot(vy);
+    let len = hypot_fast(vx, vy);
     let e_y = [vx / len, vy / len];
     RelativeCurvature {
         a: mean - h,

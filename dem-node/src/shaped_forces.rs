@@ -13,7 +13,9 @@ use crate::elliptic_hertz::{
 };
 use crate::hertz_mindlin::V3;
 use crate::materials::{PairParams, ShapedDamping};
-use crate::narrow::superquadric::{detect, Detection, SearchSettings, SearchStats, SqBody};
+use crate::narrow::superquadric::{
+    detect, detect_tracked, Detection, SearchSettings, SearchStats, SqBody,
+};
 use crate::narrow::superquadric_patch::patch_contact;
 use crate::particles::Particles;
 use crate::resolve_forces::ForceContext;
@@ -188,9 +190,14 @@ fn pair_contact(
             rotation: b.rotation,
         },
     );
-    let guess = (old.normal != V3::zeros()).then_some(old.normal);
     let mut stats = SearchStats::default();
-    let found = detect(&ba, &bb, guess, &SearchSettings::default(), &mut stats);
+    let settings = SearchSettings::default();
+    let found = if old.touching() {
+        detect_tracked(&ba, &bb, old.normal, old.overlap, &settings, &mut stats)
+    } else {
+        let guess = (old.normal != V3::zeros()).then_some(old.normal);
+        detect(&ba, &bb, guess, &settings, &mut stats)
+    };
     let c = match found {
         Detection::Separated { normal } => {
             return ShapedContact {

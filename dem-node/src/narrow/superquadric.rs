@@ -26,7 +26,7 @@
 //! search + Nelder–Mead; fixed directions keep the result deterministic).
 
 use crate::hertz_mindlin::V3;
-use crate::shape::superquadric::{tangent_basis, Superquadric};
+use crate::shape::superquadric::{hypot_fast, tangent_basis, Superquadric};
 use nalgebra::Matrix3;
 
 /// A superquadric body placed in space: centre and rotation T (body → global).
@@ -164,7 +164,7 @@ fn evaluate(b1: &SqBody, b2: &SqBody, x21: &V3, c: V3, with_jacobian: bool) -> E
 /// c rotated by the tangent step (Δα1, Δα2): the exponential map on the unit sphere.
 #[inline]
 pub(crate) fn rotate_normal(c: &V3, t: &(V3, V3), da: [f64; 2]) -> V3 {
-    let angle = da[0].hypot(da[1]);
+    let angle = hypot_fast(da[0], da[1]);
     if angle == 0.0 {
         return *c;
     }
@@ -182,7 +182,7 @@ pub(crate) fn shifted_newton_step(g: [f64; 3], s: f64, dt: [f64; 2]) -> Option<[
         return None;
     }
     let da = [(c * dt[0] - b * dt[1]) / det, (a * dt[1] - b * dt[0]) / det];
-    let len = da[0].hypot(da[1]);
+    let len = hypot_fast(da[0], da[1]);
     Some(if len > 0.5 {
         [da[0] * 0.5 / len, da[1] * 0.5 / len]
     } else {
@@ -206,16 +206,17 @@ fn newton(
     max_iter: u32,
     iterations: &mut u32,
 ) -> Run {
-    let mut e = evaluate(b1, b2, x21, c0, false);
+    // one evaluation with the Jacobian blocks: they cost arithmetic only, the surface points
+    // cost the transcendental functions, which a separate test would pay twice
+    let mut e = evaluate(b1, b2, x21, c0, true);
     if e.s() > 0.0 {
         return Run::Separated(e.c);
     }
-    e = evaluate(b1, b2, x21, c0, true);
     let mut mu = 0.0f64;
     for _ in 0..max_iter {
         let (t1, t2) = e.t;
         let dt = [e.d.dot(&t1), e.d.dot(&t2)];
-        if dt[0].hypot(dt[1]) <= tol {
+        if hypot_fast(dt[0], dt[1]) <= tol {
             return Run::Converged(e);
         }
         *iterations += 1;
@@ -237,7 +238,7 @@ fn newton(
             let ok = step.is_some();
             let da = step.unwrap_or([0.0, 0.0]);
             let cn = rotate_normal(&e.c, &e.t, da);
-            let trial = evaluate(b1, b2, x21, cn, false);
+            let trial = evaluate(b1, b2, x21, cn, true);
             if trial.s() > 0.0 {
                 return Run::Separated(cn);
             }
@@ -249,7 +250,7 @@ fn newton(
                 && (trial.f() < e.f()
                     || (trial.residual() < e.residual() && trial.f() <= e.f() * (1.0 + 1e-9)));
             if better || tries > 40 {
-                e = evaluate(b1, b2, x21, cn, true);
+                e = trial;
                 mu *= 0.25;
                 if mu < 1e-6 * floor {
                     mu = 0.0;
@@ -265,7 +266,7 @@ fn newton(
         }
     }
     let (t1, t2) = e.t;
-    if e.d.dot(&t1).hypot(e.d.dot(&t2)) <= tol {
+    if hypot_fast(e.d.dot(&t1), e.d.dot(&t2)) <= tol {
         Run::Converged(e)
     } else {
         Run::NotConverged(e)
@@ -305,6 +306,57 @@ fn restart_directions(axis: &V3, restart: u32) -> impl Iterator<Item = V3> {
     })
 }
 
+/// The contact of a converged evaluation, in global coordinates.
+fn finish(b1: &SqBody, e: Eval) -> SqContact {
+    let (t1, t2) = e.t;
+    SqContact {
+        normal: e.c,
+        p1: e.p1 + b1.position,
+        p2: e.p2 + b1.position,
+        overlap: -e.s(),
+        t1,
+        t2,
+        radii1: e.g1,
+        radii2: e.g2,
+    }
+}
+
+/// Wellmann's temporal-coherence update (SEED-SPEC §1.5, W 3.60–3.61) for a pair that
+/// touched in the last step with `normal` and `overlap`: Newton from that normal, and a
+/// converged root is taken without the acceptance test (the minimum condition is dropped),
+/// unless the overlap jumped (more than twice the last one plus 1 % of the smaller body's
+/// inscribed radius: the sign of a wrong root, W p. 38), in which case, as on non-convergence,
+/// the full search [`detect`] decides. A separating iterate ends it as in the full search
+/// (3.59: a separating plane is a proof).
+pub fn detect_tracked(
+    b1: &SqBody,
+    b2: &SqBody,
+    normal: V3,
+    overlap: f64,
+    settings: &SearchSettings,
+    stats: &mut SearchStats,
+) -> Detection {
+    let x21 = b2.position - b1.position;
+    let scale = 0.5 * (b1.shape.bounding_radius() + b2.shape.bounding_radius());
+    let tol = settings.tolerance * scale;
+    let size = b1.shape.inscribed_radius().min(b2.shape.inscribed_radius());
+    match newton(
+        b1,
+        b2,
+        &x21,
+        normal,
+        tol,
+        settings.max_iterations,
+        &mut stats.iterations,
+    ) {
+        Run::Separated(n) => Detection::Separated { normal: n },
+        Run::Converged(e) if -e.s() <= 2.0 * overlap.max(0.0) + 0.01 * size => {
+            Detection::Contact(finish(b1, e))
+        }
+        _ => detect(b1, b2, Some(normal), settings, stats),
+    }
+}
+
 /// Detects the contact of two superquadrics. `guess` is the last step's normal of this pair
 /// (temporal coherence), else the centre line x2 − x1 is the start (exact for spheres).
 pub fn detect(
@@ -322,19 +374,7 @@ pub fn detect(
     };
     let scale = 0.5 * (b1.shape.bounding_radius() + b2.shape.bounding_radius());
     let tol = settings.tolerance * scale;
-    let finish = |e: Eval| {
-        let (t1, t2) = e.t;
-        SqContact {
-            normal: e.c,
-            p1: e.p1 + b1.position,
-            p2: e.p2 + b1.position,
-            overlap: -e.s(),
-            t1,
-            t2,
-            radii1: e.g1,
-            radii2: e.g2,
-        }
-    };
+    let finish = |e: Eval| finish(b1, e);
     let start = guess.filter(|g| g.norm_squared() > 0.0).unwrap_or(centre);
     let mut best: Option<Eval> = None;
     let keep = |e: Eval, best: &mut Option<Eval>| {

@@ -1019,7 +1019,7 @@ impl Ctx<'_> {
             let t = tangent_basis(&e.c);
             let d = e.r - v;
             let dt = [d.dot(&t.0), d.dot(&t.1)];
-            let res = dt[0].hypot(dt[1]);
+            let res = crate::shape::superquadric::hypot_fast(dt[0], dt[1]);
             if res <= ntol {
                 return (e, true);
             }

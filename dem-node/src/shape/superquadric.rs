@@ -95,11 +95,26 @@ pub struct SurfacePoint {
 
 #[inline(always)]
 fn log_sum_exp(a: f64, b: f64) -> (f64, f64, f64) {
-    // returns (ln(e^a + e^b), weight of a, weight of b)
-    let m = a.max(b);
-    let (ea, eb) = ((a - m).exp(), (b - m).exp());
-    let s = ea + eb;
-    (m + s.ln(), ea / s, eb / s)
+    // returns (ln(e^a + e^b), weight of a, weight of b); the larger term's exponential is 1,
+    // so one exp and one ln
+    let (m, small) = if a >= b { (a, b) } else { (b, a) };
+    let e = (small - m).exp();
+    let w_small = e / (1.0 + e);
+    let w_large = 1.0 - w_small;
+    // ln(1 + e) by ln: its absolute error (~1e-16) is that of m itself, and ln is cheaper
+    let l = m + (1.0 + e).ln();
+    if a >= b {
+        (l, w_large, w_small)
+    } else {
+        (l, w_small, w_large)
+    }
+}
+
+/// √(a² + b²) without `hypot`'s guard against overflow (libm's is several times slower); for
+/// the curvature and angle values of the contact geometry, far inside ±1e150.
+#[inline(always)]
+pub fn hypot_fast(a: f64, b: f64) -> f64 {
+    (a * a + b * b).sqrt()
 }
 
 impl Superquadric {
@@ -318,7 +333,7 @@ pub fn tangent_basis(n: &V3) -> (V3, V3) {
 pub fn sym2_eigen(a: f64, b: f64, c: f64) -> (f64, f64, [f64; 2], [f64; 2]) {
     let mean = 0.5 * (a + c);
     let half_diff = 0.5 * (a - c);
-    let rad = half_diff.hypot(b);
+    let rad = hypot_fast(half_diff, b);
     let (lo, hi) = (mean - rad, mean + rad);
     if rad == 0.0 {
         return (lo, hi, [1.0, 0.0], [0.0, 1.0]);
@@ -329,7 +344,7 @@ pub fn sym2_eigen(a: f64, b: f64, c: f64) -> (f64, f64, [f64; 2], [f64; 2]) {
     } else {
         [b, rad - half_diff]
     };
-    let norm = v[0].hypot(v[1]);
+    let norm = hypot_fast(v[0], v[1]);
     let v_large = [v[0] / norm, v[1] / norm];
     let v_small = [-v_large[1], v_large[0]];
     (lo, hi, v_small, v_large)
