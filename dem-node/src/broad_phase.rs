@@ -15,7 +15,7 @@
 
 use crate::config::CentreBox;
 use crate::hertz_mindlin::V3;
-use crate::particles::{Particles, SPHERE};
+use crate::particles::{Orientation, Particles, SPHERE};
 use crate::triangle_contact::distance_squared;
 use crate::walls::{Mesh, Plane};
 use rayon::prelude::*;
@@ -74,6 +74,18 @@ pub struct ShapedContact {
     pub force: V3,
     /// γ of the elliptic Hertz law (W 3.19) used in the last evaluation (0 when not touching).
     pub stiffness: f64,
+    /// A separated pair's proof of separation, kept for the next steps (*not in thesis*):
+    /// H = h1(c) + h2(−c), the support functions of the two bodies in the directions of the
+    /// separating `normal` c at the last evaluation (the gap is then c·(x2 − x1) − H), and the
+    /// two orientations then. NaN when there is none (touching, new, or no plane found).
+    #[serde(default = "nan")]
+    pub support: f64,
+    #[serde(default)]
+    pub frames: [Orientation; 2],
+}
+
+fn nan() -> f64 {
+    f64::NAN
 }
 
 impl ShapedContact {
@@ -84,6 +96,8 @@ impl ShapedContact {
         point: V3::new(0.0, 0.0, 0.0),
         force: V3::new(0.0, 0.0, 0.0),
         stiffness: 0.0,
+        support: f64::NAN,
+        frames: [Orientation::new_unchecked(nalgebra::Quaternion::new(1.0, 0.0, 0.0, 0.0)); 2],
     };
 
     pub fn touching(&self) -> bool {
@@ -99,6 +113,8 @@ impl ShapedContact {
             point: self.point,
             force: -self.force,
             stiffness: self.stiffness,
+            support: self.support,
+            frames: [self.frames[1], self.frames[0]],
         }
     }
 }

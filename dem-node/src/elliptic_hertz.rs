@@ -133,7 +133,7 @@ pub fn hertz_ellipse(a_curv: f64, b_curv: f64) -> Option<HertzEllipse> {
     } else {
         MAX_CURVATURE_RATIO
     };
-    let (s, p) = solve_kappa(ratio);
+    let (s, p) = fitted_kappa(ratio);
     let root_sum = sum.sqrt();
     // (3.19) with E(e), K(e) (W4): γ = (2/3) π κ √(E/(K³ (A+B)))
     let kappa = s.exp();
@@ -574,10 +574,110 @@ fn solve_kappa(r: f64) -> (f64, Elliptic) {
     (s, Elliptic::from_log_kappa(s))
 }
 
+/// Breaks of the pieces of [`KappaFit`] in L = ln(B/A) (the last is ln [`MAX_CURVATURE_RATIO`]
+/// with a margin).
+const FIT_BREAKS: [f64; 6] = [0.0, 0.5, 1.5, 4.0, 10.0, 23.1];
+/// Chebyshev terms per piece.
+const FIT_TERMS: usize = 30;
+
+/// ln κ as a function of L = ln(B/A), fitted once (*not in thesis*): on each piece of
+/// [`FIT_BREAKS`] a Chebyshev series of ln κ / L (smooth, from 2/3 at L → 0 to ½ at L → ∞)
+/// interpolating the Newton solution [`solve_kappa`] at the Chebyshev nodes. The contact law
+/// evaluates it instead of iterating: one AGM instead of three or four (the test bounds the
+/// relative error of κ at 1e-14 × max(1, ln κ); the bodies' curvatures are not known to that).
+struct KappaFit {
+    coef: [[f64; FIT_TERMS]; FIT_BREAKS.len() - 1],
+}
+
+impl KappaFit {
+    fn new() -> KappaFit {
+        let n = FIT_TERMS;
+        let mut coef = [[0.0; FIT_TERMS]; FIT_BREAKS.len() - 1];
+        for (piece, c) in coef.iter_mut().enumerate() {
+            let (lo, hi) = (FIT_BREAKS[piece], FIT_BREAKS[piece + 1]);
+            // values at the Chebyshev nodes x_k = cos(π(k + ½)/n), then the discrete
+            // cosine transform
+            let values: Vec<f64> = (0..n)
+                .map(|k| {
+                    let x = (PI * (k as f64 + 0.5) / n as f64).cos();
+                    let l = 0.5 * (lo + hi) + 0.5 * (hi - lo) * x;
+                    solve_kappa(l.exp()).0 / l
+                })
+                .collect();
+            for (j, cj) in c.iter_mut().enumerate() {
+                let sum: f64 = (0..n)
+                    .map(|k| values[k] * (PI * j as f64 * (k as f64 + 0.5) / n as f64).cos())
+                    .sum();
+                *cj = 2.0 / n as f64 * sum;
+            }
+            c[0] *= 0.5;
+        }
+        KappaFit { coef }
+    }
+
+    /// ln κ at L = ln(B/A) ∈ (0, ln MAX_CURVATURE_RATIO].
+    #[inline]
+    fn log_kappa(&self, l: f64) -> f64 {
+        let piece = FIT_BREAKS[1..FIT_BREAKS.len() - 1]
+            .iter()
+            .take_while(|&&b| l >= b)
+            .count();
+        let (lo, hi) = (FIT_BREAKS[piece], FIT_BREAKS[piece + 1]);
+        let x = (2.0 * l - lo - hi) / (hi - lo);
+        // Clenshaw
+        let c = &self.coef[piece];
+        let (mut b1, mut b2) = (0.0, 0.0);
+        for &cj in c[1..].iter().rev() {
+            let b0 = 2.0 * x * b1 - b2 + cj;
+            b2 = b1;
+            b1 = b0;
+        }
+        l * (x * b1 - b2 + c[0])
+    }
+}
+
+/// [`solve_kappa`] by the fit: s = ln κ at ratio r and K, E, B, D at exactly that s.
+#[inline]
+fn fitted_kappa(r: f64) -> (f64, Elliptic) {
+    static FIT: std::sync::OnceLock<KappaFit> = std::sync::OnceLock::new();
+    let target = (r - 1.0).ln_1p();
+    if target <= 0.0 {
+        return (0.0, Elliptic::new(0.0, 1.0));
+    }
+    let s = FIT.get_or_init(KappaFit::new).log_kappa(target);
+    (s, Elliptic::from_log_kappa(s))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::generate::SplitMix64;
+
+    #[test]
+    fn the_kappa_fit_matches_the_newton_root() {
+        let mut rng = SplitMix64::new(7);
+        let mut worst: f64 = 0.0;
+        let mut at = 0.0;
+        for k in 0..200_000 {
+            // uniform in ln r, plus the region near r = 1
+            let l = if k % 4 == 0 {
+                1e-6 * 10f64.powf(6.0 * rng.uniform())
+            } else {
+                MAX_CURVATURE_RATIO.ln() * rng.uniform()
+            };
+            let r = l.exp();
+            let (exact, _) = solve_kappa(r);
+            let (fit, _) = fitted_kappa(r);
+            // |Δ ln κ| is the relative error of κ; ln κ itself is known to a few ulps
+            let e = (fit - exact).abs() / exact.max(1.0);
+            if e > worst {
+                worst = e;
+                at = l;
+            }
+        }
+        println!("worst |Δ ln κ| / max(1, ln κ): {worst:.2e} at ln(B/A) = {at}");
+        assert!(worst < 1e-14, "{worst:e} at ln(B/A) = {at}");
+    }
 
     fn rel(x: f64, y: f64) -> f64 {
         ((x - y) / y).abs()
@@ -806,11 +906,14 @@ mod tests {
         let mut worst: f64 = 0.0;
         for t in TABLE_HP {
             let got = row_of(t[0]);
+            // the Newton root to round-off; the law's fitted κ to 1e-14 × max(1, ln κ) (so
+            // the values derived from it to 1e-13)
+            assert!(rel(kappa_from_ratio(t[0]), t[1]) < 2e-14, "B/A = {}", t[0]);
             for j in 1..9 {
                 let err = rel(got[j], t[j]);
                 worst = worst.max(err);
                 assert!(
-                    err < 2e-14,
+                    err < 1e-13,
                     "B/A={} {}: {} vs {}",
                     t[0],
                     names[j],
@@ -832,7 +935,8 @@ mod tests {
         for t in TABLE_HP {
             let h = hertz_ellipse(1.0, t[0]).unwrap();
             let g = 2.0 / 3.0 * PI * (h.d_e / (h.curv_a * h.k.powi(3))).sqrt();
-            assert!(rel(g, h.gamma) < 1e-14);
+            // (an identity at the root of (3.17): to the fitted κ's 1e-14 × ln κ)
+            assert!(rel(g, h.gamma) < 1e-13);
         }
     }
 
@@ -947,7 +1051,7 @@ mod tests {
             assert!(v.iter().all(|x| x.is_finite()), "{h:?}");
             assert!(h.curv_a > 0.0 && h.curv_a <= h.curv_b);
         }
-        assert_eq!(flat.kappa, kappa_from_ratio(MAX_CURVATURE_RATIO));
+        assert!(rel(flat.kappa, kappa_from_ratio(MAX_CURVATURE_RATIO)) < 1e-13);
         assert_eq!(flat.sum_ab, 2.0);
         // δ ≤ 0: no force, no stiffness, no NaN
         let lam = MindlinConstants::new(1e9, 0.3, 2e9, 0.25);

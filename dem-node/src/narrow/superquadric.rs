@@ -81,9 +81,11 @@ pub struct SqContact {
 #[derive(Debug, Clone, Copy)]
 pub enum Detection {
     /// A separating plane was found; `normal` is its direction (the warm start for the next
-    /// step).
+    /// step) and `gap` = c·d > 0 the distance of the two tangent planes of normal c (NaN when
+    /// the search gave up without one).
     Separated {
         normal: V3,
+        gap: f64,
     },
     Contact(SqContact),
 }
@@ -192,7 +194,7 @@ pub(crate) fn shifted_newton_step(g: [f64; 3], s: f64, dt: [f64; 2]) -> Option<[
 
 /// Result of one Newton run from a start direction.
 enum Run {
-    Separated(V3),
+    Separated(V3, f64),
     Converged(Eval),
     NotConverged(Eval),
 }
@@ -210,7 +212,7 @@ fn newton(
     // cost the transcendental functions, which a separate test would pay twice
     let mut e = evaluate(b1, b2, x21, c0, true);
     if e.s() > 0.0 {
-        return Run::Separated(e.c);
+        return Run::Separated(e.c, e.s());
     }
     let mut mu = 0.0f64;
     for _ in 0..max_iter {
@@ -240,7 +242,7 @@ fn newton(
             let cn = rotate_normal(&e.c, &e.t, da);
             let trial = evaluate(b1, b2, x21, cn, true);
             if trial.s() > 0.0 {
-                return Run::Separated(cn);
+                return Run::Separated(cn, trial.s());
             }
             // near the solution f changes by less than its round-off (|d_t|² ≪ ε|d|²): then
             // the decrease of the residual |d_t| decides
@@ -349,7 +351,7 @@ pub fn detect_tracked(
         settings.max_iterations,
         &mut stats.iterations,
     ) {
-        Run::Separated(n) => Detection::Separated { normal: n },
+        Run::Separated(normal, gap) => Detection::Separated { normal, gap },
         Run::Converged(e) if -e.s() <= 2.0 * overlap.max(0.0) + 0.01 * size => {
             Detection::Contact(finish(b1, e))
         }
@@ -391,7 +393,7 @@ pub fn detect(
         settings.max_iterations,
         &mut stats.iterations,
     ) {
-        Run::Separated(n) => return Detection::Separated { normal: n },
+        Run::Separated(normal, gap) => return Detection::Separated { normal, gap },
         Run::Converged(e) if accepted(b1, b2, &x21, &e) => return Detection::Contact(finish(e)),
         Run::Converged(e) => {
             stats.local_minima += 1;
@@ -410,7 +412,10 @@ pub fn detect(
         for c in restart_directions(&centre, ring) {
             let e = evaluate(b1, b2, &x21, c, false);
             if e.s() > 0.0 {
-                return Detection::Separated { normal: c };
+                return Detection::Separated {
+                    normal: c,
+                    gap: e.s(),
+                };
             }
             let key = (!accepted(b1, b2, &x21, &e), e.f());
             if pick.is_none_or(|(k, _)| key < k) {
@@ -427,7 +432,7 @@ pub fn detect(
             settings.max_iterations,
             &mut stats.iterations,
         ) {
-            Run::Separated(n) => return Detection::Separated { normal: n },
+            Run::Separated(normal, gap) => return Detection::Separated { normal, gap },
             Run::Converged(e) if accepted(b1, b2, &x21, &e) => {
                 return Detection::Contact(finish(e))
             }
@@ -444,6 +449,9 @@ pub fn detect(
     stats.failed = true;
     match best {
         Some(e) => Detection::Contact(finish(e)),
-        None => Detection::Separated { normal: centre },
+        None => Detection::Separated {
+            normal: centre,
+            gap: f64::NAN,
+        },
     }
 }
