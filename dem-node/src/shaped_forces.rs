@@ -484,3 +484,89 @@ pub fn shaped_forces(lists: &mut NeighbourLists, p: &mut Particles, ctx: &ForceC
             }
         });
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::generate::{random_orientation, random_unit_vector, SplitMix64};
+
+    /// The skip of a separated pair is a proof: whenever `still_separated` says so after the
+    /// bodies moved and turned, the full search finds them separated too; and it does skip
+    /// small motions (else it would be useless).
+    #[test]
+    fn a_skipped_pair_is_separated() {
+        let mut rng = SplitMix64::new(11);
+        let (mut skipped, mut trials) = (0, 0);
+        for _ in 0..20_000 {
+            let mut p = Particles::default();
+            let mut shape = || {
+                let r = V3::new(
+                    0.5 + rng.uniform(),
+                    0.5 + rng.uniform(),
+                    0.5 + rng.uniform(),
+                );
+                Superquadric::new(r, 0.3 + 1.4 * rng.uniform(), 0.3 + 1.4 * rng.uniform()).unwrap()
+            };
+            let (s1, s2) = (shape(), shape());
+            let reach = s1.bounding_radius() + s2.bounding_radius();
+            let x2 = random_unit_vector(&mut rng) * reach * (0.6 + 0.4 * rng.uniform());
+            for (x, s) in [(V3::zeros(), s1), (x2, s2)] {
+                let q = random_orientation(&mut rng);
+                p.push_superquadric(x, V3::zeros(), V3::zeros(), q, s, 1000.0, 0);
+            }
+            fn view(p: &Particles, k: usize) -> SqBody<'_> {
+                SqBody {
+                    shape: &p.templates[k].superquadric,
+                    position: p.position[k],
+                    rotation: p.orientation[k].to_rotation_matrix().into_inner(),
+                }
+            }
+            let detect_now = |p: &Particles| {
+                let mut st = SearchStats::default();
+                detect(
+                    &view(p, 0),
+                    &view(p, 1),
+                    None,
+                    &SearchSettings::default(),
+                    &mut st,
+                )
+            };
+            let Detection::Separated { normal, gap } = detect_now(&p) else {
+                continue;
+            };
+            let x21 = p.position[1] - p.position[0];
+            let old = ShapedContact {
+                normal,
+                support: normal.dot(&x21) - gap,
+                frames: [p.orientation[0], p.orientation[1]],
+                ..ShapedContact::NONE
+            };
+            // a random motion from far below to beyond what the bound allows: up to the gap,
+            // rotations up to 0.3 rad
+            let scale = 10f64.powf(-4.0 * rng.uniform());
+            for k in 0..2 {
+                p.position[k] += random_unit_vector(&mut rng) * (gap * scale);
+                let axis = nalgebra::Unit::new_normalize(random_unit_vector(&mut rng));
+                let turn = crate::particles::Orientation::from_axis_angle(
+                    &axis,
+                    0.3 * scale * rng.uniform(),
+                );
+                p.orientation[k] = turn * p.orientation[k];
+            }
+            trials += 1;
+            let x21 = p.position[1] - p.position[0];
+            if still_separated(&p, 0, 1, &x21, &old) {
+                skipped += 1;
+                match detect_now(&p) {
+                    Detection::Separated { gap, .. } => assert!(gap > 0.0),
+                    Detection::Contact(c) => panic!("skipped a pair in contact: {c:?}"),
+                }
+            }
+        }
+        println!("{skipped} of {trials} moved separated pairs skipped");
+        assert!(
+            trials > 5_000 && skipped > trials / 4 && skipped < trials * 95 / 100,
+            "{skipped} of {trials}"
+        );
+    }
+}
