@@ -13,7 +13,8 @@
 //!    depend on it, the number of steps to settle does). SQ_BED_THREADS (default: all),
 //!    SQ_BED_SETTLE (settling steps, default 40,000 = 0.16 s), SQ_BED_CACHE (file: the settled
 //!    state is restored from it when it holds a snapshot of this engine version, else written
-//!    there after settling; one file per SQ_BED_COUNT).
+//!    there after settling; one file per SQ_BED_COUNT), SQ_BED_NARROW (0: skip the narrow-phase
+//!    timing).
 
 use dem::hertz_mindlin::V3;
 use dem::narrow::superquadric::{detect, detect_tracked, SearchSettings, SearchStats, SqBody};
@@ -170,6 +171,9 @@ fn bed(count: usize) {
         e.neighbour_list_builds() - builds0,
         e.num_contacts()
     );
+    if env("SQ_BED_NARROW", 1) == 0 {
+        return;
+    }
     // the narrow phase alone: every listed pair, warm-started as in the step
     let p = e.particles();
     let idx: std::collections::HashMap<u32, usize> =

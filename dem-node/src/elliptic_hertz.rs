@@ -576,9 +576,9 @@ fn solve_kappa(r: f64) -> (f64, Elliptic) {
 
 /// Breaks of the pieces of [`KappaFit`] in L = ln(B/A) (the last is ln [`MAX_CURVATURE_RATIO`]
 /// with a margin).
-const FIT_BREAKS: [f64; 6] = [0.0, 0.5, 1.5, 4.0, 10.0, 23.1];
+const FIT_BREAKS: [f64; 11] = [0.0, 0.25, 0.6, 1.2, 2.0, 3.2, 5.0, 7.5, 11.0, 16.0, 23.1];
 /// Chebyshev terms per piece.
-const FIT_TERMS: usize = 30;
+const FIT_TERMS: usize = 14;
 
 /// ln κ as a function of L = ln(B/A), fitted once (*not in thesis*): on each piece of
 /// [`FIT_BREAKS`] a Chebyshev series of ln κ / L (smooth, from 2/3 at L → 0 to ½ at L → ∞)

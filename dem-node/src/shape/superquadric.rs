@@ -185,17 +185,18 @@ impl Superquadric {
             n.y.abs().max(NORMAL_FLOOR),
             n.z.abs().max(NORMAL_FLOOR),
         ];
-        let u = [m[0].ln(), m[1].ln(), m[2].ln()];
+        // only the differences of ln n_i enter: two logarithms of ratios (m_i ∈ [1e-20, 1])
+        let (u10, u20) = ((m[1] / m[0]).ln(), (m[2] / m[0]).ln());
         let (a1, a2, t1, t2, e12) = (self.a1, self.a2, self.two_e1, self.two_e2, self.e1_e2);
         let ln_r = &self.ln_r;
         // (A.44) γ21 = X2/X1
-        let l21 = self.c21 + a1 * (u[1] - u[0]);
+        let l21 = self.c21 + a1 * u10;
         let d21 = [-a1, a1, 0.0];
         // (A.45) s12 = (1/r1)^(2/ε1) + (γ21/r2)^(2/ε1)
         let (ls12, _, wq) = log_sum_exp(-t1 * ln_r[0], t1 * (l21 - ln_r[1]));
         let ds12 = d21.map(|d| wq * t1 * d);
         // (A.46) γ31 = X3/X1
-        let l31 = a2 * (u[2] - u[0] + t2 * ln_r[2] - t1 * ln_r[0] + (e12 - 1.0) * ls12);
+        let l31 = a2 * (u20 + t2 * ln_r[2] - t1 * ln_r[0] + (e12 - 1.0) * ls12);
         let d31 = [
             a2 * (-1.0 + (e12 - 1.0) * ds12[0]),
             a2 * ((e12 - 1.0) * ds12[1]),
