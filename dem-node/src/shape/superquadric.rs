@@ -217,7 +217,8 @@ impl Superquadric {
         ];
         let xa = lx.map(f64::exp);
         let x = V3::new(s[0] * xa[0], s[1] * xa[1], s[2] * xa[2]);
-        let jacobian = Matrix3::from_fn(|i, j| s[i] * s[j] * xa[i] * dl[i][j] / m[j]);
+        let inv_m = m.map(|v| 1.0 / v);
+        let jacobian = Matrix3::from_fn(|i, j| s[i] * s[j] * xa[i] * dl[i][j] * inv_m[j]);
         SurfacePoint { x, jacobian }
     }
 
