@@ -136,11 +136,17 @@ fn bed(count: usize) {
     );
     let t = Instant::now();
     let cache = std::env::var("SQ_BED_CACHE").ok();
+    let n0 = e.num_particles();
     let cached = cache
         .as_ref()
         .and_then(|path| std::fs::read(path).ok())
         .is_some_and(|bytes| e.restore(&bytes).is_ok());
     if cached {
+        assert_eq!(
+            e.num_particles(),
+            n0,
+            "SQ_BED_CACHE holds a bed of another size: one file per SQ_BED_COUNT"
+        );
         println!(
             "  settled state restored from {}",
             cache.as_deref().unwrap_or("")

@@ -323,12 +323,12 @@ fn finish(b1: &SqBody, e: Eval) -> SqContact {
     }
 }
 
-/// Wellmann's temporal-coherence update (SEED-SPEC §1.5, W 3.60–3.61) for a pair that
+/// Wellmann's temporal-coherence update (SEED-SPEC §1.6, W 3.60–3.61) for a pair that
 /// touched in the last step with `normal` and `overlap`: Newton from that normal, and a
 /// converged root is taken without the acceptance test (the minimum condition is dropped),
 /// unless the overlap jumped (more than twice the last one plus 1 % of the smaller body's
-/// inscribed radius: the sign of a wrong root, W p. 38), in which case, as on non-convergence,
-/// the full search [`detect`] decides. A separating iterate ends it as in the full search
+/// inscribed radius: a sign of a wrong root, SEED-SPEC §1.6), in which case, as on
+/// non-convergence, the full search [`detect`] decides. A separating iterate ends it as in the full search
 /// (3.59: a separating plane is a proof).
 pub fn detect_tracked(
     b1: &SqBody,
