@@ -217,7 +217,14 @@ struct Run<'a> {
     /// While windows run, the first signal is kept here and acted on at the window's end.
     defer_interrupt: bool,
     pending_interrupt: Option<i32>,
+    /// When the coordinator last heard from a node or said it was still waiting (a long wait
+    /// is reported every [`WAITING_NOTICE`], or every quarter of `coupling.window_timeout`
+    /// if that is shorter).
+    last_heard: Instant,
 }
+
+/// How often a long wait for the nodes is reported in the log.
+const WAITING_NOTICE: Duration = Duration::from_secs(60);
 
 impl Run<'_> {
     /// The kind the scene gives node `name`.
@@ -293,6 +300,17 @@ impl Run<'_> {
                 );
             }
             let left = deadline.saturating_duration_since(Instant::now());
+            let notice =
+                WAITING_NOTICE.min(Duration::from_secs_f64(0.25 * self.scene.window_timeout));
+            if self.last_heard.elapsed() >= notice && !left.is_zero() {
+                tracing::info!(
+                    "still waiting for {what}: no message for {:.1} s, the run stops if none \
+                     comes within {:.1} s",
+                    self.last_heard.elapsed().as_secs_f64(),
+                    left.as_secs_f64()
+                );
+                self.last_heard = Instant::now();
+            }
             if left.is_zero() {
                 bail!(
                     "timed out waiting for {what} (a window may take coupling.window_timeout \
@@ -313,10 +331,12 @@ impl Run<'_> {
                     }
                 }
                 Ok(Event::Status(st)) if matches!(st.body, StatusBody::Stopped { .. }) => {
+                    self.last_heard = Instant::now();
                     self.stopped.insert(st.node.clone());
                     return Ok(Event::Status(st));
                 }
                 Ok(Event::Status(st)) => {
+                    self.last_heard = Instant::now();
                     if let StatusBody::Error {
                         code,
                         message,
@@ -1361,6 +1381,7 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
         kinematics_tap,
         defer_interrupt: false,
         pending_interrupt: None,
+        last_heard: Instant::now(),
     };
     if let Some((_, state)) = &opts.resume {
         // the run continues: its summary so far comes from the checkpoint

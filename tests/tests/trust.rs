@@ -452,3 +452,31 @@ fn cosim_check_never_deletes_an_existing_folder() {
     assert!(run(c).status.success());
     assert!(scratch.exists());
 }
+
+#[test]
+fn a_long_wait_for_a_node_is_reported_while_it_lasts() {
+    // the DEM node is external and never comes: the coordinator waits for its hello (120 s)
+    // and says so every quarter of window_timeout (0.5 s here); SIGTERM then ends the wait
+    let dir = tempfile::tempdir().unwrap();
+    let scene = minimal(dir.path(), "waiting.toml", "0.2 s", "");
+    let text = std::fs::read_to_string(&scene)
+        .unwrap()
+        .replace("[coupling]", "[coupling]\nwindow_timeout = 2.0");
+    std::fs::write(&scene, text).unwrap();
+    let run_id = format!("waiting-{}", std::process::id());
+    let child = start(
+        &scene,
+        &dir.path().join("out"),
+        &run_id,
+        &["--external", "dem"],
+    );
+    std::thread::sleep(Duration::from_millis(2500));
+    signal(child.id(), "TERM");
+    let (code, err) = exit_with(child, Duration::from_secs(30));
+    assert_eq!(code, 143, "{err}");
+    let notices = err
+        .matches("still waiting for hello from dem: no message for")
+        .count();
+    assert!((2..=6).contains(&notices), "{notices} notices: {err}");
+    assert!(err.contains("no message for 0.5 s"), "{err}");
+}
