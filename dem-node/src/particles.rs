@@ -157,6 +157,28 @@ impl Particles {
         apply(&mut self.torque, perm);
         apply(&mut self.orientation, perm);
         apply(&mut self.shape, perm);
+        self.order_templates();
+    }
+
+    /// Renumbers the shape templates in the order of the bodies that use them (shared ones
+    /// stay shared, unused ones go): the contact search reads a body's template with its
+    /// state, and after the cell sort those reads then stream instead of jumping through
+    /// an array as large as the bodies (150 MB at a million superquadrics).
+    fn order_templates(&mut self) {
+        if self.templates.is_empty() {
+            return;
+        }
+        let mut new_index = vec![u32::MAX; self.templates.len()];
+        let mut templates = Vec::with_capacity(self.templates.len());
+        for s in self.shape.iter_mut().filter(|s| **s != SPHERE) {
+            let old = *s as usize;
+            if new_index[old] == u32::MAX {
+                new_index[old] = templates.len() as u32;
+                templates.push(self.templates[old]);
+            }
+            *s = new_index[old];
+        }
+        self.templates = templates;
     }
 
     pub fn kinetic_energy(&self) -> f64 {
@@ -184,5 +206,49 @@ impl Particles {
     pub fn bytes_per_particle() -> usize {
         // id, 5 vectors (x, v, ω, F, T), r, m, I, material, orientation, shape id
         4 + 5 * 24 + 3 * 8 + 2 + 32 + 4
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn templates_follow_their_bodies_when_the_bodies_are_reordered() {
+        let mut p = Particles::default();
+        let sq = |a: f64| Superquadric::new(V3::new(a, 1.0, 1.0), 0.8, 1.2).unwrap();
+        let q = Orientation::identity();
+        for k in 0..4 {
+            if k == 1 {
+                p.push(V3::zeros(), V3::zeros(), V3::zeros(), 0.5, 1000.0, 0);
+            } else {
+                let x = V3::new(k as f64, 0.0, 0.0);
+                p.push_superquadric(
+                    x,
+                    V3::zeros(),
+                    V3::zeros(),
+                    q,
+                    sq(1.0 + k as f64),
+                    1000.0,
+                    0,
+                );
+            }
+        }
+        let radii = |p: &Particles| -> Vec<f64> {
+            (0..p.len())
+                .map(|k| p.template(k).map_or(0.0, |t| t.superquadric.radii.x))
+                .collect()
+        };
+        assert_eq!(radii(&p), [1.0, 0.0, 3.0, 4.0]);
+        p.permute(&[3, 1, 0, 2]);
+        // every body kept its own shape, and the templates are in body order
+        assert_eq!(radii(&p), [4.0, 0.0, 1.0, 3.0]);
+        assert_eq!(p.shape, [0, SPHERE, 1, 2]);
+        assert_eq!(p.templates.len(), 3);
+        // a template no body uses any more goes
+        p.shape[3] = p.shape[2];
+        p.permute(&[0, 1, 2, 3]);
+        assert_eq!(p.templates.len(), 2);
+        assert_eq!(radii(&p), [4.0, 0.0, 1.0, 1.0]);
     }
 }
