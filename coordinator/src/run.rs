@@ -381,7 +381,10 @@ impl Run<'_> {
                 Ok(Event::Rejected { key, error }) => {
                     tracing::warn!("refused a message on `{key}`: {error}");
                 }
-                Ok(ev) => return Ok(ev),
+                Ok(ev) => {
+                    self.last_heard = Instant::now();
+                    return Ok(ev);
+                }
                 Err(proto::ProtoError::Timeout { .. }) => continue,
                 Err(e) => return Err(e.into()),
             }
