@@ -688,6 +688,16 @@ mod tests {
     const DEM: &str = "dem";
     const FEM: &str = "fem";
 
+    /// Adaptive settings from `min` to `max` with the default tolerance.
+    fn ladder(min_window: f64, max_window: f64, iterations: u32) -> adaptive::AdaptiveSettings {
+        adaptive::AdaptiveSettings {
+            min_window,
+            max_window,
+            tolerance: 0.05,
+            iterations,
+        }
+    }
+
     fn cfg(kind: ScheduleKind, windows: u64) -> SchedulerConfig {
         SchedulerConfig {
             kind,
@@ -1252,12 +1262,7 @@ mod tests {
         let mut c = cfg(ScheduleKind::Predictive, 32);
         c.window = 1e-5;
         c.adaptive = Some((
-            adaptive::AdaptiveSettings {
-                min_window: 1e-5,
-                max_window: 8e-5,
-                tolerance: 0.05,
-                iterations: 4,
-            },
+            ladder(1e-5, 8e-5, 4),
             adaptive::Limits {
                 loaded: Some(2.5e-5),
                 radius_min: Some(1e-3),
@@ -1374,16 +1379,7 @@ mod tests {
         let mut cfg = implicit_cfg(implicit::Acceleration::IqnIls, 30, false);
         cfg.positions = vec![0.0; 6];
         cfg.window = 1e-5;
-        cfg.adaptive = Some((
-            adaptive::AdaptiveSettings {
-                min_window: 1e-5,
-                max_window: 8e-5,
-                tolerance: 0.05,
-                iterations: 30,
-            },
-            adaptive::Limits::default(),
-            3e-5,
-        ));
+        cfg.adaptive = Some((ladder(1e-5, 8e-5, 30), adaptive::Limits::default(), 3e-5));
         if let Some(i) = cfg.implicit.as_mut() {
             i.concurrent = true;
         }
