@@ -194,7 +194,12 @@ fn bed(count: usize) {
         ));
     }
     let body = |k: usize| {
-        let s = p.template(k).expect("superquadric").superquadric;
+        let s = p
+            .template(k)
+            .expect("superquadric")
+            .superquadric()
+            .copied()
+            .unwrap();
         (
             s,
             p.position[k],
@@ -241,7 +246,10 @@ fn packing(e: &Engine, side: f64) -> String {
     let p = e.particles();
     let top = (0..p.len()).map(|k| p.position[k].z).fold(0.0f64, f64::max);
     let vol: f64 = (0..p.len())
-        .map(|k| p.template(k).map_or(0.0, |t| t.superquadric.volume()))
+        .map(|k| {
+            p.template(k)
+                .map_or(0.0, |t| t.superquadric().unwrap().volume())
+        })
         .sum();
     // below the highest centre, a little under the bed's true fraction
     format!(

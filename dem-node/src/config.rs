@@ -243,6 +243,40 @@ pub enum ShapeConfig {
         #[serde(default = "default_true")]
         random_orientation: bool,
     },
+    /// Dilated convex polyhedra (Ullrich's ballast, U §2.1.1): every particle is a randomly
+    /// oriented copy of a stone of the source's library, scaled so that its equivalent-volume
+    /// diameter is twice the source's radius. The library is `library` (STL files of convex
+    /// stones, relative to the scene folder; a non-convex one is refused) or `stones` random
+    /// convex stones of `triangles` core triangles (even; U: 10, 30, 40) and `elongation`
+    /// (axis ratios each uniform in [1/elongation, 1]), seeded. `dilation` is r_ds as a
+    /// fraction of the size (U: 0.1).
+    Polyhedron {
+        #[serde(default = "default_triangles")]
+        triangles: usize,
+        #[serde(default = "default_elongation")]
+        elongation: f64,
+        #[serde(default = "default_dilation")]
+        dilation: f64,
+        #[serde(default = "default_stones")]
+        stones: usize,
+        #[serde(default)]
+        library: Option<Vec<String>>,
+        #[serde(default = "default_true")]
+        random_orientation: bool,
+    },
+}
+
+fn default_triangles() -> usize {
+    30
+}
+fn default_elongation() -> f64 {
+    1.5
+}
+fn default_dilation() -> f64 {
+    0.1
+}
+fn default_stones() -> usize {
+    50
 }
 
 impl ShapeConfig {
@@ -613,6 +647,54 @@ impl Check {
     }
     /// A source's `shape` (`base` is the path of the source).
     fn shape(&mut self, base: &[Seg], shape: &ShapeConfig) {
+        if let ShapeConfig::Polyhedron {
+            triangles,
+            elongation,
+            dilation,
+            stones,
+            library,
+            ..
+        } = shape
+        {
+            let f = |field: &str| {
+                let mut v = base.to_vec();
+                v.push(Seg::Key("shape".into()));
+                v.push(Seg::Key(field.into()));
+                v
+            };
+            if *triangles < 4 || triangles % 2 != 0 || *triangles > 1000 {
+                self.fail(
+                    f("triangles"),
+                    format!(
+                        "a closed convex core has an even number of triangles >= 4 (<= 1000), \
+                         got {triangles}"
+                    ),
+                );
+            }
+            if !(elongation.is_finite() && *elongation >= 1.0 && *elongation <= 100.0) {
+                self.fail(
+                    f("elongation"),
+                    format!("must be in [1, 100] (largest to smallest axis), got {elongation}"),
+                );
+            }
+            let max = crate::shape::polyhedron::DILATION_MAX;
+            if !(dilation.is_finite() && *dilation > 0.0 && *dilation <= max) {
+                self.fail(
+                    f("dilation"),
+                    format!(
+                        "the dilation radius as a fraction of the size must be in (0, {max}] \
+                         (Ullrich: 0.1), got {dilation}"
+                    ),
+                );
+            }
+            if *stones == 0 || *stones > 100_000 {
+                self.fail(f("stones"), format!("must be in [1, 100000], got {stones}"));
+            }
+            if library.as_ref().is_some_and(|l| l.is_empty()) {
+                self.fail(f("library"), "is empty: give STL files or remove it".into());
+            }
+            return;
+        }
         let ShapeConfig::Superquadric {
             semi_axes,
             aspect,
@@ -923,6 +1005,21 @@ impl DemConfig {
         }
         if let Some(m) = &self.interface_material {
             c.material(p(&["dem", "interface_material"]), m, self);
+        }
+        let polyhedral = self.particles.iter().position(|src| match src {
+            ParticleSource::List { shape, .. }
+            | ParticleSource::Lattice { shape, .. }
+            | ParticleSource::Fill { shape, .. } => matches!(shape, ShapeConfig::Polyhedron { .. }),
+            ParticleSource::File { .. } => false,
+        });
+        if let (true, Some(k)) = (self.output.final_particles, polyhedral) {
+            c.fail(
+                p(&["dem", "output", "final_particles"]),
+                format!(
+                    "particle files carry spheres and superquadrics, not the dilated polyhedra of \
+                     dem.particles[{k}]: continue a polyhedral bed from a snapshot instead"
+                ),
+            );
         }
         for (k, src) in self.particles.iter().enumerate() {
             let f = |field: &str| pi(&["dem", "particles"], k, &[field]);

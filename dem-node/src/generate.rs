@@ -188,6 +188,74 @@ pub fn random_orientation(rng: &mut SplitMix64) -> crate::particles::Orientation
     }
 }
 
+/// A drawn non-spherical body.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Drawn {
+    Superquadric(crate::shape::Superquadric),
+    /// Stone `stone` of the particles' library at size `scale` (equivalent-volume diameter).
+    Polyhedron {
+        stone: u32,
+        scale: f64,
+        bounding: f64,
+        volume: f64,
+    },
+}
+
+impl Drawn {
+    pub fn bounding_radius(&self) -> f64 {
+        match self {
+            Drawn::Superquadric(s) => s.bounding_radius(),
+            Drawn::Polyhedron { bounding, .. } => *bounding,
+        }
+    }
+
+    pub fn volume(&self) -> f64 {
+        match self {
+            Drawn::Superquadric(s) => s.volume(),
+            Drawn::Polyhedron { volume, .. } => *volume,
+        }
+    }
+}
+
+/// Draws a body of the source `shape` with the volume of a sphere of radius `r_eq` and its
+/// orientation: a superquadric ([`sample_superquadric`]) or a copy of a random stone of
+/// `library` (indices into `stones`) scaled to the equivalent-volume diameter 2 `r_eq`.
+/// `None` for a sphere source.
+pub fn sample_body(
+    shape: &crate::config::ShapeConfig,
+    r_eq: f64,
+    rng: &mut SplitMix64,
+    library: &[u32],
+    stones: &[crate::shape::Stone],
+) -> Option<(Drawn, crate::particles::Orientation)> {
+    match shape {
+        crate::config::ShapeConfig::Polyhedron {
+            random_orientation: random,
+            ..
+        } => {
+            let pick = ((rng.uniform() * library.len() as f64) as usize).min(library.len() - 1);
+            let stone = library[pick];
+            let s = &stones[stone as usize];
+            let scale = 2.0 * r_eq;
+            let q = if *random {
+                random_orientation(rng)
+            } else {
+                crate::particles::Orientation::identity()
+            };
+            Some((
+                Drawn::Polyhedron {
+                    stone,
+                    scale,
+                    bounding: s.circumradius * scale,
+                    volume: s.volume * scale.powi(3),
+                },
+                q,
+            ))
+        }
+        _ => sample_superquadric(shape, r_eq, rng).map(|(b, q)| (Drawn::Superquadric(b), q)),
+    }
+}
+
 /// Draws a superquadric of the source `shape` with the volume of a sphere of radius `r_eq`
 /// (Wellmann §3.4.4: ratios uniform in [1, elongation], exponents uniform in
 /// [1 − angularity, 1 + angularity], then scaled to the size), and its orientation. `None`

@@ -101,6 +101,20 @@ pub enum DemError {
         rayleigh: f64,
     },
     #[error(
+        "instability at t = {time:e} s (step {step}): the cores of {first} and {second} \
+         interpenetrate (overlap {overlap:e} m of the dilated bodies, more than their dilation \
+         radii {dilation:e} m: the dilated-polyhedron model is no longer valid); reduce \
+         dem.time_step or the impact speeds, or raise the Young's modulus or the dilation"
+    )]
+    CoresIntersect {
+        time: f64,
+        step: u64,
+        first: String,
+        second: String,
+        overlap: f64,
+        dilation: f64,
+    },
+    #[error(
         "instability at t = {time:e} s (step {step}): the loaded wall `{wall}` has a non-finite \
          displacement or velocity; give it more mass or reduce dem.time_step"
     )]
@@ -180,6 +194,60 @@ pub struct Engine {
 
 /// The generator of a source's shapes and orientations: its own stream, so that drawing
 /// shapes leaves the positions of sphere sources as they were.
+/// The stones of a polyhedral source (its `library` of STL files, or its random stones),
+/// added to the particles' library; their indices there. Empty for other sources.
+fn stone_library(
+    src: &ParticleSource,
+    k: usize,
+    base_dir: &std::path::Path,
+    particles: &mut Particles,
+) -> Result<Vec<u32>, DemError> {
+    let (shape, seed) = match src {
+        ParticleSource::List { shape, .. } => (shape, 1),
+        ParticleSource::Lattice { shape, seed, .. } | ParticleSource::Fill { shape, seed, .. } => {
+            (shape, *seed)
+        }
+        ParticleSource::File { .. } => return Ok(Vec::new()),
+    };
+    let config::ShapeConfig::Polyhedron {
+        triangles,
+        elongation,
+        dilation,
+        stones,
+        library,
+        ..
+    } = shape
+    else {
+        return Ok(Vec::new());
+    };
+    let error = |message: String| DemError::Generation {
+        source_index: k,
+        message,
+    };
+    let mut out = Vec::new();
+    match library {
+        Some(files) => {
+            for (i, file) in files.iter().enumerate() {
+                let full = base_dir.join(file);
+                let mesh = stl::read_stl(&full)
+                    .map_err(|e| error(format!("shape.library[{i}] ({}): {e}", full.display())))?;
+                let stone = shape::Stone::from_mesh(&mesh.positions, &mesh.triangles, *dilation)
+                    .map_err(|e| error(format!("shape.library[{i}] ({}): {e}", full.display())))?;
+                out.push(particles.add_stone(stone));
+            }
+        }
+        None => {
+            let mut rng = shape_rng(seed ^ 0x57_0E5, k);
+            for _ in 0..*stones {
+                let stone = shape::Stone::random(*triangles, *elongation, *dilation, &mut rng)
+                    .map_err(|e| error(format!("shape: {e}")))?;
+                out.push(particles.add_stone(stone));
+            }
+        }
+    }
+    Ok(out)
+}
+
 fn shape_rng(seed: u64, source: usize) -> generate::SplitMix64 {
     generate::SplitMix64::new(
         seed.wrapping_mul(0x9E37_79B9_7F4A_7C15)
@@ -316,6 +384,7 @@ impl Engine {
         let mut particles = Particles::default();
         for (k, src) in cfg.particles.iter().enumerate() {
             let field = format!("dem.particles[{k}].material");
+            let library = stone_library(src, k, base_dir, &mut particles)?;
             match src {
                 ParticleSource::List {
                     material,
@@ -327,7 +396,13 @@ impl Engine {
                     let mut rng = shape_rng(1, k);
                     for s in spheres {
                         let (x, v, w) = (v3(&s.position), v3(&s.velocity), v3(&s.angular_velocity));
-                        match generate::sample_superquadric(shape, s.radius, &mut rng) {
+                        match generate::sample_body(
+                            shape,
+                            s.radius,
+                            &mut rng,
+                            &library,
+                            &particles.stones,
+                        ) {
                             None => particles.push(x, v, w, s.radius, rho, m),
                             Some((body, q)) => {
                                 let q = s.orientation.map_or(q, |[w0, x0, y0, z0]| {
@@ -335,7 +410,7 @@ impl Engine {
                                         nalgebra::Quaternion::new(w0, x0, y0, z0),
                                     )
                                 });
-                                particles.push_superquadric(x, v, w, q, body, rho, m)
+                                particles.push_drawn(x, v, w, q, body, rho, m)
                             }
                         }
                     }
@@ -362,7 +437,13 @@ impl Engine {
                             x.x += jitter * (2.0 * rng.uniform() - 1.0);
                             x.y += jitter * (2.0 * rng.uniform() - 1.0);
                         }
-                        match generate::sample_superquadric(shape, *radius, &mut shapes) {
+                        match generate::sample_body(
+                            shape,
+                            *radius,
+                            &mut shapes,
+                            &library,
+                            &particles.stones,
+                        ) {
                             None => particles.push(x, v3(velocity), V3::zeros(), *radius, rho, m),
                             Some((body, q)) => {
                                 // bounding spheres apart: no two bodies can overlap
@@ -380,15 +461,7 @@ impl Engine {
                                         ),
                                     });
                                 }
-                                particles.push_superquadric(
-                                    x,
-                                    v3(velocity),
-                                    V3::zeros(),
-                                    q,
-                                    body,
-                                    rho,
-                                    m,
-                                )
+                                particles.push_drawn(x, v3(velocity), V3::zeros(), q, body, rho, m)
                             }
                         }
                     }
@@ -428,7 +501,7 @@ impl Engine {
                                 radii.push(r);
                             }
                             None => {
-                                let b = generate::sample_superquadric(shape, 0.0, &mut shapes_rng)
+                                let b = generate::sample_body(shape, 0.0, &mut shapes_rng, &library, &particles.stones)
                                     .expect("validated: without a distribution the shape draws its semi-axes");
                                 total += rho * b.0.volume();
                                 drawn.push(b);
@@ -451,7 +524,15 @@ impl Engine {
                     // largest first as fill_box sorts (a stable sort keeps ties in order)
                     let mut bodies: Vec<_> = radii
                         .iter()
-                        .filter_map(|&r| generate::sample_superquadric(shape, r, &mut shapes_rng))
+                        .filter_map(|&r| {
+                            generate::sample_body(
+                                shape,
+                                r,
+                                &mut shapes_rng,
+                                &library,
+                                &particles.stones,
+                            )
+                        })
                         .collect();
                     bodies.extend(drawn);
                     if !bodies.is_empty() {
@@ -471,15 +552,7 @@ impl Engine {
                         }
                     } else {
                         for ((x, _), (body, q)) in placed.into_iter().zip(bodies) {
-                            particles.push_superquadric(
-                                x,
-                                v3(velocity),
-                                V3::zeros(),
-                                q,
-                                body,
-                                rho,
-                                m,
-                            );
+                            particles.push_drawn(x, v3(velocity), V3::zeros(), q, body, rho, m);
                         }
                     }
                 }
@@ -706,11 +779,8 @@ impl Engine {
         let mut best = (f64::INFINITY, 0u32);
         for k in 0..p.len() {
             let m = &self.materials.materials[p.material[k] as usize];
-            // a superquadric's from its smallest semi-axis (the smallest lump of it that
-            // vibrates)
-            let r = p
-                .template(k)
-                .map_or(p.radius[k], |t| t.superquadric.radii.min());
+            // a shaped body's from its smallest lump that vibrates
+            let r = p.vibration_radius(k);
             let t = rayleigh_time_step_of(r, m.poisson_ratio, m.density, m.shear_modulus());
             if t < best.0 {
                 best = (t, p.id[k]);
@@ -1337,6 +1407,70 @@ impl Engine {
         self.loaded_wall_forces();
     }
 
+    /// The first shaped contact whose cores interpenetrate (its force is NaN), as an error
+    /// naming the two bodies (particle ids, or the wall).
+    fn intersecting_cores(&self) -> Option<DemError> {
+        let (p, l) = (&self.state.particles, &self.state.lists);
+        let bad = |c: &broad_phase::ShapedContact| c.touching() && !c.force.x.is_finite();
+        let dilation = |k: usize| match p.polyhedron(k) {
+            Some((s, scale)) => s.dilation * scale,
+            None if p.template(k).is_none() => p.radius[k],
+            None => 0.0,
+        };
+        let wall_name = |w: usize| match w.checked_sub(self.planes.len()) {
+            None => format!("plane wall {w}"),
+            Some(m) => format!("mesh `{}`", self.state.meshes[m].name),
+        };
+        let (first, second, overlap, dilation) = if let Some((&[i, j], c)) = l
+            .shaped_pairs
+            .iter()
+            .zip(&l.shaped_pair_contacts)
+            .find(|(_, c)| bad(c))
+        {
+            let (i, j) = (i as usize, j as usize);
+            (
+                format!("particle {}", p.id[i]),
+                format!("particle {}", p.id[j]),
+                c.overlap,
+                dilation(i) + dilation(j),
+            )
+        } else if let Some((&[k, w], c)) = l
+            .shaped_walls
+            .iter()
+            .zip(&l.shaped_wall_contacts)
+            .find(|(_, c)| bad(c))
+        {
+            let k = k as usize;
+            (
+                format!("particle {}", p.id[k]),
+                wall_name(w as usize),
+                c.overlap,
+                dilation(k),
+            )
+        } else {
+            let ((k, w), c) = l
+                .shaped_mesh
+                .iter()
+                .zip(&l.shaped_mesh_contacts)
+                .find(|(_, c)| bad(c))?;
+            let k = *k as usize;
+            (
+                format!("particle {}", p.id[k]),
+                wall_name(w.wall as usize),
+                c.overlap,
+                dilation(k),
+            )
+        };
+        Some(DemError::CoresIntersect {
+            time: self.state.time,
+            step: self.state.steps,
+            first,
+            second,
+            overlap,
+            dilation,
+        })
+    }
+
     /// The error naming the first loaded wall or particle with a non-finite state.
     fn instability(&self) -> DemError {
         let wall = (self.loaded_walls.iter().zip(&self.state.loaded_walls))
@@ -1347,6 +1481,9 @@ impl Engine {
                 step: self.state.steps,
                 wall: w.name.clone(),
             };
+        }
+        if let Some(e) = self.intersecting_cores() {
+            return e;
         }
         let p = &self.state.particles;
         let bad = |v: &V3| !(v.x.is_finite() && v.y.is_finite() && v.z.is_finite());
@@ -1571,14 +1708,24 @@ impl Engine {
                 self.time(),
             )?;
             output::write_pvd(out_dir, "particles", self.dt)?;
-            if self.state.particles.has_shapes() {
+            let p = &self.state.particles;
+            if p.templates.iter().any(|t| t.superquadric().is_some()) {
                 output::write_superquadrics_vtk(
                     &out_dir.join(format!("superquadrics_{step:09}.vtk")),
-                    &self.state.particles,
+                    p,
                     self.time(),
                     16,
                 )?;
                 output::write_pvd(out_dir, "superquadrics", self.dt)?;
+            }
+            if !p.stones.is_empty() {
+                output::write_polyhedra_vtk(
+                    &out_dir.join(format!("polyhedra_{step:09}.vtk")),
+                    p,
+                    self.time(),
+                    16,
+                )?;
+                output::write_pvd(out_dir, "polyhedra", self.dt)?;
             }
             for (k, m) in self.state.meshes.iter().enumerate() {
                 let moving = self.wall_motions.iter().any(|w| {
@@ -1632,12 +1779,7 @@ impl Engine {
                     .map(|k| p.position[k][axis] - p.radius[k])
                     .fold(f64::MAX, f64::min)
         };
-        let vol: f64 = (0..p.len())
-            .map(|k| match p.template(k) {
-                Some(t) => t.superquadric.volume(),
-                None => 4.0 / 3.0 * std::f64::consts::PI * p.radius[k].powi(3),
-            })
-            .sum();
+        let vol: f64 = (0..p.len()).map(|k| p.volume(k)).sum();
         Some(vol / (area * height))
     }
 
@@ -1689,6 +1831,17 @@ impl Engine {
             return Ok(None);
         }
         let path = out_dir.join("particles_final.csv");
+        let p = &self.state.particles;
+        if let Some(k) = (0..p.len()).find(|&k| p.polyhedron(k).is_some()) {
+            return Err(DemError::Output {
+                path: path.display().to_string(),
+                message: format!(
+                    "particle {} is a dilated polyhedron, which particle files cannot carry \
+                     (spheres and superquadrics only): continue from a snapshot instead",
+                    p.id[k]
+                ),
+            });
+        }
         std::fs::create_dir_all(out_dir)
             .and_then(|_| std::fs::write(&path, particle_file::format(&self.state.particles)))
             .map_err(|e| DemError::Output {

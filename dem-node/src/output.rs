@@ -113,7 +113,7 @@ fn tessellate(s: &crate::shape::Superquadric, n1: usize, n2: usize) -> (Vec<V3>,
     (points, cells)
 }
 
-/// The non-spherical bodies as their real surfaces, VTK legacy polydata: each superquadric
+/// The superquadrics as their real surfaces, VTK legacy polydata: each superquadric
 /// tessellated from its parameterisation (3.3) on `resolution` × `resolution`/2 intervals of
 /// (φ1, φ2) (quads, triangles at the poles), turned by its orientation and placed at its
 /// centre. Point data: `id` of the body, `velocity` of the material point (v + ω × r) and
@@ -132,53 +132,110 @@ pub fn write_superquadrics_vtk(
         ));
     }
     let (n1, n2) = (resolution, resolution / 2);
-    let bodies: Vec<usize> = (0..p.len()).filter(|&k| p.template(k).is_some()).collect();
     // every template's mesh once (body frame)
-    let meshes: Vec<(Vec<V3>, Vec<Vec<usize>>)> = p
+    let meshes: Vec<Option<(Vec<V3>, Vec<Vec<usize>>)>> = p
         .templates
         .iter()
-        .map(|t| tessellate(&t.superquadric, n1, n2))
+        .map(|t| t.superquadric().map(|s| tessellate(s, n1, n2)))
         .collect();
-    let (per_points, per_cells) = (n1 * (n2 - 1) + 2, n1 * n2);
-    let per_size = n1 * (n2 - 2) * 5 + 2 * n1 * 4;
-    let (np, nc) = (bodies.len() * per_points, bodies.len() * per_cells);
+    write_bodies_vtk(path, p, time, "superquadrics", &meshes)
+}
+
+/// The dilated polyhedra as their real surfaces (VTK legacy polydata, the point data of
+/// [`write_superquadrics_vtk`]): every stone's dilated surface is the convex hull of its core
+/// vertices each offset by the dilation radius in `2 × resolution` directions (a Fibonacci
+/// sphere), so flat faces, edge cylinders and vertex caps show as they are (the points lie
+/// on the exact surface).
+pub fn write_polyhedra_vtk(
+    path: &Path,
+    p: &Particles,
+    time: f64,
+    resolution: usize,
+) -> Result<(), DemError> {
+    let stones: Vec<(Vec<V3>, Vec<Vec<usize>>)> = p
+        .stones
+        .iter()
+        .map(|s| {
+            let (v, t) = s.surface(2 * resolution.max(4));
+            (
+                v,
+                t.iter().map(|t| t.map(|k| k as usize).to_vec()).collect(),
+            )
+        })
+        .collect();
+    let meshes: Vec<Option<(Vec<V3>, Vec<Vec<usize>>)>> = p
+        .templates
+        .iter()
+        .map(|t| match t.shape {
+            crate::particles::Shape::Polyhedron { stone, scale } => {
+                let (v, c) = &stones[stone as usize];
+                Some((v.iter().map(|x| x * scale).collect(), c.clone()))
+            }
+            crate::particles::Shape::Superquadric(_) => None,
+        })
+        .collect();
+    write_bodies_vtk(path, p, time, "polyhedra", &meshes)
+}
+
+/// The bodies whose template has a mesh (body frame) in `meshes`, placed and turned.
+fn write_bodies_vtk(
+    path: &Path,
+    p: &Particles,
+    time: f64,
+    title: &str,
+    meshes: &[Option<(Vec<V3>, Vec<Vec<usize>>)>],
+) -> Result<(), DemError> {
+    let mesh_of = |k: usize| -> Option<&(Vec<V3>, Vec<Vec<usize>>)> {
+        p.template(k)?;
+        meshes[p.shape[k] as usize].as_ref()
+    };
+    let bodies: Vec<usize> = (0..p.len()).filter(|&k| mesh_of(k).is_some()).collect();
+    let (mut np, mut nc, mut size) = (0, 0, 0);
+    for &k in &bodies {
+        let (v, c) = mesh_of(k).unwrap();
+        np += v.len();
+        nc += c.len();
+        size += c.iter().map(|c| c.len() + 1).sum::<usize>();
+    }
     let mut s = String::with_capacity(200 * np + 40 * nc + 256);
     let _ = writeln!(
         s,
-        "# vtk DataFile Version 3.0\nDEM superquadrics t={time:.9e}\nASCII\nDATASET POLYDATA"
+        "# vtk DataFile Version 3.0\nDEM {title} t={time:.9e}\nASCII\nDATASET POLYDATA"
     );
     let _ = writeln!(s, "POINTS {np} double");
     let mut velocities = Vec::with_capacity(np);
     for &k in &bodies {
         let rot = p.orientation[k];
         let (x0, v0, w) = (p.position[k], p.velocity[k], p.angular_velocity[k]);
-        for x in &meshes[p.shape[k] as usize].0 {
+        for x in &mesh_of(k).unwrap().0 {
             let r = rot * x;
             let x = x0 + r;
             let _ = writeln!(s, "{:.9e} {:.9e} {:.9e}", x.x, x.y, x.z);
             velocities.push(v0 + w.cross(&r));
         }
     }
-    let _ = writeln!(s, "POLYGONS {nc} {}", bodies.len() * per_size);
-    for (b, &k) in bodies.iter().enumerate() {
-        let offset = b * per_points;
-        for cell in &meshes[p.shape[k] as usize].1 {
+    let _ = writeln!(s, "POLYGONS {nc} {size}");
+    let mut offset = 0;
+    for &k in &bodies {
+        let (v, cells) = mesh_of(k).unwrap();
+        for cell in cells {
             let _ = write!(s, "{}", cell.len());
-            for v in cell {
-                let _ = write!(s, " {}", offset + v);
+            for i in cell {
+                let _ = write!(s, " {}", offset + i);
             }
             s.push('\n');
         }
+        offset += v.len();
     }
     let _ = writeln!(s, "POINT_DATA {np}\nSCALARS id int 1\nLOOKUP_TABLE default");
     for &k in &bodies {
-        for _ in 0..per_points {
+        for _ in 0..mesh_of(k).unwrap().0.len() {
             let _ = writeln!(s, "{}", p.id[k]);
         }
     }
     let _ = writeln!(s, "SCALARS shape_index int 1\nLOOKUP_TABLE default");
     for &k in &bodies {
-        for _ in 0..per_points {
+        for _ in 0..mesh_of(k).unwrap().0.len() {
             let _ = writeln!(s, "{}", p.shape[k]);
         }
     }

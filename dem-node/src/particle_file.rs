@@ -380,6 +380,8 @@ fn shaped_overlap_fraction(a: &FileParticle, b: &FileParticle) -> f64 {
 
 /// The particles in id order as a particle file with velocities; with non-spherical bodies
 /// also with orientation, angular velocity and shape (see the module documentation).
+/// Dilated polyhedra have no columns here: callers refuse them first
+/// ([`crate::Engine::write_final_particles`]).
 pub fn format(p: &Particles) -> String {
     let mut order: Vec<usize> = (0..p.len()).collect();
     order.sort_unstable_by_key(|&k| p.id[k]);
@@ -404,9 +406,8 @@ pub fn format(p: &Particles) -> String {
                 ",{},{},{},{},{},{},{}",
                 q.w, q.i, q.j, q.k, w.x, w.y, w.z
             );
-            match p.template(k) {
-                Some(t) => {
-                    let q = &t.superquadric;
+            match p.template(k).and_then(|t| t.superquadric()) {
+                Some(q) => {
                     let _ = write!(
                         s,
                         ",{},{},{},{},{}",
@@ -548,7 +549,7 @@ mod tests {
             match (f.shape, p.template(k)) {
                 (None, None) => {}
                 (Some(a), Some(t)) => {
-                    let b = t.superquadric;
+                    let b = *t.superquadric().unwrap();
                     assert_eq!(bits(&a.radii), bits(&b.radii));
                     assert_eq!(
                         (a.eps1.to_bits(), a.eps2.to_bits()),

@@ -7,10 +7,12 @@
 //! the tangential and rolling contact terms. A superquadric's `radius` is its bounding radius
 //! (the broad phase's, Wellmann 3.47), `inertia` the smallest principal moment, and its
 //! template holds the shape and the principal moments (3.5)–(3.7); its rotation follows
-//! Wellmann's scheme ([`crate::rotation`]).
+//! Wellmann's scheme ([`crate::rotation`]). A dilated polyhedron's template is a scaled copy
+//! of a [`Stone`] of the `stones` library (many bodies share a stone); its `radius` is its
+//! bounding radius too.
 
 use crate::hertz_mindlin::V3;
-use crate::shape::Superquadric;
+use crate::shape::{Stone, Superquadric};
 use nalgebra::UnitQuaternion;
 use serde::{Deserialize, Serialize};
 
@@ -20,11 +22,34 @@ pub const SPHERE: u32 = u32::MAX;
 /// Orientation body → global.
 pub type Orientation = UnitQuaternion<f64>;
 
+/// A non-spherical body's shape.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
+pub enum Shape {
+    Superquadric(Superquadric),
+    /// Stone `stone` of [`Particles::stones`] at size `scale` (m, the equivalent-volume
+    /// diameter): core vertices × scale, dilation radius × scale.
+    Polyhedron {
+        stone: u32,
+        scale: f64,
+    },
+}
+
 /// A non-spherical body's shape and principal moments of inertia (body frame).
 #[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
 pub struct ShapeTemplate {
-    pub superquadric: Superquadric,
+    pub shape: Shape,
     pub principal_inertia: V3,
+}
+
+impl ShapeTemplate {
+    /// The superquadric, `None` for another shape.
+    #[inline]
+    pub fn superquadric(&self) -> Option<&Superquadric> {
+        match &self.shape {
+            Shape::Superquadric(s) => Some(s),
+            Shape::Polyhedron { .. } => None,
+        }
+    }
 }
 
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
@@ -51,6 +76,9 @@ pub struct Particles {
     pub shape: Vec<u32>,
     #[serde(default)]
     pub templates: Vec<ShapeTemplate>,
+    /// The stones the polyhedral templates are copies of (unit size).
+    #[serde(default)]
+    pub stones: Vec<Stone>,
 }
 
 impl Particles {
@@ -112,9 +140,111 @@ impl Particles {
         self.orientation.push(orientation);
         self.shape.push(self.templates.len() as u32);
         self.templates.push(ShapeTemplate {
-            superquadric: shape,
+            shape: Shape::Superquadric(shape),
             principal_inertia,
         });
+    }
+
+    /// Adds a drawn body (a superquadric or a stone copy) of `density`.
+    #[allow(clippy::too_many_arguments)] // one body's state, as `push`
+    pub fn push_drawn(
+        &mut self,
+        position: V3,
+        velocity: V3,
+        omega: V3,
+        orientation: Orientation,
+        body: crate::generate::Drawn,
+        density: f64,
+        material: u16,
+    ) {
+        match body {
+            crate::generate::Drawn::Superquadric(s) => {
+                self.push_superquadric(position, velocity, omega, orientation, s, density, material)
+            }
+            crate::generate::Drawn::Polyhedron { stone, scale, .. } => self.push_polyhedron(
+                position,
+                velocity,
+                omega,
+                orientation,
+                stone,
+                scale,
+                density,
+                material,
+            ),
+        }
+    }
+
+    /// Adds `stone` to the library; returns its index for [`Particles::push_polyhedron`].
+    pub fn add_stone(&mut self, stone: Stone) -> u32 {
+        self.stones.push(stone);
+        (self.stones.len() - 1) as u32
+    }
+
+    /// Adds a dilated polyhedron: stone `stone` (of [`Particles::add_stone`]) at size `scale`
+    /// (m) and `density`.
+    #[allow(clippy::too_many_arguments)] // one body's state, as `push`
+    pub fn push_polyhedron(
+        &mut self,
+        position: V3,
+        velocity: V3,
+        omega: V3,
+        orientation: Orientation,
+        stone: u32,
+        scale: f64,
+        density: f64,
+        material: u16,
+    ) {
+        let s = &self.stones[stone as usize];
+        let mass = density * s.volume * scale.powi(3);
+        let principal_inertia = s.inertia * (density * scale.powi(5));
+        self.id.push(self.position.len() as u32);
+        self.position.push(position);
+        self.velocity.push(velocity);
+        self.angular_velocity.push(omega);
+        self.radius.push(s.circumradius * scale);
+        self.mass.push(mass);
+        self.inertia.push(principal_inertia.min());
+        self.material.push(material);
+        self.force.push(V3::zeros());
+        self.torque.push(V3::zeros());
+        self.orientation.push(orientation);
+        self.shape.push(self.templates.len() as u32);
+        self.templates.push(ShapeTemplate {
+            shape: Shape::Polyhedron { stone, scale },
+            principal_inertia,
+        });
+    }
+
+    /// The (stone, scale) of body k if it is a dilated polyhedron.
+    #[inline]
+    pub fn polyhedron(&self, k: usize) -> Option<(&Stone, f64)> {
+        match self.template(k)?.shape {
+            Shape::Polyhedron { stone, scale } => Some((&self.stones[stone as usize], scale)),
+            Shape::Superquadric(_) => None,
+        }
+    }
+
+    /// Volume of body k.
+    pub fn volume(&self, k: usize) -> f64 {
+        match self.template(k).map(|t| t.shape) {
+            None => 4.0 / 3.0 * std::f64::consts::PI * self.radius[k].powi(3),
+            Some(Shape::Superquadric(s)) => s.volume(),
+            Some(Shape::Polyhedron { stone, scale }) => {
+                self.stones[stone as usize].volume * scale.powi(3)
+            }
+        }
+    }
+
+    /// Radius of the smallest lump of body k that vibrates (its Rayleigh time step's): a
+    /// sphere's radius, a superquadric's smallest semi-axis, a polyhedron's inscribed radius.
+    pub fn vibration_radius(&self, k: usize) -> f64 {
+        match self.template(k).map(|t| t.shape) {
+            None => self.radius[k],
+            Some(Shape::Superquadric(s)) => s.radii.min(),
+            Some(Shape::Polyhedron { stone, scale }) => {
+                self.stones[stone as usize].inradius() * scale
+            }
+        }
     }
 
     /// True if some body is not a sphere (the shaped pipeline runs).
@@ -236,7 +366,10 @@ mod tests {
         }
         let radii = |p: &Particles| -> Vec<f64> {
             (0..p.len())
-                .map(|k| p.template(k).map_or(0.0, |t| t.superquadric.radii.x))
+                .map(|k| {
+                    p.template(k)
+                        .map_or(0.0, |t| t.superquadric().unwrap().radii.x)
+                })
                 .collect()
         };
         assert_eq!(radii(&p), [1.0, 0.0, 3.0, 4.0]);

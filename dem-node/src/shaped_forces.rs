@@ -11,13 +11,17 @@ use crate::elliptic_hertz::{
     hertz_ellipse, lift, relative_curvature, tangential_force, MindlinConstants,
     TangentialStiffness,
 };
+use crate::hertz_mindlin;
 use crate::hertz_mindlin::V3;
 use crate::materials::{PairParams, ShapedDamping};
+use crate::narrow::polyhedron::{
+    detect_pair, detect_plane, detect_triangle, Core, PolyBody, PolyDetection, POINT_CORE,
+};
 use crate::narrow::superquadric::{
     detect, detect_tracked, Detection, SearchSettings, SearchStats, SqBody,
 };
 use crate::narrow::superquadric_patch::patch_contact;
-use crate::particles::Particles;
+use crate::particles::{Particles, Shape};
 use crate::resolve_forces::ForceContext;
 use crate::resolve_forces::MeshForceRecord;
 use crate::shape::superquadric::{sym2_eigen, tangent_basis};
@@ -48,9 +52,10 @@ struct BodyView {
 }
 
 fn body(p: &Particles, k: usize) -> BodyView {
-    let shape = match p.template(k) {
-        Some(t) => t.superquadric,
-        // a sphere is the superquadric with equal semi-axes and ε = 1 (exact in the search)
+    let shape = match p.template(k).and_then(|t| t.superquadric()) {
+        Some(s) => *s,
+        // a sphere is the superquadric with equal semi-axes and ε = 1 (exact in the search);
+        // polyhedra never come here (`pair_contact` sends them to `poly_pair_contact`)
         None => Superquadric::new(V3::repeat(p.radius[k]), 1.0, 1.0)
             .expect("a particle radius is positive"),
     };
@@ -207,6 +212,9 @@ fn pair_contact(
     if still_separated(p, i, j, &x21, old) {
         return *old;
     }
+    if p.polyhedron(i).is_some() || p.polyhedron(j).is_some() {
+        return poly_pair_contact(p, ctx, [i, j], &x21, old);
+    }
     let (a, b) = (body(p, i), body(p, j));
     let (ba, bb) = (
         SqBody {
@@ -266,6 +274,9 @@ fn plane_contact(
 ) -> ShapedContact {
     let (k, w) = (k as usize, w as usize);
     let pl = &ctx.planes[w];
+    if p.polyhedron(k).is_some() {
+        return poly_plane_contact(p, ctx, k, pl, old);
+    }
     let a = body(p, k);
     let c = -pl.normal;
     let n_body = a.rotation.tr_mul(&c);
@@ -334,6 +345,9 @@ fn mesh_contact(
             }
         }));
     }
+    if p.polyhedron(k).is_some() {
+        return poly_mesh_contact(p, ctx, group, old);
+    }
     let vertices: Vec<V3> = nodes.iter().map(|&n| mesh.positions[n as usize]).collect();
     let a = body(p, k);
     // Walls are two-sided (as for spheres): the patch's front is the side of the body's
@@ -389,6 +403,240 @@ fn mesh_contact(
     let d_dot = wall_velocity - (a.velocity + a.omega.cross(&(point - a.position)));
     let params = ctx.materials.pair(p.material[k], mesh.material);
     let contact = law(&g, params, &d_dot, a.mass, old, ctx.dt, ctx.hold_stiffness);
+    let record = MeshForceRecord {
+        triangle: tri,
+        bary,
+        force: -contact.force,
+    };
+    (contact, record)
+}
+
+/// A body as the polyhedral narrow phase sees it: a stone, a sphere (a dilated point) or a
+/// superquadric (its support map, no dilation).
+fn poly_view(p: &Particles, k: usize) -> PolyBody<'_> {
+    let (core, dilation) = match p.template(k).map(|t| &t.shape) {
+        None => (
+            Core::Points {
+                vertices: &POINT_CORE,
+                scale: 1.0,
+            },
+            p.radius[k],
+        ),
+        Some(Shape::Polyhedron { stone, scale }) => {
+            let s = &p.stones[*stone as usize];
+            (
+                Core::Points {
+                    vertices: &s.vertices,
+                    scale: *scale,
+                },
+                s.dilation * scale,
+            )
+        }
+        Some(Shape::Superquadric(s)) => (Core::Superquadric(s), 0.0),
+    };
+    PolyBody {
+        core,
+        dilation,
+        position: p.position[k],
+        orientation: p.orientation[k],
+    }
+}
+
+/// The record of a pair whose cores interpenetrate: a non-finite force, which stops the run
+/// with [`crate::DemError::CoresIntersect`] naming the pair (the model's validity limit).
+fn cores_intersect(normal: V3, overlap: f64) -> ShapedContact {
+    ShapedContact {
+        normal,
+        overlap,
+        force: V3::repeat(f64::NAN),
+        ..ShapedContact::NONE
+    }
+}
+
+/// Ullrich's dilated-polyhedron law (2.20)–(2.24), corrected (SEED-SPEC §6.2): Hertz between
+/// the dilation spheres, F_n = 4/3 E* √R δ^{3/2} with R = r_ds,1 r_ds,2/(r_ds,1 + r_ds,2)
+/// (r_ds against a wall; (2.20) is the equal-sphere case), Mindlin's k_t = 8G*√(Rδ) ((2.22)
+/// with its missing factor 3), the relative velocity of (2.23) with ω × r, Coulomb's cap
+/// (2.24), and the restitution damping of the sphere law (the thesis writes none; Table 6.1
+/// sets e = 0.2). It is [`hertz_mindlin::contact_force`] itself. `normal` points from body 1
+/// to body 2, `d_dot` is the velocity of 2's contact point relative to 1's; `tangential`
+/// of the record holds the tangential displacement history.
+#[allow(clippy::too_many_arguments)] // the physical inputs of one contact
+fn dilated_law(
+    params: &PairParams,
+    overlap: f64,
+    r_eff: f64,
+    m_eff: f64,
+    normal: V3,
+    d_dot: &V3,
+    point: V3,
+    old: &ShapedContact,
+    dt: f64,
+) -> ShapedContact {
+    let mut shear = if old.touching() {
+        old.tangential
+    } else {
+        V3::zeros()
+    };
+    let cf = hertz_mindlin::contact_force(
+        params, overlap, r_eff, m_eff, &-normal, &-d_dot, &mut shear, dt,
+    );
+    ShapedContact {
+        normal,
+        tangential: shear,
+        overlap,
+        point,
+        force: cf.force,
+        ..ShapedContact::NONE
+    }
+}
+
+/// Velocity of body k's material point at `point`.
+#[inline]
+fn point_velocity(p: &Particles, k: usize, point: &V3) -> V3 {
+    p.velocity[k] + p.angular_velocity[k].cross(&(point - p.position[k]))
+}
+
+/// A pair with a dilated polyhedron (the other a polyhedron, a sphere or a superquadric).
+fn poly_pair_contact(
+    p: &Particles,
+    ctx: &ForceContext,
+    [i, j]: [usize; 2],
+    x21: &V3,
+    old: &ShapedContact,
+) -> ShapedContact {
+    let (a, b) = (poly_view(p, i), poly_view(p, j));
+    let warm = (old.normal != V3::zeros()).then_some(old.normal);
+    match detect_pair(&a, &b, warm) {
+        PolyDetection::Separated { normal, gap } => ShapedContact {
+            normal,
+            support: normal.dot(x21) - gap, // NaN when GJK found them beyond its reach
+            frames: [p.orientation[i], p.orientation[j]],
+            ..ShapedContact::NONE
+        },
+        PolyDetection::CoresIntersect { depth } => {
+            cores_intersect(old.normal, depth + a.dilation + b.dilation)
+        }
+        PolyDetection::Contact {
+            normal,
+            overlap,
+            point,
+            ..
+        } => {
+            let (ra, rb) = (a.dilation, b.dilation);
+            // a superquadric has no dilation: the polyhedron's sphere against a surface
+            let r_eff = if ra > 0.0 && rb > 0.0 {
+                ra * rb / (ra + rb)
+            } else {
+                ra.max(rb)
+            };
+            let m_eff = p.mass[i] * p.mass[j] / (p.mass[i] + p.mass[j]);
+            let d_dot = point_velocity(p, j, &point) - point_velocity(p, i, &point);
+            let params = ctx.materials.pair(p.material[i], p.material[j]);
+            dilated_law(
+                params, overlap, r_eff, m_eff, normal, &d_dot, point, old, ctx.dt,
+            )
+        }
+    }
+}
+
+/// A dilated polyhedron against a plane (a flat wall: R = r_ds).
+fn poly_plane_contact(
+    p: &Particles,
+    ctx: &ForceContext,
+    k: usize,
+    pl: &crate::walls::Plane,
+    old: &ShapedContact,
+) -> ShapedContact {
+    let none = ShapedContact {
+        normal: -pl.normal,
+        ..ShapedContact::NONE
+    };
+    if !pl.active {
+        return none;
+    }
+    let a = poly_view(p, k);
+    match detect_plane(&a, &pl.point, &pl.normal) {
+        PolyDetection::Separated { .. } => none,
+        PolyDetection::CoresIntersect { depth } => cores_intersect(-pl.normal, depth + a.dilation),
+        PolyDetection::Contact {
+            normal,
+            overlap,
+            point,
+            ..
+        } => {
+            let d_dot = pl.velocity - point_velocity(p, k, &point);
+            let params = ctx.materials.pair(p.material[k], pl.material);
+            dilated_law(
+                params, overlap, a.dilation, p.mass[k], normal, &d_dot, point, old, ctx.dt,
+            )
+        }
+    }
+}
+
+/// A dilated polyhedron against one (mesh, patch) group of triangles: the closest triangle
+/// of the patch (the distance of the core to the patch, continuous across its edges, as for
+/// spheres in [`crate::triangle_contact`]), a flat wall (R = r_ds); the force acts on the
+/// mesh at the triangle's closest point.
+fn poly_mesh_contact(
+    p: &Particles,
+    ctx: &ForceContext,
+    group: &[(u32, WallCandidate)],
+    old: &ShapedContact,
+) -> (ShapedContact, MeshForceRecord) {
+    let (k, first) = group[0];
+    let k = k as usize;
+    let mesh = &ctx.meshes[(first.wall as usize) - ctx.planes.len()];
+    let none = (
+        ShapedContact {
+            normal: old.normal,
+            ..ShapedContact::NONE
+        },
+        MeshForceRecord::default(),
+    );
+    if !mesh.active {
+        return none;
+    }
+    let a = poly_view(p, k);
+    let warm = (old.normal != V3::zeros()).then_some(old.normal);
+    // the deepest contact of the patch (one per patch), or the first core intersection
+    let mut best: Option<(f64, V3, V3, V3, u32)> = None;
+    for (_, c) in group {
+        let corner = mesh.triangles[c.triangle as usize].map(|n| mesh.positions[n as usize]);
+        match detect_triangle(&a, &corner, warm) {
+            PolyDetection::Separated { .. } => {}
+            PolyDetection::CoresIntersect { depth } => {
+                return (
+                    cores_intersect(old.normal, depth + a.dilation),
+                    MeshForceRecord::default(),
+                )
+            }
+            PolyDetection::Contact {
+                normal,
+                overlap,
+                point,
+                core_point,
+            } => {
+                if best.is_none_or(|b| overlap > b.0) {
+                    best = Some((overlap, normal, point, core_point, c.triangle));
+                }
+            }
+        }
+    }
+    let Some((overlap, normal, point, on_wall, tri)) = best else {
+        return none;
+    };
+    let corner = mesh.triangles[tri as usize];
+    let [u, v, w] = corner.map(|n| mesh.positions[n as usize]);
+    let (_, bary) = crate::triangle_contact::closest_point_on_triangle(&on_wall, &u, &v, &w);
+    let wall_velocity = corner.iter().zip(&bary).fold(V3::zeros(), |s, (&n, &b)| {
+        s + mesh.velocities[n as usize] * b
+    });
+    let d_dot = wall_velocity - point_velocity(p, k, &point);
+    let params = ctx.materials.pair(p.material[k], mesh.material);
+    let contact = dilated_law(
+        params, overlap, a.dilation, p.mass[k], normal, &d_dot, point, old, ctx.dt,
+    );
     let record = MeshForceRecord {
         triangle: tri,
         bary,
@@ -516,7 +764,7 @@ mod tests {
             }
             fn view(p: &Particles, k: usize) -> SqBody<'_> {
                 SqBody {
-                    shape: &p.templates[k].superquadric,
+                    shape: p.templates[k].superquadric().unwrap(),
                     position: p.position[k],
                     rotation: p.orientation[k].to_rotation_matrix().into_inner(),
                 }

@@ -345,7 +345,7 @@ fn verlet_skin_never_misses_a_contact_under_rotation() {
             .map(|k| {
                 let t = p.template(k).unwrap();
                 (
-                    t.superquadric,
+                    *t.superquadric().unwrap(),
                     p.position[k],
                     p.orientation[k].to_rotation_matrix().into_inner(),
                 )
@@ -475,7 +475,7 @@ fn sand_recipe_draws_semi_axes_and_exponents() {
     );
     assert!(mass >= 2e-4 && mass < 2e-4 + p.mass.iter().cloned().fold(0.0, f64::max));
     for k in 0..p.len() {
-        let s = p.template(k).unwrap().superquadric;
+        let s = p.template(k).unwrap().superquadric().copied().unwrap();
         assert!(
             s.radii.iter().all(|r| (0.25e-3..=0.75e-3).contains(r)),
             "{s:?}"
@@ -536,8 +536,8 @@ fn superquadric_bed_round_trips_through_a_particle_file_and_shows_in_paraview() 
         assert_eq!(pa.orientation[ka], pb.orientation[kb]);
         assert_eq!(pa.mass[ka], pb.mass[kb]);
         assert_eq!(
-            pa.template(ka).unwrap().superquadric,
-            pb.template(kb).unwrap().superquadric
+            pa.template(ka).unwrap().superquadric().copied().unwrap(),
+            pb.template(kb).unwrap().superquadric().copied().unwrap()
         );
     }
 }

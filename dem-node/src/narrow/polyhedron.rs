@@ -1,0 +1,469 @@
+//! Narrow phase of the dilated polyhedra (U (2.5), SEED-SPEC §6.1): the distance Δ between the
+//! two convex cores by parry's GJK (its EPA when they interpenetrate), the gap between the
+//! dilated bodies δ = Δ − r_ds,1 − r_ds,2 and the overlap δ_d = −δ along the cores' closest-
+//! point direction. The thesis leaves the narrow phase open; GJK on the cores is what its
+//! "distance between the two core polyhedra" asks for.
+//!
+//! One contact point per pair, halfway between the two dilated surfaces on the segment of the
+//! cores' closest points. The overlap δ_d(x, θ) is a continuous function of the poses (the
+//! distance of two convex sets is), and the normal force F(δ_d) c applied at the closest
+//! points is −∇W(δ_d) wherever those points are unique: the field is conservative (elastic
+//! impacts conserve energy) and the force has no jump when the closest features change
+//! between face, edge and vertex. Where two faces are parallel the closest points are not
+//! unique (the force is then a subgradient): the force is the same but its point may jump
+//! within the common area, as for any single-point model of flat contacts.
+//!
+//! A sphere takes part as a dilated point (core = its centre, dilation = its radius), so a
+//! sphere–polyhedron pair is exact; a superquadric as its own support map (point from a
+//! normal, W A.2) with no dilation.
+//!
+//! The cores must never interpenetrate (δ_d < r_ds,1 + r_ds,2, the model's validity limit,
+//! U §6.1): when they do, the detection says so ([`PolyDetection::CoresIntersect`]) and the
+//! engine stops with an error naming the pair.
+
+use crate::hertz_mindlin::V3;
+use crate::particles::Orientation;
+use crate::shape::Superquadric;
+use parry3d_f64::math::{Pose, Rotation, Vector};
+use parry3d_f64::query::details::contact_support_map_support_map_with_params;
+use parry3d_f64::query::gjk::{GJKResult, VoronoiSimplex};
+use parry3d_f64::shape::{SupportMap, Triangle};
+
+#[inline]
+fn to_parry(x: &V3) -> Vector {
+    Vector::new(x.x, x.y, x.z)
+}
+
+#[inline]
+fn from_parry(x: Vector) -> V3 {
+    V3::new(x.x, x.y, x.z)
+}
+
+/// The convex core of a body in its own frame, as GJK sees it.
+#[derive(Clone, Copy)]
+pub enum Core<'a> {
+    /// The hull of `vertices` × `scale` (a stone; a sphere is the single vertex 0).
+    Points { vertices: &'a [V3], scale: f64 },
+    /// A superquadric (no dilation): its support point is its surface point of that normal.
+    Superquadric(&'a Superquadric),
+}
+
+impl SupportMap for Core<'_> {
+    #[inline]
+    fn local_support_point(&self, dir: Vector) -> Vector {
+        match self {
+            Core::Points { vertices, scale } => {
+                let d = from_parry(dir);
+                let mut best = vertices[0];
+                let mut h = best.dot(&d);
+                for v in &vertices[1..] {
+                    let hv = v.dot(&d);
+                    if hv > h {
+                        h = hv;
+                        best = *v;
+                    }
+                }
+                to_parry(&(best * *scale))
+            }
+            Core::Superquadric(s) => {
+                let d = from_parry(dir);
+                if d.norm_squared() == 0.0 {
+                    return Vector::ZERO;
+                }
+                to_parry(&s.point_from_normal(&d).x)
+            }
+        }
+    }
+}
+
+/// A body as the polyhedral narrow phase sees it.
+#[derive(Clone, Copy)]
+pub struct PolyBody<'a> {
+    pub core: Core<'a>,
+    /// Dilation radius r_ds (m); a sphere's radius, 0 for a superquadric.
+    pub dilation: f64,
+    pub position: V3,
+    pub orientation: Orientation,
+}
+
+/// The single vertex of a sphere's core.
+pub const POINT_CORE: [V3; 1] = [V3::new(0.0, 0.0, 0.0)];
+
+/// Result of a polyhedral detection.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PolyDetection {
+    /// The dilated bodies are apart. `normal` is the cores' closest-point direction (from the
+    /// first body to the second) and `gap` the distance of the dilated surfaces, when GJK
+    /// found them within its reach; otherwise `gap` is NaN (more than the reach apart).
+    Separated { normal: V3, gap: f64 },
+    /// Overlap δ_d > 0 along `normal` (unit, from the first body to the second), contact
+    /// `point` halfway between the dilated surfaces; `core_point` is the second's core point
+    /// (on a triangle: where the force acts on the wall).
+    Contact {
+        normal: V3,
+        overlap: f64,
+        point: V3,
+        core_point: V3,
+    },
+    /// The cores interpenetrate by `depth` (the dilation no longer covers the overlap).
+    CoresIntersect { depth: f64 },
+}
+
+/// Distance query between two cores placed by `pos12` (second in the first's frame, both
+/// cores in their own frames), reach `reach`: (closest point on the first, on the second,
+/// normal from first to second, all in the first's frame) or the separating direction.
+fn closest<G1: SupportMap, G2: SupportMap>(
+    pos12: &Pose,
+    g1: &G1,
+    g2: &G2,
+    reach: f64,
+    warm: Option<Vector>,
+) -> GJKResult {
+    let mut simplex = VoronoiSimplex::new();
+    contact_support_map_support_map_with_params(pos12, g1, g2, reach, &mut simplex, warm)
+}
+
+/// Classifies the GJK result of two bodies of dilations summing to `reach` (`r1` the
+/// first's); `to_global` maps the first body's frame to the global one.
+fn classify(
+    result: GJKResult,
+    reach: f64,
+    r1: f64,
+    to_global: impl Fn(V3) -> V3,
+    x1: &V3,
+) -> PolyDetection {
+    match result {
+        GJKResult::ClosestPoints(p1, p2, n1) => {
+            let dist = (p2 - p1).dot(n1);
+            let normal = to_global(from_parry(n1)).normalize();
+            if dist <= 0.0 {
+                return PolyDetection::CoresIntersect { depth: -dist };
+            }
+            if dist >= reach {
+                return PolyDetection::Separated {
+                    normal,
+                    gap: dist - reach,
+                };
+            }
+            let c1 = x1 + to_global(from_parry(p1));
+            let c2 = x1 + to_global(from_parry(p2));
+            // halfway between the dilated surfaces c1 + r1 n and c2 − r2 n
+            let overlap = reach - dist;
+            let point = c1 + normal * (r1 - 0.5 * overlap);
+            PolyDetection::Contact {
+                normal,
+                overlap,
+                point,
+                core_point: c2,
+            }
+        }
+        GJKResult::NoIntersection(dir) => PolyDetection::Separated {
+            normal: to_global(from_parry(dir))
+                .try_normalize(0.0)
+                .unwrap_or_else(V3::z),
+            gap: f64::NAN,
+        },
+        // not returned by the contact query (EPA answers an intersection)
+        GJKResult::Intersection | GJKResult::Proximity(_) => {
+            PolyDetection::CoresIntersect { depth: 0.0 }
+        }
+    }
+}
+
+fn rotation(q: &Orientation) -> Rotation {
+    let c = q.quaternion().coords; // [i, j, k, w]
+    Rotation::from_xyzw(c.x, c.y, c.z, c.w)
+}
+
+/// Contact of two bodies; `warm` is the last normal (the GJK start direction).
+pub fn detect_pair(a: &PolyBody, b: &PolyBody, warm: Option<V3>) -> PolyDetection {
+    let q1 = a.orientation;
+    let t = q1.inverse_transform_vector(&(b.position - a.position));
+    let pos12 = Pose::from_parts(to_parry(&t), rotation(&(q1.inverse() * b.orientation)));
+    let reach = a.dilation + b.dilation;
+    let warm = warm.map(|n| to_parry(&q1.inverse_transform_vector(&n)));
+    let result = closest(&pos12, &a.core, &b.core, reach, warm);
+    classify(result, reach, a.dilation, |v| q1 * v, &a.position)
+}
+
+/// Contact of a body with triangle `tri` (global corners; walls have no dilation). The
+/// normal points from the body to the triangle; `core_point` is the triangle's closest point.
+pub fn detect_triangle(a: &PolyBody, tri: &[V3; 3], warm: Option<V3>) -> PolyDetection {
+    let q1 = a.orientation;
+    let local = tri.map(|v| to_parry(&q1.inverse_transform_vector(&(v - a.position))));
+    let triangle = Triangle::new(local[0], local[1], local[2]);
+    let warm = warm.map(|n| to_parry(&q1.inverse_transform_vector(&n)));
+    let result = closest(&Pose::IDENTITY, &a.core, &triangle, a.dilation, warm);
+    classify(result, a.dilation, a.dilation, |v| q1 * v, &a.position)
+}
+
+/// Contact of a body with the plane through `point` of unit `normal` (pointing to the side
+/// the body belongs to): the core's deepest vertex against the plane.
+pub fn detect_plane(a: &PolyBody, point: &V3, normal: &V3) -> PolyDetection {
+    let c = -normal; // from the body to the wall
+    let local = a.orientation.inverse_transform_vector(&c);
+    let deepest =
+        a.position + a.orientation * from_parry(a.core.local_support_point(to_parry(&local)));
+    let dist = (deepest - point).dot(normal);
+    if dist <= 0.0 {
+        return PolyDetection::CoresIntersect { depth: -dist };
+    }
+    if dist >= a.dilation {
+        return PolyDetection::Separated {
+            normal: c,
+            gap: dist - a.dilation,
+        };
+    }
+    let foot = deepest - normal * dist;
+    PolyDetection::Contact {
+        normal: c,
+        overlap: a.dilation - dist,
+        point: (deepest + foot) * 0.5,
+        core_point: foot,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::generate::{random_orientation, random_unit_vector, SplitMix64};
+    use crate::shape::Stone;
+
+    fn body<'a>(s: &'a Stone, scale: f64, x: V3, q: Orientation) -> PolyBody<'a> {
+        PolyBody {
+            core: Core::Points {
+                vertices: &s.vertices,
+                scale,
+            },
+            dilation: s.dilation * scale,
+            position: x,
+            orientation: q,
+        }
+    }
+
+    fn world(p: &PolyBody, s: &Stone) -> Vec<V3> {
+        let Core::Points { scale, .. } = p.core else {
+            unreachable!()
+        };
+        s.vertices
+            .iter()
+            .map(|v| p.position + p.orientation * (v * scale))
+            .collect()
+    }
+
+    /// The separating-axis test of two convex polytopes (face normals and edge crossings):
+    /// true iff their cores are disjoint.
+    fn separated_by_an_axis(a: &PolyBody, sa: &Stone, b: &PolyBody, sb: &Stone) -> bool {
+        let (va, vb) = (world(a, sa), world(b, sb));
+        let edges = |v: &[V3], s: &Stone| -> Vec<V3> {
+            s.triangles
+                .iter()
+                .flat_map(|t| (0..3).map(move |e| (t[e], t[(e + 1) % 3])))
+                .map(|(i, j)| v[j as usize] - v[i as usize])
+                .collect()
+        };
+        let normals = |v: &[V3], s: &Stone| -> Vec<V3> {
+            s.triangles
+                .iter()
+                .map(|t| (v[t[1] as usize] - v[t[0] as usize]).cross(&(v[t[2] as usize] - v[t[0] as usize])))
+                .collect()
+        };
+        let mut axes = normals(&va, sa);
+        axes.extend(normals(&vb, sb));
+        for e in edges(&va, sa) {
+            for f in edges(&vb, sb) {
+                axes.push(e.cross(&f));
+            }
+        }
+        axes.iter().filter(|n| n.norm() > 1e-12).any(|n| {
+            let n = n.normalize();
+            let range = |v: &[V3]| {
+                v.iter().fold((f64::MAX, f64::MIN), |(lo, hi), x| {
+                    (lo.min(x.dot(&n)), hi.max(x.dot(&n)))
+                })
+            };
+            let (ra, rb) = (range(&va), range(&vb));
+            ra.1 < rb.0 || rb.1 < ra.0
+        })
+    }
+
+    /// Brute-force core distance: the minimum over vertex–triangle and edge–edge pairs.
+    fn brute_distance(a: &PolyBody, sa: &Stone, b: &PolyBody, sb: &Stone) -> f64 {
+        let world = |p: &PolyBody, s: &Stone, scale: f64| -> Vec<V3> {
+            s.vertices
+                .iter()
+                .map(|v| p.position + p.orientation * (v * scale))
+                .collect()
+        };
+        let (Core::Points { scale: ka, .. }, Core::Points { scale: kb, .. }) = (a.core, b.core)
+        else {
+            unreachable!()
+        };
+        let (va, vb) = (world(a, sa, ka), world(b, sb, kb));
+        let mut d = f64::INFINITY;
+        for (vs, other, tris) in [(&va, &vb, &sb.triangles), (&vb, &va, &sa.triangles)] {
+            for v in vs.iter() {
+                for t in tris.iter() {
+                    let [p, q, r] = t.map(|k| other[k as usize]);
+                    d = d.min(crate::triangle_contact::distance_squared(v, &p, &q, &r).sqrt());
+                }
+            }
+        }
+        // exact segment–segment distance (Ericson, Real-Time Collision Detection 5.1.9)
+        let seg = |p1: V3, q1: V3, p2: V3, q2: V3| -> f64 {
+            let (d1, d2, r) = (q1 - p1, q2 - p2, p1 - p2);
+            let (a, e, f) = (d1.dot(&d1), d2.dot(&d2), d2.dot(&r));
+            let (c, b) = (d1.dot(&r), d1.dot(&d2));
+            let denom = a * e - b * b;
+            let mut s = if denom > 1e-300 {
+                ((b * f - c * e) / denom).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let mut t = (b * s + f) / e;
+            if t < 0.0 {
+                t = 0.0;
+                s = (-c / a).clamp(0.0, 1.0);
+            } else if t > 1.0 {
+                t = 1.0;
+                s = ((b - c) / a).clamp(0.0, 1.0);
+            }
+            ((p1 + d1 * s) - (p2 + d2 * t)).norm()
+        };
+        for ta in &sa.triangles {
+            for tb in &sb.triangles {
+                for e in 0..3 {
+                    for f in 0..3 {
+                        d = d.min(seg(
+                            va[ta[e] as usize],
+                            va[ta[(e + 1) % 3] as usize],
+                            vb[tb[f] as usize],
+                            vb[tb[(f + 1) % 3] as usize],
+                        ));
+                    }
+                }
+            }
+        }
+        d
+    }
+
+    /// GJK's overlap agrees with a brute-force distance of the cores on random pairs.
+    #[test]
+    fn pair_overlap_matches_a_brute_force_distance() {
+        let mut rng = SplitMix64::new(9);
+        let sa = Stone::random(30, 1.6, 0.1, &mut rng).unwrap();
+        let sb = Stone::random(10, 1.3, 0.1, &mut rng).unwrap();
+        let (mut contacts, mut intersections) = (0, 0);
+        for _ in 0..400 {
+            let a = body(&sa, 1.0, V3::zeros(), random_orientation(&mut rng));
+            let dir = random_unit_vector(&mut rng);
+            let x = dir * (0.75 + 0.3 * rng.uniform());
+            let b = body(&sb, 0.8, x, random_orientation(&mut rng));
+            let d = brute_distance(&a, &sa, &b, &sb);
+            match detect_pair(&a, &b, None) {
+                PolyDetection::Contact {
+                    overlap, normal, ..
+                } => {
+                    contacts += 1;
+                    let expected = a.dilation + b.dilation - d;
+                    assert!((overlap - expected).abs() < 1e-10, "{overlap} vs {expected}");
+                    assert!((normal.norm() - 1.0).abs() < 1e-12);
+                }
+                PolyDetection::Separated { gap, .. } => {
+                    assert!(separated_by_an_axis(&a, &sa, &b, &sb));
+                    assert!(d >= a.dilation + b.dilation - 2e-5, "missed: {d}");
+                    if gap.is_finite() {
+                        assert!((gap - (d - a.dilation - b.dilation)).abs() < 2e-5);
+                    }
+                }
+                PolyDetection::CoresIntersect { depth } => {
+                    assert!(
+                        !separated_by_an_axis(&a, &sa, &b, &sb),
+                        "cores {d} apart but said to intersect by {depth}"
+                    );
+                    intersections += 1;
+                }
+            }
+        }
+        println!("{contacts} contacts, {intersections} core intersections");
+        assert!(contacts > 20 && intersections > 5, "{contacts} {intersections}");
+    }
+
+    /// A sphere is a dilated point: sphere–sphere gives the exact overlap r1 + r2 − |x2 − x1|
+    /// and the point halfway between the surfaces.
+    #[test]
+    fn spheres_as_dilated_points_are_exact() {
+        let q = Orientation::identity();
+        let a = PolyBody {
+            core: Core::Points {
+                vertices: &POINT_CORE,
+                scale: 1.0,
+            },
+            dilation: 1.0,
+            position: V3::zeros(),
+            orientation: q,
+        };
+        let b = PolyBody {
+            dilation: 0.5,
+            position: V3::new(0.3, 1.2, 0.4),
+            ..a
+        };
+        let d = b.position.norm();
+        let PolyDetection::Contact {
+            overlap,
+            normal,
+            point,
+            ..
+        } = detect_pair(&a, &b, None)
+        else {
+            panic!()
+        };
+        assert!((overlap - (1.5 - d)).abs() < 1e-14);
+        assert!((normal - b.position / d).norm() < 1e-14);
+        let mid = normal * (0.5 * (1.0 + d - 0.5));
+        assert!((point - mid).norm() < 1e-14, "{point} vs {mid}");
+    }
+
+    /// Body against a plane and against a triangle of that plane give the same overlap where
+    /// the body is over the triangle's interior.
+    #[test]
+    fn plane_and_triangle_agree() {
+        let mut rng = SplitMix64::new(2);
+        let s = Stone::random(30, 1.5, 0.1, &mut rng).unwrap();
+        for _ in 0..50 {
+            let q = random_orientation(&mut rng);
+            let h = s.circumradius * (0.75 + 0.3 * rng.uniform());
+            let a = body(&s, 1.0, V3::new(0.0, 0.0, h), q);
+            let tri = [
+                V3::new(-10.0, -10.0, 0.0),
+                V3::new(10.0, -10.0, 0.0),
+                V3::new(0.0, 10.0, 0.0),
+            ];
+            let p = detect_plane(&a, &V3::zeros(), &V3::z());
+            let t = detect_triangle(&a, &tri, None);
+            match (p, t) {
+                (
+                    PolyDetection::Contact {
+                        overlap: o1,
+                        normal: n1,
+                        ..
+                    },
+                    PolyDetection::Contact {
+                        overlap: o2,
+                        normal: n2,
+                        ..
+                    },
+                ) => {
+                    assert!((o1 - o2).abs() < 1e-10, "{o1} vs {o2}");
+                    assert!((n1 - n2).norm() < 1e-8 && (n1 + V3::z()).norm() < 1e-8);
+                }
+                (PolyDetection::Separated { .. }, PolyDetection::Separated { .. }) => {}
+                (
+                    PolyDetection::CoresIntersect { depth: d1 },
+                    PolyDetection::CoresIntersect { depth: d2 },
+                ) => assert!((d1 - d2).abs() < 1e-10),
+                other => panic!("{other:?}"),
+            }
+        }
+    }
+}

@@ -1,0 +1,540 @@
+//! Dilated convex polyhedra in the engine (Ullrich's ballast, SEED-SPEC §6.1–6.2): impacts
+//! conserve energy on stones and on triangle walls, a stone at rest on a coupled plate loads
+//! it with its weight, results do not depend on the thread count or on snapshots, and the
+//! model's validity limit (the cores must not meet) stops a run with the pair named.
+mod common;
+
+use dem::generate::SplitMix64;
+use dem::hertz_mindlin::V3;
+use dem::particles::Orientation;
+use dem::shape::Stone;
+use dem::Engine;
+
+const ELASTIC: &str = r#"
+[dem]
+time_step = 1e-6
+gravity = [0.0, 0.0, 0.0]
+[dem.materials.grain]
+youngs_modulus = 1e7
+poisson_ratio = 0.3
+density = 1000.0
+restitution = 1.0
+friction = 0.0
+"#;
+
+fn rot(axis: [f64; 3], angle: f64) -> Orientation {
+    Orientation::from_axis_angle(&nalgebra::Unit::new_normalize(V3::from(axis)), angle)
+}
+
+/// Stones of 10, 30 and 40 triangles (seeded).
+fn stones() -> Vec<Stone> {
+    let mut rng = SplitMix64::new(21);
+    [10, 30, 40]
+        .iter()
+        .map(|&t| Stone::random(t, 1.6, 0.1, &mut rng).unwrap())
+        .collect()
+}
+
+/// An engine of `scene` with the stone bodies (x, v, ω, q, stone, size).
+fn engine_with(scene: &str, bodies: &[(V3, V3, V3, Orientation, &Stone, f64)]) -> Engine {
+    let mut e = common::engine(scene);
+    let p = e.particles_mut();
+    for (x, v, w, q, s, size) in bodies {
+        let id = p.add_stone((*s).clone());
+        p.push_polyhedron(*x, *v, *w, *q, id, *size, 1000.0, 0);
+    }
+    e.refresh_forces();
+    e
+}
+
+/// Steps until the contacts have opened again (after at least one); (energy before, after).
+fn until_apart(e: &mut Engine, walls: bool) -> (f64, f64) {
+    let e0 = e.kinetic_energy();
+    let count = |e: &Engine| {
+        if walls {
+            e.num_wall_contacts()
+        } else {
+            e.num_contacts()
+        }
+    };
+    let mut touched = false;
+    for _ in 0..400_000 {
+        e.step().unwrap();
+        touched |= count(e) > 0;
+        if touched && count(e) == 0 {
+            break;
+        }
+    }
+    assert!(touched, "never touched");
+    assert_eq!(count(e), 0, "still in contact");
+    (e0, e.kinetic_energy())
+}
+
+/// Frictionless elastic (e = 1) impacts of spinning stones, off-centre, so the closest
+/// features move over faces, edges and vertices: the normal force is −∇W(δ_d) of the core
+/// distance, so the energy after the impact equals the energy before (1e-5).
+#[test]
+fn frictionless_elastic_polyhedron_impacts_conserve_energy() {
+    let s = stones();
+    let cases = [(0, 1), (1, 1), (2, 0), (1, 2)];
+    for (k, (a, b)) in cases.into_iter().enumerate() {
+        let mut e = engine_with(
+            ELASTIC,
+            &[
+                (
+                    V3::zeros(),
+                    V3::new(0.1, 0.0, 0.0),
+                    V3::new(0.0, 30.0, 10.0),
+                    rot([0.3, 1.0, 0.2], 0.4 + k as f64),
+                    &s[a],
+                    4e-3,
+                ),
+                (
+                    V3::new(6e-3, 0.8e-3, 0.5e-3),
+                    V3::new(-0.1, 0.0, 0.0),
+                    V3::new(20.0, 0.0, -15.0),
+                    rot([1.0, -0.2, 0.5], 1.1 + k as f64),
+                    &s[b],
+                    3.5e-3,
+                ),
+            ],
+        );
+        let (e0, e1) = until_apart(&mut e, false);
+        let rel = (e1 - e0) / e0;
+        println!("case {k}: energy change {rel:e}");
+        assert!(rel.abs() < 1e-5, "case {k}: {rel:e}");
+    }
+}
+
+/// A spinning stone bouncing off a box's edge, corner and face (frictionless, e = 1): the
+/// closest triangle of the patch changes across the box's edges without a force jump and the
+/// energy is conserved (1e-5).
+#[test]
+fn polyhedron_impacts_on_box_edges_conserve_energy() {
+    let scene = format!(
+        "{ELASTIC}[[dem.walls]]\nkind = \"box\"\nmaterial = \"grain\"\nmin = [0.0, 0.0, 0.0]\nmax = [0.02, 0.02, 0.02]\n"
+    );
+    let s = stones();
+    let cases = [
+        (V3::new(0.024, 0.01, 0.024), V3::new(-0.1, 0.0, -0.1)),
+        (V3::new(0.024, 0.024, 0.024), V3::new(-0.08, -0.08, -0.08)),
+        (V3::new(0.023, 0.003, 0.01), V3::new(-0.15, 0.05, 0.0)),
+    ];
+    for (k, (x, v)) in cases.into_iter().enumerate() {
+        let mut e = engine_with(
+            &scene,
+            &[(
+                x,
+                v,
+                V3::new(20.0, -30.0, 10.0),
+                rot([0.2, 1.0, 0.4], 0.8),
+                &s[1],
+                4e-3,
+            )],
+        );
+        let (e0, e1) = until_apart(&mut e, true);
+        let rel = (e1 - e0) / e0;
+        println!("case {k}: energy change {rel:e}");
+        assert!(rel.abs() < 1e-5, "case {k}: {rel:e}");
+    }
+}
+
+/// The normal force of a pair is Ullrich's (2.20) as printed — 2√2 G/(3(1 − ν)) √r_ds δ^{3/2}
+/// for two bodies of the same material and dilation — evaluated at the overlap the narrow
+/// phase reports (checked against a brute force in its own tests).
+#[test]
+fn pair_force_is_ullrich_2_20() {
+    let s = stones();
+    let (size, e_mod, nu) = (4e-3, 1e7, 0.3);
+    let g = e_mod / (2.0 * (1.0 + nu));
+    let r = s[1].dilation * size;
+    for gap in [0.2e-3, 0.05e-3, 0.005e-3] {
+        // two copies facing each other along x, the second pushed in until they touch
+        let mut e = engine_with(
+            ELASTIC,
+            &[
+                (
+                    V3::zeros(),
+                    V3::zeros(),
+                    V3::zeros(),
+                    Orientation::identity(),
+                    &s[1],
+                    size,
+                ),
+                (
+                    V3::new(size, 0.0, 0.0),
+                    V3::zeros(),
+                    V3::zeros(),
+                    rot([0.0, 0.0, 1.0], std::f64::consts::PI),
+                    &s[1],
+                    size,
+                ),
+            ],
+        );
+        // move body 1 along −x until the dilated bodies overlap by at least `gap`
+        let overlap = |e: &Engine| {
+            e.shaped_pair_contacts()
+                .map(|c| c.1.overlap)
+                .fold(-1.0, f64::max)
+        };
+        for _ in 0..10_000 {
+            if overlap(&e) >= gap {
+                break;
+            }
+            e.particles_mut().position[1].x -= 2e-6;
+            e.refresh_forces();
+        }
+        let p = e.particles();
+        let (f0, f1) = (p.force[0], p.force[1]);
+        assert!((f0 + f1).norm() < 1e-12 * f0.norm(), "action = reaction: {f0} {f1}");
+        let delta = e.shaped_pair_contacts().find(|c| c.1.touching()).unwrap().1.overlap;
+        let expected = 2.0 * 2f64.sqrt() * g / (3.0 * (1.0 - nu)) * r.sqrt() * delta.powf(1.5);
+        println!(
+            "gap {gap:e}: δ = {delta:e}, |F| = {:e}, (2.20) {expected:e}",
+            f0.norm()
+        );
+        assert!(delta >= gap && delta < gap + 1e-5);
+        assert!((f0.norm() - expected).abs() < 1e-9 * expected);
+    }
+}
+
+/// A stone landed on a coupled (FEM interface) plate of 8 triangles loads the plate nodes
+/// with its weight: the mean nodal force over a window balances the weight and the stone's
+/// momentum change (1e-7: the window mean and the leapfrog sum differ by half a step), and
+/// the weight to 1e-6 once it has settled.
+#[test]
+fn polyhedron_at_rest_on_a_coupled_plate_loads_it_with_its_weight() {
+    let scene = format!(
+        "[dem]\ntime_step = 2e-6\ninterface_material = \"grain\"\n{}",
+        common::GRAIN.replace("restitution = 0.5", "restitution = 0.2")
+    );
+    let s = stones();
+    let mut e = engine_with(
+        &scene,
+        &[(
+            V3::new(0.025, 0.025, 0.004),
+            V3::zeros(),
+            V3::zeros(),
+            rot([1.0, 0.5, 0.0], 0.3),
+            &s[1],
+            4e-3,
+        )],
+    );
+    let mut pos = Vec::new();
+    for j in 0..3 {
+        for i in 0..3 {
+            pos.extend([0.025 * i as f64, 0.025 * j as f64, 0.001]);
+        }
+    }
+    let mut tris = Vec::new();
+    for j in 0..2u32 {
+        for i in 0..2u32 {
+            let a = j * 3 + i;
+            tris.extend([a, a + 1, a + 4, a, a + 4, a + 3]);
+        }
+    }
+    let m = e.add_coupled_mesh("plate", &pos, &tris).unwrap();
+    let zeros = vec![0.0; pos.len()];
+    e.set_mesh_kinematics(m, &pos, &zeros, &zeros, dem::MotionRule::Quadratic)
+        .unwrap();
+    e.refresh_forces();
+    let mass = e.particles().mass[0];
+    e.advance(400_000).unwrap(); // 0.8 s: landed, rocking by nanometres
+    // the mean nodal force of the next 0.2 s (a new window) against the weight: a stone on
+    // one contact point keeps rocking among the vertices of the face it lies on (ω ~ 0.01
+    // rad/s, kinetic energy ~1e-14 J here), so the force of one step is not the weight
+    e.set_mesh_kinematics(m, &pos, &zeros, &zeros, dem::MotionRule::Quadratic)
+        .unwrap();
+    let v0 = e.particles().velocity[0].z;
+    e.advance(100_000).unwrap();
+    let f = e.interface_forces(m, true);
+    let fz: f64 = f.chunks(3).map(|c| c[2]).sum();
+    let fx: f64 = f.chunks(3).map(|c| c[0]).sum();
+    // momentum balance over the window: mean force = weight + m Δv/T
+    let dv = e.particles().velocity[0].z - v0;
+    let weight = mass * 9.81;
+    let ke = e.kinetic_energy();
+    println!("weight {weight:e} N, mean nodal force z {fz:e}, x {fx:e}, m Δv/T {:e}, KE {ke:e}", mass * dv / 0.2);
+    assert!((fz + weight + mass * dv / 0.2).abs() < 1e-7 * weight, "{fz} vs {weight}");
+    assert!((fz + weight).abs() < 1e-6 * weight, "{fz} vs {weight}");
+    assert!(fx.abs() < 1e-6 * weight, "{fx}");
+}
+
+/// A box of plane walls with `count` stones (and as many spheres with `mixed`) poured in.
+fn poured_scene(threads: usize, count: usize, mixed: bool) -> String {
+    let spheres = if mixed {
+        format!(
+            r#"
+[[dem.particles]]
+kind = "fill"
+material = "grain"
+min = [0.0, 0.0, 0.002]
+max = [0.05, 0.05, 0.08]
+count = {count}
+seed = 4
+distribution = {{ kind = "uniform", min = 0.0015, max = 0.0025 }}
+"#
+        )
+    } else {
+        String::new()
+    };
+    format!(
+        r#"
+[dem]
+time_step = 1e-5
+threads = {threads}
+[dem.materials.grain]
+youngs_modulus = 5e7
+poisson_ratio = 0.3
+density = 1500.0
+restitution = 0.3
+friction = 0.5
+[[dem.walls]]
+kind = "box"
+material = "grain"
+min = [0.0, 0.0, 0.0]
+max = [0.05, 0.05, 0.12]
+open = ["+z"]
+[[dem.walls]]
+kind = "plane"
+material = "grain"
+point = [0.0, 0.0, 0.0]
+normal = [1.0, 0.0, 0.0]
+[[dem.particles]]
+kind = "fill"
+material = "grain"
+min = [0.0, 0.0, 0.002]
+max = [0.05, 0.05, 0.08]
+count = {count}
+seed = 3
+distribution = {{ kind = "uniform", min = 0.002, max = 0.003 }}
+velocity = [0.05, -0.02, 0.0]
+shape = {{ kind = "polyhedron", triangles = 30, stones = 8 }}
+{spheres}"#
+    )
+}
+
+fn run_pour(threads: usize, steps: usize, split: bool) -> Vec<u8> {
+    let mut e = common::engine(&poured_scene(threads, 80, true));
+    if split {
+        for _ in 0..steps {
+            e.step().unwrap();
+        }
+    } else {
+        e.advance(steps).unwrap();
+    }
+    assert!(
+        e.num_contacts() > 10 && e.num_wall_contacts() > 10,
+        "the pour should be in contact by now: {} pairs, {} wall contacts",
+        e.num_contacts(),
+        e.num_wall_contacts()
+    );
+    // stones touch spheres (the mixed pairs go through the polyhedral narrow phase)
+    let p = e.particles();
+    let ids: Vec<u32> = (0..p.len()).filter(|&k| p.template(k).is_none()).map(|k| p.id[k]).collect();
+    let mixed = e
+        .shaped_pair_contacts()
+        .filter(|(pair, c)| c.touching() && pair.iter().any(|id| ids.contains(id)))
+        .count();
+    assert!(mixed > 2, "{mixed} sphere–stone contacts");
+    e.snapshot()
+}
+
+/// Bitwise: 1 vs 2 threads, `step` × n vs `advance(n)`, and a restored snapshot continues
+/// as the uninterrupted run — a mixed bed of stones and spheres in a box of triangles and
+/// planes.
+#[test]
+fn polyhedron_pour_is_bitwise_reproducible() {
+    let steps = 10_000;
+    let a = run_pour(1, steps, false);
+    let b = run_pour(2, steps, false);
+    assert!(a == b, "1 and 2 threads differ");
+    let c = run_pour(2, steps, true);
+    assert!(a == c, "step × n differs from advance(n)");
+    let mut full = common::engine(&poured_scene(2, 80, true));
+    full.advance(steps).unwrap();
+    let mut half = common::engine(&poured_scene(2, 80, true));
+    half.advance(steps / 2).unwrap();
+    let snap = half.snapshot();
+    let mut resumed = common::engine(&poured_scene(2, 80, true));
+    resumed.restore(&snap).unwrap();
+    resumed.advance(steps - steps / 2).unwrap();
+    assert!(
+        full.snapshot() == resumed.snapshot(),
+        "restore does not continue bitwise"
+    );
+}
+
+/// Two soft stones shot at each other far too fast: the overlap outgrows the dilation, the
+/// cores meet, and the run stops with an error naming both particles and the limit.
+#[test]
+fn cores_meeting_stop_the_run_naming_the_pair() {
+    let s = stones();
+    let scene = ELASTIC.replace("youngs_modulus = 1e7", "youngs_modulus = 1e4");
+    let mut e = engine_with(
+        &scene,
+        &[
+            (
+                V3::zeros(),
+                V3::new(5.0, 0.0, 0.0),
+                V3::zeros(),
+                Orientation::identity(),
+                &s[1],
+                4e-3,
+            ),
+            (
+                V3::new(5e-3, 0.0, 0.0),
+                V3::new(-5.0, 0.0, 0.0),
+                V3::zeros(),
+                Orientation::identity(),
+                &s[0],
+                4e-3,
+            ),
+        ],
+    );
+    let err = (0..10_000)
+        .find_map(|_| e.step().err())
+        .expect("the cores must meet");
+    let msg = err.to_string();
+    println!("{msg}");
+    assert!(
+        msg.contains("cores of particle 0 and particle 1")
+            || msg.contains("cores of particle 1 and particle 0"),
+        "{msg}"
+    );
+    assert!(msg.contains("dilation"), "{msg}");
+}
+
+/// Shape keys out of range are refused at validation with the field and the limit named; a
+/// non-convex stone in the library is refused naming the file and the vertex.
+#[test]
+fn polyhedron_keys_and_stone_files_are_validated() {
+    let base = poured_scene(1, 5, false);
+    for (bad, field) in [
+        ("triangles = 30", "triangles = 31"),
+        ("stones = 8", "stones = 8, dilation = 0.6"),
+        ("stones = 8", "stones = 8, elongation = 0.5"),
+    ] {
+        let scene = base.replace(bad, field);
+        let err = match dem::parse_scene_section(&scene) {
+            Err(e) => e.to_string(),
+            Ok(Some(cfg)) => match Engine::from_config(&cfg, std::path::Path::new(".")) {
+                Err(e) => e.to_string(),
+                Ok(_) => panic!("accepted: {field}"),
+            },
+            Ok(None) => panic!("no [dem]"),
+        };
+        let key = field
+            .rsplit(", ")
+            .next()
+            .unwrap()
+            .split(' ')
+            .next()
+            .unwrap();
+        println!("{field}: {err}");
+        assert!(err.contains(&format!("shape.{key}")), "{err}");
+    }
+    // a stone file with a dent
+    let dir = tempfile::tempdir().unwrap();
+    let mut stl = String::from("solid dent\n");
+    let v = |x: f64, y: f64, z: f64| V3::new(x, y, z);
+    let tris = [
+        [v(0., 0., 0.), v(1., 1., 0.), v(1., 0., 0.)],
+        [v(0., 0., 0.), v(0., 1., 0.), v(1., 1., 0.)],
+        [v(0., 0., 0.), v(1., 0., 0.), v(0.5, 0.5, 0.2)],
+        [v(1., 0., 0.), v(1., 1., 0.), v(0.5, 0.5, 0.2)],
+        [v(1., 1., 0.), v(0., 1., 0.), v(0.5, 0.5, 0.2)],
+        [v(0., 1., 0.), v(0., 0., 0.), v(0.5, 0.5, 0.2)],
+        [v(0., 0., 0.), v(1., 0., 0.), v(0.5, 0.5, 1.0)],
+        [v(1., 0., 0.), v(1., 1., 0.), v(0.5, 0.5, 1.0)],
+    ];
+    for t in tris {
+        stl.push_str("facet normal 0 0 0\nouter loop\n");
+        for p in t {
+            stl.push_str(&format!("vertex {} {} {}\n", p.x, p.y, p.z));
+        }
+        stl.push_str("endloop\nendfacet\n");
+    }
+    stl.push_str("endsolid dent\n");
+    std::fs::write(dir.path().join("dent.stl"), stl).unwrap();
+    let scene = base.replace("stones = 8", "library = [\"dent.stl\"]");
+    let cfg = dem::parse_scene_section(&scene).unwrap().unwrap();
+    let err = Engine::from_config(&cfg, dir.path())
+        .err()
+        .unwrap()
+        .to_string();
+    println!("{err}");
+    assert!(
+        err.contains("dent.stl") && err.contains("not convex"),
+        "{err}"
+    );
+}
+
+/// The stones' VTK surfaces: every point of `polyhedra_*.vtk` lies on its stone's dilated
+/// surface (distance r_ds from the core, to 1e-7 of the size: the file has 10 digits).
+#[test]
+fn polyhedra_show_their_real_surfaces_in_paraview() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = poured_scene(1, 5, false).replace(
+        "[dem.materials.grain]",
+        "[dem.output]\nvtk_every = 100\n[dem.materials.grain]",
+    );
+    let mut e = common::engine(&scene);
+    e.advance(100).unwrap();
+    e.write_outputs(dir.path()).unwrap();
+    let name = std::fs::read_dir(dir.path())
+        .unwrap()
+        .filter_map(|f| f.ok().map(|f| f.file_name().to_string_lossy().to_string()))
+        .find(|n| n.starts_with("polyhedra_") && n.ends_with(".vtk"))
+        .expect("a polyhedra VTK file");
+    assert!(dir.path().join("polyhedra.pvd").exists());
+    let text = std::fs::read_to_string(dir.path().join(&name)).unwrap();
+    let mut lines = text.lines().skip_while(|l| !l.starts_with("POINTS"));
+    let n: usize = lines
+        .next()
+        .unwrap()
+        .split_whitespace()
+        .nth(1)
+        .unwrap()
+        .parse()
+        .unwrap();
+    let points: Vec<V3> = lines
+        .take(n)
+        .map(|l| {
+            let c: Vec<f64> = l.split_whitespace().map(|x| x.parse().unwrap()).collect();
+            V3::new(c[0], c[1], c[2])
+        })
+        .collect();
+    let ids: Vec<u32> = text
+        .lines()
+        .skip_while(|l| !l.starts_with("SCALARS id"))
+        .skip(2)
+        .take(n)
+        .map(|l| l.parse().unwrap())
+        .collect();
+    let p = e.particles();
+    let mut checked = 0;
+    for (x, id) in points.iter().zip(&ids) {
+        let k = p.id.iter().position(|i| i == id).unwrap();
+        let (stone, scale) = p.polyhedron(k).unwrap();
+        let local = p.orientation[k].inverse_transform_vector(&(x - p.position[k])) / scale;
+        // distance of `local` (outside the core) to the core
+        let mut d = f64::INFINITY;
+        for t in &stone.triangles {
+            let [a, b, c] = t.map(|i| stone.vertices[i as usize]);
+            d = d.min(dem::triangle_contact::distance_squared(&local, &a, &b, &c).sqrt());
+        }
+        assert!(
+            (d - stone.dilation).abs() < 1e-7,
+            "{d} vs {}",
+            stone.dilation
+        );
+        checked += 1;
+    }
+    assert!(
+        checked == points.len() && points.len() > 5 * 100,
+        "{checked} of {} points, {} ids",
+        points.len(),
+        ids.len()
+    );
+}
