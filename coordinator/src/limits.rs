@@ -5,6 +5,7 @@
 //! |---|---|---|
 //! | DEM Rayleigh step (Ullrich 2.27) | `dem.time_step`, `dem.rayleigh_time_step` | the DEM node refuses Δt^D above its `rayleigh_fraction` itself; here only reported |
 //! | impact resolution (Ullrich fig. 2.5) | `dem.contact_duration_min` | a 1 m/s impact of the smallest, stiffest particle must last ≥ [`MIN_STEPS_PER_CONTACT`] steps (warn below [`GOOD_STEPS_PER_CONTACT`]) |
+//! | dilated polyhedra (Ullrich §6.1) | `dem.dilation_impact_velocity_max`, `dem.dilation_force_max` | the cores must not meet: warn when an impact slower than [`DILATION_IMPACT_VELOCITY_MIN`] can drive them together (the run stops naming the pair if they do) |
 //! | FEM explicit critical step | `fem.critical_time_step`, `fem.explicit` | reported: the node sub-steps each window below it |
 //! | coupling window (two-way) | `dem.contact_stiffness_typical` (else `_max`), `fem.interface_node_mass_min` | Δt^C ≤ C_schedule · T_c, T_c = 2π √(M_node / k_c) |
 //!
@@ -33,6 +34,11 @@ use crate::scene::{Scene, ScheduleKind};
 pub const MIN_STEPS_PER_CONTACT: f64 = 3.0;
 /// ... and by fewer than this gives a rebound error above ~2e-3 (A2 sweep): warn.
 pub const GOOD_STEPS_PER_CONTACT: f64 = 10.0;
+
+/// Dilated polyhedra whose cores meet in an elastic impact slower than this (m/s) are warned
+/// about: the dilation (or the stiffness) is too small for ordinary impacts (Ullrich needed
+/// E ≥ 10 GPa with r_ds = 10 %).
+pub const DILATION_IMPACT_VELOCITY_MIN: f64 = 1.0;
 
 /// Relative rebound-velocity error of a Hertz impact resolved by `steps` DEM steps per contact
 /// duration, fitted to the bouncing-sphere sweep (REFERENCE A2; the problem is self-similar in
@@ -190,6 +196,20 @@ pub fn assess(
                     "a 1 m/s impact of the smallest, stiffest particle lasts only {steps:.1} DEM steps ({tc:.3e} s): rebound velocities err by ~{:.1e} (faster impacts: more); use Δt^D ≤ {good:.3e} s for 1e-4", impact_error(steps)
                 ));
             }
+        }
+    }
+    // dilated polyhedra: the validity limit of the model
+    if let Some(&v) = d.get("dilation_impact_velocity_max") {
+        let f_max = d.get("dilation_force_max").copied().unwrap_or(f64::NAN);
+        let what = format!(
+            "the cores of the dilated polyhedra meet (the model's validity limit) in an elastic impact at {v:.3e} m/s or under a static contact force of {f_max:.3e} N"
+        );
+        if v < DILATION_IMPACT_VELOCITY_MIN {
+            push(Level::Warn, "dilated polyhedra", format!(
+                "{what}: slower than {DILATION_IMPACT_VELOCITY_MIN} m/s; raise the Young's modulus or the dilation (the run stops naming the pair if the cores meet)"
+            ));
+        } else {
+            push(Level::Info, "dilated polyhedra", what);
         }
     }
     // FEM explicit: the node sub-steps each window at a safety fraction of Δt_crit itself
@@ -452,5 +472,40 @@ mod tests {
         assert_eq!(level(2e-5), Level::Refuse);
         assert_eq!(level(5e-5), Level::Warn);
         assert_eq!(level(1e-3), Level::Info);
+    }
+
+    #[test]
+    fn soft_dilated_polyhedra_are_warned_with_the_speed_and_force_named() {
+        let s = SceneFacts {
+            schedule: ScheduleKind::None,
+            window: 1e-3,
+            has_dem: true,
+            has_fem: false,
+            adaptive: None,
+        };
+        let found = |v: f64| {
+            assess(
+                &s,
+                Some(&m(&[
+                    ("dilation_impact_velocity_max", v),
+                    ("dilation_force_max", 12.5),
+                ])),
+                None,
+            )
+            .into_iter()
+            .find(|x| x.limit == "dilated polyhedra")
+            .unwrap()
+        };
+        let soft = found(0.4);
+        assert_eq!(soft.level, Level::Warn);
+        assert!(
+            soft.message.contains("4.000e-1 m/s") && soft.message.contains("1.250e1 N"),
+            "{soft}"
+        );
+        assert_eq!(found(20.0).level, Level::Info);
+        // spheres: no such finding
+        assert!(assess(&s, Some(&m(&[])), None)
+            .iter()
+            .all(|x| x.limit != "dilated polyhedra"));
     }
 }

@@ -16,6 +16,17 @@
 //! - `contact_duration_min`: the shortest Hertz contact duration at a 1 m/s impact,
 //!   t_c = 2.87 (m*²/(R* E*² v))^{1/5}, over the same pairs with the smallest radii (and
 //!   masses) of each material; m* = m for a wall.
+//!
+//! Radii are the radii that enter Hertz: a sphere's radius, a superquadric's bounding
+//! radius, a dilated polyhedron's dilation radius r_ds (its contact law is Hertz between the
+//! dilation spheres, U (2.20)). With dilated polyhedra also the validity limit of that model
+//! (U §6.1: the cores must not meet, δ_d < r_ds,1 + r_ds,2), for the stone of each material
+//! with the smallest r_ds³/m (the worst; the limits do not depend on the size for a fixed
+//! dilation ratio) against itself and the interface material:
+//! - `dilation_impact_velocity_max`: the relative normal speed of an elastic impact whose
+//!   largest overlap (15 m* v²/(16 E* √R))^{2/5} reaches r_ds,1 + r_ds,2;
+//! - `dilation_force_max`: the static contact force 4/3 E* √R (r_ds,1 + r_ds,2)^{3/2} at which
+//!   the cores touch.
 
 use crate::materials::MaterialTable;
 use crate::particles::Particles;
@@ -63,8 +74,20 @@ pub fn contact_limits(
         return Vec::new();
     }
     let mut ext: Vec<Option<Extent>> = vec![None; materials.materials.len()];
+    // per material, the stone with the smallest r_ds³/m: (r_ds, m)
+    let mut stones: Vec<Option<(f64, f64)>> = vec![None; materials.materials.len()];
+    let contact_radius = |k: usize| match p.polyhedron(k) {
+        Some((s, scale)) => s.dilation * scale,
+        None => p.radius[k],
+    };
     for k in 0..p.len() {
-        let (r, m) = (p.radius[k], p.mass[k]);
+        let (r, m) = (contact_radius(k), p.mass[k]);
+        if p.polyhedron(k).is_some() {
+            let worst = stones[p.material[k] as usize].get_or_insert((r, m));
+            if r.powi(3) / m < worst.0.powi(3) / worst.1 {
+                *worst = (r, m);
+            }
+        }
         let e = ext[p.material[k] as usize].get_or_insert(Extent {
             r_min: r,
             r_max: r,
@@ -82,7 +105,7 @@ pub fn contact_limits(
             (e.r_max, e.m_of_r_max) = (r, m);
         }
     }
-    let radii = &p.radius;
+    let radii: Vec<f64> = (0..p.len()).map(contact_radius).collect();
     let masses = &p.mass;
     let min = |v: &[f64]| v.iter().cloned().fold(f64::INFINITY, f64::min);
     let max = |v: &[f64]| v.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
@@ -129,15 +152,46 @@ pub fn contact_limits(
             ));
         }
     }
-    vec![
+    let mut out: Vec<(String, f64)> = vec![
         ("particle_mass_min".into(), min(masses)),
         ("particle_mass_max".into(), max(masses)),
-        ("particle_radius_min".into(), min(radii)),
-        ("particle_radius_max".into(), max(radii)),
+        ("particle_radius_min".into(), min(&radii)),
+        ("particle_radius_max".into(), max(&radii)),
         ("contact_stiffness_max".into(), k_max),
         ("contact_stiffness_typical".into(), k_typical),
         ("contact_duration_min".into(), t_min),
-    ]
+    ];
+    // the dilated-polyhedron validity limit
+    let (mut v_max, mut f_max) = (f64::INFINITY, f64::INFINITY);
+    let mut limit = |e_star: f64, r_eff: f64, reach: f64, m_eff: f64| {
+        v_max = v_max.min(dilation_impact_velocity(e_star, r_eff, reach, m_eff));
+        f_max = f_max.min(4.0 / 3.0 * e_star * r_eff.sqrt() * reach.powf(1.5));
+    };
+    let present: Vec<(u16, (f64, f64))> = stones
+        .iter()
+        .enumerate()
+        .filter_map(|(m, s)| s.map(|s| (m as u16, s)))
+        .collect();
+    for (x, &(a, (ra, ma))) in present.iter().enumerate() {
+        for &(b, (rb, mb)) in &present[x..] {
+            let e_star = materials.pair(a, b).e_star;
+            limit(e_star, ra * rb / (ra + rb), ra + rb, ma * mb / (ma + mb));
+        }
+        if let Some(w) = interface_material {
+            limit(materials.pair(a, w).e_star, ra, ra, ma);
+        }
+    }
+    if !present.is_empty() {
+        out.push(("dilation_impact_velocity_max".into(), v_max));
+        out.push(("dilation_force_max".into(), f_max));
+    }
+    out
+}
+
+/// The relative normal speed of an elastic Hertz impact whose largest overlap
+/// (15 m* v²/(16 E* √R))^{2/5} is `overlap`.
+pub fn dilation_impact_velocity(e_star: f64, r_eff: f64, overlap: f64, m_eff: f64) -> f64 {
+    (16.0 * e_star * r_eff.sqrt() * overlap.powf(2.5) / (15.0 * m_eff)).sqrt()
 }
 
 #[cfg(test)]

@@ -113,6 +113,9 @@ fn tessellate(s: &crate::shape::Superquadric, n1: usize, n2: usize) -> (Vec<V3>,
     (points, cells)
 }
 
+/// A body's surface in its own frame: points and polygons (indices into the points).
+type BodyMesh = (Vec<V3>, Vec<Vec<usize>>);
+
 /// The superquadrics as their real surfaces, VTK legacy polydata: each superquadric
 /// tessellated from its parameterisation (3.3) on `resolution` × `resolution`/2 intervals of
 /// (φ1, φ2) (quads, triangles at the poles), turned by its orientation and placed at its
@@ -133,7 +136,7 @@ pub fn write_superquadrics_vtk(
     }
     let (n1, n2) = (resolution, resolution / 2);
     // every template's mesh once (body frame)
-    let meshes: Vec<Option<(Vec<V3>, Vec<Vec<usize>>)>> = p
+    let meshes: Vec<Option<BodyMesh>> = p
         .templates
         .iter()
         .map(|t| t.superquadric().map(|s| tessellate(s, n1, n2)))
@@ -163,7 +166,7 @@ pub fn write_polyhedra_vtk(
             )
         })
         .collect();
-    let meshes: Vec<Option<(Vec<V3>, Vec<Vec<usize>>)>> = p
+    let meshes: Vec<Option<BodyMesh>> = p
         .templates
         .iter()
         .map(|t| match t.shape {
@@ -183,9 +186,9 @@ fn write_bodies_vtk(
     p: &Particles,
     time: f64,
     title: &str,
-    meshes: &[Option<(Vec<V3>, Vec<Vec<usize>>)>],
+    meshes: &[Option<BodyMesh>],
 ) -> Result<(), DemError> {
-    let mesh_of = |k: usize| -> Option<&(Vec<V3>, Vec<Vec<usize>>)> {
+    let mesh_of = |k: usize| -> Option<&BodyMesh> {
         p.template(k)?;
         meshes[p.shape[k] as usize].as_ref()
     };

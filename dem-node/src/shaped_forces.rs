@@ -738,6 +738,55 @@ mod tests {
     use super::*;
     use crate::generate::{random_orientation, random_unit_vector, SplitMix64};
 
+    /// The dilated-polyhedron law with Ullrich's corrected constants (SEED-SPEC §6.2): for two
+    /// bodies of dilation r of one material, F_n = 2√2 G/(3(1 − ν)) √r δ^{3/2} (2.20) and the
+    /// tangential stiffness k_t = 2 (3 G² (1 − ν) |F_n| r)^{1/3}/(2 − ν) (2.22 with its factor
+    /// 3); the tangential force drags body 1 along with body 2 (the sign of (2.23)).
+    #[test]
+    fn dilated_law_is_ullrichs_corrected_2_20_to_2_24() {
+        let cfg = crate::config::parse_scene_section(
+            "[dem]\ntime_step = 1e-6\n[dem.materials.rock]\nyoungs_modulus = 1e10\npoisson_ratio = 0.27\ndensity = 2600.0\nrestitution = 1.0\nfriction = 10.0\n",
+        )
+        .unwrap()
+        .unwrap();
+        let table = crate::materials::MaterialTable::from_config(&cfg);
+        let params = table.pair(0, 0);
+        let (e, nu) = (1e10, 0.27);
+        let g = e / (2.0 * (1.0 + nu));
+        let (r, delta, v, dt) = (4e-3, 2e-5, 0.01, 1e-6);
+        let old = ShapedContact::NONE;
+        let c = dilated_law(
+            params,
+            delta,
+            r / 2.0,
+            0.1,
+            V3::x(),
+            &(V3::y() * v),
+            V3::zeros(),
+            &old,
+            dt,
+        );
+        let f_n = 2.0 * 2f64.sqrt() * g / (3.0 * (1.0 - nu)) * r.sqrt() * delta.powf(1.5);
+        let k_t = 2.0 * (3.0 * g * g * (1.0 - nu) * f_n * r).cbrt() / (2.0 - nu);
+        // normal: pushes body 1 away from body 2 (−x)
+        assert!(
+            (c.force.x + f_n).abs() < 1e-12 * f_n,
+            "{} vs {f_n}",
+            c.force.x
+        );
+        // tangential: one step of relative sliding v dt, along body 2's motion (+y)
+        let f_t = k_t * v * dt;
+        assert!(
+            (c.force.y - f_t).abs() < 1e-12 * f_t,
+            "{} vs {f_t}",
+            c.force.y
+        );
+        assert!(c.force.z.abs() < 1e-20);
+        // the printed (2.22) without the 3 is 3^{1/3} too small
+        let printed = 2.0 * (g * g * (1.0 - nu) * f_n * r).cbrt() / (2.0 - nu);
+        assert!((k_t / printed - 3f64.cbrt()).abs() < 1e-12);
+    }
+
     /// The skip of a separated pair is a proof: whenever `still_separated` says so after the
     /// bodies moved and turned, the full search finds them separated too; and it does skip
     /// small motions (else it would be useless).

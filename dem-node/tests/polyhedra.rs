@@ -186,8 +186,16 @@ fn pair_force_is_ullrich_2_20() {
         }
         let p = e.particles();
         let (f0, f1) = (p.force[0], p.force[1]);
-        assert!((f0 + f1).norm() < 1e-12 * f0.norm(), "action = reaction: {f0} {f1}");
-        let delta = e.shaped_pair_contacts().find(|c| c.1.touching()).unwrap().1.overlap;
+        assert!(
+            (f0 + f1).norm() < 1e-12 * f0.norm(),
+            "action = reaction: {f0} {f1}"
+        );
+        let delta = e
+            .shaped_pair_contacts()
+            .find(|c| c.1.touching())
+            .unwrap()
+            .1
+            .overlap;
         let expected = 2.0 * 2f64.sqrt() * g / (3.0 * (1.0 - nu)) * r.sqrt() * delta.powf(1.5);
         println!(
             "gap {gap:e}: δ = {delta:e}, |F| = {:e}, (2.20) {expected:e}",
@@ -240,9 +248,9 @@ fn polyhedron_at_rest_on_a_coupled_plate_loads_it_with_its_weight() {
     e.refresh_forces();
     let mass = e.particles().mass[0];
     e.advance(400_000).unwrap(); // 0.8 s: landed, rocking by nanometres
-    // the mean nodal force of the next 0.2 s (a new window) against the weight: a stone on
-    // one contact point keeps rocking among the vertices of the face it lies on (ω ~ 0.01
-    // rad/s, kinetic energy ~1e-14 J here), so the force of one step is not the weight
+                                 // the mean nodal force of the next 0.2 s (a new window) against the weight: a stone on
+                                 // one contact point keeps rocking among the vertices of the face it lies on (ω ~ 0.01
+                                 // rad/s, kinetic energy ~1e-14 J here), so the force of one step is not the weight
     e.set_mesh_kinematics(m, &pos, &zeros, &zeros, dem::MotionRule::Quadratic)
         .unwrap();
     let v0 = e.particles().velocity[0].z;
@@ -254,8 +262,14 @@ fn polyhedron_at_rest_on_a_coupled_plate_loads_it_with_its_weight() {
     let dv = e.particles().velocity[0].z - v0;
     let weight = mass * 9.81;
     let ke = e.kinetic_energy();
-    println!("weight {weight:e} N, mean nodal force z {fz:e}, x {fx:e}, m Δv/T {:e}, KE {ke:e}", mass * dv / 0.2);
-    assert!((fz + weight + mass * dv / 0.2).abs() < 1e-7 * weight, "{fz} vs {weight}");
+    println!(
+        "weight {weight:e} N, mean nodal force z {fz:e}, x {fx:e}, m Δv/T {:e}, KE {ke:e}",
+        mass * dv / 0.2
+    );
+    assert!(
+        (fz + weight + mass * dv / 0.2).abs() < 1e-7 * weight,
+        "{fz} vs {weight}"
+    );
     assert!((fz + weight).abs() < 1e-6 * weight, "{fz} vs {weight}");
     assert!(fx.abs() < 1e-6 * weight, "{fx}");
 }
@@ -331,7 +345,10 @@ fn run_pour(threads: usize, steps: usize, split: bool) -> Vec<u8> {
     );
     // stones touch spheres (the mixed pairs go through the polyhedral narrow phase)
     let p = e.particles();
-    let ids: Vec<u32> = (0..p.len()).filter(|&k| p.template(k).is_none()).map(|k| p.id[k]).collect();
+    let ids: Vec<u32> = (0..p.len())
+        .filter(|&k| p.template(k).is_none())
+        .map(|k| p.id[k])
+        .collect();
     let mixed = e
         .shaped_pair_contacts()
         .filter(|(pair, c)| c.touching() && pair.iter().any(|id| ids.contains(id)))
@@ -537,4 +554,79 @@ fn polyhedra_show_their_real_surfaces_in_paraview() {
         points.len(),
         ids.len()
     );
+}
+
+/// The validity limit `cosim check` reports (`dilation_impact_velocity_max`) is the speed at
+/// which the cores meet: a stone falling onto a plane on its outermost vertex (straight
+/// below its centre, so it does not turn) at 0.97 of it rebounds, at 1.03 of it stops the
+/// run naming the plane.
+#[test]
+fn the_dilation_limit_is_the_speed_at_which_the_cores_meet() {
+    let scene = format!(
+        "{}interface_material = \"grain\"\n{}[[dem.walls]]\nkind = \"plane\"\nmaterial = \"grain\"\npoint = [0.0, 0.0, 0.0]\nnormal = [0.0, 0.0, 1.0]\n",
+        "[dem]\ntime_step = 1e-7\ngravity = [0.0, 0.0, 0.0]\nallow_large_time_step = true\n",
+        &ELASTIC[ELASTIC.find("[dem.materials").unwrap()..]
+    );
+    let stone = stones()[1].clone();
+    let tip = *stone
+        .vertices
+        .iter()
+        .max_by(|a, b| a.norm().total_cmp(&b.norm()))
+        .unwrap();
+    let down = Orientation::rotation_between(&tip, &-V3::z()).unwrap();
+    let size = 4e-3;
+    let height = tip.norm() * size + stone.dilation * size;
+    let limit = {
+        let e = engine_with(
+            &scene,
+            &[(
+                V3::new(0.0, 0.0, 0.01),
+                V3::zeros(),
+                V3::zeros(),
+                down,
+                &stone,
+                size,
+            )],
+        );
+        e.limits()
+            .into_iter()
+            .find(|(k, _)| k == "dilation_impact_velocity_max")
+            .expect("the limit is reported")
+            .1
+    };
+    println!("dilation impact velocity limit {limit} m/s");
+    for (factor, fails) in [(0.97, false), (1.03, true)] {
+        let mut e = engine_with(
+            &scene,
+            &[(
+                V3::new(0.0, 0.0, height + 1e-6),
+                V3::new(0.0, 0.0, -factor * limit),
+                V3::zeros(),
+                down,
+                &stone,
+                size,
+            )],
+        );
+        let mut outcome = Ok(());
+        for _ in 0..200_000 {
+            outcome = e.step();
+            if outcome.is_err() || e.particles().velocity[0].z > 0.0 {
+                break;
+            }
+        }
+        match outcome {
+            Ok(()) => {
+                assert!(!fails, "{factor}: no core contact");
+                assert!(e.particles().velocity[0].z > 0.0, "{factor}: no rebound");
+            }
+            Err(err) => {
+                println!("{factor}: {err}");
+                assert!(fails, "{factor}: {err}");
+                assert!(
+                    err.to_string().contains("particle 0 and plane wall 0"),
+                    "{err}"
+                );
+            }
+        }
+    }
 }

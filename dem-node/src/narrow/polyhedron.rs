@@ -265,7 +265,10 @@ mod tests {
         let normals = |v: &[V3], s: &Stone| -> Vec<V3> {
             s.triangles
                 .iter()
-                .map(|t| (v[t[1] as usize] - v[t[0] as usize]).cross(&(v[t[2] as usize] - v[t[0] as usize])))
+                .map(|t| {
+                    (v[t[1] as usize] - v[t[0] as usize])
+                        .cross(&(v[t[2] as usize] - v[t[0] as usize]))
+                })
                 .collect()
         };
         let mut axes = normals(&va, sa);
@@ -366,7 +369,10 @@ mod tests {
                 } => {
                     contacts += 1;
                     let expected = a.dilation + b.dilation - d;
-                    assert!((overlap - expected).abs() < 1e-10, "{overlap} vs {expected}");
+                    assert!(
+                        (overlap - expected).abs() < 1e-10,
+                        "{overlap} vs {expected}"
+                    );
                     assert!((normal.norm() - 1.0).abs() < 1e-12);
                 }
                 PolyDetection::Separated { gap, .. } => {
@@ -386,7 +392,10 @@ mod tests {
             }
         }
         println!("{contacts} contacts, {intersections} core intersections");
-        assert!(contacts > 20 && intersections > 5, "{contacts} {intersections}");
+        assert!(
+            contacts > 20 && intersections > 5,
+            "{contacts} {intersections}"
+        );
     }
 
     /// A sphere is a dilated point: sphere–sphere gives the exact overlap r1 + r2 − |x2 − x1|

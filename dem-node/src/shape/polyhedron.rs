@@ -159,7 +159,9 @@ fn spherical_triangle(a: &V3, b: &V3, c: &V3, rule: &[(f64, f64)]) -> (f64, V3, 
 }
 
 /// The edges of a closed triangle mesh with their two triangles: (a, b) → [t1, t2] for a < b.
-fn edge_faces(triangles: &[[u32; 3]]) -> Result<Vec<([u32; 2], [usize; 2])>, String> {
+type EdgeFaces = Vec<([u32; 2], [usize; 2])>;
+
+fn edge_faces(triangles: &[[u32; 3]]) -> Result<EdgeFaces, String> {
     let mut map: HashMap<[u32; 2], Vec<usize>> = HashMap::new();
     for (t, tri) in triangles.iter().enumerate() {
         for e in 0..3 {
@@ -167,7 +169,7 @@ fn edge_faces(triangles: &[[u32; 3]]) -> Result<Vec<([u32; 2], [usize; 2])>, Str
             map.entry([a.min(b), a.max(b)]).or_default().push(t);
         }
     }
-    let mut edges: Vec<([u32; 2], [usize; 2])> = Vec::with_capacity(map.len());
+    let mut edges: EdgeFaces = Vec::with_capacity(map.len());
     for (e, faces) in map {
         if faces.len() != 2 {
             return Err(format!(
