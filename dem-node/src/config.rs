@@ -1006,21 +1006,6 @@ impl DemConfig {
         if let Some(m) = &self.interface_material {
             c.material(p(&["dem", "interface_material"]), m, self);
         }
-        let polyhedral = self.particles.iter().position(|src| match src {
-            ParticleSource::List { shape, .. }
-            | ParticleSource::Lattice { shape, .. }
-            | ParticleSource::Fill { shape, .. } => matches!(shape, ShapeConfig::Polyhedron { .. }),
-            ParticleSource::File { .. } => false,
-        });
-        if let (true, Some(k)) = (self.output.final_particles, polyhedral) {
-            c.fail(
-                p(&["dem", "output", "final_particles"]),
-                format!(
-                    "particle files carry spheres and superquadrics, not the dilated polyhedra of \
-                     dem.particles[{k}]: continue a polyhedral bed from a snapshot instead"
-                ),
-            );
-        }
         for (k, src) in self.particles.iter().enumerate() {
             let f = |field: &str| pi(&["dem", "particles"], k, &[field]);
             match src {

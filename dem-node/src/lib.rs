@@ -585,10 +585,55 @@ impl Engine {
                             keep.as_ref().is_none_or(|b| b.contains([p.x, p.y, p.z]))
                         })
                         .collect();
-                    if let Some((a, b, fraction)) =
-                        particle_file::find_overlap(&spheres, particle_file::MAX_FILE_OVERLAP)
-                    {
+                    // the stone library of a file with dilated polyhedra
+                    let stones = if spheres.iter().any(|s| s.stone.is_some()) {
+                        let lib_path = particle_file::stones_path(&full);
+                        let stones = particle_file::read_stones(&lib_path).map_err(|e| {
+                            DemError::ParticleFile {
+                                field: format!("dem.particles[{k}].path"),
+                                file: lib_path.display().to_string(),
+                                line: e.line,
+                                message: e.message,
+                            }
+                        })?;
+                        if let Some(s) = spheres
+                            .iter()
+                            .find(|s| s.stone.is_some_and(|(i, _)| i as usize >= stones.len()))
+                        {
+                            return Err(file_error(
+                                s.line,
+                                format!(
+                                    "stone {} but the library {} has {} stones",
+                                    s.stone.unwrap().0,
+                                    lib_path.display(),
+                                    stones.len()
+                                ),
+                            ));
+                        }
+                        stones
+                    } else {
+                        Vec::new()
+                    };
+                    if let Some((a, b, fraction)) = particle_file::find_overlap_with_stones(
+                        &spheres,
+                        &stones,
+                        particle_file::MAX_FILE_OVERLAP,
+                    ) {
                         let (a, b) = (&spheres[a], &spheres[b]);
+                        if a.stone.is_some() || b.stone.is_some() {
+                            return Err(file_error(
+                                a.line,
+                                format!(
+                                    "the bodies on lines {} and {} overlap by {} of the sum of \
+                                     their dilations (at most {} is accepted; 1 means the cores \
+                                     meet): bodies written twice or a wrong column?",
+                                    a.line,
+                                    b.line,
+                                    resources::format_number(fraction),
+                                    particle_file::MAX_FILE_OVERLAP
+                                ),
+                            ));
+                        }
                         if a.shape.is_some() || b.shape.is_some() {
                             return Err(file_error(
                                 a.line,
@@ -631,7 +676,23 @@ impl Engine {
                     )
                     .map_err(|message| file_error(0, message))?;
                     let before = particles.len();
+                    let first_stone = particles.stones.len() as u32;
+                    particles.stones.extend(stones);
                     for s in spheres {
+                        if let Some((stone, size)) = s.stone {
+                            particles.push_polyhedron(
+                                s.position,
+                                s.velocity,
+                                s.angular_velocity,
+                                s.orientation
+                                    .unwrap_or_else(particles::Orientation::identity),
+                                first_stone + stone,
+                                size,
+                                rho,
+                                m,
+                            );
+                            continue;
+                        }
                         match s.shape {
                             None => particles.push(
                                 s.position,
@@ -1821,7 +1882,8 @@ impl Engine {
         r
     }
 
-    /// Writes `particles_final.csv` (the `kind = "file"` format) into `out_dir` when
+    /// Writes `particles_final.csv` (the `kind = "file"` format; with dilated polyhedra also
+    /// their library `particles_final.stones.json`) into `out_dir` when
     /// `[dem.output] final_particles` is set; returns the path written.
     pub fn write_final_particles(
         &self,
@@ -1832,15 +1894,14 @@ impl Engine {
         }
         let path = out_dir.join("particles_final.csv");
         let p = &self.state.particles;
-        if let Some(k) = (0..p.len()).find(|&k| p.polyhedron(k).is_some()) {
-            return Err(DemError::Output {
-                path: path.display().to_string(),
-                message: format!(
-                    "particle {} is a dilated polyhedron, which particle files cannot carry \
-                     (spheres and superquadrics only): continue from a snapshot instead",
-                    p.id[k]
-                ),
-            });
+        if !p.stones.is_empty() {
+            let lib = particle_file::stones_path(&path);
+            std::fs::create_dir_all(out_dir)
+                .and_then(|_| std::fs::write(&lib, particle_file::format_stones(p)))
+                .map_err(|e| DemError::Output {
+                    path: lib.display().to_string(),
+                    message: e.to_string(),
+                })?;
         }
         std::fs::create_dir_all(out_dir)
             .and_then(|_| std::fs::write(&path, particle_file::format(&self.state.particles)))

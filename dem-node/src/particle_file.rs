@@ -8,6 +8,14 @@
 //! sphere of radius `radius`, one with all five given a superquadric (its `radius` field is
 //! then not read: the file writes its bounding radius there, for information only).
 //!
+//! Dilated polyhedra add the group `stone,size`: a line with both given is a copy of stone
+//! `stone` (0-based) of the file's stone library at size `size` (m, equivalent-volume
+//! diameter), its `radius` field again for information only. The library is the JSON file
+//! next to the CSV with the extension `.stones.json` (`particles_final.stones.json`): a list
+//! of stones as [`crate::shape::Stone`] stores them (unit size, principal frame), so a bed of
+//! stones reads back bitwise too. A line gives the superquadric group or the stone group,
+//! not both.
+//!
 //! Values are written with Rust's shortest round-trip representation, so a bed written at the
 //! end of one run starts the next one bitwise where it stopped. A bed of spheres only is
 //! written as `x,y,z,radius,vx,vy,vz` (rotations start at rest); a bed with non-spherical
@@ -35,6 +43,8 @@ pub struct FileParticle {
     pub angular_velocity: V3,
     /// `None` for a sphere.
     pub shape: Option<Superquadric>,
+    /// (stone, size) of a dilated polyhedron: the stone's index in the file's library.
+    pub stone: Option<(u32, f64)>,
     /// 1-based line of the file.
     pub line: usize,
 }
@@ -49,6 +59,7 @@ impl FileParticle {
             orientation: None,
             angular_velocity: V3::zeros(),
             shape: None,
+            stone: None,
             line,
         }
     }
@@ -66,6 +77,7 @@ const VELOCITY: [&str; 3] = ["vx", "vy", "vz"];
 const ORIENTATION: [&str; 4] = ["qw", "qx", "qy", "qz"];
 const ANGULAR_VELOCITY: [&str; 3] = ["wx", "wy", "wz"];
 const SHAPE: [&str; 5] = ["r1", "r2", "r3", "eps1", "eps2"];
+const STONE: [&str; 2] = ["stone", "size"];
 
 /// A quaternion whose squared norm is within this of 1 is already unit (to the round-off of a
 /// normalisation) and is kept as written, so a written state reads back bitwise; any other is
@@ -93,6 +105,7 @@ pub fn parse(text: &str) -> Result<Vec<FileParticle>, FileError> {
             || ORIENTATION.contains(name)
             || ANGULAR_VELOCITY.contains(name)
             || SHAPE.contains(name)
+            || STONE.contains(name)
     };
     for name in &names {
         if !known(name) {
@@ -100,7 +113,7 @@ pub fn parse(text: &str) -> Result<Vec<FileParticle>, FileError> {
                 header_line,
                 format!(
                     "unknown column `{name}`, expected x,y,z,radius and optionally vx,vy,vz; \
-                     qw,qx,qy,qz; wx,wy,wz; r1,r2,r3,eps1,eps2"
+                     qw,qx,qy,qz; wx,wy,wz; r1,r2,r3,eps1,eps2; stone,size"
                 ),
             ));
         }
@@ -139,6 +152,7 @@ pub fn parse(text: &str) -> Result<Vec<FileParticle>, FileError> {
     let ori = group(&ORIENTATION)?;
     let ang = group(&ANGULAR_VELOCITY)?;
     let shp = group(&SHAPE)?;
+    let stn = group(&STONE)?;
     let mut out = Vec::new();
     for (line, text) in lines {
         let fields: Vec<&str> = text.split(',').map(str::trim).collect();
@@ -174,8 +188,23 @@ pub fn parse(text: &str) -> Result<Vec<FileParticle>, FileError> {
         } else {
             parse_shape(&shp, &fields, &names, line, num)?
         };
+        let stone = if stn.is_empty() {
+            None
+        } else {
+            parse_stone(&stn, &fields, line, num)?
+        };
+        if shape.is_some() && stone.is_some() {
+            return Err(err(
+                line,
+                "both a superquadric (r1,r2,r3,eps1,eps2) and a stone (stone,size) are given: \
+                 a body is one or the other"
+                    .into(),
+            ));
+        }
         let radius = match &shape {
             Some(s) => s.bounding_radius(),
+            // a stone's bounding radius comes with its library (the field is informative)
+            None if stone.is_some() => num(req[3]).unwrap_or(0.0),
             None => {
                 let radius = num(req[3])?;
                 if radius <= 0.0 {
@@ -218,10 +247,72 @@ pub fn parse(text: &str) -> Result<Vec<FileParticle>, FileError> {
             orientation,
             angular_velocity,
             shape,
+            stone,
             line,
         });
     }
     Ok(out)
+}
+
+/// The stone fields of a line (`stone`, `size`): both empty, not a stone; both given, the
+/// stone index and a size > 0.
+fn parse_stone(
+    stn: &[usize],
+    fields: &[&str],
+    line: usize,
+    num: impl Fn(usize) -> Result<f64, FileError>,
+) -> Result<Option<(u32, f64)>, FileError> {
+    let err = |message: String| FileError { line, message };
+    match (fields[stn[0]].is_empty(), fields[stn[1]].is_empty()) {
+        (true, true) => return Ok(None),
+        (false, false) => {}
+        _ => {
+            return Err(err(
+                "columns stone,size: give both (a dilated polyhedron) or neither".into(),
+            ))
+        }
+    }
+    let index: u32 = fields[stn[0]].parse().map_err(|_| {
+        err(format!(
+            "column `stone`: `{}` is not a stone index (0, 1, 2, …)",
+            fields[stn[0]]
+        ))
+    })?;
+    let size = num(stn[1])?;
+    if size <= 0.0 {
+        return Err(err(format!("column `size`: must be > 0, got {size}")));
+    }
+    Ok(Some((index, size)))
+}
+
+/// The stone library that goes with the particle file `csv`: `<stem>.stones.json` beside it.
+pub fn stones_path(csv: &Path) -> std::path::PathBuf {
+    let stem = csv
+        .file_stem()
+        .map_or_else(|| "particles".into(), |s| s.to_string_lossy().to_string());
+    csv.with_file_name(format!("{stem}.stones.json"))
+}
+
+/// Reads a stone library (see the module documentation), checking every stone.
+pub fn read_stones(path: &Path) -> Result<Vec<crate::shape::Stone>, FileError> {
+    let text = crate::resources::read_text_within_memory(path, "it")
+        .map_err(|message| FileError { line: 0, message })?;
+    let stones: Vec<crate::shape::Stone> = serde_json::from_str(&text).map_err(|e| FileError {
+        line: e.line(),
+        message: format!("not a stone library (a JSON list of stones): {e}"),
+    })?;
+    for (k, s) in stones.iter().enumerate() {
+        s.check().map_err(|e| FileError {
+            line: 0,
+            message: format!("stone {k}: {e}"),
+        })?;
+    }
+    Ok(stones)
+}
+
+/// The particles' stone library as JSON (see the module documentation).
+pub fn format_stones(p: &Particles) -> String {
+    serde_json::to_string(&p.stones).expect("stones serialise")
 }
 
 /// The shape fields of a line (columns `shp` in the order of [`SHAPE`]): all empty, a sphere
@@ -298,10 +389,25 @@ pub const MAX_FILE_OVERLAP: f64 = 0.5;
 /// only pairs whose bounding spheres overlap are searched. A cell grid of edge 2 r_max
 /// (largest bounding radius) keeps it O(n) for a bed.
 pub fn find_overlap(particles: &[FileParticle], max_fraction: f64) -> Option<(usize, usize, f64)> {
+    find_overlap_with_stones(particles, &[], max_fraction)
+}
+
+/// [`find_overlap`] for a file with dilated polyhedra (`stones` its library; every stone
+/// index valid): a pair with a polyhedron overlaps by the fraction δ_d/(r_ds,1 + r_ds,2) of
+/// what the model allows (the cores meeting is the whole of it, and more: ∞).
+pub fn find_overlap_with_stones(
+    particles: &[FileParticle],
+    stones: &[crate::shape::Stone],
+    max_fraction: f64,
+) -> Option<(usize, usize, f64)> {
     use std::collections::HashMap;
     let bounding: Vec<f64> = particles
         .iter()
-        .map(|s| s.shape.map_or(s.radius, |q| q.bounding_radius()))
+        .map(|s| match (s.shape, s.stone) {
+            (Some(q), _) => q.bounding_radius(),
+            (None, Some((k, size))) => stones[k as usize].circumradius * size,
+            (None, None) => s.radius,
+        })
         .collect();
     let r_max = bounding.iter().copied().fold(0.0, f64::max);
     if particles.len() < 2 || r_max <= 0.0 {
@@ -330,20 +436,70 @@ pub fn find_overlap(particles: &[FileParticle], max_fraction: f64) -> Option<(us
         candidates.sort_unstable();
         for &b in &candidates {
             let o = &particles[b];
-            let fraction = if s.shape.is_none() && o.shape.is_none() {
-                let overlap = s.radius + o.radius - (s.position - o.position).norm();
-                overlap / s.radius.min(o.radius)
-            } else if bounding[a] + bounding[b] > (s.position - o.position).norm() {
-                shaped_overlap_fraction(s, o)
-            } else {
-                continue;
-            };
+            let fraction =
+                if s.shape.is_none() && o.shape.is_none() && s.stone.is_none() && o.stone.is_none()
+                {
+                    let overlap = s.radius + o.radius - (s.position - o.position).norm();
+                    overlap / s.radius.min(o.radius)
+                } else if bounding[a] + bounding[b] <= (s.position - o.position).norm() {
+                    continue;
+                } else if s.stone.is_some() || o.stone.is_some() {
+                    stone_overlap_fraction(s, o, stones)
+                } else {
+                    shaped_overlap_fraction(s, o)
+                };
             if fraction > max_fraction {
                 return Some((a, b, fraction));
             }
         }
     }
     None
+}
+
+/// Overlap of a pair with a dilated polyhedron over the sum of the dilations (∞ when the
+/// cores meet); 0 if separated.
+fn stone_overlap_fraction(
+    a: &FileParticle,
+    b: &FileParticle,
+    stones: &[crate::shape::Stone],
+) -> f64 {
+    use crate::narrow::polyhedron::{detect_pair, Core, PolyBody, PolyDetection, POINT_CORE};
+    let body = |p: &FileParticle| -> Option<PolyBody<'_>> {
+        let (core, dilation) = match (p.stone, &p.shape) {
+            (Some((k, size)), _) => {
+                let s = &stones[k as usize];
+                (
+                    Core::Points {
+                        vertices: &s.vertices,
+                        scale: size,
+                    },
+                    s.dilation * size,
+                )
+            }
+            (None, Some(_)) => return None, // no superquadric–stone check in files
+            (None, None) => (
+                Core::Points {
+                    vertices: &POINT_CORE,
+                    scale: 1.0,
+                },
+                p.radius,
+            ),
+        };
+        Some(PolyBody {
+            core,
+            dilation,
+            position: p.position,
+            orientation: p.orientation.unwrap_or_else(UnitQuaternion::identity),
+        })
+    };
+    let (Some(x), Some(y)) = (body(a), body(b)) else {
+        return 0.0;
+    };
+    match detect_pair(&x, &y, None) {
+        PolyDetection::Contact { overlap, .. } => overlap / (x.dilation + y.dilation),
+        PolyDetection::Separated { .. } => 0.0,
+        PolyDetection::CoresIntersect { .. } => f64::INFINITY,
+    }
 }
 
 /// Penetration of two bodies (at least one a superquadric) by the exact contact detection,
@@ -380,15 +536,16 @@ fn shaped_overlap_fraction(a: &FileParticle, b: &FileParticle) -> f64 {
 
 /// The particles in id order as a particle file with velocities; with non-spherical bodies
 /// also with orientation, angular velocity and shape (see the module documentation).
-/// Dilated polyhedra have no columns here: callers refuse them first
-/// ([`crate::Engine::write_final_particles`]).
+/// With dilated polyhedra the stone group too; their library is [`format_stones`].
 pub fn format(p: &Particles) -> String {
     let mut order: Vec<usize> = (0..p.len()).collect();
     order.sort_unstable_by_key(|&k| p.id[k]);
     let shaped = p.has_shapes();
-    let mut s = String::with_capacity(64 + if shaped { 360 } else { 120 } * p.len());
+    let stones = !p.stones.is_empty();
+    let mut s = String::with_capacity(64 + if shaped { 400 } else { 120 } * p.len());
     if shaped {
-        s.push_str("x,y,z,radius,vx,vy,vz,qw,qx,qy,qz,wx,wy,wz,r1,r2,r3,eps1,eps2\n");
+        s.push_str("x,y,z,radius,vx,vy,vz,qw,qx,qy,qz,wx,wy,wz,r1,r2,r3,eps1,eps2");
+        s.push_str(if stones { ",stone,size\n" } else { "\n" });
     } else {
         s.push_str("x,y,z,radius,vx,vy,vz\n");
     }
@@ -415,6 +572,14 @@ pub fn format(p: &Particles) -> String {
                     );
                 }
                 None => s.push_str(",,,,,"),
+            }
+            if stones {
+                match p.template(k).map(|t| t.shape) {
+                    Some(crate::particles::Shape::Polyhedron { stone, scale }) => {
+                        let _ = write!(s, ",{stone},{scale}");
+                    }
+                    _ => s.push_str(",,"),
+                }
             }
         }
         s.push('\n');
@@ -704,6 +869,7 @@ mod tests {
             orientation: Some(q),
             angular_velocity: V3::zeros(),
             shape: Some(s),
+            stone: None,
             line,
         }
     }

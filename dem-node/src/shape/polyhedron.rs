@@ -571,6 +571,57 @@ impl Stone {
         ))
     }
 
+    /// Checks a stone read from a file: finite values, triangles naming existing vertices,
+    /// the dilation in range, positive volume and moments, and the bounding radius it
+    /// claims.
+    pub fn check(&self) -> Result<(), String> {
+        if self.vertices.len() < 4 || self.triangles.len() < 4 {
+            return Err(format!(
+                "{} vertices and {} triangles: a core has at least 4 of each",
+                self.vertices.len(),
+                self.triangles.len()
+            ));
+        }
+        if let Some(k) = self
+            .vertices
+            .iter()
+            .position(|v| !v.iter().all(|c| c.is_finite()))
+        {
+            return Err(format!("vertex {k} is not finite"));
+        }
+        let n = self.vertices.len() as u32;
+        if let Some(k) = self
+            .triangles
+            .iter()
+            .position(|t| t.iter().any(|&i| i >= n))
+        {
+            return Err(format!(
+                "triangle {k} names a vertex beyond the {n} there are"
+            ));
+        }
+        if !(self.dilation > 0.0 && self.dilation <= DILATION_MAX) {
+            return Err(format!(
+                "dilation {} outside (0, {DILATION_MAX}]",
+                self.dilation
+            ));
+        }
+        if !(self.volume > 0.0 && self.inertia.iter().all(|i| *i > 0.0 && i.is_finite())) {
+            return Err(format!(
+                "volume {} and moments {:?} must be positive",
+                self.volume,
+                self.inertia.as_slice()
+            ));
+        }
+        let reach = self.vertices.iter().map(|v| v.norm()).fold(0.0, f64::max) + self.dilation;
+        if (reach - self.circumradius).abs() > 1e-12 * reach {
+            return Err(format!(
+                "bounding radius {} but the vertices reach {reach}",
+                self.circumradius
+            ));
+        }
+        Ok(())
+    }
+
     /// Support point of the core at unit size: the vertex furthest along `dir`.
     #[inline]
     pub fn support(&self, dir: &V3) -> V3 {
