@@ -23,6 +23,7 @@
 
 use crate::hertz_mindlin::V3;
 use crate::particles::Orientation;
+use crate::shape::polyhedron::support_index;
 use crate::shape::Superquadric;
 use parry3d_f64::math::{Pose, Rotation, Vector};
 use parry3d_f64::query::details::contact_support_map_support_map_with_params;
@@ -53,16 +54,7 @@ impl SupportMap for Core<'_> {
     fn local_support_point(&self, dir: Vector) -> Vector {
         match self {
             Core::Points { vertices, scale } => {
-                let d = from_parry(dir);
-                let mut best = vertices[0];
-                let mut h = best.dot(&d);
-                for v in &vertices[1..] {
-                    let hv = v.dot(&d);
-                    if hv > h {
-                        h = hv;
-                        best = *v;
-                    }
-                }
+                let best = vertices[support_index(vertices, &from_parry(dir))];
                 to_parry(&(best * *scale))
             }
             Core::Superquadric(s) => {
@@ -92,9 +84,10 @@ pub const POINT_CORE: [V3; 1] = [V3::new(0.0, 0.0, 0.0)];
 /// Result of a polyhedral detection.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum PolyDetection {
-    /// The dilated bodies are apart. `normal` is the cores' closest-point direction (from the
-    /// first body to the second) and `gap` the distance of the dilated surfaces, when GJK
-    /// found them within its reach; otherwise `gap` is NaN (more than the reach apart).
+    /// The dilated bodies are apart, separated by the plane of normal `normal` (from the first
+    /// body to the second) with `gap` between them: the cores' closest-point direction and
+    /// the distance of the dilated surfaces when GJK found them within its reach, else GJK's
+    /// separating direction and the gap along it (a lower bound; NaN if none was proved).
     Separated { normal: V3, gap: f64 },
     /// Overlap δ_d > 0 along `normal` (unit, from the first body to the second), contact
     /// `point` halfway between the dilated surfaces; `core_point` is the second's core point
@@ -183,7 +176,26 @@ pub fn detect_pair(a: &PolyBody, b: &PolyBody, warm: Option<V3>) -> PolyDetectio
     let reach = a.dilation + b.dilation;
     let warm = warm.map(|n| to_parry(&q1.inverse_transform_vector(&n)));
     let result = closest(&pos12, &a.core, &b.core, reach, warm);
-    classify(result, reach, a.dilation, |v| q1 * v, &a.position)
+    match classify(result, reach, a.dilation, |v| q1 * v, &a.position) {
+        // beyond GJK's reach: the gap along its separating direction (a proof of
+        // separation the next steps can reuse, as for the pairs within reach)
+        PolyDetection::Separated { normal, gap } if gap.is_nan() => {
+            let x21 = b.position - a.position;
+            let h = |body: &PolyBody, c: &V3| {
+                let local = body.orientation.inverse_transform_vector(c);
+                let v = from_parry(body.core.local_support_point(to_parry(&local)));
+                (body.orientation * v).dot(c) + body.dilation
+            };
+            for c in [normal, -normal] {
+                let g = c.dot(&x21) - h(a, &c) - h(b, &-c);
+                if g > 0.0 {
+                    return PolyDetection::Separated { normal: c, gap: g };
+                }
+            }
+            PolyDetection::Separated { normal, gap }
+        }
+        found => found,
+    }
 }
 
 /// Contact of a body with triangle `tri` (global corners; walls have no dilation). The
@@ -378,9 +390,8 @@ mod tests {
                 PolyDetection::Separated { gap, .. } => {
                     assert!(separated_by_an_axis(&a, &sa, &b, &sb));
                     assert!(d >= a.dilation + b.dilation - 2e-5, "missed: {d}");
-                    if gap.is_finite() {
-                        assert!((gap - (d - a.dilation - b.dilation)).abs() < 2e-5);
-                    }
+                    // the distance within GJK's reach, a lower bound beyond it
+                    assert!(gap > 0.0 && gap <= d - a.dilation - b.dilation + 1e-10);
                 }
                 PolyDetection::CoresIntersect { depth } => {
                     assert!(

@@ -410,6 +410,52 @@ fn hull(points: &[V3]) -> Result<(Vec<V3>, Vec<[u32; 3]>), String> {
     Ok((vertices, triangles))
 }
 
+/// Index of the vertex furthest along `d` (the first of equals): the hot loop of GJK. Four
+/// independent lanes without branches, so the comparisons neither mispredict nor wait on
+/// each other.
+#[inline]
+pub fn support_index(vertices: &[V3], d: &V3) -> usize {
+    let n = vertices.len();
+    let dot = |v: &V3| v.x * d.x + v.y * d.y + v.z * d.z;
+    if n < 8 {
+        let (mut best, mut h) = (0, dot(&vertices[0]));
+        for (i, v) in vertices.iter().enumerate().skip(1) {
+            let x = dot(v);
+            if x > h {
+                (best, h) = (i, x);
+            }
+        }
+        return best;
+    }
+    let mut h = [f64::NEG_INFINITY; 4];
+    let mut at = [0usize; 4];
+    let chunks = n / 4;
+    for c in 0..chunks {
+        for l in 0..4 {
+            let i = 4 * c + l;
+            let x = dot(&vertices[i]);
+            let better = x > h[l];
+            h[l] = if better { x } else { h[l] };
+            at[l] = if better { i } else { at[l] };
+        }
+    }
+    for i in 4 * chunks..n {
+        let x = dot(&vertices[i]);
+        let l = i - 4 * chunks;
+        if x > h[l] {
+            (h[l], at[l]) = (x, i);
+        }
+    }
+    // the largest value, the smallest index among equals
+    let mut best = 0;
+    for l in 1..4 {
+        if h[l] > h[best] || (h[l] == h[best] && at[l] < at[best]) {
+            best = l;
+        }
+    }
+    at[best]
+}
+
 impl Stone {
     /// The stone whose core is the convex hull of `points`, dilated by `dilation` × its size
     /// (equivalent-volume diameter of the dilated body), scaled to unit size and turned into
@@ -625,16 +671,7 @@ impl Stone {
     /// Support point of the core at unit size: the vertex furthest along `dir`.
     #[inline]
     pub fn support(&self, dir: &V3) -> V3 {
-        let mut best = self.vertices[0];
-        let mut h = best.dot(dir);
-        for v in &self.vertices[1..] {
-            let d = v.dot(dir);
-            if d > h {
-                h = d;
-                best = *v;
-            }
-        }
-        best
+        self.vertices[support_index(&self.vertices, dir)]
     }
 
     /// The dilated surface at unit size for drawing: the convex hull of points on the exact
@@ -852,6 +889,28 @@ mod tests {
                         inertia[(k, l)]
                     );
                 }
+            }
+        }
+    }
+
+    /// The branch-free support scan finds the first furthest vertex, as a plain scan does.
+    #[test]
+    fn support_index_is_the_first_furthest_vertex() {
+        let mut rng = SplitMix64::new(8);
+        for n in 1..40 {
+            let mut v: Vec<V3> = (0..n).map(|_| random_unit_vector(&mut rng)).collect();
+            if n > 5 {
+                v[n - 1] = v[2]; // a tie: the first wins
+            }
+            for _ in 0..50 {
+                let d = random_unit_vector(&mut rng);
+                let mut plain = 0;
+                for i in 1..n {
+                    if v[i].dot(&d) > v[plain].dot(&d) {
+                        plain = i;
+                    }
+                }
+                assert_eq!(support_index(&v, &d), plain, "{n}");
             }
         }
     }
