@@ -439,11 +439,10 @@ pub fn support_index(vertices: &[V3], d: &V3) -> usize {
             at[l] = if better { i } else { at[l] };
         }
     }
-    for i in 4 * chunks..n {
-        let x = dot(&vertices[i]);
-        let l = i - 4 * chunks;
+    for (l, v) in vertices[4 * chunks..].iter().enumerate() {
+        let x = dot(v);
         if x > h[l] {
-            (h[l], at[l]) = (x, i);
+            (h[l], at[l]) = (x, 4 * chunks + l);
         }
     }
     // the largest value, the smallest index among equals
