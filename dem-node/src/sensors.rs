@@ -15,7 +15,9 @@
 //!   inside the rectangle, and of every particle–wall contact whose particle centre and contact
 //!   point lie on opposite sides with the crossing inside the rectangle, over the area. The
 //!   contact forces are re-evaluated by the engine's contact law from the current state
-//!   (elastic, damping and the stored tangential history; no history increment).
+//!   (elastic, damping and the stored tangential history; no history increment); those of
+//!   non-spherical bodies (superquadrics, polyhedra) are their contact records of the last
+//!   force evaluation, which saw the same state.
 //! - **repose**: angle of repose (degrees) of a heap around the vertical axis through
 //!   `centre`: particles with radial distance ρ in [r_min, r_max] are binned by ρ; per bin the
 //!   particle with the highest top z + r gives a point (ρ, z + r); a least-squares line through
@@ -352,6 +354,31 @@ pub fn pressure(
                 cf.force[a]
             } else {
                 -cf.force[a]
+            };
+        }
+    }
+    // the contacts of non-spherical bodies: their records of the last force evaluation (the
+    // state the sample sees), force on the first body
+    for (&[i, j], c) in lists.shaped_pairs.iter().zip(&lists.shaped_pair_contacts) {
+        let (xi, xj) = (p.position[i as usize], p.position[j as usize]);
+        if c.touching() && crossing(&xi, &xj).is_some() {
+            force += if xi[a] > value {
+                c.force[a]
+            } else {
+                -c.force[a]
+            };
+        }
+    }
+    let walls = (lists.shaped_walls.iter().map(|w| w[0]))
+        .zip(&lists.shaped_wall_contacts)
+        .chain((lists.shaped_mesh.iter().map(|m| m.0)).zip(&lists.shaped_mesh_contacts));
+    for (i, c) in walls {
+        let xi = p.position[i as usize];
+        if c.touching() && crossing(&xi, &c.point).is_some() {
+            force += if xi[a] > value {
+                c.force[a]
+            } else {
+                -c.force[a]
             };
         }
     }
