@@ -1,7 +1,7 @@
 //! Every shipped scene passes `cosim check` (real nodes read their tables, build their models
 //! and report their limits), except the sleeper's later steps, which must name the bed file
 //! the step before writes when it has not been run yet (sleeper-compact.toml reads
-//! sleeper-bed's, sleeper.toml sleeper-compact's). (plate-python.toml needs the Python node's
+//! sleeper-bed's, sleeper.toml sleeper-compact's; the same for the -poly chain). (plate-python.toml needs the Python node's
 //! packages and is run by python_node.rs.)
 
 use cosim_tests::{cosim, root, run};
@@ -20,6 +20,8 @@ fn every_shipped_scene_checks() {
     let needs = |name: &str| match name {
         "sleeper-compact.toml" => Some("out/sleeper-bed/dem/particles_final.csv"),
         "sleeper.toml" => Some("out/sleeper-compact/dem/particles_final.csv"),
+        "sleeper-compact-poly.toml" => Some("out/sleeper-bed-poly/dem/particles_final.csv"),
+        "sleeper-poly.toml" => Some("out/sleeper-compact-poly/dem/particles_final.csv"),
         _ => None,
     };
     for name in names {
