@@ -706,3 +706,117 @@ fn polyhedron_bed_round_trips_through_a_particle_file() {
         assert!((pa.position[ka] - pb.position[kb]).norm() < 1e-9);
     }
 }
+
+/// The force has no jump while the closest features change: a stone slid across a box edge
+/// (face → edge → off), and a stone turned against another (its closest face, edge and
+/// vertex take turns). Sampled along the path at n and 2n points, the largest change of the
+/// force between neighbouring samples halves with the spacing (a jump would stay).
+#[test]
+fn the_force_has_no_jump_between_face_edge_and_vertex() {
+    let s = stones();
+    let path_max_step = |n: usize, f: &mut dyn FnMut(f64) -> V3| -> (f64, f64) {
+        let forces: Vec<V3> = (0..=n).map(|k| f(k as f64 / n as f64)).collect();
+        let scale = forces.iter().map(|f| f.norm()).fold(0.0, f64::max);
+        let step = forces
+            .windows(2)
+            .map(|w| (w[1] - w[0]).norm())
+            .fold(0.0, f64::max);
+        (step, scale)
+    };
+    // across the edge x = 0.02 of a box's top face (z = 0.02)
+    let scene = format!(
+        "{ELASTIC}[[dem.walls]]\nkind = \"box\"\nmaterial = \"grain\"\nmin = [0.0, 0.0, 0.0]\nmax = [0.02, 0.02, 0.02]\n"
+    );
+    let q = rot([0.3, 1.0, 0.2], 0.7);
+    let mut e = engine_with(
+        &scene,
+        &[(
+            V3::new(0.017, 0.01, 0.022),
+            V3::zeros(),
+            V3::zeros(),
+            q,
+            &s[1],
+            4e-3,
+        )],
+    );
+    // the stone's lowest point just below the top face: overlap ~ 20 µm while over the face
+    let lowest = {
+        let local = q.inverse_transform_vector(&-V3::z());
+        (q * (s[1].support(&local) * 4e-3)).z - s[1].dilation * 4e-3
+    };
+    let z0 = 0.02 - lowest - 2e-5;
+    let mut slide = |t: f64| -> V3 {
+        // from over the face, across the edge, down the side
+        let x = 0.016 + 0.008 * t;
+        let z = z0 - 0.004 * (t - 0.5).max(0.0);
+        e.particles_mut().position[0] = V3::new(x, 0.01, z);
+        e.refresh_forces();
+        e.particles().force[0]
+    };
+    let (a, scale) = path_max_step(1000, &mut slide);
+    let (b, _) = path_max_step(2000, &mut slide);
+    println!(
+        "edge: largest force change {a:e} N (n = 1000), {b:e} N (n = 2000), |F| ≤ {scale:e} N"
+    );
+    assert!(
+        scale > 0.0 && b < 0.6 * a && b < 0.05 * scale,
+        "{a} {b} {scale}"
+    );
+    // a stone turned against another about an axis through its centre, in contact all along
+    // (placed at an overlap of half a dilation radius first, by bisection on the distance)
+    let mut e = engine_with(
+        ELASTIC,
+        &[
+            (
+                V3::zeros(),
+                V3::zeros(),
+                V3::zeros(),
+                Orientation::identity(),
+                &s[2],
+                4e-3,
+            ),
+            (
+                V3::new(8e-3, 0.0, 0.0),
+                V3::zeros(),
+                V3::zeros(),
+                Orientation::identity(),
+                &s[1],
+                4e-3,
+            ),
+        ],
+    );
+    let target = 0.5 * s[1].dilation * 4e-3;
+    let overlap = |e: &Engine| {
+        e.shaped_pair_contacts()
+            .map(|c| c.1.overlap)
+            .fold(-1.0, f64::max)
+    };
+    let (mut near, mut far) = (2e-3, 8e-3);
+    for _ in 0..60 {
+        let d = 0.5 * (near + far);
+        e.particles_mut().position[1].x = d;
+        e.refresh_forces();
+        if overlap(&e) > target {
+            near = d;
+        } else {
+            far = d;
+        }
+    }
+    let mut touching = true;
+    let mut turn = |t: f64| -> V3 {
+        e.particles_mut().orientation[1] = rot([0.2, 0.4, 1.0], 0.5 * t);
+        e.refresh_forces();
+        touching &= overlap(&e) > 0.0;
+        e.particles().force[0]
+    };
+    let (a, scale) = path_max_step(1000, &mut turn);
+    let (b, _) = path_max_step(2000, &mut turn);
+    println!(
+        "turning: largest force change {a:e} N (n = 1000), {b:e} N (n = 2000), |F| ≤ {scale:e} N"
+    );
+    assert!(touching, "the stones must stay in contact while turning");
+    assert!(
+        scale > 0.0 && b < 0.6 * a && b < 0.05 * scale,
+        "{a} {b} {scale}"
+    );
+}
