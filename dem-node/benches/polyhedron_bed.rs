@@ -13,7 +13,7 @@
 //! it holds a snapshot of this engine version and size, else written there after settling),
 //! PB_NARROW (0: skip the narrow-phase timing).
 
-use dem::narrow::polyhedron::{detect_pair, Core, PolyBody};
+use dem::narrow::polyhedron::{detect_pair_warm, Core, PolyBody, Simplex};
 use dem::{parse_scene_section, Engine};
 use std::time::Instant;
 
@@ -137,13 +137,13 @@ fn main() {
     if env("PB_NARROW", 1) == 0 {
         return;
     }
-    // the narrow phase alone: every listed pair, warm-started from its last normal
+    // the narrow phase alone: every listed pair, warm-started from its last normal and simplex
     let p = e.particles();
     let idx: std::collections::HashMap<u32, usize> =
         p.id.iter().enumerate().map(|(k, &i)| (i, k)).collect();
-    let jobs: Vec<(usize, usize, dem::hertz_mindlin::V3)> = e
+    let jobs: Vec<(usize, usize, dem::hertz_mindlin::V3, Simplex)> = e
         .shaped_pair_contacts()
-        .map(|(ids, c)| (idx[&ids[0]], idx[&ids[1]], c.normal))
+        .map(|(ids, c)| (idx[&ids[0]], idx[&ids[1]], c.normal, c.simplex))
         .collect();
     let body = |k: usize| {
         let (s, scale) = p.polyhedron(k).expect("a stone");
@@ -160,9 +160,9 @@ fn main() {
     let rounds = 5;
     let t = Instant::now();
     for _ in 0..rounds {
-        for &(a, b, warm) in &jobs {
-            let w = (warm != dem::hertz_mindlin::V3::zeros()).then_some(warm);
-            std::hint::black_box(detect_pair(&body(a), &body(b), w));
+        for (a, b, warm, simplex) in &jobs {
+            let w = (*warm != dem::hertz_mindlin::V3::zeros()).then_some(*warm);
+            std::hint::black_box(detect_pair_warm(&body(*a), &body(*b), w, simplex));
         }
     }
     let narrow = t.elapsed().as_secs_f64() / rounds as f64;

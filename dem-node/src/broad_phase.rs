@@ -82,10 +82,18 @@ pub struct ShapedContact {
     pub support: f64,
     #[serde(default)]
     pub frames: [Orientation; 2],
+    /// A polyhedral pair's last GJK simplex as vertex indices (first body, second body) × 3,
+    /// `u16::MAX` where unused: the next step's GJK starts from it (temporal coherence).
+    #[serde(default = "no_simplex")]
+    pub simplex: [u16; 6],
 }
 
 fn nan() -> f64 {
     f64::NAN
+}
+
+fn no_simplex() -> [u16; 6] {
+    [u16::MAX; 6]
 }
 
 impl ShapedContact {
@@ -98,6 +106,7 @@ impl ShapedContact {
         stiffness: 0.0,
         support: f64::NAN,
         frames: [Orientation::new_unchecked(nalgebra::Quaternion::new(1.0, 0.0, 0.0, 0.0)); 2],
+        simplex: [u16::MAX; 6],
     };
 
     pub fn touching(&self) -> bool {
@@ -115,6 +124,10 @@ impl ShapedContact {
             stiffness: self.stiffness,
             support: self.support,
             frames: [self.frames[1], self.frames[0]],
+            simplex: {
+                let s = self.simplex;
+                [s[1], s[0], s[3], s[2], s[5], s[4]]
+            },
         }
     }
 }

@@ -15,7 +15,7 @@ use crate::hertz_mindlin;
 use crate::hertz_mindlin::V3;
 use crate::materials::{PairParams, ShapedDamping};
 use crate::narrow::polyhedron::{
-    detect_pair, detect_plane, detect_triangle, Core, PolyBody, PolyDetection, POINT_CORE,
+    detect_pair_warm, detect_plane, detect_triangle, Core, PolyBody, PolyDetection, POINT_CORE,
 };
 use crate::narrow::superquadric::{
     detect, detect_tracked, Detection, SearchSettings, SearchStats, SqBody,
@@ -507,10 +507,11 @@ fn poly_pair_contact(
 ) -> ShapedContact {
     let (a, b) = (poly_view(p, i), poly_view(p, j));
     let warm = (old.normal != V3::zeros()).then_some(old.normal);
-    match detect_pair(&a, &b, warm) {
+    let (found, simplex) = detect_pair_warm(&a, &b, warm, &old.simplex);
+    let mut c = match found {
         PolyDetection::Separated { normal, gap } => ShapedContact {
             normal,
-            support: normal.dot(x21) - gap, // NaN when GJK found them beyond its reach
+            support: normal.dot(x21) - gap, // NaN when no plane was proved
             frames: [p.orientation[i], p.orientation[j]],
             ..ShapedContact::NONE
         },
@@ -537,7 +538,9 @@ fn poly_pair_contact(
                 params, overlap, r_eff, m_eff, normal, &d_dot, point, old, ctx.dt,
             )
         }
-    }
+    };
+    c.simplex = simplex;
+    c
 }
 
 /// A dilated polyhedron against a plane (a flat wall: R = r_ds).

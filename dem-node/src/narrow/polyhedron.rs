@@ -27,7 +27,8 @@ use crate::shape::polyhedron::support_index;
 use crate::shape::Superquadric;
 use parry3d_f64::math::{Pose, Rotation, Vector};
 use parry3d_f64::query::details::contact_support_map_support_map_with_params;
-use parry3d_f64::query::gjk::{GJKResult, VoronoiSimplex};
+use parry3d_f64::query::epa::EPA;
+use parry3d_f64::query::gjk::{self, CsoPoint, GJKResult, VoronoiSimplex};
 use parry3d_f64::shape::{SupportMap, Triangle};
 
 #[inline]
@@ -168,14 +169,119 @@ fn rotation(q: &Orientation) -> Rotation {
     Rotation::from_xyzw(c.x, c.y, c.z, c.w)
 }
 
+/// A GJK simplex as vertex indices of the two cores, (first, second) × 3; `u16::MAX` unused.
+pub type Simplex = [u16; 6];
+
+/// No simplex.
+pub const NO_SIMPLEX: Simplex = [u16::MAX; 6];
+
 /// Contact of two bodies; `warm` is the last normal (the GJK start direction).
 pub fn detect_pair(a: &PolyBody, b: &PolyBody, warm: Option<V3>) -> PolyDetection {
+    detect_pair_warm(a, b, warm, &NO_SIMPLEX).0
+}
+
+/// The index of the vertex of `vertices` × `scale` at `x` (a support point GJK kept).
+fn vertex_at(vertices: &[V3], scale: f64, x: &V3) -> Option<u16> {
+    let (mut best, mut d) = (0, f64::INFINITY);
+    for (i, v) in vertices.iter().enumerate() {
+        let e = (v * scale - x).norm_squared();
+        if e < d {
+            (best, d) = (i, e);
+        }
+    }
+    (d <= 1e-20 * scale * scale && best < u16::MAX as usize).then_some(best as u16)
+}
+
+/// [`detect_pair`] warm-started from the last step's simplex too (temporal coherence, *not in
+/// thesis*): GJK begins with the CSO points of the vertex pairs that formed its last simplex,
+/// evaluated at the current poses — for a resting contact the closest features of the last
+/// step, so it converges in an iteration or two instead of building the simplex up again.
+/// Any simplex of CSO points is a valid start, so the answer is GJK's as from scratch (up to
+/// its tolerance). Returns the detection and the simplex to keep.
+pub fn detect_pair_warm(
+    a: &PolyBody,
+    b: &PolyBody,
+    warm: Option<V3>,
+    last: &Simplex,
+) -> (PolyDetection, Simplex) {
     let q1 = a.orientation;
     let t = q1.inverse_transform_vector(&(b.position - a.position));
     let pos12 = Pose::from_parts(to_parry(&t), rotation(&(q1.inverse() * b.orientation)));
     let reach = a.dilation + b.dilation;
     let warm = warm.map(|n| to_parry(&q1.inverse_transform_vector(&n)));
-    let result = closest(&pos12, &a.core, &b.core, reach, warm);
+    let (
+        Core::Points {
+            vertices: va,
+            scale: sa,
+        },
+        Core::Points {
+            vertices: vb,
+            scale: sb,
+        },
+    ) = (a.core, b.core)
+    else {
+        let result = closest(&pos12, &a.core, &b.core, reach, warm);
+        return (finish(result, reach, a, b, &q1), NO_SIMPLEX);
+    };
+    let mut simplex = VoronoiSimplex::new();
+    let mut seeded = 0;
+    for k in 0..3 {
+        let (i, j) = (last[2 * k] as usize, last[2 * k + 1] as usize);
+        if i >= va.len() || j >= vb.len() {
+            break;
+        }
+        let point = CsoPoint::new(to_parry(&(va[i] * sa)), pos12 * to_parry(&(vb[j] * sb)));
+        if seeded == 0 {
+            simplex.reset(point);
+            seeded = 1;
+        } else if simplex.add_point(point) {
+            seeded += 1;
+        }
+    }
+    let result = if seeded == 0 {
+        let dir = warm
+            .or_else(|| pos12.translation.try_normalize())
+            .unwrap_or(Vector::X);
+        simplex.reset(CsoPoint::from_shapes(&pos12, &a.core, &b.core, dir));
+        gjk::closest_points(&pos12, &a.core, &b.core, reach, true, &mut simplex)
+    } else {
+        gjk::closest_points(&pos12, &a.core, &b.core, reach, true, &mut simplex)
+    };
+    let result = match result {
+        GJKResult::Intersection => {
+            match EPA::new().closest_points(&pos12, &a.core, &b.core, &simplex) {
+                Some((p1, p2, n)) => GJKResult::ClosestPoints(p1, p2, n),
+                None => GJKResult::NoIntersection(Vector::X),
+            }
+        }
+        other => other,
+    };
+    // the simplex to keep: its points' vertex indices on each core
+    let mut keep = NO_SIMPLEX;
+    let inverse = pos12.inverse();
+    for k in 0..=simplex.dimension().min(2) {
+        let c = simplex.point(k);
+        let (Some(i), Some(j)) = (
+            vertex_at(va, sa, &from_parry(c.orig1)),
+            vertex_at(vb, sb, &from_parry(inverse * c.orig2)),
+        ) else {
+            break;
+        };
+        keep[2 * k] = i;
+        keep[2 * k + 1] = j;
+    }
+    (finish(result, reach, a, b, &q1), keep)
+}
+
+/// Classifies a pair's GJK result, and proves a separation beyond GJK's reach with the
+/// support functions along its separating direction.
+fn finish(
+    result: GJKResult,
+    reach: f64,
+    a: &PolyBody,
+    b: &PolyBody,
+    q1: &Orientation,
+) -> PolyDetection {
     match classify(result, reach, a.dilation, |v| q1 * v, &a.position) {
         // beyond GJK's reach: the gap along its separating direction (a proof of
         // separation the next steps can reuse, as for the pairs within reach)
@@ -407,6 +513,71 @@ mod tests {
             contacts > 20 && intersections > 5,
             "{contacts} {intersections}"
         );
+    }
+
+    /// Warm-started from the last step's simplex, GJK gives the answer it gives from scratch
+    /// (overlap to 1e-12 of the size) after the bodies moved and turned a little; the kept
+    /// simplex names real vertices.
+    #[test]
+    fn a_warm_simplex_gives_the_cold_answer() {
+        let mut rng = SplitMix64::new(31);
+        let sa = Stone::random(30, 1.6, 0.1, &mut rng).unwrap();
+        let sb = Stone::random(40, 1.3, 0.1, &mut rng).unwrap();
+        let mut warm_used = 0;
+        for _ in 0..500 {
+            let (qa, qb) = (random_orientation(&mut rng), random_orientation(&mut rng));
+            let x = random_unit_vector(&mut rng) * (0.85 + 0.25 * rng.uniform());
+            let a = body(&sa, 1.0, V3::zeros(), qa);
+            let b = body(&sb, 1.0, x, qb);
+            let (first, simplex) = detect_pair_warm(&a, &b, None, &NO_SIMPLEX);
+            assert!(simplex.iter().all(|&i| i == u16::MAX || (i as usize) < 22));
+            // a small motion and turn
+            let turn = crate::particles::Orientation::from_axis_angle(
+                &nalgebra::Unit::new_normalize(random_unit_vector(&mut rng)),
+                0.02 * rng.uniform(),
+            );
+            let b2 = body(
+                &sb,
+                1.0,
+                x + random_unit_vector(&mut rng) * 0.003,
+                turn * qb,
+            );
+            let normal = match first {
+                PolyDetection::Contact { normal, .. } | PolyDetection::Separated { normal, .. } => {
+                    Some(normal)
+                }
+                PolyDetection::CoresIntersect { .. } => None,
+            };
+            let (cold, _) = detect_pair_warm(&a, &b2, normal, &NO_SIMPLEX);
+            let (warm, _) = detect_pair_warm(&a, &b2, normal, &simplex);
+            if simplex[0] != u16::MAX {
+                warm_used += 1;
+            }
+            match (cold, warm) {
+                (
+                    PolyDetection::Contact {
+                        overlap: o1,
+                        normal: n1,
+                        ..
+                    },
+                    PolyDetection::Contact {
+                        overlap: o2,
+                        normal: n2,
+                        ..
+                    },
+                ) => {
+                    assert!((o1 - o2).abs() < 1e-12, "{o1} vs {o2}");
+                    assert!((n1 - n2).norm() < 1e-6, "{n1} vs {n2}");
+                }
+                (PolyDetection::Separated { .. }, PolyDetection::Separated { .. }) => {}
+                (
+                    PolyDetection::CoresIntersect { depth: d1 },
+                    PolyDetection::CoresIntersect { depth: d2 },
+                ) => assert!((d1 - d2).abs() < 1e-9, "{d1} {d2}"),
+                other => panic!("{other:?}"),
+            }
+        }
+        assert!(warm_used > 300, "{warm_used}");
     }
 
     /// A sphere is a dilated point: sphere–sphere gives the exact overlap r1 + r2 − |x2 − x1|
