@@ -180,8 +180,17 @@ pub fn detect_pair(a: &PolyBody, b: &PolyBody, warm: Option<V3>) -> PolyDetectio
     detect_pair_warm(a, b, warm, &NO_SIMPLEX).0
 }
 
-/// The index of the vertex of `vertices` × `scale` at `x` (a support point GJK kept).
-fn vertex_at(vertices: &[V3], scale: f64, x: &V3) -> Option<u16> {
+/// The index of the vertex of `vertices` × `scale` at `x` (a support point GJK kept): one of
+/// the `hints` (the last simplex's, usually still the closest features) or any.
+fn vertex_at(vertices: &[V3], scale: f64, x: &V3, hints: [u16; 3]) -> Option<u16> {
+    let tolerance = 1e-20 * scale * scale;
+    for h in hints {
+        if let Some(v) = vertices.get(h as usize) {
+            if (v * scale - x).norm_squared() <= tolerance {
+                return Some(h);
+            }
+        }
+    }
     let (mut best, mut d) = (0, f64::INFINITY);
     for (i, v) in vertices.iter().enumerate() {
         let e = (v * scale - x).norm_squared();
@@ -189,7 +198,7 @@ fn vertex_at(vertices: &[V3], scale: f64, x: &V3) -> Option<u16> {
             (best, d) = (i, e);
         }
     }
-    (d <= 1e-20 * scale * scale && best < u16::MAX as usize).then_some(best as u16)
+    (d <= tolerance && best < u16::MAX as usize).then_some(best as u16)
 }
 
 /// [`detect_pair`] warm-started from the last step's simplex too (temporal coherence, *not in
@@ -262,8 +271,13 @@ pub fn detect_pair_warm(
     for k in 0..=simplex.dimension().min(2) {
         let c = simplex.point(k);
         let (Some(i), Some(j)) = (
-            vertex_at(va, sa, &from_parry(c.orig1)),
-            vertex_at(vb, sb, &from_parry(inverse * c.orig2)),
+            vertex_at(va, sa, &from_parry(c.orig1), [last[0], last[2], last[4]]),
+            vertex_at(
+                vb,
+                sb,
+                &from_parry(inverse * c.orig2),
+                [last[1], last[3], last[5]],
+            ),
         ) else {
             break;
         };
