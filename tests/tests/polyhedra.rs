@@ -2,7 +2,8 @@
 //! convex polyhedra, no rolling resistance): bed generation, compaction by a loaded plate
 //! and the coupled sleeper under a rail-seat load, each through `cosim run` (real dem-node
 //! and fem-node processes over zenoh), each reading the bed the one before wrote
-//! (`particles_final.csv` with its stone library).
+//! (`particles_final.csv` with its stone library). `POLY_CHAIN_DIR=<dir>` keeps the scenes
+//! and outputs there (the window study of docs/full-size.md ran on its `sleeper.toml`).
 
 use cosim_tests::{csv_column, run_scene};
 use std::path::Path;
