@@ -127,22 +127,37 @@ impl Particles {
         material: u16,
     ) {
         let (mass, principal_inertia) = shape.mass_properties(density);
+        let body = ShapeTemplate {
+            shape: Shape::Superquadric(shape),
+            principal_inertia,
+        };
+        let state = (position, velocity, omega, orientation);
+        self.push_shaped(state, shape.bounding_radius(), mass, body, material);
+    }
+
+    /// Appends a non-spherical body: its state (x, v, ω, orientation), bounding radius, mass
+    /// and template.
+    fn push_shaped(
+        &mut self,
+        (position, velocity, omega, orientation): (V3, V3, V3, Orientation),
+        radius: f64,
+        mass: f64,
+        template: ShapeTemplate,
+        material: u16,
+    ) {
         self.id.push(self.position.len() as u32);
         self.position.push(position);
         self.velocity.push(velocity);
         self.angular_velocity.push(omega);
-        self.radius.push(shape.bounding_radius());
+        self.radius.push(radius);
         self.mass.push(mass);
-        self.inertia.push(principal_inertia.min());
+        self.inertia.push(template.principal_inertia.min());
         self.material.push(material);
         self.force.push(V3::zeros());
         self.torque.push(V3::zeros());
         self.orientation.push(orientation);
         self.shape.push(self.templates.len() as u32);
-        self.templates.push(ShapeTemplate {
-            shape: Shape::Superquadric(shape),
-            principal_inertia,
-        });
+        self.templates.push(template);
     }
 
     /// Adds a drawn body (a superquadric or a stone copy) of `density`.
@@ -195,24 +210,13 @@ impl Particles {
         material: u16,
     ) {
         let s = &self.stones[stone as usize];
-        let mass = density * s.volume * scale.powi(3);
-        let principal_inertia = s.inertia * (density * scale.powi(5));
-        self.id.push(self.position.len() as u32);
-        self.position.push(position);
-        self.velocity.push(velocity);
-        self.angular_velocity.push(omega);
-        self.radius.push(s.circumradius * scale);
-        self.mass.push(mass);
-        self.inertia.push(principal_inertia.min());
-        self.material.push(material);
-        self.force.push(V3::zeros());
-        self.torque.push(V3::zeros());
-        self.orientation.push(orientation);
-        self.shape.push(self.templates.len() as u32);
-        self.templates.push(ShapeTemplate {
+        let (mass, radius) = (density * s.volume * scale.powi(3), s.circumradius * scale);
+        let body = ShapeTemplate {
             shape: Shape::Polyhedron { stone, scale },
-            principal_inertia,
-        });
+            principal_inertia: s.inertia * (density * scale.powi(5)),
+        };
+        let state = (position, velocity, omega, orientation);
+        self.push_shaped(state, radius, mass, body, material);
     }
 
     /// The (stone, scale) of body k if it is a dilated polyhedron.
