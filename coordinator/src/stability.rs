@@ -157,7 +157,7 @@ impl StabilityMonitor {
                     let step = d.max_norm * window;
                     if step > 0.5 * radius {
                         return fail(format!(
-                            "a node of interface `{}` moves at {:.3e} m/s: {step:.3e} m in one window of {window:.3e} s, more than half the smallest particle radius ({radius:.3e} m); the coupling diverges — reduce the coupling window or use the predictive schedule",
+                            "a node of interface `{}` moves at {:.3e} m/s: {step:.3e} m in one window of {window:.3e} s, more than half the smallest particle contact radius ({radius:.3e} m: a sphere's radius, a stone's dilation); the coupling diverges — reduce the coupling window or use the predictive schedule",
                             d.interface, d.max_norm
                         ));
                     }
@@ -212,7 +212,11 @@ mod tests {
         };
         assert!(m.observe(&k(49.0)).is_none());
         let e = m.observe(&k(51.0)).unwrap();
-        assert!(e.cause.contains("half the smallest particle radius"), "{e}");
+        assert!(
+            e.cause
+                .contains("half the smallest particle contact radius"),
+            "{e}"
+        );
     }
 
     #[test]

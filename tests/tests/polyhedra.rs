@@ -3,7 +3,9 @@
 //! and the coupled sleeper under a rail-seat load, each through `cosim run` (real dem-node
 //! and fem-node processes over zenoh), each reading the bed the one before wrote
 //! (`particles_final.csv` with its stone library). `POLY_CHAIN_DIR=<dir>` keeps the scenes
-//! and outputs there (the window study of docs/full-size.md ran on its `sleeper.toml`).
+//! and outputs there (the window study of docs/full-size.md ran on its `sleeper.toml`);
+//! `POLY_CHAIN_TRIANGLES` (default 30) and `POLY_CHAIN_SEED` (default 7) change the stones
+//! and the bed for the resolution comparison there.
 
 use cosim_tests::{csv_column, run_scene};
 use std::path::Path;
@@ -27,6 +29,13 @@ friction = 0.6
 /// Step 1: 300 stones of 30 triangles (size normal 40 ± 10 mm in [30, 60] mm, dilation 10 %)
 /// fall into a 0.6 × 0.28 m box and settle.
 fn bed_scene() -> String {
+    let env = |name: &str, default: u64| {
+        std::env::var(name)
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(default)
+    };
+    let (triangles, seed) = (env("POLY_CHAIN_TRIANGLES", 30), env("POLY_CHAIN_SEED", 7));
     format!(
         r#"
 [scene]
@@ -46,9 +55,9 @@ material = "ballast"
 min = [0.0, 0.0, 0.0]
 max = [0.6, 0.28, 0.55]
 count = 300
-seed = 7
+seed = {seed}
 distribution = {{ kind = "normal", mean = 0.02, std_dev = 0.005, min = 0.015, max = 0.03 }}
-shape = {{ kind = "polyhedron", triangles = 30, dilation = 0.1, stones = 20 }}
+shape = {{ kind = "polyhedron", triangles = {triangles}, dilation = 0.1, stones = 20 }}
 
 [[dem.walls]]
 kind = "box"
