@@ -326,6 +326,14 @@ mod tests {
         pairs.iter().map(|(k, v)| (k.to_string(), *v)).collect()
     }
 
+    /// A DEM-only scene (no coupling window to check).
+    fn dem_only() -> SceneFacts {
+        SceneFacts {
+            has_fem: false,
+            ..facts(ScheduleKind::None, 1e-3)
+        }
+    }
+
     fn facts(schedule: ScheduleKind, window: f64) -> SceneFacts {
         SceneFacts {
             schedule,
@@ -448,13 +456,7 @@ mod tests {
 
     #[test]
     fn unresolved_impacts_are_refused_and_poorly_resolved_ones_warned() {
-        let s = SceneFacts {
-            schedule: ScheduleKind::None,
-            window: 1e-3,
-            has_dem: true,
-            has_fem: false,
-            adaptive: None,
-        };
+        let s = dem_only();
         let d = |tc: f64| {
             m(&[
                 ("time_step", 1e-5),
@@ -476,13 +478,7 @@ mod tests {
 
     #[test]
     fn soft_dilated_polyhedra_are_warned_with_the_speed_and_force_named() {
-        let s = SceneFacts {
-            schedule: ScheduleKind::None,
-            window: 1e-3,
-            has_dem: true,
-            has_fem: false,
-            adaptive: None,
-        };
+        let s = dem_only();
         let found = |v: f64| {
             assess(
                 &s,

@@ -141,7 +141,11 @@ pub fn write_superquadrics_vtk(
         .iter()
         .map(|t| t.superquadric().map(|s| tessellate(s, n1, n2)))
         .collect();
-    write_bodies_vtk(path, p, time, "superquadrics", &meshes)
+    let mesh_of = |k: usize| {
+        p.template(k)?;
+        Some((meshes[p.shape[k] as usize].as_ref()?, 1.0))
+    };
+    write_bodies_vtk(path, p, time, "superquadrics", mesh_of)
 }
 
 /// The dilated polyhedra as their real surfaces (VTK legacy polydata, the point data of
@@ -155,7 +159,8 @@ pub fn write_polyhedra_vtk(
     time: f64,
     resolution: usize,
 ) -> Result<(), DemError> {
-    let stones: Vec<(Vec<V3>, Vec<Vec<usize>>)> = p
+    // one mesh per stone (unit size), scaled for each body as it is written
+    let stones: Vec<BodyMesh> = p
         .stones
         .iter()
         .map(|s| {
@@ -166,36 +171,27 @@ pub fn write_polyhedra_vtk(
             )
         })
         .collect();
-    let meshes: Vec<Option<BodyMesh>> = p
-        .templates
-        .iter()
-        .map(|t| match t.shape {
-            crate::particles::Shape::Polyhedron { stone, scale } => {
-                let (v, c) = &stones[stone as usize];
-                Some((v.iter().map(|x| x * scale).collect(), c.clone()))
-            }
-            crate::particles::Shape::Superquadric(_) => None,
-        })
-        .collect();
-    write_bodies_vtk(path, p, time, "polyhedra", &meshes)
+    let mesh_of = |k: usize| match p.template(k)?.shape {
+        crate::particles::Shape::Polyhedron { stone, scale } => {
+            Some((&stones[stone as usize], scale))
+        }
+        crate::particles::Shape::Superquadric(_) => None,
+    };
+    write_bodies_vtk(path, p, time, "polyhedra", mesh_of)
 }
 
-/// The bodies whose template has a mesh (body frame) in `meshes`, placed and turned.
-fn write_bodies_vtk(
+/// The bodies for which `mesh_of` gives a mesh (body frame) and its scale, placed and turned.
+fn write_bodies_vtk<'m>(
     path: &Path,
     p: &Particles,
     time: f64,
     title: &str,
-    meshes: &[Option<BodyMesh>],
+    mesh_of: impl Fn(usize) -> Option<(&'m BodyMesh, f64)>,
 ) -> Result<(), DemError> {
-    let mesh_of = |k: usize| -> Option<&BodyMesh> {
-        p.template(k)?;
-        meshes[p.shape[k] as usize].as_ref()
-    };
     let bodies: Vec<usize> = (0..p.len()).filter(|&k| mesh_of(k).is_some()).collect();
     let (mut np, mut nc, mut size) = (0, 0, 0);
     for &k in &bodies {
-        let (v, c) = mesh_of(k).unwrap();
+        let ((v, c), _) = mesh_of(k).unwrap();
         np += v.len();
         nc += c.len();
         size += c.iter().map(|c| c.len() + 1).sum::<usize>();
@@ -210,8 +206,9 @@ fn write_bodies_vtk(
     for &k in &bodies {
         let rot = p.orientation[k];
         let (x0, v0, w) = (p.position[k], p.velocity[k], p.angular_velocity[k]);
-        for x in &mesh_of(k).unwrap().0 {
-            let r = rot * x;
+        let ((points, _), scale) = mesh_of(k).unwrap();
+        for x in points {
+            let r = rot * (x * scale);
             let x = x0 + r;
             let _ = writeln!(s, "{:.9e} {:.9e} {:.9e}", x.x, x.y, x.z);
             velocities.push(v0 + w.cross(&r));
@@ -220,7 +217,7 @@ fn write_bodies_vtk(
     let _ = writeln!(s, "POLYGONS {nc} {size}");
     let mut offset = 0;
     for &k in &bodies {
-        let (v, cells) = mesh_of(k).unwrap();
+        let ((v, cells), _) = mesh_of(k).unwrap();
         for cell in cells {
             let _ = write!(s, "{}", cell.len());
             for i in cell {
@@ -232,13 +229,13 @@ fn write_bodies_vtk(
     }
     let _ = writeln!(s, "POINT_DATA {np}\nSCALARS id int 1\nLOOKUP_TABLE default");
     for &k in &bodies {
-        for _ in 0..mesh_of(k).unwrap().0.len() {
+        for _ in 0..mesh_of(k).unwrap().0 .0.len() {
             let _ = writeln!(s, "{}", p.id[k]);
         }
     }
     let _ = writeln!(s, "SCALARS shape_index int 1\nLOOKUP_TABLE default");
     for &k in &bodies {
-        for _ in 0..mesh_of(k).unwrap().0.len() {
+        for _ in 0..mesh_of(k).unwrap().0 .0.len() {
             let _ = writeln!(s, "{}", p.shape[k]);
         }
     }
