@@ -6,6 +6,8 @@
 //! | DEM Rayleigh step (Ullrich 2.27) | `dem.time_step`, `dem.rayleigh_time_step` | the DEM node refuses Δt^D above its `rayleigh_fraction` itself; here only reported |
 //! | impact resolution (Ullrich fig. 2.5) | `dem.contact_duration_min` | a 1 m/s impact of the smallest, stiffest particle must last ≥ [`MIN_STEPS_PER_CONTACT`] steps (warn below [`GOOD_STEPS_PER_CONTACT`]) |
 //! | dilated polyhedra (Ullrich §6.1) | `dem.dilation_impact_velocity_max`, `dem.dilation_force_max` | the cores must not meet: warn when an impact slower than [`DILATION_IMPACT_VELOCITY_MIN`] can drive them together (the run stops naming the pair if they do) |
+//! | 2-D discs: critical step (Madan 2.14–2.16) | `dem.critical_time_step`, `dem.discs` | refused above Δt_cr = 2/ν_max (Lanczos on the initial contacts) |
+//! | DDEM convergence (Madan 3.13–3.14) | `dem.ddem_spectral_radius`, `dem.ddem_kn_over_ep`, `dem.ddem_poisson_ratio` | refused at ρ(B) ≥ 1 of the initial packing, naming k_n/E_p, ν_p and the limit |
 //! | FEM explicit critical step | `fem.critical_time_step`, `fem.explicit` | reported: the node sub-steps each window below it |
 //! | coupling window (two-way) | `dem.contact_stiffness_typical` (else `_max`), `fem.interface_node_mass_min` | Δt^C ≤ C_schedule · T_c, T_c = 2π √(M_node / k_c) |
 //!
@@ -196,6 +198,50 @@ pub fn assess(
                     "a 1 m/s impact of the smallest, stiffest particle lasts only {steps:.1} DEM steps ({tc:.3e} s): rebound velocities err by ~{:.1e} (faster impacts: more); use Δt^D ≤ {good:.3e} s for 1e-4", impact_error(steps)
                 ));
             }
+        }
+    }
+    // 2-D discs (Madan): the critical step of central differences and the DDEM's ρ(B) < 1
+    if let (Some(&dt), Some(&crit), Some(_)) = (
+        d.get("time_step"),
+        d.get("critical_time_step"),
+        d.get("discs"),
+    ) {
+        let what = format!(
+            "Δt = {dt:.4e} s = {:.4} Δt_cr (Δt_cr = 2/ν_max = {crit:.4e} s of the initial contacts, Madan (2.14)–(2.16); the DDEM leaves it unchanged)",
+            dt / crit
+        );
+        if dt > crit {
+            push(
+                Level::Refuse,
+                "disc critical time step",
+                format!("{what}: central differences diverge; use dem.time_step ≤ {crit:.4e} s"),
+            );
+        } else {
+            push(Level::Info, "disc critical time step", what);
+        }
+    }
+    if let (Some(&rho), Some(&ratio), Some(&nu)) = (
+        d.get("ddem_spectral_radius"),
+        d.get("ddem_kn_over_ep"),
+        d.get("ddem_poisson_ratio"),
+    ) {
+        let limit = d.get("ddem_kn_over_ep_limit").copied().unwrap_or(f64::NAN);
+        let lattice = d
+            .get("ddem_spectral_radius_lattice")
+            .map(|a| {
+                format!("; the infinite lattice's analytic ρ(B) = {a:.4} (Madan (3.41)/(3.76))")
+            })
+            .unwrap_or_default();
+        let what = format!(
+            "k_n/E_p = {ratio:.4}, ν_p = {nu}: the iteration matrix of the initial packing has ρ(B) = {rho:.4}{lattice}; the limit ρ(B) = 1 lies at k_n/E_p = {limit:.4} for this packing and ν_p"
+        );
+        if rho >= 1.0 {
+            push(Level::Refuse, "DDEM convergence", format!(
+                "{what}: the lagged scheme diverges (Madan (3.13)–(3.14), §3.5–3.6); lower dem.contact.normal_stiffness or raise dem.ddem.youngs_modulus above {:.4e} Pa",
+                ratio / limit * d.get("ddem_youngs_modulus").copied().unwrap_or(f64::NAN)
+            ));
+        } else {
+            push(Level::Info, "DDEM convergence", what);
         }
     }
     // dilated polyhedra: the validity limit of the model

@@ -24,6 +24,10 @@ pub use scenefile::SceneError;
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct DemConfig {
+    /// Which engine: `bodies-3d` (this table, the default) or `discs-2d` (Madan's 2-D discs,
+    /// [`crate::discs::config::DiscConfig`], read by the node when it sees that value).
+    #[serde(default)]
+    pub model: crate::discs::config::Model,
     /// DEM time step Δt^D in s.
     pub time_step: f64,
     /// Gravitational acceleration in m/s², default `[0, 0, -9.81]`.

@@ -16,6 +16,7 @@
 pub mod broad_phase;
 pub mod config;
 pub mod contact_detection;
+pub mod discs;
 pub mod elliptic_hertz;
 pub mod generate;
 pub mod hertz_mindlin;

@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use clap::Parser;
+use dem::discs::{config::Model, DiscEngine};
 use dem::{Engine, MotionRule};
 use proto::cli::NodeArgs;
 use proto::node::{main_with, total, NodeError, Solver, Trace, WindowReport};
@@ -36,6 +37,8 @@ struct Coupled {
 
 struct DemNode {
     engine: Option<Engine>,
+    /// A scene with `model = "discs-2d"`: Madan's 2-D disc engine (DEM-only).
+    discs: Option<DiscEngine>,
     coupled: Vec<Coupled>,
     out_dir: PathBuf,
     data_timeout: std::time::Duration,
@@ -84,12 +87,72 @@ impl DemNode {
     }
 }
 
+impl DemNode {
+    /// `init` of a disc scene: the engine, its limits (the critical step, the DDEM's ρ(B)); a
+    /// disc scene couples no interfaces.
+    async fn init_discs(
+        &mut self,
+        p: &mut Participant,
+        init: &Init,
+    ) -> Result<(BTreeMap<String, f64>, Vec<String>), NodeError> {
+        let cfg = init.scene_table(dem::discs::parse_scene_table)?;
+        if let Some(decl) = init.interfaces.first() {
+            return Err(scene_error(format!(
+                "{}: interface `{}`: a 2-D disc scene (model = \"discs-2d\") runs DEM-only; it couples no interfaces",
+                init.scene_path, decl.name
+            )));
+        }
+        let engine = DiscEngine::from_config(&cfg, init.scene_dir())
+            .map_err(|e| scene_error(format!("{}: {e}", init.scene_path)))?;
+        self.out_dir = init.node_out_dir(p.node())?;
+        p.wait_for_peers(self.data_timeout).await?;
+        let limits = engine.limits().into_iter().collect();
+        self.discs = Some(engine);
+        Ok((limits, Vec::new()))
+    }
+
+    fn advance_discs(&mut self, w: &AdvanceWindow) -> Result<WindowReport, NodeError> {
+        let out_dir = self.out_dir.clone();
+        let d = self.discs.as_mut().ok_or_else(|| {
+            NodeError::new(ErrorCode::Protocol, "a window command came before `init`")
+        })?;
+        let step = d.time_step();
+        let substeps = proto::motion::whole_substeps(w.dt, step).map_err(|ratio| {
+            NodeError::new(
+                ErrorCode::Protocol,
+                format!(
+                    "window {}: Δt^C = {} s is not a whole multiple of the disc time step {step} s (ratio {ratio})",
+                    w.window, w.dt
+                ),
+            )
+        })?;
+        d.advance(substeps as u64).map_err(|e| {
+            NodeError::new(ErrorCode::Unstable, format!("window {}: {e}", w.window))
+        })?;
+        d.write_outputs(&out_dir)
+            .map_err(|e| NodeError::new(ErrorCode::Io, e.to_string()))?;
+        let monitor = BTreeMap::from([
+            ("kinetic_energy".to_string(), d.kinetic_energy()),
+            ("contact_energy".to_string(), d.contact_energy()),
+            ("particle_energy".to_string(), d.particle_energy()),
+        ]);
+        Ok(WindowReport {
+            wait_s: 0.0,
+            t_end: d.time(),
+            monitor,
+        })
+    }
+}
+
 impl Solver for DemNode {
     async fn init(
         &mut self,
         p: &mut Participant,
         init: &Init,
     ) -> Result<(BTreeMap<String, f64>, Vec<String>), NodeError> {
+        if dem::discs::scene_model(&init.scene_toml, &init.table) == Model::Discs2d {
+            return self.init_discs(p, init).await;
+        }
         let cfg = init.scene_table(dem::parse_scene_table)?;
         let base = init.scene_dir();
         let mut engine = Engine::from_config(&cfg, base)
@@ -133,6 +196,9 @@ impl Solver for DemNode {
         p: &mut Participant,
         w: &AdvanceWindow,
     ) -> Result<WindowReport, NodeError> {
+        if self.discs.is_some() {
+            return self.advance_discs(w);
+        }
         let step = self.engine()?.time_step();
         let substeps = proto::motion::whole_substeps(w.dt, step).map_err(|ratio| {
             NodeError::new(
@@ -255,6 +321,9 @@ impl Solver for DemNode {
     }
 
     fn snapshot(&self) -> Result<Vec<u8>, NodeError> {
+        if let Some(d) = &self.discs {
+            return Ok(d.snapshot());
+        }
         self.engine
             .as_ref()
             .map(|e| e.snapshot())
@@ -262,18 +331,31 @@ impl Solver for DemNode {
     }
 
     fn restore(&mut self, bytes: &[u8]) -> Result<(), NodeError> {
+        if let Some(d) = self.discs.as_mut() {
+            return d.restore(bytes).map_err(|e| {
+                NodeError::new(ErrorCode::Io, format!("restoring the disc state: {e}"))
+            });
+        }
         self.engine()?
             .restore(bytes)
             .map_err(|e| NodeError::new(ErrorCode::Io, format!("restoring the DEM state: {e}")))
     }
 
     fn time_series(&self) -> Option<(&Path, f64)> {
+        if let Some(d) = &self.discs {
+            return Some((&self.out_dir, d.time()));
+        }
         let e = self.engine.as_ref()?;
         Some((&self.out_dir, e.time()))
     }
 
     fn finish(&mut self) -> Result<BTreeMap<String, f64>, NodeError> {
         let out_dir = self.out_dir.clone();
+        if let Some(d) = self.discs.as_mut() {
+            d.write_final(&out_dir)
+                .map_err(|e| NodeError::new(ErrorCode::Io, e.to_string()))?;
+            return Ok(d.results().into_iter().collect());
+        }
         match self.engine.as_mut() {
             Some(e) => {
                 let io = |e: dem::DemError| NodeError::new(ErrorCode::Io, e.to_string());
@@ -300,6 +382,7 @@ fn main() -> std::process::ExitCode {
     let data_timeout = args.node.data_timeout();
     let node = DemNode {
         engine: None,
+        discs: None,
         coupled: Vec::new(),
         out_dir: PathBuf::new(),
         data_timeout,

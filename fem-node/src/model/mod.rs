@@ -700,7 +700,7 @@ impl Model {
                 &local
             }
         };
-        let theta = lanczos_largest(
+        let theta = numeric::lanczos_largest(
             n,
             |x, y| {
                 y.copy_from_slice(x);
@@ -728,7 +728,7 @@ impl Model {
                     self.m_factor = Some(Factor::new(&self.pattern, m, &mut self.symbolic)?);
                 }
                 let mf = self.m_factor.as_ref().expect("set");
-                Some(lanczos_largest(
+                Some(numeric::lanczos_largest(
                     self.dofs.n_eq,
                     |x, y| {
                         self.pattern.mul(&self.k, x, y);
@@ -1055,14 +1055,14 @@ impl Model {
         let u = self.dofs.gather(&self.st.u);
         let mut ku = vec![0.0; u.len()];
         self.pattern.mul(&self.k, &u, &mut ku);
-        0.5 * dot(&u, &ku)
+        0.5 * numeric::dot(&u, &ku)
     }
     /// Kinetic energy ½ vᵀ M v with the analysis' mass matrix [J].
     pub fn kinetic_energy(&self) -> f64 {
         let v = self.dofs.gather(&self.st.v);
         let mut mv = vec![0.0; v.len()];
         self.mass_mul(&v, &mut mv);
-        0.5 * dot(&v, &mv)
+        0.5 * numeric::dot(&v, &mv)
     }
     /// External load vector F(t) (loads × histories + interface forces), full dofs [N].
     pub fn external_forces(&self, t: f64) -> Vec<f64> {
@@ -1632,58 +1632,23 @@ impl Model {
             .iter()
             .map(|m| 1.0 / m.sqrt())
             .collect();
-        // deterministic pseudo-random start vector
-        let mut seed = 0x9E37_79B9_7F4A_7C15u64;
-        let mut q: Vec<f64> = (0..n)
-            .map(|_| {
-                seed ^= seed << 13;
-                seed ^= seed >> 7;
-                seed ^= seed << 17;
-                (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-            })
-            .collect();
-        let nq = norm(&q);
-        q.iter_mut().for_each(|x| *x /= nq);
-        let mut q_prev = vec![0.0; n];
-        let mut beta = 0.0;
-        let (mut alphas, mut betas) = (Vec::new(), Vec::new());
         let mut tmp = vec![0.0; n];
-        let mut w = vec![0.0; n];
-        let mut last = 0.0;
-        let max_it = n.min(300);
-        for it in 0..max_it {
-            for i in 0..n {
-                tmp[i] = s[i] * q[i];
-            }
-            self.pattern.mul(&self.k, &tmp, &mut w);
-            for i in 0..n {
-                w[i] = s[i] * w[i] - beta * q_prev[i];
-            }
-            let alpha = dot(&w, &q);
-            for i in 0..n {
-                w[i] -= alpha * q[i];
-            }
-            alphas.push(alpha);
-            let b = norm(&w);
-            let done = b <= 1e-13 * alpha.abs();
-            if (it + 1) % 10 == 0 || done || it + 1 == max_it {
-                let top = tridiagonal_max_eigenvalue(&alphas, &betas);
-                if done || (top - last).abs() <= 1e-10 * top {
-                    return Some(top);
+        Some(numeric::lanczos_largest(
+            n,
+            |q, w| {
+                for i in 0..n {
+                    tmp[i] = s[i] * q[i];
                 }
-                last = top;
-            }
-            if done {
-                break;
-            }
-            betas.push(b);
-            std::mem::swap(&mut q_prev, &mut q);
-            for i in 0..n {
-                q[i] = w[i] / b;
-            }
-            beta = b;
-        }
-        Some(tridiagonal_max_eigenvalue(&alphas, &betas))
+                self.pattern.mul(&self.k, &tmp, w);
+                for i in 0..n {
+                    w[i] *= s[i];
+                }
+            },
+            |x, y| y.copy_from_slice(x),
+            false,
+            300,
+            1e-10,
+        ))
     }
 
     /// Σ_e K_e u_e over all dofs, parallel in element batches with an ordered scatter.
@@ -1735,69 +1700,6 @@ pub const LOCKING_POISSON_RATIO: f64 = 0.45;
 /// Above this many free dofs, `limits` skips the lowest frequency (a Cholesky factor of K and
 /// tens of solves).
 pub const LOWEST_FREQUENCY_MAX_EQUATIONS: usize = 200_000;
-
-/// Largest eigenvalue θ of an operator A that is self-adjoint in the M inner product
-/// (K⁻¹M or M⁻¹K), by Lanczos with the M-norm; `apply` computes y = A x given x. With
-/// `apply_to_mass`, `apply` receives M x instead of x (A = K⁻¹M reuses the product).
-fn lanczos_largest(
-    n: usize,
-    mut apply: impl FnMut(&[f64], &mut [f64]),
-    mass_mul: impl Fn(&[f64], &mut [f64]),
-    apply_to_mass: bool,
-    max_it: usize,
-    tol: f64,
-) -> f64 {
-    // deterministic pseudo-random start vector
-    let mut seed = 0x2545_F491_4F6C_DD1Du64;
-    let mut q: Vec<f64> = (0..n)
-        .map(|_| {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        })
-        .collect();
-    let mut mq = vec![0.0; n];
-    mass_mul(&q, &mut mq);
-    let nq = dot(&q, &mq).sqrt();
-    q.iter_mut().for_each(|x| *x /= nq);
-    mq.iter_mut().for_each(|x| *x /= nq);
-    let mut q_prev = vec![0.0; n];
-    let (mut w, mut mw) = (vec![0.0; n], vec![0.0; n]);
-    let (mut alphas, mut betas) = (Vec::new(), Vec::new());
-    let mut beta = 0.0;
-    let mut last = f64::NAN;
-    for it in 0..max_it.min(n) {
-        apply(if apply_to_mass { &mq } else { &q }, &mut w);
-        for i in 0..n {
-            w[i] -= beta * q_prev[i];
-        }
-        // ⟨q, w⟩_M = (M q)·w
-        let alpha = dot(&mq, &w);
-        for i in 0..n {
-            w[i] -= alpha * q[i];
-        }
-        alphas.push(alpha);
-        mass_mul(&w, &mut mw);
-        let b = dot(&w, &mw).max(0.0).sqrt();
-        let done = b <= 1e-13 * alpha.abs();
-        if (it + 1) % 5 == 0 || done || it + 1 == max_it.min(n) {
-            let top = tridiagonal_max_eigenvalue(&alphas, &betas);
-            if done || (top - last).abs() <= tol * top.abs() {
-                return top;
-            }
-            last = top;
-        }
-        betas.push(b);
-        std::mem::swap(&mut q_prev, &mut q);
-        for i in 0..n {
-            q[i] = w[i] / b;
-            mq[i] = mw[i] / b;
-        }
-        beta = b;
-    }
-    tridiagonal_max_eigenvalue(&alphas, &betas)
-}
 
 /// Column/result names of a strain gauge's three quantities.
 const STRAIN_QUANTITIES: [&str; 3] = ["max_principal", "min_principal", "von_mises"];
@@ -1902,31 +1804,6 @@ fn gravity_loads(
         }
     }
     Ok(())
-}
-
-fn tridiagonal_max_eigenvalue(alphas: &[f64], betas: &[f64]) -> f64 {
-    let k = alphas.len();
-    let t = nalgebra::DMatrix::from_fn(k, k, |i, j| {
-        if i == j {
-            alphas[i]
-        } else if i + 1 == j || j + 1 == i {
-            betas[i.min(j)]
-        } else {
-            0.0
-        }
-    });
-    t.symmetric_eigenvalues()
-        .iter()
-        .copied()
-        .fold(f64::NEG_INFINITY, f64::max)
-}
-
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
-}
-
-fn norm(a: &[f64]) -> f64 {
-    dot(a, a).sqrt()
 }
 
 fn check_finite(v: &[f64], what: &str) -> Result<(), FemError> {

@@ -3,7 +3,7 @@
 //! iterations on the new acceleration (time-step cut-back), and the explicit scheme's forces.
 //! When every material is linear elastic none of this runs (the cached-factor path stays).
 
-use super::{check_finite, dot, Model};
+use super::{check_finite, Model};
 use crate::assembly::{self, Factor, LuFactor, MAX_ELEMENT_MATRIX};
 use crate::config::{Analysis, FemConfig, MaterialSpec, SectionElements, TangentUpdate};
 use crate::element::{ElementKind, Lame};
@@ -13,6 +13,7 @@ use crate::material::{Material, Model as Law};
 use crate::mesh::Mesh;
 use crate::nonlinear::{self, ElementFailure, Scratch};
 use crate::FemError;
+use numeric::dot;
 use rayon::prelude::*;
 
 /// The materials of a scene (named ones in name order, then `[fem.material]`) and each

@@ -1,0 +1,472 @@
+//! The scene table of the 2-D disc engine: `[dem]` with `model = "discs-2d"` (Madan 2019).
+//! Plain numbers in SI units; every field is checked with its path named.
+
+use serde::Deserialize;
+
+/// Which engine a `[dem]` table asks for (read before the rest of the table).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Model {
+    /// 3-D bodies: spheres, superquadrics, dilated polyhedra (the default).
+    #[default]
+    #[serde(rename = "bodies-3d")]
+    Bodies3d,
+    /// 2-D discs per unit depth, standard DEM or DDEM (Madan).
+    #[serde(rename = "discs-2d")]
+    Discs2d,
+}
+
+/// Only the `model` key of a `[dem]` table.
+#[derive(Debug, Deserialize)]
+pub struct ModelOnly {
+    #[serde(default)]
+    pub model: Model,
+}
+
+/// `[dem]` of a disc scene.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DiscConfig {
+    pub model: Model,
+    /// Δt (s), central differences (Madan 2.9–2.13).
+    pub time_step: f64,
+    /// Depth l of the discs (m): masses, stiffnesses and forces are per this depth (default 1).
+    #[serde(default = "one")]
+    pub depth: f64,
+    /// Particle density ρ (kg/m³).
+    pub density: f64,
+    /// Body force per unit mass (m/s²), default none.
+    #[serde(default)]
+    pub gravity: [f64; 2],
+    pub contact: ContactConfig,
+    /// Non-viscous background damping (2.7)–(2.8).
+    #[serde(default)]
+    pub damping: BackgroundDamping,
+    /// The deformable-particle mode (2.41)–(2.54); absent: standard DEM.
+    #[serde(default)]
+    pub ddem: Option<DdemConfig>,
+    /// Disc sources.
+    #[serde(default)]
+    pub discs: Vec<DiscSource>,
+    /// Forces on discs (per disc, ramped).
+    #[serde(default)]
+    pub loads: Vec<LoadConfig>,
+    /// Fixed degrees of freedom.
+    #[serde(default)]
+    pub constraints: Vec<ConstraintConfig>,
+    /// The uniaxial-compression measurement (Madan §4.4: E and ν of the sample).
+    #[serde(default)]
+    pub measure: Option<UniaxialConfig>,
+    #[serde(default)]
+    pub output: DiscOutput,
+    /// Neighbour-list skin as a fraction of the mean radius (default 0.2); the list also
+    /// covers the particles' own deformation.
+    #[serde(default = "default_skin")]
+    pub skin: f64,
+}
+
+fn one() -> f64 {
+    1.0
+}
+fn default_skin() -> f64 {
+    0.2
+}
+
+/// Linear contact law (2.20)–(2.40).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ContactConfig {
+    /// k_n (N/m for the depth l).
+    pub normal_stiffness: f64,
+    /// k_t (N/m), default 0.
+    #[serde(default)]
+    pub tangential_stiffness: f64,
+    /// ξ_n: viscous normal damping as a fraction of c_cr = 2√(m_i m_j k_n / (m_i + m_j)).
+    #[serde(default)]
+    pub normal_damping: f64,
+    /// ξ_t, the same for the tangential spring.
+    #[serde(default)]
+    pub tangential_damping: f64,
+    /// Coulomb friction μ of unbonded contacts (2.40).
+    #[serde(default)]
+    pub friction: f64,
+    /// Bonds: pairs whose gap at t = 0 is at most this (m) are bonded (2.21); absent: none.
+    #[serde(default)]
+    pub bond_gap: Option<f64>,
+    /// φ_n: a bond breaks under this tension (N), default never.
+    #[serde(default = "never")]
+    pub bond_normal_strength: f64,
+    /// φ_t: ... or this shear force (N), default never.
+    #[serde(default = "never")]
+    pub bond_tangential_strength: f64,
+}
+
+fn never() -> f64 {
+    f64::INFINITY
+}
+
+/// α^t, α^r of (2.7)–(2.8).
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BackgroundDamping {
+    #[serde(default)]
+    pub translational: f64,
+    #[serde(default)]
+    pub rotational: f64,
+}
+
+/// Plane strain (2.48) or plane stress (2.49).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Plane {
+    #[default]
+    Strain,
+    Stress,
+}
+
+/// The explicit lagged scheme (Madan 3.17) or the fixed point of every step (3.5)–(3.7).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Scheme {
+    #[default]
+    Lagged,
+    FixedPoint,
+}
+
+/// `[dem.ddem]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DdemConfig {
+    /// E_p (Pa).
+    pub youngs_modulus: f64,
+    /// ν_p.
+    pub poisson_ratio: f64,
+    #[serde(default)]
+    pub plane: Plane,
+    #[serde(default)]
+    pub scheme: Scheme,
+    /// Fixed point: iterate until the largest force change is below this fraction of the
+    /// largest force (default 1e-12).
+    #[serde(default = "default_tolerance")]
+    pub tolerance: f64,
+    /// Fixed point: most iterations per step (default 10,000); more is an error naming the
+    /// spectral radius.
+    #[serde(default = "default_iterations")]
+    pub max_iterations: usize,
+}
+
+fn default_tolerance() -> f64 {
+    1e-12
+}
+fn default_iterations() -> usize {
+    10_000
+}
+
+/// Square (simple cubic in the thesis' words) or hexagonal close packing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Arrangement {
+    Square,
+    Hexagonal,
+}
+
+/// `[[dem.discs]]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum DiscSource {
+    /// A lattice of equal discs: `count = [columns, rows]`, centre spacing (the row spacing
+    /// of a hexagonal packing is spacing·√3/2; its odd rows are shifted by `odd_row_offset`
+    /// spacings, default ½, and hold `odd_row_count` discs, default `count[0]`).
+    Lattice {
+        arrangement: Arrangement,
+        radius: f64,
+        spacing: f64,
+        first: [f64; 2],
+        count: [usize; 2],
+        #[serde(default)]
+        odd_row_offset: Option<f64>,
+        #[serde(default)]
+        odd_row_count: Option<usize>,
+    },
+    /// A CSV file of `x,y,radius` rows (a header line is allowed).
+    File { path: String },
+}
+
+/// Discs whose centres lie in a box.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Region {
+    pub min: [f64; 2],
+    pub max: [f64; 2],
+}
+
+impl Region {
+    pub fn contains(&self, x: [f64; 2]) -> bool {
+        (0..2).all(|k| x[k] >= self.min[k] && x[k] <= self.max[k])
+    }
+}
+
+/// `[[dem.loads]]`: a force on each disc of the region, ramped linearly from 0 over `ramp`
+/// seconds, then held.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LoadConfig {
+    pub region: Region,
+    /// N per disc (for the depth l).
+    pub force: [f64; 2],
+    /// Ramp time (s), default 0 (a step load).
+    #[serde(default)]
+    pub ramp: f64,
+}
+
+/// A degree of freedom a constraint fixes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Dof {
+    X,
+    Y,
+    Rotation,
+}
+
+/// `[[dem.constraints]]`: the discs of the region keep their `fix`ed coordinates.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ConstraintConfig {
+    pub region: Region,
+    pub fix: Vec<Dof>,
+}
+
+/// `[dem.measure]`: uniaxial compression along y (Madan §4.4, (4.19)–(4.22)). The strain is
+/// the change of the distance between the mean centres of `top` and `bottom` (of `left` and
+/// `right`) over its initial value; the stress the load on `top` over `section` × depth.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct UniaxialConfig {
+    pub top: Region,
+    pub bottom: Region,
+    pub left: Region,
+    pub right: Region,
+    /// A (m): the sample's width the stress is taken over.
+    pub section: f64,
+    /// The load fractions between which E and ν are fitted (default [0.4, 0.8]).
+    #[serde(default = "default_fit")]
+    pub fit: [f64; 2],
+}
+
+fn default_fit() -> [f64; 2] {
+    [0.4, 0.8]
+}
+
+/// `[dem.output]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DiscOutput {
+    /// A row of `discs.csv` (energies, forces, measurement) every this many steps.
+    #[serde(default = "default_csv_every")]
+    pub csv_every: u64,
+    /// A VTK file of the discs (radius, velocity, stress, strain) every this many steps (0:
+    /// only the last state).
+    #[serde(default)]
+    pub vtk_every: u64,
+}
+
+fn default_csv_every() -> u64 {
+    10
+}
+
+impl Default for DiscOutput {
+    fn default() -> Self {
+        DiscOutput {
+            csv_every: default_csv_every(),
+            vtk_every: 0,
+        }
+    }
+}
+
+/// A value error: the dotted path of the field and what is wrong.
+#[derive(Debug, Clone)]
+pub struct ValueError {
+    pub path: String,
+    pub message: String,
+}
+
+fn positive(path: &str, v: f64, out: &mut Vec<ValueError>) {
+    if !(v.is_finite() && v > 0.0) {
+        out.push(ValueError {
+            path: path.into(),
+            message: format!("must be a positive number, got {v}"),
+        });
+    }
+}
+
+fn non_negative(path: &str, v: f64, out: &mut Vec<ValueError>) {
+    if !(v.is_finite() && v >= 0.0) {
+        out.push(ValueError {
+            path: path.into(),
+            message: format!("must be zero or positive, got {v}"),
+        });
+    }
+}
+
+fn region(path: &str, r: &Region, out: &mut Vec<ValueError>) {
+    if !(0..2).all(|k| r.min[k].is_finite() && r.max[k].is_finite() && r.min[k] <= r.max[k]) {
+        out.push(ValueError {
+            path: path.into(),
+            message: format!(
+                "min {:?} must be finite and not above max {:?}",
+                r.min, r.max
+            ),
+        });
+    }
+}
+
+impl DiscConfig {
+    /// Every value check, each naming its field (`dem.contact.normal_stiffness`, ...).
+    pub fn validate(&self) -> Vec<ValueError> {
+        let mut e = Vec::new();
+        positive("dem.time_step", self.time_step, &mut e);
+        positive("dem.depth", self.depth, &mut e);
+        positive("dem.density", self.density, &mut e);
+        positive("dem.skin", self.skin, &mut e);
+        let c = &self.contact;
+        positive("dem.contact.normal_stiffness", c.normal_stiffness, &mut e);
+        non_negative(
+            "dem.contact.tangential_stiffness",
+            c.tangential_stiffness,
+            &mut e,
+        );
+        non_negative("dem.contact.normal_damping", c.normal_damping, &mut e);
+        non_negative(
+            "dem.contact.tangential_damping",
+            c.tangential_damping,
+            &mut e,
+        );
+        non_negative("dem.contact.friction", c.friction, &mut e);
+        if let Some(g) = c.bond_gap {
+            if !g.is_finite() {
+                e.push(ValueError {
+                    path: "dem.contact.bond_gap".into(),
+                    message: format!("must be a finite gap in m, got {g}"),
+                });
+            }
+        }
+        if c.bond_normal_strength.is_nan() || c.bond_normal_strength <= 0.0 {
+            positive(
+                "dem.contact.bond_normal_strength",
+                c.bond_normal_strength,
+                &mut e,
+            );
+        }
+        if c.bond_tangential_strength.is_nan() || c.bond_tangential_strength <= 0.0 {
+            positive(
+                "dem.contact.bond_tangential_strength",
+                c.bond_tangential_strength,
+                &mut e,
+            );
+        }
+        for (k, v) in [
+            ("translational", self.damping.translational),
+            ("rotational", self.damping.rotational),
+        ] {
+            if !(v.is_finite() && (0.0..1.0).contains(&v)) {
+                e.push(ValueError {
+                    path: format!("dem.damping.{k}"),
+                    message: format!("must lie in [0, 1), got {v}"),
+                });
+            }
+        }
+        if let Some(d) = &self.ddem {
+            positive("dem.ddem.youngs_modulus", d.youngs_modulus, &mut e);
+            if !(d.poisson_ratio.is_finite() && d.poisson_ratio > -1.0 && d.poisson_ratio < 0.5) {
+                e.push(ValueError {
+                    path: "dem.ddem.poisson_ratio".into(),
+                    message: format!("must lie in (−1, 0.5), got {}", d.poisson_ratio),
+                });
+            }
+            positive("dem.ddem.tolerance", d.tolerance, &mut e);
+            if d.max_iterations == 0 {
+                e.push(ValueError {
+                    path: "dem.ddem.max_iterations".into(),
+                    message: "must be at least 1".into(),
+                });
+            }
+        }
+        if self.discs.is_empty() {
+            e.push(ValueError {
+                path: "dem.discs".into(),
+                message: "the scene has no discs: add a [[dem.discs]] source".into(),
+            });
+        }
+        for (i, s) in self.discs.iter().enumerate() {
+            if let DiscSource::Lattice {
+                radius,
+                spacing,
+                first,
+                count,
+                ..
+            } = s
+            {
+                positive(&format!("dem.discs[{i}].radius"), *radius, &mut e);
+                positive(&format!("dem.discs[{i}].spacing"), *spacing, &mut e);
+                if !first.iter().all(|v| v.is_finite()) {
+                    e.push(ValueError {
+                        path: format!("dem.discs[{i}].first"),
+                        message: "must be finite".into(),
+                    });
+                }
+                if count[0] == 0 || count[1] == 0 || count[0].saturating_mul(count[1]) > 10_000_000
+                {
+                    e.push(ValueError {
+                        path: format!("dem.discs[{i}].count"),
+                        message: format!(
+                            "must be two positive counts with at most 1e7 discs, got {count:?}"
+                        ),
+                    });
+                }
+            }
+        }
+        for (i, l) in self.loads.iter().enumerate() {
+            region(&format!("dem.loads[{i}].region"), &l.region, &mut e);
+            if !l.force.iter().all(|v| v.is_finite()) {
+                e.push(ValueError {
+                    path: format!("dem.loads[{i}].force"),
+                    message: "must be finite".into(),
+                });
+            }
+            non_negative(&format!("dem.loads[{i}].ramp"), l.ramp, &mut e);
+        }
+        for (i, c) in self.constraints.iter().enumerate() {
+            region(&format!("dem.constraints[{i}].region"), &c.region, &mut e);
+            if c.fix.is_empty() {
+                e.push(ValueError {
+                    path: format!("dem.constraints[{i}].fix"),
+                    message: "names no degree of freedom (x, y, rotation)".into(),
+                });
+            }
+        }
+        if let Some(m) = &self.measure {
+            for (k, r) in [
+                ("top", &m.top),
+                ("bottom", &m.bottom),
+                ("left", &m.left),
+                ("right", &m.right),
+            ] {
+                region(&format!("dem.measure.{k}"), r, &mut e);
+            }
+            positive("dem.measure.section", m.section, &mut e);
+            if !(0.0 <= m.fit[0] && m.fit[0] < m.fit[1] && m.fit[1] <= 1.0) {
+                e.push(ValueError {
+                    path: "dem.measure.fit".into(),
+                    message: format!("must be two load fractions 0 ≤ a < b ≤ 1, got {:?}", m.fit),
+                });
+            }
+        }
+        if self.output.csv_every == 0 {
+            e.push(ValueError {
+                path: "dem.output.csv_every".into(),
+                message: "must be at least 1 step".into(),
+            });
+        }
+        e
+    }
+}

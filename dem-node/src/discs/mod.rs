@@ -1,0 +1,1478 @@
+//! The 2-D disc engine of Madan (2019): discs per unit depth with a linear contact law, bonds,
+//! viscous and non-viscous damping and central differences (standard DEM, M §2.1), and the
+//! deformable-particle mode DDEM (M §2.2–2.6): every particle takes the uniform strain of the
+//! average stress of its contact (and external) forces, and contacts act on the overlap of the
+//! deformed particles (2.41)–(2.54).
+//!
+//! A step (the lagged explicit scheme, M (3.17), Fig. 2.7): particle strains from the stresses
+//! of the previous step's forces → contacts of the deformed particles at the new positions →
+//! contact forces → particle stresses → central differences. With `scheme = "fixed-point"` the
+//! forces of a step are instead iterated to the fixed point F = F(X, E(F)) (3.5)–(3.7), which
+//! converges only while ρ(B) < 1 ([`ddem::spectral_radius`]).
+//!
+//! Sign conventions (SEED-SPEC §5.11): normal forces are magnitudes, compression positive
+//! (bonded contacts may go negative, in tension); stresses are tension positive; strain and
+//! stress vectors ε̃ = [ε_xx, ε_yy, 2ε_xy], σ̃ = [σ_xx, σ_yy, σ_xy]. The normal n points from the
+//! first disc i of a pair to the second j, t = ẑ × n; the force on j is f_n n + f_t t.
+
+pub mod config;
+pub mod ddem;
+mod output;
+
+use config::{DiscConfig, DiscSource, Dof, Model, Region, Scheme};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+pub use output::write_discs_vtk;
+
+/// A 2-D vector.
+pub type V2 = [f64; 2];
+
+/// Errors of the disc engine; each names the field, file, disc or contact concerned.
+#[derive(Debug, thiserror::Error)]
+pub enum DiscError {
+    #[error("{path}: {message}")]
+    Config { path: String, message: String },
+    #[error("{path}, line {line}: {message}")]
+    File {
+        path: String,
+        line: usize,
+        message: String,
+    },
+    #[error("{path}: {message}")]
+    Output { path: String, message: String },
+    #[error("instability at t = {time:e} s (step {step}): {message}")]
+    Unstable {
+        time: f64,
+        step: u64,
+        message: String,
+    },
+    #[error("{0}")]
+    Snapshot(String),
+}
+
+fn config_err(path: impl Into<String>, message: impl Into<String>) -> DiscError {
+    DiscError::Config {
+        path: path.into(),
+        message: message.into(),
+    }
+}
+
+/// Parses the top-level table `table` of a scene file as a disc scene (`model = "discs-2d"`),
+/// every value checked; errors carry the line and column in the file.
+pub fn parse_scene_table(
+    text: &str,
+    table: &str,
+) -> Result<Option<DiscConfig>, scenefile::SceneError> {
+    let cfg: Option<DiscConfig> = scenefile::named_table(text, table).map_err(|e| {
+        let at = e.span().map_or(0, |s| s.start);
+        let field = scenefile::path_at(text, at).unwrap_or_default();
+        scenefile::SceneError::at(text, at, field, e.message().trim().to_string())
+    })?;
+    let Some(cfg) = cfg else { return Ok(None) };
+    if let Some(err) = cfg.validate().into_iter().next() {
+        let path = match err.path.strip_prefix("dem") {
+            Some(rest) => format!("{table}{rest}"),
+            None => err.path.clone(),
+        };
+        let at = scenefile::locate(text, &scenefile::split_path(&path)).map_or(0, |s| s.start);
+        return Err(scenefile::SceneError::at(text, at, path, err.message));
+    }
+    Ok(Some(cfg))
+}
+
+/// Which model a `[dem]`-schema table asks for, read before the rest.
+pub fn scene_model(text: &str, table: &str) -> Model {
+    scenefile::named_table::<config::ModelOnly>(text, table)
+        .ok()
+        .flatten()
+        .map(|m| m.model)
+        .unwrap_or_default()
+}
+
+/// The contact state of a candidate pair (i < j).
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq)]
+pub struct PairState {
+    /// Bonded at t = 0 (2.21) and not broken since (2.38)–(2.39).
+    pub bonded: bool,
+    /// Touching (or bonded) in the last force evaluation.
+    pub active: bool,
+    /// The tangential spring's elongation u_t along t (m), incremental (2.27)–(2.32).
+    pub ut: f64,
+    /// Elastic normal force f_ne = k_n h_c (N, compression positive) (2.54).
+    pub fn_elastic: f64,
+    /// Elastic tangential force on j along t (N).
+    pub ft_elastic: f64,
+    /// The whole normal force, with the viscous part (2.33).
+    pub fn_total: f64,
+    /// The whole tangential force on j along t, with the viscous part (2.34).
+    pub ft_total: f64,
+    /// The overlap of the deformed discs h_c (m) (2.53), positive in contact.
+    pub overlap: f64,
+}
+
+/// The mutable state: all a snapshot holds, so a resumed run continues bit for bit.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+struct State {
+    step: u64,
+    time: f64,
+    x: Vec<V2>,
+    v: Vec<V2>,
+    theta: Vec<f64>,
+    omega: Vec<f64>,
+    /// Candidate pairs (i < j, sorted) of the neighbour list and their contact state.
+    pairs: Vec<(u32, u32)>,
+    pair_state: Vec<PairState>,
+    /// Positions at the last list build and the list's skin (m).
+    x_build: Vec<V2>,
+    list_skin: f64,
+    /// σ̃ of each disc from the last force evaluation: the next step's strains (lagged).
+    stress: Vec<[f64; 3]>,
+    /// The work of the external loads at their points of application and of gravity (J).
+    work_external: f64,
+    /// Per loaded disc: the displacement of its load point and its load at the last evaluation.
+    load_point: Vec<V2>,
+    load_previous: Vec<V2>,
+    /// The uniaxial measurement while the load rises: (σ_yy, ε_yy, ε_xx, load fraction).
+    samples: Vec<[f64; 4]>,
+    /// Fixed-point iterations of the last step and the most of any step.
+    iterations_last: u32,
+    iterations_most: u32,
+    /// Bonds broken so far.
+    bonds_broken: u64,
+}
+
+/// A load on a set of discs, ramped.
+#[derive(Debug, Clone)]
+struct Load {
+    discs: Vec<u32>,
+    force: V2,
+    ramp: f64,
+}
+
+impl Load {
+    fn factor(&self, t: f64) -> f64 {
+        if self.ramp > 0.0 {
+            (t / self.ramp).min(1.0)
+        } else {
+            1.0
+        }
+    }
+}
+
+/// The disc sets of the uniaxial measurement and the initial distances.
+#[derive(Debug, Clone)]
+struct Measure {
+    top: Vec<u32>,
+    bottom: Vec<u32>,
+    left: Vec<u32>,
+    right: Vec<u32>,
+    height0: f64,
+    width0: f64,
+    section: f64,
+    fit: [f64; 2],
+}
+
+/// One pair's forces of an evaluation (not yet committed to [`PairState`]).
+#[derive(Debug, Clone, Copy, Default)]
+struct PairEval {
+    state: PairState,
+    /// n (i → j).
+    n: V2,
+    broke: bool,
+}
+
+/// The disc engine.
+pub struct DiscEngine {
+    cfg: DiscConfig,
+    dt: f64,
+    radius: Vec<f64>,
+    mass: Vec<f64>,
+    inertia: Vec<f64>,
+    volume: Vec<f64>,
+    x0: Vec<V2>,
+    /// Free coordinates (x, y, θ) of each disc.
+    free: Vec<[bool; 3]>,
+    loads: Vec<Load>,
+    /// Discs with a load, sorted, and the index of each disc among them (u32::MAX: none).
+    loaded: Vec<u32>,
+    loaded_index: Vec<u32>,
+    compliance: Option<[[f64; 3]; 3]>,
+    measure: Option<Measure>,
+    r_mean: f64,
+    r_max: f64,
+    state: State,
+    /// Scratch of a step.
+    force: Vec<V2>,
+    torque: Vec<f64>,
+    external: Vec<V2>,
+    strain: Vec<[f64; 3]>,
+    stress_new: Vec<[f64; 3]>,
+    eval: Vec<PairEval>,
+    /// Limits at t = 0 (see [`DiscEngine::limits`]).
+    initial_limits: Vec<(String, f64)>,
+    output: output::OutputState,
+}
+
+/// Largest strain a particle may take before the run is stopped as unstable: the DDEM is a
+/// small-strain model (M §2.2), and a diverging lagged scheme shows first as growing strains.
+pub const STRAIN_LIMIT: f64 = 0.05;
+
+fn add(a: V2, b: V2) -> V2 {
+    [a[0] + b[0], a[1] + b[1]]
+}
+fn sub(a: V2, b: V2) -> V2 {
+    [a[0] - b[0], a[1] - b[1]]
+}
+fn dot2(a: V2, b: V2) -> f64 {
+    a[0] * b[0] + a[1] * b[1]
+}
+fn norm2(a: V2) -> f64 {
+    dot2(a, a).sqrt()
+}
+fn scale(a: V2, s: f64) -> V2 {
+    [a[0] * s, a[1] * s]
+}
+/// ε s for a strain vector ε̃ = [ε_xx, ε_yy, 2ε_xy] (2.50).
+fn strain_times(e: [f64; 3], s: V2) -> V2 {
+    [
+        e[0] * s[0] + 0.5 * e[2] * s[1],
+        0.5 * e[2] * s[0] + e[1] * s[1],
+    ]
+}
+/// The Frobenius norm of the strain tensor: a bound of |ε s| / |s|.
+fn strain_norm(e: [f64; 3]) -> f64 {
+    (e[0] * e[0] + e[1] * e[1] + 0.5 * e[2] * e[2]).sqrt()
+}
+/// Adds the symmetric part of s ⊗ f (2.44) to σ̃.
+fn add_stress(s: &mut [f64; 3], arm: V2, f: V2) {
+    s[0] += arm[0] * f[0];
+    s[1] += arm[1] * f[1];
+    s[2] += 0.5 * (arm[0] * f[1] + arm[1] * f[0]);
+}
+
+/// Reads the discs of a CSV file of `x,y,radius` rows (a header line and `#` comments are
+/// allowed).
+fn read_disc_file(path: &Path, field: &str) -> Result<Vec<(V2, f64)>, DiscError> {
+    let text = std::fs::read_to_string(path).map_err(|e| DiscError::File {
+        path: path.display().to_string(),
+        line: 0,
+        message: format!("cannot read ({e}); named by {field}"),
+    })?;
+    let mut out = Vec::new();
+    for (k, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let cols: Vec<&str> = line.split(',').map(str::trim).collect();
+        let nums: Result<Vec<f64>, _> = cols.iter().map(|c| c.parse::<f64>()).collect();
+        let err = |message: String| DiscError::File {
+            path: path.display().to_string(),
+            line: k + 1,
+            message,
+        };
+        match nums {
+            Err(_) if out.is_empty() && k == 0 => continue, // a header
+            Err(_) => return Err(err(format!("`{line}` is not three numbers x,y,radius"))),
+            Ok(v) if v.len() != 3 => {
+                return Err(err(format!(
+                    "{} columns; a disc is x,y,radius (m)",
+                    v.len()
+                )))
+            }
+            Ok(v) => {
+                if !(v.iter().all(|c| c.is_finite()) && v[2] > 0.0) {
+                    return Err(err(format!(
+                        "x,y must be finite and the radius positive, got {line}"
+                    )));
+                }
+                out.push(([v[0], v[1]], v[2]));
+            }
+        }
+    }
+    if out.is_empty() {
+        return Err(DiscError::File {
+            path: path.display().to_string(),
+            line: 0,
+            message: "holds no discs".into(),
+        });
+    }
+    Ok(out)
+}
+
+fn in_region(x: &[V2], r: &Region) -> Vec<u32> {
+    (0..x.len() as u32)
+        .filter(|&i| r.contains(x[i as usize]))
+        .collect()
+}
+
+impl DiscEngine {
+    /// Builds the engine: the discs of every source, bonds at t = 0, loads, constraints, the
+    /// neighbour list, and the limits of the initial packing.
+    pub fn from_config(cfg: &DiscConfig, base: &Path) -> Result<Self, DiscError> {
+        if cfg.model != Model::Discs2d {
+            return Err(config_err(
+                "dem.model",
+                "the disc engine reads scenes with model = \"discs-2d\"",
+            ));
+        }
+        if let Some(e) = cfg.validate().into_iter().next() {
+            return Err(config_err(e.path, e.message));
+        }
+        let mut x = Vec::new();
+        let mut radius = Vec::new();
+        for (k, s) in cfg.discs.iter().enumerate() {
+            match s {
+                DiscSource::Lattice {
+                    arrangement,
+                    radius: r,
+                    spacing,
+                    first,
+                    count,
+                    odd_row_offset,
+                    odd_row_count,
+                } => {
+                    let hex = *arrangement == config::Arrangement::Hexagonal;
+                    let dy = if hex {
+                        spacing * 3f64.sqrt() / 2.0
+                    } else {
+                        *spacing
+                    };
+                    for row in 0..count[1] {
+                        let odd = row % 2 == 1 && hex;
+                        let (offset, n) = if odd {
+                            (
+                                odd_row_offset.unwrap_or(0.5) * spacing,
+                                odd_row_count.unwrap_or(count[0]),
+                            )
+                        } else {
+                            (0.0, count[0])
+                        };
+                        for col in 0..n {
+                            x.push([
+                                first[0] + offset + col as f64 * spacing,
+                                first[1] + row as f64 * dy,
+                            ]);
+                            radius.push(*r);
+                        }
+                    }
+                    if !hex && (odd_row_offset.is_some() || odd_row_count.is_some()) {
+                        return Err(config_err(
+                            format!("dem.discs[{k}]"),
+                            "odd_row_offset and odd_row_count belong to hexagonal lattices",
+                        ));
+                    }
+                }
+                DiscSource::File { path } => {
+                    let field = format!("dem.discs[{k}].path");
+                    for (p, r) in read_disc_file(&base.join(path), &field)? {
+                        x.push(p);
+                        radius.push(r);
+                    }
+                }
+            }
+        }
+        let n = x.len();
+        if n > u32::MAX as usize / 2 {
+            return Err(config_err("dem.discs", format!("{n} discs are too many")));
+        }
+        let l = cfg.depth;
+        let volume: Vec<f64> = radius
+            .iter()
+            .map(|r| std::f64::consts::PI * r * r * l)
+            .collect();
+        let mass: Vec<f64> = volume.iter().map(|v| cfg.density * v).collect();
+        // J = ½ m R² (2.3)
+        let inertia: Vec<f64> = mass
+            .iter()
+            .zip(&radius)
+            .map(|(m, r)| 0.5 * m * r * r)
+            .collect();
+        let r_mean = radius.iter().sum::<f64>() / n as f64;
+        let r_max = radius.iter().copied().fold(0.0, f64::max);
+        let mut free = vec![[true; 3]; n];
+        for (k, c) in cfg.constraints.iter().enumerate() {
+            let discs = in_region(&x, &c.region);
+            if discs.is_empty() {
+                return Err(config_err(
+                    format!("dem.constraints[{k}].region"),
+                    format!(
+                        "holds no disc centre (min {:?}, max {:?})",
+                        c.region.min, c.region.max
+                    ),
+                ));
+            }
+            for &p in &discs {
+                for d in &c.fix {
+                    let k = match d {
+                        Dof::X => 0,
+                        Dof::Y => 1,
+                        Dof::Rotation => 2,
+                    };
+                    free[p as usize][k] = false;
+                }
+            }
+        }
+        let mut loads = Vec::new();
+        for (k, ld) in cfg.loads.iter().enumerate() {
+            let discs = in_region(&x, &ld.region);
+            if discs.is_empty() {
+                return Err(config_err(
+                    format!("dem.loads[{k}].region"),
+                    format!(
+                        "holds no disc centre (min {:?}, max {:?})",
+                        ld.region.min, ld.region.max
+                    ),
+                ));
+            }
+            loads.push(Load {
+                discs,
+                force: ld.force,
+                ramp: ld.ramp,
+            });
+        }
+        let mut loaded: Vec<u32> = loads.iter().flat_map(|l| l.discs.clone()).collect();
+        loaded.sort_unstable();
+        loaded.dedup();
+        let mut loaded_index = vec![u32::MAX; n];
+        for (k, &p) in loaded.iter().enumerate() {
+            loaded_index[p as usize] = k as u32;
+        }
+        let measure = match &cfg.measure {
+            None => None,
+            Some(m) => {
+                let mut sets = Vec::new();
+                for (name, r) in [
+                    ("top", &m.top),
+                    ("bottom", &m.bottom),
+                    ("left", &m.left),
+                    ("right", &m.right),
+                ] {
+                    let s = in_region(&x, r);
+                    if s.is_empty() {
+                        return Err(config_err(
+                            format!("dem.measure.{name}"),
+                            format!("holds no disc centre (min {:?}, max {:?})", r.min, r.max),
+                        ));
+                    }
+                    sets.push(s);
+                }
+                let mean = |s: &[u32], k: usize| {
+                    s.iter().map(|&p| x[p as usize][k]).sum::<f64>() / s.len() as f64
+                };
+                let height0 = mean(&sets[0], 1) - mean(&sets[1], 1);
+                let width0 = mean(&sets[3], 0) - mean(&sets[2], 0);
+                if height0 <= 0.0 || width0 <= 0.0 {
+                    return Err(config_err(
+                        "dem.measure",
+                        format!(
+                            "the top discs must lie above the bottom ones and the right ones right of the left ones (mean distances {height0:e} m, {width0:e} m)"
+                        ),
+                    ));
+                }
+                let right = sets.pop().unwrap_or_default();
+                let left = sets.pop().unwrap_or_default();
+                let bottom = sets.pop().unwrap_or_default();
+                let top = sets.pop().unwrap_or_default();
+                Some(Measure {
+                    top,
+                    bottom,
+                    left,
+                    right,
+                    height0,
+                    width0,
+                    section: m.section,
+                    fit: m.fit,
+                })
+            }
+        };
+        let compliance = cfg
+            .ddem
+            .as_ref()
+            .map(|d| ddem::compliance(d.youngs_modulus, d.poisson_ratio, d.plane));
+        let state = State {
+            step: 0,
+            time: 0.0,
+            x: x.clone(),
+            v: vec![[0.0; 2]; n],
+            theta: vec![0.0; n],
+            omega: vec![0.0; n],
+            pairs: Vec::new(),
+            pair_state: Vec::new(),
+            x_build: x.clone(),
+            list_skin: cfg.skin * r_mean,
+            stress: vec![[0.0; 3]; n],
+            work_external: 0.0,
+            load_point: vec![[0.0; 2]; loaded.len()],
+            load_previous: vec![[0.0; 2]; loaded.len()],
+            samples: Vec::new(),
+            iterations_last: 0,
+            iterations_most: 0,
+            bonds_broken: 0,
+        };
+        let mut e = DiscEngine {
+            cfg: cfg.clone(),
+            dt: cfg.time_step,
+            radius,
+            mass,
+            inertia,
+            volume,
+            x0: x,
+            free,
+            loads,
+            loaded,
+            loaded_index,
+            compliance,
+            measure,
+            r_mean,
+            r_max,
+            state,
+            force: vec![[0.0; 2]; n],
+            torque: vec![0.0; n],
+            external: vec![[0.0; 2]; n],
+            strain: vec![[0.0; 3]; n],
+            stress_new: vec![[0.0; 3]; n],
+            eval: Vec::new(),
+            initial_limits: Vec::new(),
+            output: output::OutputState::default(),
+        };
+        e.check_coincident()?;
+        e.build_list();
+        // bonds at t = 0 (2.21)
+        if let Some(g) = cfg.contact.bond_gap {
+            for (k, &(i, j)) in e.state.pairs.iter().enumerate() {
+                if e.gap(i as usize, j as usize) <= g {
+                    e.state.pair_state[k].bonded = true;
+                }
+            }
+        }
+        e.initial_limits = e.compute_limits();
+        // the row of the state at t = 0
+        let first = output::row(&e);
+        e.output.pending.push(first);
+        Ok(e)
+    }
+
+    /// Two discs at one place make no contact normal: refuse them by name.
+    fn check_coincident(&self) -> Result<(), DiscError> {
+        for &(i, j) in &self.state.pairs {
+            let d = norm2(sub(self.state.x[j as usize], self.state.x[i as usize]));
+            if d <= 1e-9 * self.r_mean {
+                return Err(config_err(
+                    "dem.discs",
+                    format!(
+                        "discs {i} and {j} have the same centre {:?}",
+                        self.state.x[i as usize]
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    fn gap(&self, i: usize, j: usize) -> f64 {
+        norm2(sub(self.state.x[j], self.state.x[i])) - self.radius[i] - self.radius[j]
+    }
+
+    /// Rebuilds the candidate pairs (centre distance below R_i + R_j + skin) from a cell grid,
+    /// keeping the state of pairs that stay and every bonded pair.
+    fn build_list(&mut self) {
+        let s = &mut self.state;
+        let skin = s.list_skin;
+        let cell = 2.0 * self.r_max + skin;
+        let n = s.x.len();
+        let key = |p: V2| ((p[0] / cell).floor() as i64, (p[1] / cell).floor() as i64);
+        let mut order: Vec<(i64, i64, u32)> = (0..n)
+            .map(|i| {
+                let (a, b) = key(s.x[i]);
+                (a, b, i as u32)
+            })
+            .collect();
+        order.sort_unstable();
+        let mut pairs = Vec::new();
+        for i in 0..n {
+            let (a, b) = key(s.x[i]);
+            for da in -1..=1 {
+                for db in -1..=1 {
+                    let c = (a + da, b + db);
+                    let start = order.partition_point(|o| (o.0, o.1) < c);
+                    for o in &order[start..] {
+                        if (o.0, o.1) != c {
+                            break;
+                        }
+                        let j = o.2 as usize;
+                        if j <= i {
+                            continue;
+                        }
+                        let d = norm2(sub(s.x[j], s.x[i]));
+                        if d < self.radius[i] + self.radius[j] + skin {
+                            pairs.push((i as u32, j as u32));
+                        }
+                    }
+                }
+            }
+        }
+        // bonded pairs stay candidates however far they stretch
+        for (k, p) in s.pairs.iter().enumerate() {
+            if s.pair_state[k].bonded {
+                pairs.push(*p);
+            }
+        }
+        pairs.sort_unstable();
+        pairs.dedup();
+        let mut states = vec![PairState::default(); pairs.len()];
+        let mut k_old = 0;
+        for (k, p) in pairs.iter().enumerate() {
+            while k_old < s.pairs.len() && s.pairs[k_old] < *p {
+                k_old += 1;
+            }
+            if k_old < s.pairs.len() && s.pairs[k_old] == *p {
+                states[k] = s.pair_state[k_old];
+            }
+        }
+        s.pairs = pairs;
+        s.pair_state = states;
+        s.x_build = s.x.clone();
+    }
+
+    /// The list is valid while no pair outside it can touch: 2 δ_max + 2 R_max ε_max < skin
+    /// (δ: displacement since the build, ε: the particles' strains, Madan Fig. 2.4).
+    fn list_still_valid(&self, strain_max: f64) -> bool {
+        let s = &self.state;
+        let moved =
+            s.x.iter()
+                .zip(&s.x_build)
+                .map(|(a, b)| norm2(sub(*a, *b)))
+                .fold(0.0, f64::max);
+        2.0 * moved + 2.0 * self.r_max * strain_max < s.list_skin
+    }
+
+    fn ensure_list(&mut self, strain_max: f64) {
+        if !self.list_still_valid(strain_max) {
+            self.state.list_skin = (self.cfg.skin * self.r_mean).max(4.0 * self.r_max * strain_max);
+            self.build_list();
+        }
+    }
+
+    /// The strains ε̃ = D̃ σ̃ (2.47) of the stresses `stress` into `self.strain`; the largest
+    /// strain norm.
+    fn strains_of(&mut self, stress_new: bool) -> f64 {
+        let Some(d) = self.compliance else {
+            return 0.0;
+        };
+        let src = if stress_new {
+            &self.stress_new
+        } else {
+            &self.state.stress
+        };
+        let mut most = 0.0f64;
+        for (e, s) in self.strain.iter_mut().zip(src) {
+            *e = ddem::mul3(&d, *s);
+            most = most.max(strain_norm(*e));
+        }
+        most
+    }
+
+    /// The external force of each disc at time t (loads ramped, gravity).
+    fn external_at(&self, t: f64, out: &mut [V2]) {
+        let g = self.cfg.gravity;
+        for (o, m) in out.iter_mut().zip(&self.mass) {
+            *o = [m * g[0], m * g[1]];
+        }
+        for l in &self.loads {
+            let f = scale(l.force, l.factor(t));
+            for &p in &l.discs {
+                out[p as usize] = add(out[p as usize], f);
+            }
+        }
+    }
+
+    /// The loads alone (without gravity) on disc p at time t.
+    fn load_on(&self, p: usize, t: f64) -> V2 {
+        let mut f = [0.0; 2];
+        for l in &self.loads {
+            if l.discs.binary_search(&(p as u32)).is_ok() {
+                f = add(f, scale(l.force, l.factor(t)));
+            }
+        }
+        f
+    }
+
+    /// Evaluates every candidate pair's contact with the strains in `self.strain` (zero in
+    /// standard DEM) into `self.eval`, from the committed pair states (so that a fixed-point
+    /// iteration can repeat it).
+    fn evaluate_pairs(&mut self) {
+        let c = &self.cfg.contact;
+        let ddem = self.compliance.is_some();
+        let dt = self.dt;
+        let s = &self.state;
+        self.eval.resize(s.pairs.len(), PairEval::default());
+        for (k, &(i, j)) in s.pairs.iter().enumerate() {
+            let (i, j) = (i as usize, j as usize);
+            let old = s.pair_state[k];
+            let d = sub(s.x[j], s.x[i]);
+            let dist = norm2(d);
+            let n = scale(d, 1.0 / dist);
+            let (ri, rj) = (self.radius[i], self.radius[j]);
+            // h_c = h + u_c^i·n_c^i + u_c^j·n_c^j (2.53), u_c = ε s (2.50), s_i = R_i n,
+            // s_j = −R_j n, n_c^i = n, n_c^j = −n
+            let mut overlap = ri + rj - dist;
+            if ddem {
+                overlap += dot2(strain_times(self.strain[i], scale(n, ri)), n)
+                    + dot2(strain_times(self.strain[j], scale(n, rj)), n);
+            }
+            let mut e = PairEval {
+                n,
+                ..Default::default()
+            };
+            e.state.bonded = old.bonded;
+            e.state.overlap = overlap;
+            if !(old.bonded || overlap > 0.0) {
+                // apart: no force, the tangential spring relaxes
+                self.eval[k] = e;
+                continue;
+            }
+            let t = [-n[1], n[0]];
+            // relative velocity of j's contact point to i's: (v_j + ω_j ẑ × s_j) − (v_i + ω_i ẑ × s_i)
+            let vr = sub(s.v[j], s.v[i]);
+            let v_n = dot2(vr, n);
+            let v_t = dot2(vr, t) - s.omega[j] * rj - s.omega[i] * ri;
+            let (mi, mj) = (self.mass[i], self.mass[j]);
+            let m_red = mi * mj / (mi + mj);
+            // c = ξ c_cr, c_cr = 2 √(m_i m_j k / (m_i + m_j)) (2.35)–(2.37)
+            let c_n = c.normal_damping * 2.0 * (m_red * c.normal_stiffness).sqrt();
+            let c_t = c.tangential_damping * 2.0 * (m_red * c.tangential_stiffness).sqrt();
+            let fn_e = c.normal_stiffness * overlap;
+            let mut fn_total = fn_e - c_n * v_n;
+            let mut ut = old.ut + v_t * dt;
+            let mut ft_e = -c.tangential_stiffness * ut;
+            let mut ft_total = ft_e - c_t * v_t;
+            let mut bonded = old.bonded;
+            if bonded
+                && ((fn_e < 0.0 && -fn_e >= c.bond_normal_strength)
+                    || ft_e.abs() >= c.bond_tangential_strength)
+            {
+                // (2.38)–(2.39)
+                bonded = false;
+                e.broke = true;
+            }
+            if !bonded {
+                if overlap <= 0.0 {
+                    self.eval[k] = PairEval {
+                        broke: e.broke,
+                        ..e
+                    };
+                    continue;
+                }
+                fn_total = fn_total.max(0.0);
+                // Coulomb (2.40): |f_t| ≤ μ f_n, the spring slides back to the limit
+                let limit = c.friction * fn_e.max(0.0);
+                if ft_e.abs() > limit {
+                    ft_e = limit.copysign(ft_e);
+                    ut = if c.tangential_stiffness > 0.0 {
+                        -ft_e / c.tangential_stiffness
+                    } else {
+                        0.0
+                    };
+                    ft_total = ft_e;
+                }
+            }
+            e.state = PairState {
+                bonded,
+                active: true,
+                ut,
+                fn_elastic: fn_e,
+                ft_elastic: ft_e,
+                fn_total,
+                ft_total,
+                overlap,
+            };
+            self.eval[k] = e;
+        }
+    }
+
+    /// Sums the evaluated contact forces, the external forces at `t` and the constraint
+    /// reactions into `self.force` / `self.torque`, and the particle stresses (2.41)–(2.45)
+    /// into `self.stress_new`.
+    fn assemble(&mut self) {
+        let n = self.state.x.len();
+        for p in 0..n {
+            self.force[p] = self.external[p];
+            self.torque[p] = 0.0;
+            self.stress_new[p] = [0.0; 3];
+        }
+        for (k, &(i, j)) in self.state.pairs.iter().enumerate() {
+            let e = &self.eval[k];
+            if !e.state.active {
+                continue;
+            }
+            let (i, j) = (i as usize, j as usize);
+            let n_ = e.n;
+            let t = [-n_[1], n_[0]];
+            let fj = add(scale(n_, e.state.fn_total), scale(t, e.state.ft_total));
+            let fi = scale(fj, -1.0);
+            self.force[j] = add(self.force[j], fj);
+            self.force[i] = add(self.force[i], fi);
+            // moments s × f with s_i = R_i n, s_j = −R_j n: both −R f_t
+            self.torque[i] -= self.radius[i] * e.state.ft_total;
+            self.torque[j] -= self.radius[j] * e.state.ft_total;
+            add_stress(&mut self.stress_new[i], scale(n_, self.radius[i]), fi);
+            add_stress(&mut self.stress_new[j], scale(n_, -self.radius[j]), fj);
+        }
+        let t = self.state.time;
+        for p in 0..n {
+            // loads act at the point opposite their direction, s = −R F̂ (pushing on the
+            // surface), as do the reactions of fixed coordinates: end discs then deform as
+            // interior ones do
+            let load = if self.loaded_index[p] != u32::MAX {
+                self.load_on(p, t)
+            } else {
+                [0.0; 2]
+            };
+            let reaction: V2 = std::array::from_fn(|k| {
+                if self.free[p][k] {
+                    0.0
+                } else {
+                    -self.force[p][k]
+                }
+            });
+            for f in [load, reaction] {
+                let size = norm2(f);
+                if size > 0.0 {
+                    add_stress(&mut self.stress_new[p], scale(f, -self.radius[p] / size), f);
+                }
+            }
+            let v = self.volume[p];
+            for c in &mut self.stress_new[p] {
+                *c /= v;
+            }
+        }
+    }
+
+    /// One step of Δt.
+    pub fn step(&mut self) -> Result<(), DiscError> {
+        let t = self.state.time;
+        let mut ext = std::mem::take(&mut self.external);
+        self.external_at(t, &mut ext);
+        self.external = ext;
+        let scheme = self.cfg.ddem.as_ref().map(|d| d.scheme);
+        // strains from the last step's stresses (the lagged scheme; the fixed point's start)
+        let strain_max = self.strains_of(false);
+        self.check_strain(strain_max)?;
+        self.ensure_list(strain_max);
+        self.evaluate_pairs();
+        self.assemble();
+        if scheme == Some(Scheme::FixedPoint) {
+            self.fixed_point()?;
+        }
+        // commit the pairs
+        for (k, e) in self.eval.iter().enumerate() {
+            if e.broke {
+                self.state.bonds_broken += 1;
+            }
+            self.state.pair_state[k] = e.state;
+        }
+        std::mem::swap(&mut self.state.stress, &mut self.stress_new);
+        self.account_work();
+        self.record_measure();
+        self.integrate();
+        self.account_gravity();
+        self.state.step += 1;
+        self.state.time = self.state.step as f64 * self.dt;
+        self.check_finite()?;
+        if self.state.step % self.cfg.output.csv_every == 0 {
+            let row = output::row(self);
+            self.output.pending.push(row);
+        }
+        Ok(())
+    }
+
+    /// Repeats evaluate → stresses → strains until the normal forces change by less than the
+    /// tolerance (3.5)–(3.7); the last evaluation stays in `self.eval`, its stresses in
+    /// `self.stress_new`.
+    fn fixed_point(&mut self) -> Result<(), DiscError> {
+        let (tol, most) = self
+            .cfg
+            .ddem
+            .as_ref()
+            .map(|d| (d.tolerance, d.max_iterations))
+            .unwrap_or((1e-12, 1));
+        let mut previous: Vec<f64> = self.eval.iter().map(|e| e.state.fn_elastic).collect();
+        for it in 1..=most {
+            let strain_max = self.strains_of(true);
+            self.check_strain(strain_max)?;
+            if !self.list_still_valid(strain_max) {
+                // the deformation outgrew the list: rebuild and start the iteration over
+                self.ensure_list(strain_max);
+                self.evaluate_pairs();
+                self.assemble();
+                previous = self.eval.iter().map(|e| e.state.fn_elastic).collect();
+                continue;
+            }
+            self.evaluate_pairs();
+            self.assemble();
+            let mut change = 0.0f64;
+            let mut size = 0.0f64;
+            for (e, p) in self.eval.iter().zip(&mut previous) {
+                change = change.max((e.state.fn_elastic - *p).abs());
+                size = size.max(e.state.fn_elastic.abs());
+                *p = e.state.fn_elastic;
+            }
+            if change <= tol * size || size == 0.0 {
+                self.state.iterations_last = it as u32;
+                self.state.iterations_most = self.state.iterations_most.max(it as u32);
+                return Ok(());
+            }
+        }
+        let rho = self.limit("ddem_spectral_radius");
+        Err(DiscError::Unstable {
+            time: self.state.time,
+            step: self.state.step,
+            message: format!(
+                "the DDEM fixed-point iteration did not converge in {most} iterations \
+                 (dem.ddem.max_iterations); it converges only for ρ(B) < 1 and the initial \
+                 packing has ρ(B) = {rho:.4} (Madan (3.13)–(3.14)): raise dem.ddem.youngs_modulus \
+                 or lower dem.contact.normal_stiffness"
+            ),
+        })
+    }
+
+    fn check_strain(&self, strain_max: f64) -> Result<(), DiscError> {
+        if strain_max.is_finite() && strain_max <= STRAIN_LIMIT {
+            return Ok(());
+        }
+        let (p, e) = self
+            .strain
+            .iter()
+            .enumerate()
+            .map(|(p, e)| (p, strain_norm(*e)))
+            .fold(
+                (0, 0.0),
+                |a, b| if b.1 > a.1 || b.1.is_nan() { b } else { a },
+            );
+        let rho = self.limit("ddem_spectral_radius");
+        Err(DiscError::Unstable {
+            time: self.state.time,
+            step: self.state.step,
+            message: format!(
+                "disc {p} at {:?} takes a strain of {e:.3e}, beyond the small strains of the \
+                 DDEM ({STRAIN_LIMIT}): the lagged scheme diverges; the initial packing has \
+                 ρ(B) = {rho:.4} (stable only below 1, Madan (3.13)) and Δt/Δt_cr = {:.4}",
+                self.state.x[p],
+                self.dt / self.limit("critical_time_step")
+            ),
+        })
+    }
+
+    fn check_finite(&self) -> Result<(), DiscError> {
+        let s = &self.state;
+        for p in 0..s.x.len() {
+            if !(s.x[p][0].is_finite()
+                && s.x[p][1].is_finite()
+                && s.v[p][0].is_finite()
+                && s.v[p][1].is_finite()
+                && s.omega[p].is_finite())
+            {
+                return Err(DiscError::Unstable {
+                    time: s.time,
+                    step: s.step,
+                    message: format!(
+                        "disc {p} has a non-finite position or velocity; Δt = {:e} s, critical \
+                         step {:e} s",
+                        self.dt,
+                        self.limit("critical_time_step")
+                    ),
+                });
+            }
+        }
+        for (k, &(i, j)) in s.pairs.iter().enumerate() {
+            let h = s.pair_state[k].overlap;
+            let r = self.radius[i as usize].min(self.radius[j as usize]);
+            if h > r {
+                return Err(DiscError::Unstable {
+                    time: s.time,
+                    step: s.step,
+                    message: format!(
+                        "discs {i} and {j} overlap by {h:.3e} m, more than the smaller radius \
+                         {r:.3e} m: the contacts are too soft for the loads, or the run is \
+                         unstable (Δt = {:e} s, critical step {:e} s)",
+                        self.dt,
+                        self.limit("critical_time_step")
+                    ),
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Central differences (2.9)–(2.13) with the non-viscous background damping (2.7)–(2.8).
+    fn integrate(&mut self) {
+        let dt = self.dt;
+        let (at, ar) = (self.cfg.damping.translational, self.cfg.damping.rotational);
+        let s = &mut self.state;
+        for p in 0..s.x.len() {
+            let mut f = self.force[p];
+            let mut tq = self.torque[p];
+            if at > 0.0 {
+                let speed = norm2(s.v[p]);
+                if speed > 0.0 {
+                    f = sub(f, scale(s.v[p], at * norm2(f) / speed));
+                }
+            }
+            if ar > 0.0 && s.omega[p] != 0.0 {
+                tq -= ar * tq.abs() * s.omega[p].signum();
+            }
+            for (k, fk) in f.iter().enumerate() {
+                if self.free[p][k] {
+                    s.v[p][k] += dt * fk / self.mass[p];
+                    s.x[p][k] += dt * s.v[p][k];
+                } else {
+                    s.v[p][k] = 0.0;
+                }
+            }
+            if self.free[p][2] {
+                s.omega[p] += dt * tq / self.inertia[p];
+                s.theta[p] += dt * s.omega[p];
+            } else {
+                s.omega[p] = 0.0;
+            }
+        }
+    }
+
+    /// The work of the loads at their points of application (the centre's displacement plus
+    /// the particle's own ε s there, s = −R F̂) and of gravity at the centres, by the
+    /// trapezoidal rule over the step just evaluated.
+    fn account_work(&mut self) {
+        let t = self.state.time;
+        let d = self.compliance;
+        for (k, &p) in self.loaded.iter().enumerate() {
+            let p = p as usize;
+            let f = self.load_on(p, t);
+            let size = norm2(f);
+            let mut u = sub(self.state.x[p], self.x0[p]);
+            if let (Some(d), true) = (d, size > 0.0) {
+                let e = ddem::mul3(&d, self.state.stress[p]);
+                u = add(u, strain_times(e, scale(f, -self.radius[p] / size)));
+            }
+            let mid = scale(add(f, self.state.load_previous[k]), 0.5);
+            self.state.work_external += dot2(mid, sub(u, self.state.load_point[k]));
+            self.state.load_point[k] = u;
+            self.state.load_previous[k] = f;
+        }
+    }
+
+    /// Gravity's work over the step just integrated: Σ m g · Δt v^{n+½}.
+    fn account_gravity(&mut self) {
+        let g = self.cfg.gravity;
+        if g != [0.0, 0.0] {
+            let s = &self.state;
+            let w: f64 = (0..s.x.len())
+                .map(|p| self.mass[p] * self.dt * dot2(g, s.v[p]))
+                .sum();
+            self.state.work_external += w;
+        }
+    }
+
+    /// The uniaxial measurement (M (4.19)–(4.22)): the stress of the top load over the section
+    /// and the strains of the distances between the mean centres of the measured sets.
+    pub fn measurement(&self) -> Option<[f64; 3]> {
+        let m = self.measure.as_ref()?;
+        let s = &self.state;
+        let mean = |set: &[u32], k: usize| {
+            set.iter().map(|&p| s.x[p as usize][k]).sum::<f64>() / set.len() as f64
+        };
+        let load: f64 = m
+            .top
+            .iter()
+            .map(|&p| self.load_on(p as usize, s.time)[1])
+            .sum();
+        let sigma = load / (m.section * self.cfg.depth);
+        let eyy = (mean(&m.top, 1) - mean(&m.bottom, 1)) / m.height0 - 1.0;
+        let exx = (mean(&m.right, 0) - mean(&m.left, 0)) / m.width0 - 1.0;
+        Some([sigma, eyy, exx])
+    }
+
+    fn record_measure(&mut self) {
+        let Some([sigma, eyy, exx]) = self.measurement() else {
+            return;
+        };
+        // while any load still rises
+        let t = self.state.time;
+        if self.loads.iter().any(|l| l.ramp > 0.0 && t <= l.ramp) {
+            let fraction = self.loads.iter().map(|l| l.factor(t)).fold(0.0, f64::max);
+            self.state.samples.push([sigma, eyy, exx, fraction]);
+        }
+    }
+
+    /// E = Δσ_yy/Δε_yy and ν = −Δε_xx/Δε_yy by least squares over the load fractions of
+    /// `measure.fit` (M (4.19)–(4.22)).
+    pub fn moduli(&self) -> Option<(f64, f64)> {
+        let m = self.measure.as_ref()?;
+        let pts: Vec<&[f64; 4]> = self
+            .state
+            .samples
+            .iter()
+            .filter(|s| s[3] >= m.fit[0] && s[3] <= m.fit[1])
+            .collect();
+        if pts.len() < 3 {
+            return None;
+        }
+        let slope = |xs: &dyn Fn(&[f64; 4]) -> f64, ys: &dyn Fn(&[f64; 4]) -> f64| {
+            let n = pts.len() as f64;
+            let mx = pts.iter().map(|p| xs(p)).sum::<f64>() / n;
+            let my = pts.iter().map(|p| ys(p)).sum::<f64>() / n;
+            let sxy: f64 = pts.iter().map(|p| (xs(p) - mx) * (ys(p) - my)).sum();
+            let sxx: f64 = pts.iter().map(|p| (xs(p) - mx).powi(2)).sum();
+            sxy / sxx
+        };
+        let e = slope(&|p| p[1], &|p| p[0]);
+        let nu = -slope(&|p| p[1], &|p| p[2]);
+        Some((e, nu))
+    }
+
+    /// Advances `steps` steps.
+    pub fn advance(&mut self, steps: u64) -> Result<(), DiscError> {
+        for _ in 0..steps {
+            self.step()?;
+        }
+        Ok(())
+    }
+
+    pub fn time(&self) -> f64 {
+        self.state.time
+    }
+    pub fn time_step(&self) -> f64 {
+        self.dt
+    }
+    pub fn steps(&self) -> u64 {
+        self.state.step
+    }
+    pub fn num_discs(&self) -> usize {
+        self.state.x.len()
+    }
+    pub fn positions(&self) -> &[V2] {
+        &self.state.x
+    }
+    pub fn initial_positions(&self) -> &[V2] {
+        &self.x0
+    }
+    pub fn radii(&self) -> &[f64] {
+        &self.radius
+    }
+    /// σ̃ of each disc from the last force evaluation.
+    pub fn stresses(&self) -> &[[f64; 3]] {
+        &self.state.stress
+    }
+    /// ε̃ = D̃ σ̃ of each disc (zero in standard DEM).
+    pub fn strains(&self) -> Vec<[f64; 3]> {
+        match self.compliance {
+            Some(d) => self
+                .state
+                .stress
+                .iter()
+                .map(|s| ddem::mul3(&d, *s))
+                .collect(),
+            None => vec![[0.0; 3]; self.state.x.len()],
+        }
+    }
+    /// The candidate pairs and their contact state.
+    pub fn pairs(&self) -> impl Iterator<Item = ((u32, u32), &PairState)> {
+        self.state.pairs.iter().copied().zip(&self.state.pair_state)
+    }
+    /// The elastic normal force of the pair (i, j) (compression positive), if a candidate.
+    pub fn normal_force(&self, i: u32, j: u32) -> Option<f64> {
+        let key = (i.min(j), i.max(j));
+        let k = self.state.pairs.binary_search(&key).ok()?;
+        Some(self.state.pair_state[k].fn_elastic)
+    }
+    /// Fixed-point iterations of the last step and the most of any step.
+    pub fn iterations(&self) -> (u32, u32) {
+        (self.state.iterations_last, self.state.iterations_most)
+    }
+
+    /// E_k = Σ ½ m v² + ½ J ω² (2.58), at the half-step velocities.
+    pub fn kinetic_energy(&self) -> f64 {
+        let s = &self.state;
+        (0..s.x.len())
+            .map(|p| {
+                0.5 * self.mass[p] * dot2(s.v[p], s.v[p])
+                    + 0.5 * self.inertia[p] * s.omega[p].powi(2)
+            })
+            .sum()
+    }
+
+    /// E_el,c = Σ f_ne²/(2k_n) + f_te²/(2k_t) (2.59, with the ½ the print lacks).
+    pub fn contact_energy(&self) -> f64 {
+        let c = &self.cfg.contact;
+        self.state
+            .pair_state
+            .iter()
+            .filter(|p| p.active)
+            .map(|p| {
+                let mut e = p.fn_elastic.powi(2) / (2.0 * c.normal_stiffness);
+                if c.tangential_stiffness > 0.0 {
+                    e += p.ft_elastic.powi(2) / (2.0 * c.tangential_stiffness);
+                }
+                e
+            })
+            .sum()
+    }
+
+    /// E_el,p = ½ Σ V_p σ_p : ε_p (2.61) (σ:ε = σ̃ · ε̃ with ε̃_3 = 2ε_xy).
+    pub fn particle_energy(&self) -> f64 {
+        let Some(d) = self.compliance else {
+            return 0.0;
+        };
+        self.state
+            .stress
+            .iter()
+            .zip(&self.volume)
+            .map(|(s, v)| {
+                let e = ddem::mul3(&d, *s);
+                0.5 * v * (s[0] * e[0] + s[1] * e[1] + s[2] * e[2])
+            })
+            .sum()
+    }
+
+    /// W_ext: the work of the loads (at their points) and of gravity so far (2.55).
+    pub fn external_work(&self) -> f64 {
+        self.state.work_external
+    }
+
+    /// The macroscopic stress σ̄ = (1/V) Σ_p V_p σ_p (4.1)–(4.3) over the box the discs span.
+    pub fn macroscopic_stress(&self) -> [f64; 3] {
+        let s = &self.state;
+        let mut lo = [f64::INFINITY; 2];
+        let mut hi = [f64::NEG_INFINITY; 2];
+        let mut sum = [0.0; 3];
+        for p in 0..s.x.len() {
+            for k in 0..2 {
+                lo[k] = lo[k].min(s.x[p][k] - self.radius[p]);
+                hi[k] = hi[k].max(s.x[p][k] + self.radius[p]);
+            }
+            for (sk, st) in sum.iter_mut().zip(s.stress[p]) {
+                *sk += self.volume[p] * st;
+            }
+        }
+        let v = (hi[0] - lo[0]) * (hi[1] - lo[1]) * self.cfg.depth;
+        sum.map(|c| c / v)
+    }
+
+    /// The limits of the scene, for the coordinator's checks: `time_step`,
+    /// `critical_time_step` (2/ν_max of the initial contacts, (2.14)–(2.16)), and in DDEM
+    /// `ddem_spectral_radius` ρ(B) of the initial packing's iteration matrix (3.8),
+    /// `ddem_kn_over_ep`, `ddem_poisson_ratio` and `ddem_kn_over_ep_limit` (k_n/E_p at which
+    /// ρ(B) = 1 for this packing).
+    pub fn limits(&self) -> Vec<(String, f64)> {
+        self.initial_limits.clone()
+    }
+
+    fn limit(&self, name: &str) -> f64 {
+        self.initial_limits
+            .iter()
+            .find(|(k, _)| k == name)
+            .map_or(f64::NAN, |(_, v)| *v)
+    }
+
+    /// The pairs touching (gap ≤ 1e-6 R̄) or bonded now.
+    fn touching(&self) -> Vec<(usize, usize)> {
+        let tol = 1e-6 * self.r_mean;
+        self.state
+            .pairs
+            .iter()
+            .zip(&self.state.pair_state)
+            .filter(|((i, j), st)| st.bonded || self.gap(*i as usize, *j as usize) <= tol)
+            .map(|((i, j), _)| (*i as usize, *j as usize))
+            .collect()
+    }
+
+    fn compute_limits(&self) -> Vec<(String, f64)> {
+        let c = &self.cfg.contact;
+        let mut l = vec![
+            ("time_step".to_string(), self.dt),
+            ("discs".to_string(), self.num_discs() as f64),
+        ];
+        let touching = self.touching();
+        let s = &self.state;
+        let springs: Vec<ddem::Spring> = touching
+            .iter()
+            .map(|&(i, j)| {
+                let d = sub(s.x[j], s.x[i]);
+                let n = scale(d, 1.0 / norm2(d));
+                ddem::Spring {
+                    i,
+                    j,
+                    n,
+                    si: scale(n, self.radius[i]),
+                    sj: scale(n, -self.radius[j]),
+                }
+            })
+            .collect();
+        let free: Vec<bool> = self.free.iter().flatten().copied().collect();
+        let critical = ddem::critical_time_step(
+            &springs,
+            &self.mass,
+            &self.inertia,
+            &free,
+            c.normal_stiffness,
+            c.tangential_stiffness,
+        )
+        .unwrap_or_else(|| {
+            // no contact yet (or nothing free): the densest packing's value for the lightest
+            // disc, 2/√6 √(m/k_n) (a disc of an infinite hexagonal lattice, normal springs)
+            let m_min = self.mass.iter().copied().fold(f64::INFINITY, f64::min);
+            2.0 / 6f64.sqrt() * (m_min / c.normal_stiffness).sqrt()
+        });
+        // viscous contact damping computed from the lagged velocities shortens it: with
+        // c = ξ 2√(m_red k_n) ≈ β k_n the highest mode has ζ = β ν_max / 2 and
+        // Δt_cr = (2/ν_max)(√(1 + ζ²) − ζ) (β the largest over the discs' pairs)
+        let m_red_max = self.mass.iter().copied().fold(0.0, f64::max) / 2.0;
+        let beta = c.normal_damping * 2.0 * (m_red_max / c.normal_stiffness).sqrt();
+        let zeta = beta * (2.0 / critical) / 2.0;
+        let damped = critical * ((1.0 + zeta * zeta).sqrt() - zeta);
+        l.push(("critical_time_step".to_string(), damped));
+        l.push(("critical_time_step_undamped".to_string(), critical));
+        l.push(("contacts_initial".to_string(), touching.len() as f64));
+        if let (Some(d), Some(cfgd)) = (self.compliance, &self.cfg.ddem) {
+            let ends: Vec<ddem::End> = touching
+                .iter()
+                .enumerate()
+                .flat_map(|(k, &(i, j))| {
+                    let dv = sub(s.x[j], s.x[i]);
+                    let n = scale(dv, 1.0 / norm2(dv));
+                    [
+                        ddem::End {
+                            contact: k,
+                            particle: i,
+                            arm: ddem::normal_arm(self.radius[i], n),
+                        },
+                        ddem::End {
+                            contact: k,
+                            particle: j,
+                            arm: ddem::normal_arm(self.radius[j], n),
+                        },
+                    ]
+                })
+                .collect();
+            let rho =
+                ddem::spectral_radius(touching.len(), &ends, &self.volume, &d, c.normal_stiffness);
+            let ratio = c.normal_stiffness / (cfgd.youngs_modulus * self.cfg.depth);
+            l.push(("ddem_spectral_radius".to_string(), rho));
+            l.push(("ddem_kn_over_ep".to_string(), ratio));
+            l.push(("ddem_poisson_ratio".to_string(), cfgd.poisson_ratio));
+            l.push(("ddem_youngs_modulus".to_string(), cfgd.youngs_modulus));
+            if rho > 0.0 {
+                // ρ(B) is proportional to k_n/E_p
+                l.push(("ddem_kn_over_ep_limit".to_string(), ratio / rho));
+            }
+            // the regular lattices' analytic values (3.41), (3.76)–(3.78)
+            if let [DiscSource::Lattice { arrangement, .. }] = self.cfg.discs.as_slice() {
+                let (e, nu) = (cfgd.youngs_modulus, cfgd.poisson_ratio);
+                let kn = c.normal_stiffness;
+                let a = match arrangement {
+                    config::Arrangement::Square => {
+                        ddem::square_spectral_radius(kn, e, nu, self.cfg.depth)
+                    }
+                    config::Arrangement::Hexagonal => {
+                        ddem::hexagonal_spectral_radius(kn, e, nu, self.cfg.depth)
+                    }
+                };
+                if cfgd.plane == config::Plane::Strain {
+                    l.push(("ddem_spectral_radius_lattice".to_string(), a));
+                }
+            }
+        }
+        l
+    }
+
+    /// Results at the end of a run: energies, the measurement and the fitted moduli.
+    pub fn results(&self) -> Vec<(String, f64)> {
+        let mut r = vec![
+            ("time".to_string(), self.time()),
+            ("steps".to_string(), self.steps() as f64),
+            ("kinetic_energy".to_string(), self.kinetic_energy()),
+            ("contact_energy".to_string(), self.contact_energy()),
+            ("particle_energy".to_string(), self.particle_energy()),
+            ("external_work".to_string(), self.external_work()),
+            (
+                "contacts".to_string(),
+                self.state.pair_state.iter().filter(|p| p.active).count() as f64,
+            ),
+            (
+                "bonds".to_string(),
+                self.state.pair_state.iter().filter(|p| p.bonded).count() as f64,
+            ),
+            ("bonds_broken".to_string(), self.state.bonds_broken as f64),
+        ];
+        let m = self.macroscopic_stress();
+        r.push(("macro_stress_xx".to_string(), m[0]));
+        r.push(("macro_stress_yy".to_string(), m[1]));
+        r.push(("macro_stress_xy".to_string(), m[2]));
+        r.push((
+            "strain_max".to_string(),
+            self.strains()
+                .iter()
+                .map(|e| strain_norm(*e))
+                .fold(0.0, f64::max),
+        ));
+        if let Some([s, eyy, exx]) = self.measurement() {
+            r.push(("stress_yy".to_string(), s));
+            r.push(("strain_yy".to_string(), eyy));
+            r.push(("strain_xx".to_string(), exx));
+        }
+        if let Some((e, nu)) = self.moduli() {
+            r.push(("youngs_modulus".to_string(), e));
+            r.push(("poisson_ratio".to_string(), nu));
+        }
+        if self.cfg.ddem.as_ref().map(|d| d.scheme) == Some(Scheme::FixedPoint) {
+            r.push((
+                "iterations_most".to_string(),
+                self.state.iterations_most as f64,
+            ));
+        }
+        r
+    }
+
+    /// The state as bytes (MessagePack).
+    pub fn snapshot(&self) -> Vec<u8> {
+        // plain data into a Vec: cannot fail
+        rmp_serde::to_vec(&self.state).expect("disc state serialises")
+    }
+
+    /// Restores a snapshot of an engine built from the same scene.
+    pub fn restore(&mut self, bytes: &[u8]) -> Result<(), DiscError> {
+        let s: State = rmp_serde::from_slice(bytes)
+            .map_err(|e| DiscError::Snapshot(format!("cannot decode the disc snapshot: {e}")))?;
+        let n = self.num_discs();
+        if s.x.len() != n
+            || s.pairs.len() != s.pair_state.len()
+            || s.load_point.len() != self.loaded.len()
+        {
+            return Err(DiscError::Snapshot(format!(
+                "the snapshot holds {} discs and {} loaded ones, this scene {n} and {}",
+                s.x.len(),
+                s.load_point.len(),
+                self.loaded.len()
+            )));
+        }
+        self.state = s;
+        self.output.pending.clear();
+        self.output.last_vtk_step = None;
+        Ok(())
+    }
+
+    /// Writes the CSV row and, when due, the VTK files of the discs and contacts.
+    pub fn write_outputs(&mut self, dir: &Path) -> Result<(), DiscError> {
+        output::write(self, dir)
+    }
+
+    /// The outputs of the end of a run: the waiting rows and the VTK files of the last state.
+    pub fn write_final(&mut self, dir: &Path) -> Result<(), DiscError> {
+        output::write(self, dir)?;
+        if self.output.last_vtk_step != Some(self.steps()) {
+            output::write_vtk_now(self, dir)?;
+        }
+        Ok(())
+    }
+}
