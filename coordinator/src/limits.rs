@@ -206,8 +206,14 @@ pub fn assess(
         d.get("critical_time_step"),
         d.get("discs"),
     ) {
+        let damped = match d.get("critical_time_step_undamped") {
+            Some(&u) if u > crit => format!(
+                "; the viscous contact damping shortens it from 2/ν_max = {u:.4e} s by (√(1 + ζ²) − ζ)"
+            ),
+            _ => String::new(),
+        };
         let what = format!(
-            "Δt = {dt:.4e} s = {:.4} Δt_cr (Δt_cr = 2/ν_max = {crit:.4e} s of the initial contacts, Madan (2.14)–(2.16); the DDEM leaves it unchanged)",
+            "Δt = {dt:.4e} s = {:.4} Δt_cr (Δt_cr = {crit:.4e} s of the initial contacts, Madan (2.14)–(2.16){damped}; the DDEM leaves it unchanged)",
             dt / crit
         );
         if dt > crit {

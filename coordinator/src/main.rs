@@ -130,12 +130,12 @@ enum Command {
 
 fn report(scene: &Scene, s: &coordinator::run::Summary, out_dir: &std::path::Path) {
     println!(
-        "{}: {} windows of {} ({}), {:.3} s simulated in {:.2} s wall (DEM {:.2} s, FEM {:.2} s, coupling {:.2} s = {:.1} %)",
+        "{}: {} windows of {} ({}), {} simulated in {:.2} s wall (DEM {:.2} s, FEM {:.2} s, coupling {:.2} s = {:.1} %)",
         s.scene,
         s.windows_done,
         format_seconds(s.coupling_window_s),
         schedule_name(scene.schedule),
-        s.simulated_time_s,
+        format_seconds(s.simulated_time_s),
         s.timing.total_wall_s,
         s.timing.dem_compute_s,
         s.timing.fem_compute_s,

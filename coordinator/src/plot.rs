@@ -380,6 +380,17 @@ pub fn run_plots(out_dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
             sources.push((out_dir.join(node).join(file), layout, prefix.clone()));
         }
     }
+    for node in &nodes {
+        let csv = out_dir.join(node).join("discs.csv");
+        if csv.exists() {
+            let prefix = if node == "dem" {
+                String::new()
+            } else {
+                format!("{node}.")
+            };
+            written.extend(disc_plots(out_dir, &csv, &dir, &prefix)?);
+        }
+    }
     for (csv, layout, prefix) in sources {
         if !csv.exists() {
             continue;
@@ -428,6 +439,78 @@ pub fn run_plots(out_dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
             .with_context(|| format!("writing {}", file.display()))?;
             written.push(file);
         }
+    }
+    Ok(written)
+}
+
+/// The plots of a 2-D disc run's `discs.csv` (Madan's energies (2.55)–(2.61) and the uniaxial
+/// measurement): `energies.png` (W_ext, E_k, E_el,c, E_el,p and the dissipated rest over
+/// time), `strains.png` (the sample's ε_yy, ε_xx and the largest particle strain) and, with a
+/// measurement, `stress_strain.png` (σ_yy against ε_yy).
+fn disc_plots(
+    out_dir: &Path,
+    csv: &Path,
+    dir: &Path,
+    prefix: &str,
+) -> anyhow::Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let source = csv
+        .strip_prefix(out_dir)
+        .unwrap_or(csv)
+        .display()
+        .to_string();
+    let cols = |names: &[&str]| names.iter().map(|n| n.to_string()).collect::<Vec<_>>();
+    let mut written = Vec::new();
+    let plots: [(&str, Option<&str>, Vec<String>, &str, &str); 3] = [
+        (
+            "energies",
+            None,
+            cols(&[
+                "external_work",
+                "kinetic_energy",
+                "contact_energy",
+                "particle_energy",
+                "dissipated",
+            ]),
+            "time (s)",
+            "energy (J)",
+        ),
+        (
+            "strains",
+            None,
+            cols(&["strain_yy", "strain_xx", "strain_max"]),
+            "time (s)",
+            "strain",
+        ),
+        (
+            "stress_strain",
+            Some("strain_yy"),
+            cols(&["stress_yy"]),
+            "sample strain ε_yy",
+            "σ_yy (Pa)",
+        ),
+    ];
+    for (name, x, columns, xlabel, ylabel) in plots {
+        let (_, series) = match read_series(csv, x, &columns, 1.0) {
+            Ok(s) => s,
+            // no measurement in this scene: its columns are empty
+            Err(_) if name != "energies" => continue,
+            Err(e) => return Err(e),
+        };
+        let series: Vec<Series> = series.into_iter().filter(|(_, p)| !p.is_empty()).collect();
+        if series.is_empty() {
+            continue;
+        }
+        let file = dir.join(format!("{prefix}{name}.png"));
+        series_png(
+            &file,
+            &format!("{name} ({source})"),
+            xlabel,
+            ylabel,
+            &series,
+        )
+        .with_context(|| format!("writing {}", file.display()))?;
+        written.push(file);
     }
     Ok(written)
 }
