@@ -92,7 +92,7 @@ pub fn spectral_radius(
         |x, y| y.copy_from_slice(x),
         false,
         500,
-        1e-12,
+        1e-10,
     )
 }
 
@@ -187,7 +187,7 @@ pub fn critical_time_step(
             add(y, s.i, 2, -(s.si[0] * f[1] - s.si[1] * f[0]));
         }
     };
-    let lam = numeric::lanczos_largest(dofs, apply, |x, y| y.copy_from_slice(x), false, 600, 1e-12);
+    let lam = numeric::lanczos_largest(dofs, apply, |x, y| y.copy_from_slice(x), false, 600, 1e-10);
     (lam > 0.0).then(|| 2.0 / lam.sqrt())
 }
 
