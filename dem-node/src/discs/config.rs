@@ -54,6 +54,9 @@ pub struct DiscConfig {
     /// Fixed degrees of freedom.
     #[serde(default)]
     pub constraints: Vec<ConstraintConfig>,
+    /// Rigid plates (straight walls).
+    #[serde(default)]
+    pub walls: Vec<PlateConfig>,
     /// The uniaxial-compression measurement (Madan §4.4: E and ν of the sample).
     #[serde(default)]
     pub measure: Option<UniaxialConfig>,
@@ -190,6 +193,74 @@ pub enum DiscSource {
     },
     /// A CSV file of `x,y,radius` rows (a header line is allowed).
     File { path: String },
+    /// `count` discs at random places in the box [min, max] without overlaps (random
+    /// sequential addition, largest first), radii from a triangular distribution; a loose
+    /// start for a packing compacted by plates.
+    Random {
+        count: usize,
+        min: [f64; 2],
+        max: [f64; 2],
+        radius: Triangular,
+        #[serde(default = "default_seed")]
+        seed: u64,
+    },
+}
+
+fn default_seed() -> u64 {
+    1
+}
+
+/// A triangular distribution on [min, max] with its peak at `mode` (mean (min + max + mode)/3).
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Triangular {
+    pub min: f64,
+    pub max: f64,
+    pub mode: f64,
+}
+
+impl Triangular {
+    /// The value at the quantile u ∈ [0, 1).
+    pub fn quantile(&self, u: f64) -> f64 {
+        let (a, b, c) = (self.min, self.max, self.mode);
+        if b <= a {
+            return a;
+        }
+        let fc = (c - a) / (b - a);
+        if u < fc {
+            a + (u * (b - a) * (c - a)).sqrt()
+        } else {
+            b - ((1.0 - u) * (b - a) * (b - c)).sqrt()
+        }
+    }
+}
+
+/// `[[dem.walls]]`: a rigid plate, the straight line through `point` with the unit `normal`
+/// pointing into the sample, moving at a constant `velocity` or servo-controlled to a normal
+/// `pressure` (Pa over `length` × depth, at most `max_speed`). Discs touch it with the
+/// contact law of the pairs (no bonds).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlateConfig {
+    pub name: String,
+    pub point: [f64; 2],
+    pub normal: [f64; 2],
+    #[serde(default)]
+    pub velocity: Option<[f64; 2]>,
+    #[serde(default)]
+    pub pressure: Option<f64>,
+    #[serde(default)]
+    pub length: Option<f64>,
+    #[serde(default)]
+    pub max_speed: Option<f64>,
+    /// The plate stops moving at this time (s; default never).
+    #[serde(default)]
+    pub stop: Option<f64>,
+    /// Move the plate along its normal at t = 0 until it just touches the outermost disc
+    /// (`point` then only fixes the line's direction offset): plates for a packing read from
+    /// a file.
+    #[serde(default)]
+    pub touch: bool,
 }
 
 /// Discs whose centres lie in a box.
@@ -248,6 +319,10 @@ pub struct UniaxialConfig {
     pub right: Region,
     /// A (m): the sample's width the stress is taken over.
     pub section: f64,
+    /// The plate whose normal force is the load (default: the loads on the `top` discs); the
+    /// fit then uses fractions of the peak stress of the loading branch.
+    #[serde(default)]
+    pub plate: Option<String>,
     /// The load fractions between which E and ν are fitted (default [0.4, 0.8]).
     #[serde(default = "default_fit")]
     pub fit: [f64; 2],
@@ -268,6 +343,9 @@ pub struct DiscOutput {
     /// only the last state).
     #[serde(default)]
     pub vtk_every: u64,
+    /// Write `discs_final.csv` (x,y,radius: a `file` source of a later scene) at the end.
+    #[serde(default)]
+    pub final_discs: bool,
 }
 
 fn default_csv_every() -> u64 {
@@ -279,6 +357,7 @@ impl Default for DiscOutput {
         DiscOutput {
             csv_every: default_csv_every(),
             vtk_every: 0,
+            final_discs: false,
         }
     }
 }
@@ -423,6 +502,99 @@ impl DiscConfig {
                         ),
                     });
                 }
+            }
+        }
+        for (i, s) in self.discs.iter().enumerate() {
+            if let DiscSource::Random {
+                count,
+                min,
+                max,
+                radius,
+                ..
+            } = s
+            {
+                if *count == 0 || *count > 10_000_000 {
+                    e.push(ValueError {
+                        path: format!("dem.discs[{i}].count"),
+                        message: format!("must be between 1 and 1e7, got {count}"),
+                    });
+                }
+                region(
+                    &format!("dem.discs[{i}]"),
+                    &Region {
+                        min: *min,
+                        max: *max,
+                    },
+                    &mut e,
+                );
+                if !(radius.min > 0.0
+                    && radius.min <= radius.mode
+                    && radius.mode <= radius.max
+                    && radius.max.is_finite())
+                {
+                    e.push(ValueError {
+                        path: format!("dem.discs[{i}].radius"),
+                        message: format!(
+                            "needs 0 < min ≤ mode ≤ max, got min {}, mode {}, max {}",
+                            radius.min, radius.mode, radius.max
+                        ),
+                    });
+                }
+            }
+        }
+        let mut names = std::collections::BTreeSet::new();
+        for (i, w) in self.walls.iter().enumerate() {
+            let path = format!("dem.walls[{i}]");
+            if w.name.is_empty() || !names.insert(w.name.clone()) {
+                e.push(ValueError {
+                    path: format!("{path}.name"),
+                    message: format!("`{}` must be a name no other wall has", w.name),
+                });
+            }
+            let n = (w.normal[0].powi(2) + w.normal[1].powi(2)).sqrt();
+            if !(n.is_finite() && n > 0.0 && w.point.iter().all(|v| v.is_finite())) {
+                e.push(ValueError {
+                    path: format!("{path}.normal"),
+                    message: format!(
+                        "point and normal must be finite and the normal non-zero, got {:?}, {:?}",
+                        w.point, w.normal
+                    ),
+                });
+            }
+            match (w.velocity, w.pressure) {
+                (Some(_), Some(_)) => e.push(ValueError {
+                    path: format!("{path}.pressure"),
+                    message: "a wall moves at a velocity or to a pressure, not both".into(),
+                }),
+                (Some(v), None) if !v.iter().all(|c| c.is_finite()) => e.push(ValueError {
+                    path: format!("{path}.velocity"),
+                    message: "must be finite".into(),
+                }),
+                (None, Some(p)) => {
+                    positive(&format!("{path}.pressure"), p, &mut e);
+                    match (w.length, w.max_speed) {
+                        (Some(l), Some(v)) => {
+                            positive(&format!("{path}.length"), l, &mut e);
+                            positive(&format!("{path}.max_speed"), v, &mut e);
+                        }
+                        _ => e.push(ValueError {
+                            path: format!("{path}.pressure"),
+                            message: "a pressure-controlled wall needs `length` (m) and `max_speed` (m/s)".into(),
+                        }),
+                    }
+                }
+                _ => {}
+            }
+            if let Some(t) = w.stop {
+                non_negative(&format!("{path}.stop"), t, &mut e);
+            }
+        }
+        if let Some(name) = self.measure.as_ref().and_then(|m| m.plate.as_ref()) {
+            if !self.walls.iter().any(|w| &w.name == name) {
+                e.push(ValueError {
+                    path: "dem.measure.plate".into(),
+                    message: format!("names no wall: `{name}`"),
+                });
             }
         }
         for (i, l) in self.loads.iter().enumerate() {

@@ -33,7 +33,7 @@ pub type V2 = [f64; 2];
 pub enum DiscError {
     #[error("{path}: {message}")]
     Config { path: String, message: String },
-    #[error("{path}, line {line}: {message}")]
+    #[error("{path}{}: {message}", if *line > 0 { format!(", line {line}") } else { String::new() })]
     File {
         path: String,
         line: usize,
@@ -128,7 +128,8 @@ struct State {
     list_skin: f64,
     /// σ̃ of each disc from the last force evaluation: the next step's strains (lagged).
     stress: Vec<[f64; 3]>,
-    /// The work of the external loads at their points of application and of gravity (J).
+    /// The work of the external loads at their points of application, of gravity and of the
+    /// moving walls (J).
     work_external: f64,
     /// Per loaded disc: the displacement of its load point and its load at the last evaluation.
     load_point: Vec<V2>,
@@ -140,6 +141,87 @@ struct State {
     iterations_most: u32,
     /// Bonds broken so far.
     bonds_broken: u64,
+    /// Per wall: its displacement from `point`, its velocity, the force the discs exert on
+    /// it (last evaluation) and each disc's contact with it.
+    wall_shift: Vec<V2>,
+    wall_velocity: Vec<V2>,
+    wall_force: Vec<V2>,
+    wall_state: Vec<Vec<PairState>>,
+}
+
+/// A rigid plate (a straight wall), its unit normal pointing into the sample.
+#[derive(Debug, Clone)]
+struct Wall {
+    name: String,
+    point: V2,
+    normal: V2,
+    velocity: Option<V2>,
+    /// (pressure, length, max_speed) of a servo-controlled wall.
+    servo: Option<(f64, f64, f64)>,
+    stop: Option<f64>,
+}
+
+/// xorshift64*: the random source's positions and radii, the same on every machine.
+struct Rng(u64);
+
+impl Rng {
+    fn uniform(&mut self) -> f64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        (self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// `count` non-overlapping discs in the box by random sequential addition, largest first.
+fn random_discs(
+    count: usize,
+    min: V2,
+    max: V2,
+    radius: &config::Triangular,
+    seed: u64,
+) -> Result<Vec<(V2, f64)>, String> {
+    let mut rng = Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
+    let mut radii: Vec<f64> = (0..count).map(|_| radius.quantile(rng.uniform())).collect();
+    radii.sort_by(|a, b| b.total_cmp(a));
+    let cell = 2.0 * radius.max;
+    let key = |p: V2| ((p[0] / cell).floor() as i64, (p[1] / cell).floor() as i64);
+    let mut grid: std::collections::HashMap<(i64, i64), Vec<usize>> = Default::default();
+    let mut out: Vec<(V2, f64)> = Vec::with_capacity(count);
+    let area = (max[0] - min[0]) * (max[1] - min[1]);
+    for (k, &r) in radii.iter().enumerate() {
+        let mut placed = false;
+        if max[0] - min[0] > 2.0 * r && max[1] - min[1] > 2.0 * r {
+            for _ in 0..10_000 {
+                let p = [
+                    min[0] + r + rng.uniform() * (max[0] - min[0] - 2.0 * r),
+                    min[1] + r + rng.uniform() * (max[1] - min[1] - 2.0 * r),
+                ];
+                let (a, b) = key(p);
+                let free = (-1..=1).all(|da| {
+                    (-1..=1).all(|db| {
+                        grid.get(&(a + da, b + db)).is_none_or(|v| {
+                            v.iter().all(|&q| norm2(sub(out[q].0, p)) >= out[q].1 + r)
+                        })
+                    })
+                });
+                if free {
+                    grid.entry((a, b)).or_default().push(out.len());
+                    out.push((p, r));
+                    placed = true;
+                    break;
+                }
+            }
+        }
+        if !placed {
+            let solid: f64 = out.iter().map(|d| std::f64::consts::PI * d.1 * d.1).sum();
+            return Err(format!(
+                "placed only {k} of {count} discs before the box was full (solid fraction {:.3}; random placement jams near 0.55): enlarge the box",
+                solid / area
+            ));
+        }
+    }
+    Ok(out)
 }
 
 /// A load on a set of discs, ramped.
@@ -171,6 +253,8 @@ struct Measure {
     width0: f64,
     section: f64,
     fit: [f64; 2],
+    /// The wall whose force is the load.
+    plate: Option<usize>,
 }
 
 /// One pair's forces of an evaluation (not yet committed to [`PairState`]).
@@ -209,6 +293,11 @@ pub struct DiscEngine {
     strain: Vec<[f64; 3]>,
     stress_new: Vec<[f64; 3]>,
     eval: Vec<PairEval>,
+    walls: Vec<Wall>,
+    /// Active contacts of each wall in the last evaluation.
+    wall_contacts: Vec<usize>,
+    eval_walls: Vec<Vec<PairEval>>,
+    wall_force_new: Vec<V2>,
     /// Limits at t = 0 (see [`DiscEngine::limits`]).
     initial_limits: Vec<(String, f64)>,
     output: output::OutputState,
@@ -364,6 +453,20 @@ impl DiscEngine {
                         ));
                     }
                 }
+                DiscSource::Random {
+                    count,
+                    min,
+                    max,
+                    radius: dist,
+                    seed,
+                } => {
+                    let discs = random_discs(*count, *min, *max, dist, *seed)
+                        .map_err(|m| config_err(format!("dem.discs[{k}]"), m))?;
+                    for (p, r) in discs {
+                        x.push(p);
+                        radius.push(r);
+                    }
+                }
                 DiscSource::File { path } => {
                     let field = format!("dem.discs[{k}].path");
                     for (p, r) in read_disc_file(&base.join(path), &field)? {
@@ -414,6 +517,34 @@ impl DiscEngine {
                 }
             }
         }
+        let walls: Vec<Wall> = cfg
+            .walls
+            .iter()
+            .map(|w| {
+                let l = norm2(w.normal);
+                let normal = scale(w.normal, 1.0 / l);
+                let mut point = w.point;
+                if w.touch {
+                    // the largest overlap of any disc with the line, taken back
+                    let most = x
+                        .iter()
+                        .zip(&radius)
+                        .map(|(p, r)| r - dot2(sub(*p, point), normal))
+                        .fold(f64::NEG_INFINITY, f64::max);
+                    point = add(point, scale(normal, most));
+                }
+                Wall {
+                    name: w.name.clone(),
+                    point,
+                    normal,
+                    velocity: w.velocity,
+                    servo: w
+                        .pressure
+                        .map(|p| (p, w.length.unwrap_or(1.0), w.max_speed.unwrap_or(0.0))),
+                    stop: w.stop,
+                }
+            })
+            .collect();
         let mut loads = Vec::new();
         for (k, ld) in cfg.loads.iter().enumerate() {
             let discs = in_region(&x, &ld.region);
@@ -484,6 +615,10 @@ impl DiscEngine {
                     width0,
                     section: m.section,
                     fit: m.fit,
+                    plate: m
+                        .plate
+                        .as_ref()
+                        .and_then(|name| cfg.walls.iter().position(|w| &w.name == name)),
                 })
             }
         };
@@ -510,6 +645,13 @@ impl DiscEngine {
             iterations_last: 0,
             iterations_most: 0,
             bonds_broken: 0,
+            wall_shift: vec![[0.0; 2]; walls.len()],
+            wall_velocity: walls
+                .iter()
+                .map(|w| w.velocity.unwrap_or([0.0; 2]))
+                .collect(),
+            wall_force: vec![[0.0; 2]; walls.len()],
+            wall_state: vec![vec![PairState::default(); n]; walls.len()],
         };
         let mut e = DiscEngine {
             cfg: cfg.clone(),
@@ -534,6 +676,10 @@ impl DiscEngine {
             strain: vec![[0.0; 3]; n],
             stress_new: vec![[0.0; 3]; n],
             eval: Vec::new(),
+            eval_walls: vec![vec![PairEval::default(); n]; walls.len()],
+            wall_contacts: vec![0; walls.len()],
+            wall_force_new: vec![[0.0; 2]; walls.len()],
+            walls,
             initial_limits: Vec::new(),
             output: output::OutputState::default(),
         };
@@ -790,6 +936,70 @@ impl DiscEngine {
             };
             self.eval[k] = e;
         }
+        self.evaluate_walls();
+    }
+
+    /// The discs' contacts with the walls (the pairs' law, without bonds): the wall is the
+    /// first body, its normal n points to the disc, the disc's contact point is s = −R n.
+    fn evaluate_walls(&mut self) {
+        let c = &self.cfg.contact;
+        let dt = self.dt;
+        let s = &self.state;
+        for (w, wall) in self.walls.iter().enumerate() {
+            let n = wall.normal;
+            let t = [-n[1], n[0]];
+            let origin = add(wall.point, s.wall_shift[w]);
+            let vw = s.wall_velocity[w];
+            for p in 0..s.x.len() {
+                let r = self.radius[p];
+                let mut overlap = r - dot2(sub(s.x[p], origin), n);
+                if self.compliance.is_some() {
+                    overlap += dot2(strain_times(self.strain[p], scale(n, r)), n);
+                }
+                let mut e = PairEval {
+                    n,
+                    ..Default::default()
+                };
+                e.state.overlap = overlap;
+                if overlap <= 0.0 {
+                    self.eval_walls[w][p] = e;
+                    continue;
+                }
+                let old = s.wall_state[w][p];
+                let vr = sub(s.v[p], vw);
+                let v_n = dot2(vr, n);
+                let v_t = dot2(vr, t) - s.omega[p] * r;
+                let m = self.mass[p];
+                let c_n = c.normal_damping * 2.0 * (m * c.normal_stiffness).sqrt();
+                let c_t = c.tangential_damping * 2.0 * (m * c.tangential_stiffness).sqrt();
+                let fn_e = c.normal_stiffness * overlap;
+                let fn_total = (fn_e - c_n * v_n).max(0.0);
+                let mut ut = old.ut + v_t * dt;
+                let mut ft_e = -c.tangential_stiffness * ut;
+                let mut ft_total = ft_e - c_t * v_t;
+                let limit = c.friction * fn_e;
+                if ft_e.abs() > limit {
+                    ft_e = limit.copysign(ft_e);
+                    ut = if c.tangential_stiffness > 0.0 {
+                        -ft_e / c.tangential_stiffness
+                    } else {
+                        0.0
+                    };
+                    ft_total = ft_e;
+                }
+                e.state = PairState {
+                    bonded: false,
+                    active: true,
+                    ut,
+                    fn_elastic: fn_e,
+                    ft_elastic: ft_e,
+                    fn_total,
+                    ft_total,
+                    overlap,
+                };
+                self.eval_walls[w][p] = e;
+            }
+        }
     }
 
     /// Sums the evaluated contact forces, the external forces at `t` and the constraint
@@ -819,6 +1029,25 @@ impl DiscEngine {
             self.torque[j] -= self.radius[j] * e.state.ft_total;
             add_stress(&mut self.stress_new[i], scale(n_, self.radius[i]), fi);
             add_stress(&mut self.stress_new[j], scale(n_, -self.radius[j]), fj);
+        }
+        for w in 0..self.walls.len() {
+            let mut on_wall = [0.0; 2];
+            self.wall_contacts[w] = 0;
+            for p in 0..n {
+                let e = &self.eval_walls[w][p];
+                if !e.state.active {
+                    continue;
+                }
+                self.wall_contacts[w] += 1;
+                let nw = e.n;
+                let t = [-nw[1], nw[0]];
+                let f = add(scale(nw, e.state.fn_total), scale(t, e.state.ft_total));
+                self.force[p] = add(self.force[p], f);
+                self.torque[p] -= self.radius[p] * e.state.ft_total;
+                add_stress(&mut self.stress_new[p], scale(nw, -self.radius[p]), f);
+                on_wall = sub(on_wall, f);
+            }
+            self.wall_force_new[w] = on_wall;
         }
         let t = self.state.time;
         for p in 0..n {
@@ -873,10 +1102,17 @@ impl DiscEngine {
             }
             self.state.pair_state[k] = e.state;
         }
+        for (w, evals) in self.eval_walls.iter().enumerate() {
+            for (st, e) in self.state.wall_state[w].iter_mut().zip(evals) {
+                *st = e.state;
+            }
+        }
+        self.state.wall_force.copy_from_slice(&self.wall_force_new);
         std::mem::swap(&mut self.state.stress, &mut self.stress_new);
         self.account_work();
         self.record_measure();
         self.integrate();
+        self.move_walls();
         self.account_gravity();
         self.state.step += 1;
         self.state.time = self.state.step as f64 * self.dt;
@@ -1062,6 +1298,50 @@ impl DiscEngine {
         }
     }
 
+    /// Walls: a prescribed velocity until `stop`, or a servo to the target pressure (the
+    /// wall advances into the sample at up to `max_speed` while the discs' normal stress on it
+    /// is below the target, backs off while above).
+    fn move_walls(&mut self) {
+        let t = self.state.time;
+        for (w, wall) in self.walls.iter().enumerate() {
+            let stopped = wall.stop.is_some_and(|s| t >= s);
+            let v = if stopped {
+                [0.0; 2]
+            } else if let Some((pressure, length, speed)) = wall.servo {
+                // v = g (F_target − F) with g = 0.2/(Δt k_w), k_w = k_n × the wall's contacts:
+                // the force closes 20 % of its error per step (a larger gain against the
+                // stiff contacts oscillates), at most `max_speed` while approaching
+                let push = -dot2(self.state.wall_force[w], wall.normal);
+                let target = pressure * length * self.cfg.depth;
+                let k_w = self.cfg.contact.normal_stiffness * self.wall_contacts[w].max(1) as f64;
+                let v = (0.2 * (target - push) / (self.dt * k_w)).clamp(-speed, speed);
+                scale(wall.normal, v)
+            } else {
+                wall.velocity.unwrap_or([0.0; 2])
+            };
+            self.state.wall_velocity[w] = v;
+            self.state.wall_shift[w] = add(self.state.wall_shift[w], scale(v, self.dt));
+            // the work the wall does on the discs (they push it with wall_force)
+            self.state.work_external -= dot2(self.state.wall_force[w], scale(v, self.dt));
+        }
+    }
+
+    /// The normal force (N, pushing on it positive) and displacement along its normal (m) of
+    /// each wall.
+    pub fn wall_readings(&self) -> Vec<(String, f64, f64)> {
+        self.walls
+            .iter()
+            .enumerate()
+            .map(|(w, wall)| {
+                (
+                    wall.name.clone(),
+                    -dot2(self.state.wall_force[w], wall.normal),
+                    dot2(self.state.wall_shift[w], wall.normal),
+                )
+            })
+            .collect()
+    }
+
     /// Gravity's work over the step just integrated: Σ m g · Δt v^{n+½}.
     fn account_gravity(&mut self) {
         let g = self.cfg.gravity;
@@ -1082,11 +1362,15 @@ impl DiscEngine {
         let mean = |set: &[u32], k: usize| {
             set.iter().map(|&p| s.x[p as usize][k]).sum::<f64>() / set.len() as f64
         };
-        let load: f64 = m
-            .top
-            .iter()
-            .map(|&p| self.load_on(p as usize, s.time)[1])
-            .sum();
+        let load: f64 = match m.plate {
+            // the plate's push, compressive: a negative stress as from loads pressing down
+            Some(w) => dot2(s.wall_force[w], self.walls[w].normal),
+            None => m
+                .top
+                .iter()
+                .map(|&p| self.load_on(p as usize, s.time)[1])
+                .sum(),
+        };
         let sigma = load / (m.section * self.cfg.depth);
         let eyy = (mean(&m.top, 1) - mean(&m.bottom, 1)) / m.height0 - 1.0;
         let exx = (mean(&m.right, 0) - mean(&m.left, 0)) / m.width0 - 1.0;
@@ -1097,6 +1381,13 @@ impl DiscEngine {
         let Some([sigma, eyy, exx]) = self.measurement() else {
             return;
         };
+        if self.measure.as_ref().is_some_and(|m| m.plate.is_some()) {
+            // a plate test: the whole loading history, every csv_every steps
+            if self.state.step % self.cfg.output.csv_every == 0 {
+                self.state.samples.push([sigma, eyy, exx, sigma.abs()]);
+            }
+            return;
+        }
         // while any load still rises
         let t = self.state.time;
         if self.loads.iter().any(|l| l.ramp > 0.0 && t <= l.ramp) {
@@ -1109,12 +1400,26 @@ impl DiscEngine {
     /// `measure.fit` (M (4.19)–(4.22)).
     pub fn moduli(&self) -> Option<(f64, f64)> {
         let m = self.measure.as_ref()?;
-        let pts: Vec<&[f64; 4]> = self
-            .state
-            .samples
-            .iter()
-            .filter(|s| s[3] >= m.fit[0] && s[3] <= m.fit[1])
-            .collect();
+        let samples = &self.state.samples;
+        let pts: Vec<&[f64; 4]> = if m.plate.is_some() {
+            // fractions of the peak stress, on the loading branch up to the peak (M (4.19))
+            let (peak_at, peak) = samples.iter().enumerate().fold((0, 0.0f64), |a, (k, s)| {
+                if s[3] > a.1 {
+                    (k, s[3])
+                } else {
+                    a
+                }
+            });
+            samples[..=peak_at.min(samples.len().saturating_sub(1))]
+                .iter()
+                .filter(|s| s[3] >= m.fit[0] * peak && s[3] <= m.fit[1] * peak)
+                .collect()
+        } else {
+            samples
+                .iter()
+                .filter(|s| s[3] >= m.fit[0] && s[3] <= m.fit[1])
+                .collect()
+        };
         if pts.len() < 3 {
             return None;
         }
@@ -1309,11 +1614,37 @@ impl DiscEngine {
                 }
             })
             .collect();
-        let free: Vec<bool> = self.free.iter().flatten().copied().collect();
+        // the walls touching at t = 0: springs to a fixed ground body (index n)
+        let ground = self.num_discs();
+        let tol = 1e-6 * self.r_mean;
+        let mut wall_contacts = Vec::new();
+        for (w, wall) in self.walls.iter().enumerate() {
+            let origin = add(wall.point, s.wall_shift[w]);
+            for p in 0..ground {
+                let gap = dot2(sub(s.x[p], origin), wall.normal) - self.radius[p];
+                if gap <= tol {
+                    wall_contacts.push((p, wall.normal));
+                }
+            }
+        }
+        let mut springs = springs;
+        springs.extend(wall_contacts.iter().map(|&(p, nw)| ddem::Spring {
+            i: p,
+            j: ground,
+            n: scale(nw, -1.0),
+            si: scale(nw, -self.radius[p]),
+            sj: [0.0; 2],
+        }));
+        let mut free: Vec<bool> = self.free.iter().flatten().copied().collect();
+        free.extend([false; 3]);
+        let mut mass = self.mass.clone();
+        mass.push(1.0);
+        let mut inertia = self.inertia.clone();
+        inertia.push(1.0);
         let critical = ddem::critical_time_step(
             &springs,
-            &self.mass,
-            &self.inertia,
+            &mass,
+            &inertia,
             &free,
             c.normal_stiffness,
             c.tangential_stiffness,
@@ -1327,13 +1658,51 @@ impl DiscEngine {
         // viscous contact damping computed from the lagged velocities shortens it: with
         // c = ξ 2√(m_red k_n) ≈ β k_n the highest mode has ζ = β ν_max / 2 and
         // Δt_cr = (2/ν_max)(√(1 + ζ²) − ζ) (β the largest over the discs' pairs)
-        let m_red_max = self.mass.iter().copied().fold(0.0, f64::max) / 2.0;
-        let beta = c.normal_damping * 2.0 * (m_red_max / c.normal_stiffness).sqrt();
+        // (the highest modes live on the lightest discs: β of the lightest disc's contact with
+        // the heaviest, m/2 for equal discs)
+        let m_max = self.mass.iter().copied().fold(0.0, f64::max);
+        let m_min = self.mass.iter().copied().fold(f64::INFINITY, f64::min);
+        let m_red = m_min * m_max / (m_min + m_max);
+        let beta = c.normal_damping * 2.0 * (m_red / c.normal_stiffness).sqrt();
         let zeta = beta * (2.0 / critical) / 2.0;
         let damped = critical * ((1.0 + zeta * zeta).sqrt() - zeta);
         l.push(("critical_time_step".to_string(), damped));
         l.push(("critical_time_step_undamped".to_string(), critical));
         l.push(("contacts_initial".to_string(), touching.len() as f64));
+        // the mean coordination number and the Voigt (uniform strain) estimates of the 2-D
+        // moduli of standard DEM (Madan (4.15)–(4.18)) over the box the discs span
+        let n_discs = self.num_discs() as f64;
+        l.push((
+            "coordination_initial".to_string(),
+            2.0 * touching.len() as f64 / n_discs,
+        ));
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for (p, r) in s.x.iter().zip(&self.radius) {
+            for k in 0..2 {
+                lo[k] = lo[k].min(p[k] - r);
+                hi[k] = hi[k].max(p[k] + r);
+            }
+        }
+        let area = (hi[0] - lo[0]) * (hi[1] - lo[1]) * self.cfg.depth;
+        let r2 = self.radius.iter().map(|r| r * r).sum::<f64>() / n_discs;
+        let (kn, kt) = (c.normal_stiffness, c.tangential_stiffness);
+        let voigt = 4.0 * touching.len() as f64 * r2 * kn / area;
+        l.push((
+            "voigt_youngs_modulus".to_string(),
+            voigt * (kn + kt) / (3.0 * kn + kt),
+        ));
+        l.push((
+            "voigt_poisson_ratio".to_string(),
+            (kn - kt) / (3.0 * kn + kt),
+        ));
+        l.push((
+            "solid_fraction_initial".to_string(),
+            self.volume.iter().sum::<f64>() / area,
+        ));
+        l.push((
+            "wall_contacts_initial".to_string(),
+            wall_contacts.len() as f64,
+        ));
         if let (Some(d), Some(cfgd)) = (self.compliance, &self.cfg.ddem) {
             let ends: Vec<ddem::End> = touching
                 .iter()
@@ -1355,8 +1724,24 @@ impl DiscEngine {
                     ]
                 })
                 .collect();
-            let rho =
-                ddem::spectral_radius(touching.len(), &ends, &self.volume, &d, c.normal_stiffness);
+            let mut ends = ends;
+            ends.extend(
+                wall_contacts
+                    .iter()
+                    .enumerate()
+                    .map(|(k, &(p, nw))| ddem::End {
+                        contact: touching.len() + k,
+                        particle: p,
+                        arm: ddem::normal_arm(self.radius[p], nw),
+                    }),
+            );
+            let rho = ddem::spectral_radius(
+                touching.len() + wall_contacts.len(),
+                &ends,
+                &self.volume,
+                &d,
+                c.normal_stiffness,
+            );
             let ratio = c.normal_stiffness / (cfgd.youngs_modulus * self.cfg.depth);
             l.push(("ddem_spectral_radius".to_string(), rho));
             l.push(("ddem_kn_over_ep".to_string(), ratio));
@@ -1421,6 +1806,10 @@ impl DiscEngine {
             r.push(("strain_yy".to_string(), eyy));
             r.push(("strain_xx".to_string(), exx));
         }
+        for (name, force, shift) in self.wall_readings() {
+            r.push((format!("{name}.force"), force));
+            r.push((format!("{name}.displacement"), shift));
+        }
         if let Some((e, nu)) = self.moduli() {
             r.push(("youngs_modulus".to_string(), e));
             r.push(("poisson_ratio".to_string(), nu));
@@ -1448,6 +1837,7 @@ impl DiscEngine {
         if s.x.len() != n
             || s.pairs.len() != s.pair_state.len()
             || s.load_point.len() != self.loaded.len()
+            || s.wall_state.len() != self.walls.len()
         {
             return Err(DiscError::Snapshot(format!(
                 "the snapshot holds {} discs and {} loaded ones, this scene {n} and {}",
@@ -1472,6 +1862,9 @@ impl DiscEngine {
         output::write(self, dir)?;
         if self.output.last_vtk_step != Some(self.steps()) {
             output::write_vtk_now(self, dir)?;
+        }
+        if self.cfg.output.final_discs {
+            output::write_final_discs(self, dir)?;
         }
         Ok(())
     }

@@ -37,6 +37,16 @@ const COLUMNS: [&str; 17] = [
     "macro_stress_xy",
 ];
 
+/// The columns of `discs.csv`: [`COLUMNS`] and each wall's normal force and displacement.
+pub(super) fn columns(e: &DiscEngine) -> Vec<String> {
+    let mut c: Vec<String> = COLUMNS.iter().map(|s| s.to_string()).collect();
+    for (name, _, _) in e.wall_readings() {
+        c.push(format!("{name}.force"));
+        c.push(format!("{name}.displacement"));
+    }
+    c
+}
+
 /// One row of `discs.csv` for the current state (`dissipated` is W_ext − E_k − E_el, the
 /// energy the dampers and friction took, (2.55)).
 pub(super) fn row(e: &DiscEngine) -> Vec<f64> {
@@ -57,7 +67,7 @@ pub(super) fn row(e: &DiscEngine) -> Vec<f64> {
         .fold(0.0, f64::max);
     let m = e.measurement().unwrap_or([f64::NAN; 3]);
     let macro_ = e.macroscopic_stress();
-    vec![
+    let mut r = vec![
         e.time(),
         e.steps() as f64,
         ek,
@@ -75,7 +85,12 @@ pub(super) fn row(e: &DiscEngine) -> Vec<f64> {
         macro_[0],
         macro_[1],
         macro_[2],
-    ]
+    ];
+    for (_, force, shift) in e.wall_readings() {
+        r.push(force);
+        r.push(shift);
+    }
+    r
 }
 
 fn io(path: &Path, e: impl std::fmt::Display) -> DiscError {
@@ -94,7 +109,7 @@ pub(super) fn write(e: &mut DiscEngine, dir: &Path) -> Result<(), DiscError> {
         let new = !path.exists();
         let mut s = String::new();
         if new {
-            s.push_str(&COLUMNS.join(","));
+            s.push_str(&columns(e).join(","));
             s.push('\n');
         }
         for r in e.output.pending.drain(..) {
@@ -120,6 +135,15 @@ pub(super) fn write(e: &mut DiscEngine, dir: &Path) -> Result<(), DiscError> {
         write_vtk_now(e, dir)?;
     }
     Ok(())
+}
+
+/// `discs_final.csv`: x,y,radius of every disc now (the `file` source of a later scene).
+pub(super) fn write_final_discs(e: &DiscEngine, dir: &Path) -> Result<(), DiscError> {
+    let mut s = String::from("x,y,radius\n");
+    for (x, r) in e.state.x.iter().zip(&e.radius) {
+        let _ = writeln!(s, "{:.17e},{:.17e},{:.17e}", x[0], x[1], r);
+    }
+    put(&dir.join("discs_final.csv"), &s)
 }
 
 /// The VTK files of the current state (the last state of a run, or a due one).
