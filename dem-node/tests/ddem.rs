@@ -429,3 +429,47 @@ fn the_lagged_scheme_is_stable_below_and_unstable_above_rho_1() {
         assert!(err.to_string().contains("diverges"), "{err}");
     }
 }
+
+#[test]
+fn a_bond_holds_tension_until_its_strength_then_the_discs_part() {
+    // two touching discs bonded at t = 0 (2.21); the right one pulled by a force ramped to
+    // 2 kN over 0.2 ms, the bond's normal strength φ_n = 1 kN (2.38)
+    let text = r#"
+[dem]
+model = "discs-2d"
+time_step = 1e-8
+density = 2000.0
+[dem.contact]
+normal_stiffness = 7e10
+normal_damping = 0.5
+bond_gap = 1e-9
+bond_normal_strength = 1e3
+[[dem.discs]]
+kind = "lattice"
+arrangement = "square"
+radius = 0.001
+spacing = 0.002
+first = [0.0, 0.0]
+count = [2, 1]
+[[dem.constraints]]
+region = { min = [-0.0005, -0.001], max = [0.0005, 0.001] }
+fix = ["x", "y", "rotation"]
+[[dem.loads]]
+region = { min = [0.0015, -0.001], max = [0.0025, 0.001] }
+force = [2e3, 0.0]
+ramp = 2e-4
+"#;
+    let mut e = engine(text);
+    // at 0.4 of the ramp (800 N) the bond holds, in tension, the force the load pulls with
+    e.advance(8_000).unwrap();
+    let f = e.normal_force(0, 1).unwrap();
+    assert!((f + 800.0).abs() < 8.0, "{f}");
+    assert_eq!(result(&e, "bonds"), 1.0);
+    // past 1 kN it breaks, and the discs part
+    e.advance(12_000).unwrap();
+    assert_eq!(result(&e, "bonds_broken"), 1.0);
+    assert_eq!(result(&e, "bonds"), 0.0);
+    assert_eq!(result(&e, "contacts"), 0.0);
+    let x = e.positions();
+    assert!(x[1][0] - x[0][0] > 0.00201, "{:?}", x);
+}

@@ -396,6 +396,66 @@ fn in_region(x: &[V2], r: &Region) -> Vec<u32> {
         .collect()
 }
 
+/// The linear contact law of a touching or bonded pair (M (2.25)–(2.40)): the elastic normal
+/// force k_n h_c, the viscous c_n = ξ_n 2√(m_red k_n) (2.33)–(2.37), the incremental
+/// tangential spring u_t with its dashpot, bond breaking at φ_n in tension or φ_t in shear
+/// (2.38)–(2.39), then (unbonded) no tension and Coulomb sliding |f_t| ≤ μ f_n (2.40). `v_n`,
+/// `v_t`: the second body's contact point relative to the first's along n and t = ẑ × n.
+/// Returns the new state (inactive for an unbonded pair apart) and whether a bond broke.
+fn contact_law(
+    c: &config::ContactConfig,
+    dt: f64,
+    m_red: f64,
+    overlap: f64,
+    v_n: f64,
+    v_t: f64,
+    old: &PairState,
+) -> (PairState, bool) {
+    let c_n = c.normal_damping * 2.0 * (m_red * c.normal_stiffness).sqrt();
+    let c_t = c.tangential_damping * 2.0 * (m_red * c.tangential_stiffness).sqrt();
+    let fn_e = c.normal_stiffness * overlap;
+    let mut fn_total = fn_e - c_n * v_n;
+    let mut ut = old.ut + v_t * dt;
+    let mut ft_e = -c.tangential_stiffness * ut;
+    let mut ft_total = ft_e - c_t * v_t;
+    let broke = old.bonded
+        && ((fn_e < 0.0 && -fn_e >= c.bond_normal_strength)
+            || ft_e.abs() >= c.bond_tangential_strength);
+    let bonded = old.bonded && !broke;
+    if !bonded {
+        if overlap <= 0.0 {
+            let apart = PairState {
+                overlap,
+                ..Default::default()
+            };
+            return (apart, broke);
+        }
+        fn_total = fn_total.max(0.0);
+        // Coulomb: the spring slides back to the limit
+        let limit = c.friction * fn_e.max(0.0);
+        if ft_e.abs() > limit {
+            ft_e = limit.copysign(ft_e);
+            ut = if c.tangential_stiffness > 0.0 {
+                -ft_e / c.tangential_stiffness
+            } else {
+                0.0
+            };
+            ft_total = ft_e;
+        }
+    }
+    let state = PairState {
+        bonded,
+        active: true,
+        ut,
+        fn_elastic: fn_e,
+        ft_elastic: ft_e,
+        fn_total,
+        ft_total,
+        overlap,
+    };
+    (state, broke)
+}
+
 impl DiscEngine {
     /// Builds the engine: the discs of every source, bonds at t = 0, loads, constraints, the
     /// neighbour list, and the limits of the initial packing.
@@ -885,55 +945,9 @@ impl DiscEngine {
             let v_n = dot2(vr, n);
             let v_t = dot2(vr, t) - s.omega[j] * rj - s.omega[i] * ri;
             let (mi, mj) = (self.mass[i], self.mass[j]);
-            let m_red = mi * mj / (mi + mj);
-            // c = ξ c_cr, c_cr = 2 √(m_i m_j k / (m_i + m_j)) (2.35)–(2.37)
-            let c_n = c.normal_damping * 2.0 * (m_red * c.normal_stiffness).sqrt();
-            let c_t = c.tangential_damping * 2.0 * (m_red * c.tangential_stiffness).sqrt();
-            let fn_e = c.normal_stiffness * overlap;
-            let mut fn_total = fn_e - c_n * v_n;
-            let mut ut = old.ut + v_t * dt;
-            let mut ft_e = -c.tangential_stiffness * ut;
-            let mut ft_total = ft_e - c_t * v_t;
-            let mut bonded = old.bonded;
-            if bonded
-                && ((fn_e < 0.0 && -fn_e >= c.bond_normal_strength)
-                    || ft_e.abs() >= c.bond_tangential_strength)
-            {
-                // (2.38)–(2.39)
-                bonded = false;
-                e.broke = true;
-            }
-            if !bonded {
-                if overlap <= 0.0 {
-                    self.eval[k] = PairEval {
-                        broke: e.broke,
-                        ..e
-                    };
-                    continue;
-                }
-                fn_total = fn_total.max(0.0);
-                // Coulomb (2.40): |f_t| ≤ μ f_n, the spring slides back to the limit
-                let limit = c.friction * fn_e.max(0.0);
-                if ft_e.abs() > limit {
-                    ft_e = limit.copysign(ft_e);
-                    ut = if c.tangential_stiffness > 0.0 {
-                        -ft_e / c.tangential_stiffness
-                    } else {
-                        0.0
-                    };
-                    ft_total = ft_e;
-                }
-            }
-            e.state = PairState {
-                bonded,
-                active: true,
-                ut,
-                fn_elastic: fn_e,
-                ft_elastic: ft_e,
-                fn_total,
-                ft_total,
-                overlap,
-            };
+            let (state, broke) = contact_law(c, dt, mi * mj / (mi + mj), overlap, v_n, v_t, &old);
+            e.state = state;
+            e.broke = broke;
             self.eval[k] = e;
         }
         self.evaluate_walls();
@@ -969,34 +983,7 @@ impl DiscEngine {
                 let vr = sub(s.v[p], vw);
                 let v_n = dot2(vr, n);
                 let v_t = dot2(vr, t) - s.omega[p] * r;
-                let m = self.mass[p];
-                let c_n = c.normal_damping * 2.0 * (m * c.normal_stiffness).sqrt();
-                let c_t = c.tangential_damping * 2.0 * (m * c.tangential_stiffness).sqrt();
-                let fn_e = c.normal_stiffness * overlap;
-                let fn_total = (fn_e - c_n * v_n).max(0.0);
-                let mut ut = old.ut + v_t * dt;
-                let mut ft_e = -c.tangential_stiffness * ut;
-                let mut ft_total = ft_e - c_t * v_t;
-                let limit = c.friction * fn_e;
-                if ft_e.abs() > limit {
-                    ft_e = limit.copysign(ft_e);
-                    ut = if c.tangential_stiffness > 0.0 {
-                        -ft_e / c.tangential_stiffness
-                    } else {
-                        0.0
-                    };
-                    ft_total = ft_e;
-                }
-                e.state = PairState {
-                    bonded: false,
-                    active: true,
-                    ut,
-                    fn_elastic: fn_e,
-                    ft_elastic: ft_e,
-                    fn_total,
-                    ft_total,
-                    overlap,
-                };
+                e.state = contact_law(c, dt, self.mass[p], overlap, v_n, v_t, &old).0;
                 self.eval_walls[w][p] = e;
             }
         }
