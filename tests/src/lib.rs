@@ -125,6 +125,16 @@ pub fn run_scene(dir: &Path, name: &str, text: &str) -> serde_json::Value {
     summary(&out)
 }
 
+/// The window of the newest checkpoint of a run's output folder (0 before the first): it
+/// counts once `checkpoints/latest.json` points at it (that file moves last).
+pub fn latest_checkpoint_window(out: &Path) -> u64 {
+    std::fs::read_to_string(out.join("checkpoints/latest.json"))
+        .ok()
+        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+        .and_then(|v| v["window"].as_u64())
+        .unwrap_or(0)
+}
+
 /// Arguments of the running process whose command line contains all of `needles`.
 pub fn process_args(needles: &[&str]) -> Option<(u32, Vec<String>)> {
     for entry in std::fs::read_dir("/proc").ok()?.flatten() {

@@ -127,13 +127,7 @@ fn a_killed_disc_run_resumes_bit_for_bit() {
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let latest_window = || -> u64 {
-        std::fs::read_to_string(broken.join("checkpoints/latest.json"))
-            .ok()
-            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
-            .and_then(|v| v["window"].as_u64())
-            .unwrap_or(0)
-    };
+    let latest_window = || cosim_tests::latest_checkpoint_window(&broken);
     let t0 = Instant::now();
     while latest_window() < 19 {
         assert!(t0.elapsed() < Duration::from_secs(60), "no checkpoint");

@@ -69,14 +69,7 @@ fn killed_and_resumed_equals_uninterrupted_with(schedule: &str, tables: &str, vi
         .spawn()
         .unwrap();
     let t0 = Instant::now();
-    // the checkpoint after window 49 counts once `latest.json` points at it (it moves last)
-    let latest_window = || -> u64 {
-        std::fs::read_to_string(broken.join("checkpoints/latest.json"))
-            .ok()
-            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
-            .and_then(|v| v["window"].as_u64())
-            .unwrap_or(0)
-    };
+    let latest_window = || cosim_tests::latest_checkpoint_window(&broken);
     while latest_window() < 49 {
         assert!(
             t0.elapsed() < Duration::from_secs(60),
