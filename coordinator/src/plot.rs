@@ -446,7 +446,8 @@ pub fn run_plots(out_dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
 /// The plots of a 2-D disc run's `discs.csv` (Madan's energies (2.55)–(2.61) and the uniaxial
 /// measurement): `energies.png` (W_ext, E_k, E_el,c, E_el,p and the dissipated rest over
 /// time), `strains.png` (the sample's ε_yy, ε_xx and the largest particle strain) and, with a
-/// measurement, `stress_strain.png` (σ_yy against ε_yy).
+/// measurement, `stress_strain.png` (σ_yy against ε_yy) and `shear_stress_strain.png` (σ_xy
+/// against ε_xy).
 fn disc_plots(
     out_dir: &Path,
     csv: &Path,
@@ -461,7 +462,9 @@ fn disc_plots(
         .to_string();
     let cols = |names: &[&str]| names.iter().map(|n| n.to_string()).collect::<Vec<_>>();
     let mut written = Vec::new();
-    let plots: [(&str, Option<&str>, Vec<String>, &str, &str); 3] = [
+    // (file, x column or time, y columns, x label, y label)
+    type Plot<'a> = (&'a str, Option<&'a str>, Vec<String>, &'a str, &'a str);
+    let plots: [Plot; 4] = [
         (
             "energies",
             None,
@@ -478,7 +481,7 @@ fn disc_plots(
         (
             "strains",
             None,
-            cols(&["strain_yy", "strain_xx", "strain_max"]),
+            cols(&["strain_yy", "strain_xx", "strain_xy", "strain_max"]),
             "time (s)",
             "strain",
         ),
@@ -488,6 +491,13 @@ fn disc_plots(
             cols(&["stress_yy"]),
             "sample strain ε_yy",
             "σ_yy (Pa)",
+        ),
+        (
+            "shear_stress_strain",
+            Some("strain_xy"),
+            cols(&["stress_xy"]),
+            "sample strain ε_xy",
+            "σ_xy (Pa)",
         ),
     ];
     for (name, x, columns, xlabel, ylabel) in plots {

@@ -96,6 +96,11 @@ pub struct ContactConfig {
     /// Bonds: pairs whose gap at t = 0 is at most this (m) are bonded (2.21); absent: none.
     #[serde(default)]
     pub bond_gap: Option<f64>,
+    /// A bond's spring is at rest at its t = 0 gap (the gap or overlap counts from there; the
+    /// bonded sample starts free of stress, and neighbours up to `bond_gap` apart bond without
+    /// pulling together). Default false: the thesis' (2.25), f_ne = k_n g from g = 0.
+    #[serde(default)]
+    pub bond_at_rest: bool,
     /// φ_n: a bond breaks under this tension (N), default never.
     #[serde(default = "never")]
     pub bond_normal_strength: f64,
@@ -263,17 +268,78 @@ pub struct PlateConfig {
     pub touch: bool,
 }
 
-/// Discs whose centres lie in a box.
-#[derive(Debug, Clone, Copy, Deserialize)]
+/// An edge of the box the discs span.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Edge {
+    Bottom,
+    Top,
+    Left,
+    Right,
+}
+
+/// A set of discs: those whose centres lie in the box `min`–`max` (m), or those reaching
+/// within `width` (m) of an `edge` of the box the discs span (bottom, top, left, right) — the
+/// boundary discs of a packing read from a file.
+#[derive(Debug, Clone, Copy, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Region {
-    pub min: [f64; 2],
-    pub max: [f64; 2],
+    #[serde(default)]
+    pub min: Option<[f64; 2]>,
+    #[serde(default)]
+    pub max: Option<[f64; 2]>,
+    #[serde(default)]
+    pub edge: Option<Edge>,
+    #[serde(default)]
+    pub width: Option<f64>,
 }
 
 impl Region {
-    pub fn contains(&self, x: [f64; 2]) -> bool {
-        (0..2).all(|k| x[k] >= self.min[k] && x[k] <= self.max[k])
+    /// The box `min`–`max`.
+    pub fn boxed(min: [f64; 2], max: [f64; 2]) -> Self {
+        Region {
+            min: Some(min),
+            max: Some(max),
+            ..Region::default()
+        }
+    }
+
+    /// The discs (centres `x`, radii `r`) of the region, in index order.
+    pub fn select(&self, x: &[[f64; 2]], r: &[f64]) -> Vec<u32> {
+        if let (Some(edge), Some(width)) = (self.edge, self.width) {
+            let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+            for (p, rp) in x.iter().zip(r) {
+                for k in 0..2 {
+                    lo[k] = lo[k].min(p[k] - rp);
+                    hi[k] = hi[k].max(p[k] + rp);
+                }
+            }
+            return (0..x.len() as u32)
+                .filter(|&i| {
+                    let (p, rp) = (x[i as usize], r[i as usize]);
+                    match edge {
+                        Edge::Bottom => p[1] - rp <= lo[1] + width,
+                        Edge::Top => p[1] + rp >= hi[1] - width,
+                        Edge::Left => p[0] - rp <= lo[0] + width,
+                        Edge::Right => p[0] + rp >= hi[0] - width,
+                    }
+                })
+                .collect();
+        }
+        let (min, max) = (self.min.unwrap_or([0.0; 2]), self.max.unwrap_or([0.0; 2]));
+        (0..x.len() as u32)
+            .filter(|&i| (0..2).all(|k| x[i as usize][k] >= min[k] && x[i as usize][k] <= max[k]))
+            .collect()
+    }
+}
+
+impl std::fmt::Display for Region {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match (self.edge, self.width, self.min, self.max) {
+            (Some(e), Some(w), _, _) => write!(f, "edge {e:?}, width {w:e} m"),
+            (_, _, Some(a), Some(b)) => write!(f, "min {a:?}, max {b:?}"),
+            _ => write!(f, "(incomplete)"),
+        }
     }
 }
 
@@ -299,31 +365,84 @@ pub enum Dof {
     Rotation,
 }
 
-/// `[[dem.constraints]]`: the discs of the region keep their `fix`ed coordinates.
+/// `[[dem.constraints]]`: the discs of the region keep their `fix`ed coordinates, or move them
+/// at a prescribed velocity: `velocity` (m/s) plus `gradient` L (1/s) times the disc's initial
+/// position from `origin`, v = velocity + L (x₀ − origin) (Madan §4.5's pure shear: the
+/// boundary discs at v_x = γ̇ (y₀ − y_bottom), v_y = 0).
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ConstraintConfig {
     pub region: Region,
     pub fix: Vec<Dof>,
+    #[serde(default)]
+    pub velocity: [f64; 2],
+    #[serde(default)]
+    pub gradient: [[f64; 2]; 2],
+    #[serde(default)]
+    pub origin: [f64; 2],
 }
 
-/// `[dem.measure]`: uniaxial compression along y (Madan §4.4, (4.19)–(4.22)). The strain is
-/// the change of the distance between the mean centres of `top` and `bottom` (of `left` and
-/// `right`) over its initial value; the stress the load on `top` over `section` × depth.
+/// Which test `[dem.measure]` evaluates (Madan §4.4–4.5).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum TestKind {
+    /// Uniaxial compression along y: E = Δσ_yy/Δε_yy (4.19), ν = −Δε_xx/Δε_yy (4.22), (4.31).
+    #[default]
+    Uniaxial,
+    /// Isotropic biaxial compression: K = Δσ_h/Δε_vol, σ_h = (σ_xx + σ_yy)/2, ε_vol = ε_xx +
+    /// ε_yy (4.33)–(4.35).
+    Biaxial,
+    /// Pure shear: G = Δσ_xy/(2Δε_xy) (4.36).
+    Shear,
+}
+
+/// How `[dem.measure]` takes the sample's stress and strain.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum StrainKind {
+    /// The distances between the mean centres of `top` and `bottom` (`left` and `right`), the
+    /// stress the load over `section` × depth (the SC sample, (4.19)–(4.22)).
+    #[default]
+    Centres,
+    /// Bagi's strain over the Delaunay triangulation of the initial centres (4.4)–(4.6) and
+    /// the macroscopic stress (4.1)–(4.3) over the box the discs span (the irregular sample).
+    Bagi,
+}
+
+/// `[dem.measure]`: the elastic moduli of a compression or shear test (Madan §4.4–4.5). With
+/// `strain = "centres"` the strain is the change of the distance between the mean centres of
+/// `top` and `bottom` (of `left` and `right`) over its initial value and the stress the load
+/// on `top` over `section` × depth; with `strain = "bagi"` both are the sample's averages.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct UniaxialConfig {
-    pub top: Region,
-    pub bottom: Region,
-    pub left: Region,
-    pub right: Region,
-    /// A (m): the sample's width the stress is taken over.
-    pub section: f64,
+    #[serde(default)]
+    pub test: TestKind,
+    #[serde(default)]
+    pub strain: StrainKind,
+    #[serde(default)]
+    pub top: Option<Region>,
+    #[serde(default)]
+    pub bottom: Option<Region>,
+    #[serde(default)]
+    pub left: Option<Region>,
+    #[serde(default)]
+    pub right: Option<Region>,
+    /// A (m): the sample's width the stress is taken over (`strain = "centres"`).
+    #[serde(default)]
+    pub section: Option<f64>,
     /// The plate whose normal force is the load (default: the loads on the `top` discs); the
     /// fit then uses fractions of the peak stress of the loading branch.
     #[serde(default)]
     pub plate: Option<String>,
-    /// The load fractions between which E and ν are fitted (default [0.4, 0.8]).
+    /// `strain = "bagi"`: average over the triangles whose corners lie at least this far (m)
+    /// inside the box the discs span at t = 0 (default 0: all, the thesis'): a free side's
+    /// loosely bonded outermost discs move more than the sample does.
+    #[serde(default)]
+    pub margin: f64,
+    /// The load fractions between which the moduli are fitted (default [0.4, 0.8]): of the
+    /// ramped loads, or of the peak stress (|σ_yy|, |σ_h| or |σ_xy|) of the loading branch
+    /// when a plate or prescribed motion drives the test.
     #[serde(default = "default_fit")]
     pub fit: [f64; 2],
 }
@@ -388,14 +507,20 @@ fn non_negative(path: &str, v: f64, out: &mut Vec<ValueError>) {
 }
 
 fn region(path: &str, r: &Region, out: &mut Vec<ValueError>) {
-    if !(0..2).all(|k| r.min[k].is_finite() && r.max[k].is_finite() && r.min[k] <= r.max[k]) {
-        out.push(ValueError {
+    match (r.min, r.max, r.edge, r.width) {
+        (Some(min), Some(max), None, None) => {
+            if !(0..2).all(|k| min[k].is_finite() && max[k].is_finite() && min[k] <= max[k]) {
+                out.push(ValueError {
+                    path: path.into(),
+                    message: format!("min {min:?} must be finite and not above max {max:?}"),
+                });
+            }
+        }
+        (None, None, Some(_), Some(w)) => positive(&format!("{path}.width"), w, out),
+        _ => out.push(ValueError {
             path: path.into(),
-            message: format!(
-                "min {:?} must be finite and not above max {:?}",
-                r.min, r.max
-            ),
-        });
+            message: "is a box of centres (`min` and `max`, m) or a band along an edge of the sample (`edge` = bottom/top/left/right and `width`, m), not a mix".into(),
+        }),
     }
 }
 
@@ -521,10 +646,7 @@ impl DiscConfig {
                 }
                 region(
                     &format!("dem.discs[{i}]"),
-                    &Region {
-                        min: *min,
-                        max: *max,
-                    },
+                    &Region::boxed(*min, *max),
                     &mut e,
                 );
                 if !(radius.min > 0.0
@@ -616,16 +738,46 @@ impl DiscConfig {
                 });
             }
         }
-        if let Some(m) = &self.measure {
-            for (k, r) in [
-                ("top", &m.top),
-                ("bottom", &m.bottom),
-                ("left", &m.left),
-                ("right", &m.right),
-            ] {
-                region(&format!("dem.measure.{k}"), r, &mut e);
+        for (i, c) in self.constraints.iter().enumerate() {
+            let finite = c.velocity.iter().chain(c.gradient.iter().flatten()).chain(&c.origin);
+            if !finite.into_iter().all(|v| v.is_finite()) {
+                e.push(ValueError {
+                    path: format!("dem.constraints[{i}].velocity"),
+                    message: "velocity, gradient and origin must be finite".into(),
+                });
             }
-            positive("dem.measure.section", m.section, &mut e);
+        }
+        if let Some(m) = &self.measure {
+            if m.strain == StrainKind::Centres {
+                for (k, r) in [
+                    ("top", &m.top),
+                    ("bottom", &m.bottom),
+                    ("left", &m.left),
+                    ("right", &m.right),
+                ] {
+                    match r {
+                        Some(r) => region(&format!("dem.measure.{k}"), r, &mut e),
+                        None => e.push(ValueError {
+                            path: format!("dem.measure.{k}"),
+                            message: "the centres' strain needs the regions top, bottom, left and right (or strain = \"bagi\")".into(),
+                        }),
+                    }
+                }
+                match m.section {
+                    Some(a) => positive("dem.measure.section", a, &mut e),
+                    None => e.push(ValueError {
+                        path: "dem.measure.section".into(),
+                        message: "the centres' strain needs the sample's width `section` (m)".into(),
+                    }),
+                }
+                if m.test != TestKind::Uniaxial {
+                    e.push(ValueError {
+                        path: "dem.measure.test".into(),
+                        message: "biaxial and shear tests take Bagi's strain: set strain = \"bagi\"".into(),
+                    });
+                }
+            }
+            non_negative("dem.measure.margin", m.margin, &mut e);
             if !(0.0 <= m.fit[0] && m.fit[0] < m.fit[1] && m.fit[1] <= 1.0) {
                 e.push(ValueError {
                     path: "dem.measure.fit".into(),

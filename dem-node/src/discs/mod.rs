@@ -15,11 +15,13 @@
 //! stress vectors ε̃ = [ε_xx, ε_yy, 2ε_xy], σ̃ = [σ_xx, σ_yy, σ_xy]. The normal n points from the
 //! first disc i of a pair to the second j, t = ẑ × n; the force on j is f_n n + f_t t.
 
+mod bagi;
 pub mod config;
 pub mod ddem;
 mod output;
 
-use config::{DiscConfig, DiscSource, Dof, Model, Region, Scheme};
+pub use bagi::BagiMesh;
+use config::{DiscConfig, DiscSource, Dof, Model, Region, Scheme, StrainKind, TestKind};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -109,6 +111,8 @@ pub struct PairState {
     pub ft_total: f64,
     /// The overlap of the deformed discs h_c (m) (2.53), positive in contact.
     pub overlap: f64,
+    /// A bond's rest overlap (m): its t = 0 overlap with `bond_at_rest`, else 0.
+    pub rest: f64,
 }
 
 /// The mutable state: all a snapshot holds, so a resumed run continues bit for bit.
@@ -134,8 +138,9 @@ struct State {
     /// Per loaded disc: the displacement of its load point and its load at the last evaluation.
     load_point: Vec<V2>,
     load_previous: Vec<V2>,
-    /// The uniaxial measurement while the load rises: (σ_yy, ε_yy, ε_xx, load fraction).
-    samples: Vec<[f64; 4]>,
+    /// The measurement while the load rises: (σ_xx, σ_yy, σ_xy, ε_xx, ε_yy, ε_xy, and the load
+    /// fraction or the test's stress magnitude).
+    samples: Vec<[f64; 7]>,
     /// Fixed-point iterations of the last step and the most of any step.
     iterations_last: u32,
     iterations_most: u32,
@@ -242,9 +247,11 @@ impl Load {
     }
 }
 
-/// The disc sets of the uniaxial measurement and the initial distances.
+/// The disc sets of the measurement and the initial distances, or Bagi's triangulation.
 #[derive(Debug, Clone)]
 struct Measure {
+    test: TestKind,
+    bagi: Option<BagiMesh>,
     top: Vec<u32>,
     bottom: Vec<u32>,
     left: Vec<u32>,
@@ -255,6 +262,9 @@ struct Measure {
     fit: [f64; 2],
     /// The wall whose force is the load.
     plate: Option<usize>,
+    /// Driven by a plate or by prescribed motion (the fit takes fractions of the peak stress),
+    /// not by ramped loads (fractions of the load).
+    driven: bool,
 }
 
 /// One pair's forces of an evaluation (not yet committed to [`PairState`]).
@@ -277,6 +287,8 @@ pub struct DiscEngine {
     x0: Vec<V2>,
     /// Free coordinates (x, y, θ) of each disc.
     free: Vec<[bool; 3]>,
+    /// The velocity of each fixed coordinate (zero unless a constraint prescribes one).
+    prescribed: Vec<V2>,
     loads: Vec<Load>,
     /// Discs with a load, sorted, and the index of each disc among them (u32::MAX: none).
     loaded: Vec<u32>,
@@ -390,10 +402,8 @@ fn read_disc_file(path: &Path, field: &str) -> Result<Vec<(V2, f64)>, DiscError>
     Ok(out)
 }
 
-fn in_region(x: &[V2], r: &Region) -> Vec<u32> {
-    (0..x.len() as u32)
-        .filter(|&i| r.contains(x[i as usize]))
-        .collect()
+fn in_region(x: &[V2], radius: &[f64], r: &Region) -> Vec<u32> {
+    r.select(x, radius)
 }
 
 /// The linear contact law of a touching or bonded pair (M (2.25)–(2.40)): the elastic normal
@@ -413,7 +423,9 @@ fn contact_law(
 ) -> (PairState, bool) {
     let c_n = c.normal_damping * 2.0 * (m_red * c.normal_stiffness).sqrt();
     let c_t = c.tangential_damping * 2.0 * (m_red * c.tangential_stiffness).sqrt();
-    let fn_e = c.normal_stiffness * overlap;
+    // a bond's spring counts from its rest overlap
+    let rest = if old.bonded { old.rest } else { 0.0 };
+    let mut fn_e = c.normal_stiffness * (overlap - rest);
     let mut fn_total = fn_e - c_n * v_n;
     let mut ut = old.ut + v_t * dt;
     let mut ft_e = -c.tangential_stiffness * ut;
@@ -422,6 +434,11 @@ fn contact_law(
         && ((fn_e < 0.0 && -fn_e >= c.bond_normal_strength)
             || ft_e.abs() >= c.bond_tangential_strength);
     let bonded = old.bonded && !broke;
+    if broke && rest != 0.0 {
+        // unbonded from now: the discs' own overlap
+        fn_e = c.normal_stiffness * overlap;
+        fn_total = fn_e - c_n * v_n;
+    }
     if !bonded {
         if overlap <= 0.0 {
             let apart = PairState {
@@ -452,6 +469,7 @@ fn contact_law(
         fn_total,
         ft_total,
         overlap,
+        rest: if bonded { rest } else { 0.0 },
     };
     (state, broke)
 }
@@ -555,25 +573,28 @@ impl DiscEngine {
         let r_mean = radius.iter().sum::<f64>() / n as f64;
         let r_max = radius.iter().copied().fold(0.0, f64::max);
         let mut free = vec![[true; 3]; n];
+        let mut prescribed = vec![[0.0; 2]; n];
         for (k, c) in cfg.constraints.iter().enumerate() {
-            let discs = in_region(&x, &c.region);
+            let discs = in_region(&x, &radius, &c.region);
             if discs.is_empty() {
                 return Err(config_err(
                     format!("dem.constraints[{k}].region"),
-                    format!(
-                        "holds no disc centre (min {:?}, max {:?})",
-                        c.region.min, c.region.max
-                    ),
+                    format!("holds no disc ({})", c.region),
                 ));
             }
             for &p in &discs {
-                for d in &c.fix {
-                    let k = match d {
+                let p = p as usize;
+                let d = sub(x[p], c.origin);
+                for dof in &c.fix {
+                    let k = match dof {
                         Dof::X => 0,
                         Dof::Y => 1,
                         Dof::Rotation => 2,
                     };
-                    free[p as usize][k] = false;
+                    free[p][k] = false;
+                    if k < 2 {
+                        prescribed[p][k] = c.velocity[k] + dot2(c.gradient[k], d);
+                    }
                 }
             }
         }
@@ -585,13 +606,14 @@ impl DiscEngine {
                 let normal = scale(w.normal, 1.0 / l);
                 let mut point = w.point;
                 if w.touch {
-                    // the largest overlap of any disc with the line, taken back
+                    // the largest overlap of any disc with the line (negative: the gap),
+                    // taken back: the line moves by −most along its normal
                     let most = x
                         .iter()
                         .zip(&radius)
                         .map(|(p, r)| r - dot2(sub(*p, point), normal))
                         .fold(f64::NEG_INFINITY, f64::max);
-                    point = add(point, scale(normal, most));
+                    point = add(point, scale(normal, -most));
                 }
                 Wall {
                     name: w.name.clone(),
@@ -607,14 +629,11 @@ impl DiscEngine {
             .collect();
         let mut loads = Vec::new();
         for (k, ld) in cfg.loads.iter().enumerate() {
-            let discs = in_region(&x, &ld.region);
+            let discs = in_region(&x, &radius, &ld.region);
             if discs.is_empty() {
                 return Err(config_err(
                     format!("dem.loads[{k}].region"),
-                    format!(
-                        "holds no disc centre (min {:?}, max {:?})",
-                        ld.region.min, ld.region.max
-                    ),
+                    format!("holds no disc ({})", ld.region),
                 ));
             }
             loads.push(Load {
@@ -634,51 +653,94 @@ impl DiscEngine {
             None => None,
             Some(m) => {
                 let mut sets = Vec::new();
-                for (name, r) in [
-                    ("top", &m.top),
-                    ("bottom", &m.bottom),
-                    ("left", &m.left),
-                    ("right", &m.right),
-                ] {
-                    let s = in_region(&x, r);
-                    if s.is_empty() {
+                let mut height0 = 0.0;
+                let mut width0 = 0.0;
+                if m.strain == StrainKind::Centres {
+                    for (name, r) in [
+                        ("top", &m.top),
+                        ("bottom", &m.bottom),
+                        ("left", &m.left),
+                        ("right", &m.right),
+                    ] {
+                        let r = r.unwrap_or_default();
+                        let s = in_region(&x, &radius, &r);
+                        if s.is_empty() {
+                            return Err(config_err(
+                                format!("dem.measure.{name}"),
+                                format!("holds no disc ({r})"),
+                            ));
+                        }
+                        sets.push(s);
+                    }
+                    let mean = |s: &[u32], k: usize| {
+                        s.iter().map(|&p| x[p as usize][k]).sum::<f64>() / s.len() as f64
+                    };
+                    height0 = mean(&sets[0], 1) - mean(&sets[1], 1);
+                    width0 = mean(&sets[3], 0) - mean(&sets[2], 0);
+                    if height0 <= 0.0 || width0 <= 0.0 {
                         return Err(config_err(
-                            format!("dem.measure.{name}"),
-                            format!("holds no disc centre (min {:?}, max {:?})", r.min, r.max),
+                            "dem.measure",
+                            format!(
+                                "the top discs must lie above the bottom ones and the right ones right of the left ones (mean distances {height0:e} m, {width0:e} m)"
+                            ),
                         ));
                     }
-                    sets.push(s);
                 }
-                let mean = |s: &[u32], k: usize| {
-                    s.iter().map(|&p| x[p as usize][k]).sum::<f64>() / s.len() as f64
+                let bagi = if m.strain == StrainKind::Bagi {
+                    let mut mesh = BagiMesh::new(&x).ok_or_else(|| {
+                        config_err(
+                            "dem.measure.strain",
+                            "Bagi's strain needs a triangulation: at least three disc centres not on one line",
+                        )
+                    })?;
+                    if m.margin > 0.0 {
+                        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+                        for (p, r) in x.iter().zip(&radius) {
+                            for k in 0..2 {
+                                lo[k] = lo[k].min(p[k] - r);
+                                hi[k] = hi[k].max(p[k] + r);
+                            }
+                        }
+                        let inside = |p: u32| {
+                            (0..2).all(|k| {
+                                x[p as usize][k] >= lo[k] + m.margin
+                                    && x[p as usize][k] <= hi[k] - m.margin
+                            })
+                        };
+                        if !mesh.retain(inside) {
+                            return Err(config_err(
+                                "dem.measure.margin",
+                                format!("{:e} m leaves no triangle inside the sample", m.margin),
+                            ));
+                        }
+                    }
+                    Some(mesh)
+                } else {
+                    None
                 };
-                let height0 = mean(&sets[0], 1) - mean(&sets[1], 1);
-                let width0 = mean(&sets[3], 0) - mean(&sets[2], 0);
-                if height0 <= 0.0 || width0 <= 0.0 {
-                    return Err(config_err(
-                        "dem.measure",
-                        format!(
-                            "the top discs must lie above the bottom ones and the right ones right of the left ones (mean distances {height0:e} m, {width0:e} m)"
-                        ),
-                    ));
-                }
+                sets.resize(4, Vec::new());
                 let right = sets.pop().unwrap_or_default();
                 let left = sets.pop().unwrap_or_default();
                 let bottom = sets.pop().unwrap_or_default();
                 let top = sets.pop().unwrap_or_default();
                 Some(Measure {
+                    test: m.test,
+                    bagi,
                     top,
                     bottom,
                     left,
                     right,
                     height0,
                     width0,
-                    section: m.section,
+                    section: m.section.unwrap_or(1.0),
                     fit: m.fit,
                     plate: m
                         .plate
                         .as_ref()
                         .and_then(|name| cfg.walls.iter().position(|w| &w.name == name)),
+                    driven: m.plate.is_some()
+                        || m.strain == StrainKind::Bagi
+                        || cfg.loads.iter().all(|l| l.ramp == 0.0),
                 })
             }
         };
@@ -722,6 +784,7 @@ impl DiscEngine {
             volume,
             x0: x,
             free,
+            prescribed,
             loads,
             loaded,
             loaded_index,
@@ -744,12 +807,20 @@ impl DiscEngine {
             output: output::OutputState::default(),
         };
         e.check_coincident()?;
+        // the first list holds every pair the bond tolerance (2.21) reaches
+        let skin = e.state.list_skin;
+        e.state.list_skin = skin.max(1.01 * cfg.contact.bond_gap.unwrap_or(0.0));
         e.build_list();
+        e.state.list_skin = skin;
         // bonds at t = 0 (2.21)
         if let Some(g) = cfg.contact.bond_gap {
             for (k, &(i, j)) in e.state.pairs.iter().enumerate() {
-                if e.gap(i as usize, j as usize) <= g {
+                let gap = e.gap(i as usize, j as usize);
+                if gap <= g {
                     e.state.pair_state[k].bonded = true;
+                    if cfg.contact.bond_at_rest {
+                        e.state.pair_state[k].rest = -gap;
+                    }
                 }
             }
         }
@@ -1249,10 +1320,10 @@ impl DiscEngine {
             for (k, fk) in f.iter().enumerate() {
                 if self.free[p][k] {
                     s.v[p][k] += dt * fk / self.mass[p];
-                    s.x[p][k] += dt * s.v[p][k];
                 } else {
-                    s.v[p][k] = 0.0;
+                    s.v[p][k] = self.prescribed[p][k];
                 }
+                s.x[p][k] += dt * s.v[p][k];
             }
             if self.free[p][2] {
                 s.omega[p] += dt * tq / self.inertia[p];
@@ -1341,11 +1412,19 @@ impl DiscEngine {
         }
     }
 
-    /// The uniaxial measurement (M (4.19)–(4.22)): the stress of the top load over the section
-    /// and the strains of the distances between the mean centres of the measured sets.
-    pub fn measurement(&self) -> Option<[f64; 3]> {
+    /// The measurement (σ_xx, σ_yy, σ_xy, ε_xx, ε_yy, ε_xy): with the centres' strain (M
+    /// (4.19)–(4.22)) the stress σ_yy of the top load over the section (the others zero) and
+    /// the strains of the distances between the mean centres of the measured sets; with Bagi's
+    /// strain the macroscopic stress (4.3) and strain (4.4)–(4.6).
+    pub fn measurement(&self) -> Option<[f64; 6]> {
         let m = self.measure.as_ref()?;
         let s = &self.state;
+        if let Some(mesh) = &m.bagi {
+            let u: Vec<V2> = s.x.iter().zip(&self.x0).map(|(a, b)| sub(*a, *b)).collect();
+            let e = mesh.strain(&u);
+            let st = self.macroscopic_stress();
+            return Some([st[0], st[1], st[2], e[0], e[1], e[2]]);
+        }
         let mean = |set: &[u32], k: usize| {
             set.iter().map(|&p| s.x[p as usize][k]).sum::<f64>() / set.len() as f64
         };
@@ -1361,56 +1440,76 @@ impl DiscEngine {
         let sigma = load / (m.section * self.cfg.depth);
         let eyy = (mean(&m.top, 1) - mean(&m.bottom, 1)) / m.height0 - 1.0;
         let exx = (mean(&m.right, 0) - mean(&m.left, 0)) / m.width0 - 1.0;
-        Some([sigma, eyy, exx])
+        Some([0.0, sigma, 0.0, exx, eyy, 0.0])
     }
 
     fn record_measure(&mut self) {
-        let Some([sigma, eyy, exx]) = self.measurement() else {
+        let Some(m) = self.measure.as_ref() else {
             return;
         };
-        if self.measure.as_ref().is_some_and(|m| m.plate.is_some()) {
-            // a plate test: the whole loading history, every csv_every steps
-            if self.state.step % self.cfg.output.csv_every == 0 {
-                self.state.samples.push([sigma, eyy, exx, sigma.abs()]);
+        let (test, driven) = (m.test, m.driven);
+        if driven {
+            // a plate or prescribed motion: the whole history, every csv_every steps
+            if self.state.step % self.cfg.output.csv_every != 0 {
+                return;
             }
+            let Some(v) = self.measurement() else {
+                return;
+            };
+            let size = match test {
+                TestKind::Uniaxial => v[1].abs(),
+                TestKind::Biaxial => (0.5 * (v[0] + v[1])).abs(),
+                TestKind::Shear => v[2].abs(),
+            };
+            self.state
+                .samples
+                .push([v[0], v[1], v[2], v[3], v[4], v[5], size]);
             return;
         }
         // while any load still rises
         let t = self.state.time;
         if self.loads.iter().any(|l| l.ramp > 0.0 && t <= l.ramp) {
+            let Some(v) = self.measurement() else {
+                return;
+            };
             let fraction = self.loads.iter().map(|l| l.factor(t)).fold(0.0, f64::max);
-            self.state.samples.push([sigma, eyy, exx, fraction]);
+            self.state
+                .samples
+                .push([v[0], v[1], v[2], v[3], v[4], v[5], fraction]);
         }
     }
 
-    /// E = Δσ_yy/Δε_yy and ν = −Δε_xx/Δε_yy by least squares over the load fractions of
-    /// `measure.fit` (M (4.19)–(4.22)).
-    pub fn moduli(&self) -> Option<(f64, f64)> {
-        let m = self.measure.as_ref()?;
+    /// The moduli of the test by least squares over the load fractions of `measure.fit`:
+    /// uniaxial E = Δσ_yy/Δε_yy and ν = −Δε_xx/Δε_yy (M (4.19)–(4.22), (4.31)), biaxial K =
+    /// Δσ_h/Δε_vol (4.33)–(4.35), shear G = Δσ_xy/(2Δε_xy) (4.36). A driven test takes
+    /// fractions of the peak stress on the loading branch (M §4.5: 0.2–0.5 of the peak).
+    pub fn moduli(&self) -> Vec<(String, f64)> {
+        let Some(m) = self.measure.as_ref() else {
+            return Vec::new();
+        };
         let samples = &self.state.samples;
-        let pts: Vec<&[f64; 4]> = if m.plate.is_some() {
-            // fractions of the peak stress, on the loading branch up to the peak (M (4.19))
+        let pts: Vec<&[f64; 7]> = if m.driven {
             let (peak_at, peak) = samples.iter().enumerate().fold((0, 0.0f64), |a, (k, s)| {
-                if s[3] > a.1 {
-                    (k, s[3])
+                if s[6] > a.1 {
+                    (k, s[6])
                 } else {
                     a
                 }
             });
             samples[..=peak_at.min(samples.len().saturating_sub(1))]
                 .iter()
-                .filter(|s| s[3] >= m.fit[0] * peak && s[3] <= m.fit[1] * peak)
+                .filter(|s| s[6] >= m.fit[0] * peak && s[6] <= m.fit[1] * peak)
                 .collect()
         } else {
             samples
                 .iter()
-                .filter(|s| s[3] >= m.fit[0] && s[3] <= m.fit[1])
+                .filter(|s| s[6] >= m.fit[0] && s[6] <= m.fit[1])
                 .collect()
         };
         if pts.len() < 3 {
-            return None;
+            return Vec::new();
         }
-        let slope = |xs: &dyn Fn(&[f64; 4]) -> f64, ys: &dyn Fn(&[f64; 4]) -> f64| {
+        let slope = |xs: &dyn Fn(&[f64; 7]) -> f64, ys: &dyn Fn(&[f64; 7]) -> f64| {
             let n = pts.len() as f64;
             let mx = pts.iter().map(|p| xs(p)).sum::<f64>() / n;
             let my = pts.iter().map(|p| ys(p)).sum::<f64>() / n;
@@ -1418,9 +1517,20 @@ impl DiscEngine {
             let sxx: f64 = pts.iter().map(|p| (xs(p) - mx).powi(2)).sum();
             sxy / sxx
         };
-        let e = slope(&|p| p[1], &|p| p[0]);
-        let nu = -slope(&|p| p[1], &|p| p[2]);
-        Some((e, nu))
+        match m.test {
+            TestKind::Uniaxial => vec![
+                ("youngs_modulus".to_string(), slope(&|p| p[4], &|p| p[1])),
+                ("poisson_ratio".to_string(), -slope(&|p| p[4], &|p| p[3])),
+            ],
+            TestKind::Biaxial => vec![(
+                "bulk_modulus".to_string(),
+                slope(&|p| p[3] + p[4], &|p| 0.5 * (p[0] + p[1])),
+            )],
+            TestKind::Shear => vec![(
+                "shear_modulus".to_string(),
+                slope(&|p| 2.0 * p[5], &|p| p[2]),
+            )],
+        }
     }
 
     /// Advances `steps` steps.
@@ -1682,6 +1792,12 @@ impl DiscEngine {
             "voigt_poisson_ratio".to_string(),
             (kn - kt) / (3.0 * kn + kt),
         ));
+        // K = N_c R² k_n / V, G = N_c R² (k_n + k_t) / (2V) (4.17)–(4.18)
+        l.push(("voigt_bulk_modulus".to_string(), voigt / 4.0));
+        l.push((
+            "voigt_shear_modulus".to_string(),
+            voigt / 4.0 * (kn + kt) / (2.0 * kn),
+        ));
         l.push((
             "solid_fraction_initial".to_string(),
             self.volume.iter().sum::<f64>() / area,
@@ -1788,19 +1904,21 @@ impl DiscEngine {
                 .map(|e| strain_norm(*e))
                 .fold(0.0, f64::max),
         ));
-        if let Some([s, eyy, exx]) = self.measurement() {
-            r.push(("stress_yy".to_string(), s));
-            r.push(("strain_yy".to_string(), eyy));
-            r.push(("strain_xx".to_string(), exx));
+        if let Some(v) = self.measurement() {
+            for (k, name) in [
+                "stress_xx", "stress_yy", "stress_xy", "strain_xx", "strain_yy", "strain_xy",
+            ]
+            .into_iter()
+            .enumerate()
+            {
+                r.push((name.to_string(), v[k]));
+            }
         }
         for (name, force, shift) in self.wall_readings() {
             r.push((format!("{name}.force"), force));
             r.push((format!("{name}.displacement"), shift));
         }
-        if let Some((e, nu)) = self.moduli() {
-            r.push(("youngs_modulus".to_string(), e));
-            r.push(("poisson_ratio".to_string(), nu));
-        }
+        r.extend(self.moduli());
         if self.cfg.ddem.as_ref().map(|d| d.scheme) == Some(Scheme::FixedPoint) {
             r.push((
                 "iterations_most".to_string(),

@@ -17,7 +17,7 @@ pub(super) struct OutputState {
     pub last_vtk_step: Option<u64>,
 }
 
-const COLUMNS: [&str; 17] = [
+const COLUMNS: [&str; 20] = [
     "time",
     "step",
     "kinetic_energy",
@@ -35,6 +35,9 @@ const COLUMNS: [&str; 17] = [
     "macro_stress_xx",
     "macro_stress_yy",
     "macro_stress_xy",
+    "stress_xx",
+    "stress_xy",
+    "strain_xy",
 ];
 
 /// The columns of `discs.csv`: [`COLUMNS`] and each wall's normal force and displacement.
@@ -65,7 +68,8 @@ pub(super) fn row(e: &DiscEngine) -> Vec<f64> {
         .iter()
         .map(|s| strain_norm(*s))
         .fold(0.0, f64::max);
-    let m = e.measurement().unwrap_or([f64::NAN; 3]);
+    // σ_xx, σ_yy, σ_xy, ε_xx, ε_yy, ε_xy
+    let m = e.measurement().unwrap_or([f64::NAN; 6]);
     let macro_ = e.macroscopic_stress();
     let mut r = vec![
         e.time(),
@@ -79,12 +83,15 @@ pub(super) fn row(e: &DiscEngine) -> Vec<f64> {
         bonds,
         strain_max,
         overlap,
-        m[0],
         m[1],
-        m[2],
+        m[4],
+        m[3],
         macro_[0],
         macro_[1],
         macro_[2],
+        m[0],
+        m[2],
+        m[5],
     ];
     for (_, force, shift) in e.wall_readings() {
         r.push(force);
