@@ -473,3 +473,27 @@ ramp = 2e-4
     let x = e.positions();
     assert!(x[1][0] - x[0][0] > 0.00201, "{:?}", x);
 }
+
+#[test]
+fn bagis_strain_and_the_macroscopic_stress_give_the_sc_samples_moduli() {
+    // the SC sample of Table 4.1 (k_n/E_p = 0.35) measured by Bagi's strain (4.4)–(4.6) and
+    // the macroscopic stress (4.1)–(4.3) instead of the mean centres and the load: the
+    // triangulation's hull is the outer rows and columns of centres (38 × 16 mm), the stress
+    // the discs' Σ V_p σ_p over the 40 × 18 mm box, so E and ν are Table 4.1's again
+    let measure = "[dem.measure]\nstrain = \"bagi\"\nfit = [0.4, 0.8]\n\n[dem.output]";
+    let text = scene("ddem-sc.toml", &[]);
+    let start = text.find("[dem.measure]").unwrap();
+    let end = text.find("[dem.output]").unwrap();
+    let text = format!("{}{measure}{}", &text[..start], &text[end + "[dem.output]".len()..]);
+    let mut e = engine(&text);
+    // before the first step: no samples, no moduli, and no panic
+    assert!(!e.results().iter().any(|(k, _)| k == "youngs_modulus"));
+    let steps = (1.5e-4 / e.time_step()).round() as u64;
+    e.advance(steps).unwrap();
+    let (ey, nu) = (result(&e, "youngs_modulus"), result(&e, "poisson_ratio"));
+    println!("Bagi: E = {:.4} GPa, ν = {nu:.4}", ey / 1e9);
+    assert!((ey / 1e9 - 50.32).abs() < 0.02, "E = {ey}");
+    assert!((nu - 0.151).abs() < 0.001, "ν = {nu}");
+    // the stress at rest after the hold: 90 kN over 18 mm
+    assert!((result(&e, "stress_yy") + 5e6).abs() < 5e6 * 1e-3);
+}

@@ -35,7 +35,11 @@ fn every_shipped_scene_checks() {
             "out/sleeper-compact-poly/dem/particles_final.csv",
             "dem.particles[0].path",
         )),
-        "ddem-irregular.toml" => Some(("out/ddem-pack/dem/discs_final.csv", "dem.discs[0].path")),
+        "ddem-irregular.toml"
+        | "ddem-uniaxial.toml"
+        | "ddem-uniaxial-dem.toml"
+        | "ddem-biaxial.toml"
+        | "ddem-shear.toml" => Some(("out/ddem-pack/dem/discs_final.csv", "dem.discs[0].path")),
         _ => None,
     };
     for name in names {

@@ -1488,6 +1488,9 @@ impl DiscEngine {
             return Vec::new();
         };
         let samples = &self.state.samples;
+        if samples.is_empty() {
+            return Vec::new();
+        }
         let pts: Vec<&[f64; 7]> = if m.driven {
             let (peak_at, peak) = samples.iter().enumerate().fold((0, 0.0f64), |a, (k, s)| {
                 if s[6] > a.1 {
