@@ -62,6 +62,9 @@ pub struct DiscConfig {
     pub measure: Option<UniaxialConfig>,
     #[serde(default)]
     pub output: DiscOutput,
+    /// Threads of the step (default: all cores); any count gives the same bits.
+    #[serde(default)]
+    pub threads: Option<usize>,
     /// Neighbour-list skin as a fraction of the mean radius (default 0.2); the list also
     /// covers the particles' own deformation.
     #[serde(default = "default_skin")]
@@ -532,6 +535,12 @@ impl DiscConfig {
         positive("dem.depth", self.depth, &mut e);
         positive("dem.density", self.density, &mut e);
         positive("dem.skin", self.skin, &mut e);
+        if self.threads == Some(0) {
+            e.push(ValueError {
+                path: "dem.threads".into(),
+                message: "must be at least 1".into(),
+            });
+        }
         let c = &self.contact;
         positive("dem.contact.normal_stiffness", c.normal_stiffness, &mut e);
         non_negative(

@@ -22,6 +22,7 @@ mod output;
 
 pub use bagi::BagiMesh;
 use config::{DiscConfig, DiscSource, Dof, Model, Region, Scheme, StrainKind, TestKind};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -29,6 +30,9 @@ pub use output::write_discs_vtk;
 
 /// A 2-D vector.
 pub type V2 = [f64; 2];
+
+/// Pairs (or discs) per parallel task: below this the work stays on one thread.
+const PAR_MIN: usize = 512;
 
 /// Errors of the disc engine; each names the field, file, disc or contact concerned.
 #[derive(Debug, thiserror::Error)]
@@ -312,6 +316,8 @@ pub struct DiscEngine {
     wall_force_new: Vec<V2>,
     /// Limits at t = 0 (see [`DiscEngine::limits`]).
     initial_limits: Vec<(String, f64)>,
+    /// `dem.threads`: the engine's own pool (None: rayon's global one, all cores).
+    pool: Option<rayon::ThreadPool>,
     output: output::OutputState,
 }
 
@@ -744,6 +750,15 @@ impl DiscEngine {
                 })
             }
         };
+        let pool = match cfg.threads {
+            Some(t) => Some(
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(t)
+                    .build()
+                    .map_err(|e| config_err("dem.threads", e.to_string()))?,
+            ),
+            None => None,
+        };
         let compliance = cfg
             .ddem
             .as_ref()
@@ -804,6 +819,7 @@ impl DiscEngine {
             wall_force_new: vec![[0.0; 2]; walls.len()],
             walls,
             initial_limits: Vec::new(),
+            pool,
             output: output::OutputState::default(),
         };
         e.check_coincident()?;
@@ -980,13 +996,37 @@ impl DiscEngine {
     /// standard DEM) into `self.eval`, from the committed pair states (so that a fixed-point
     /// iteration can repeat it).
     fn evaluate_pairs(&mut self) {
+        let mut eval = std::mem::take(&mut self.eval);
+        eval.resize(self.state.pairs.len(), PairEval::default());
+        let this = &*self;
+        this.parallel(|| {
+            eval.par_iter_mut()
+                .with_min_len(PAR_MIN)
+                .enumerate()
+                .for_each(|(k, e)| *e = this.pair_eval(k));
+        });
+        self.eval = eval;
+        self.evaluate_walls();
+    }
+
+    /// Runs `f` in the scene's thread pool (`dem.threads`), or rayon's global one.
+    fn parallel<R: Send>(&self, f: impl FnOnce() -> R + Send) -> R {
+        match &self.pool {
+            Some(p) => p.install(f),
+            None => f(),
+        }
+    }
+
+    /// Pair k's contact of this evaluation (a pure function of the state: the same for any
+    /// thread count).
+    fn pair_eval(&self, k: usize) -> PairEval {
         let c = &self.cfg.contact;
         let ddem = self.compliance.is_some();
         let dt = self.dt;
         let s = &self.state;
-        self.eval.resize(s.pairs.len(), PairEval::default());
-        for (k, &(i, j)) in s.pairs.iter().enumerate() {
-            let (i, j) = (i as usize, j as usize);
+        let (i, j) = s.pairs[k];
+        let (i, j) = (i as usize, j as usize);
+        {
             let old = s.pair_state[k];
             let d = sub(s.x[j], s.x[i]);
             let dist = norm2(d);
@@ -1007,8 +1047,7 @@ impl DiscEngine {
             e.state.overlap = overlap;
             if !(old.bonded || overlap > 0.0) {
                 // apart: no force, the tangential spring relaxes
-                self.eval[k] = e;
-                continue;
+                return e;
             }
             let t = [-n[1], n[0]];
             // relative velocity of j's contact point to i's: (v_j + ω_j ẑ × s_j) − (v_i + ω_i ẑ × s_i)
@@ -1019,45 +1058,55 @@ impl DiscEngine {
             let (state, broke) = contact_law(c, dt, mi * mj / (mi + mj), overlap, v_n, v_t, &old);
             e.state = state;
             e.broke = broke;
-            self.eval[k] = e;
+            e
         }
-        self.evaluate_walls();
     }
 
     /// The discs' contacts with the walls (the pairs' law, without bonds): the wall is the
     /// first body, its normal n points to the disc, the disc's contact point is s = −R n.
     fn evaluate_walls(&mut self) {
+        let mut evals = std::mem::take(&mut self.eval_walls);
+        let this = &*self;
+        for (w, ev) in evals.iter_mut().enumerate() {
+            this.parallel(|| {
+                ev.par_iter_mut()
+                    .with_min_len(PAR_MIN)
+                    .enumerate()
+                    .for_each(|(p, e)| *e = this.wall_eval(w, p));
+            });
+        }
+        self.eval_walls = evals;
+    }
+
+    /// Disc p's contact with wall w in this evaluation.
+    fn wall_eval(&self, w: usize, p: usize) -> PairEval {
         let c = &self.cfg.contact;
         let dt = self.dt;
         let s = &self.state;
-        for (w, wall) in self.walls.iter().enumerate() {
-            let n = wall.normal;
-            let t = [-n[1], n[0]];
-            let origin = add(wall.point, s.wall_shift[w]);
-            let vw = s.wall_velocity[w];
-            for p in 0..s.x.len() {
-                let r = self.radius[p];
-                let mut overlap = r - dot2(sub(s.x[p], origin), n);
-                if self.compliance.is_some() {
-                    overlap += dot2(strain_times(self.strain[p], scale(n, r)), n);
-                }
-                let mut e = PairEval {
-                    n,
-                    ..Default::default()
-                };
-                e.state.overlap = overlap;
-                if overlap <= 0.0 {
-                    self.eval_walls[w][p] = e;
-                    continue;
-                }
-                let old = s.wall_state[w][p];
-                let vr = sub(s.v[p], vw);
-                let v_n = dot2(vr, n);
-                let v_t = dot2(vr, t) - s.omega[p] * r;
-                e.state = contact_law(c, dt, self.mass[p], overlap, v_n, v_t, &old).0;
-                self.eval_walls[w][p] = e;
-            }
+        let wall = &self.walls[w];
+        let n = wall.normal;
+        let t = [-n[1], n[0]];
+        let origin = add(wall.point, s.wall_shift[w]);
+        let vw = s.wall_velocity[w];
+        let r = self.radius[p];
+        let mut overlap = r - dot2(sub(s.x[p], origin), n);
+        if self.compliance.is_some() {
+            overlap += dot2(strain_times(self.strain[p], scale(n, r)), n);
         }
+        let mut e = PairEval {
+            n,
+            ..Default::default()
+        };
+        e.state.overlap = overlap;
+        if overlap <= 0.0 {
+            return e;
+        }
+        let old = s.wall_state[w][p];
+        let vr = sub(s.v[p], vw);
+        let v_n = dot2(vr, n);
+        let v_t = dot2(vr, t) - s.omega[p] * r;
+        e.state = contact_law(c, dt, self.mass[p], overlap, v_n, v_t, &old).0;
+        e
     }
 
     /// Sums the evaluated contact forces, the external forces at `t` and the constraint
@@ -1304,34 +1353,49 @@ impl DiscEngine {
     fn integrate(&mut self) {
         let dt = self.dt;
         let (at, ar) = (self.cfg.damping.translational, self.cfg.damping.rotational);
-        let s = &mut self.state;
-        for p in 0..s.x.len() {
-            let mut f = self.force[p];
-            let mut tq = self.torque[p];
-            if at > 0.0 {
-                let speed = norm2(s.v[p]);
-                if speed > 0.0 {
-                    f = sub(f, scale(s.v[p], at * norm2(f) / speed));
-                }
-            }
-            if ar > 0.0 && s.omega[p] != 0.0 {
-                tq -= ar * tq.abs() * s.omega[p].signum();
-            }
-            for (k, fk) in f.iter().enumerate() {
-                if self.free[p][k] {
-                    s.v[p][k] += dt * fk / self.mass[p];
-                } else {
-                    s.v[p][k] = self.prescribed[p][k];
-                }
-                s.x[p][k] += dt * s.v[p][k];
-            }
-            if self.free[p][2] {
-                s.omega[p] += dt * tq / self.inertia[p];
-                s.theta[p] += dt * s.omega[p];
-            } else {
-                s.omega[p] = 0.0;
-            }
-        }
+        // the moving parts out of the state, so that the rest can be read meanwhile
+        let st = &mut self.state;
+        let (mut xs, mut vs) = (std::mem::take(&mut st.x), std::mem::take(&mut st.v));
+        let (mut thetas, mut omegas) = (std::mem::take(&mut st.theta), std::mem::take(&mut st.omega));
+        let this = &*self;
+        this.parallel(|| {
+            xs.par_iter_mut()
+                .zip(vs.par_iter_mut())
+                .zip(thetas.par_iter_mut().zip(omegas.par_iter_mut()))
+                .with_min_len(PAR_MIN)
+                .enumerate()
+                .for_each(|(p, ((x, v), (theta, omega)))| {
+                    let mut f = this.force[p];
+                    let mut tq = this.torque[p];
+                    if at > 0.0 {
+                        let speed = norm2(*v);
+                        if speed > 0.0 {
+                            f = sub(f, scale(*v, at * norm2(f) / speed));
+                        }
+                    }
+                    if ar > 0.0 && *omega != 0.0 {
+                        tq -= ar * tq.abs() * omega.signum();
+                    }
+                    for (k, fk) in f.iter().enumerate() {
+                        if this.free[p][k] {
+                            v[k] += dt * fk / this.mass[p];
+                        } else {
+                            v[k] = this.prescribed[p][k];
+                        }
+                        x[k] += dt * v[k];
+                    }
+                    if this.free[p][2] {
+                        *omega += dt * tq / this.inertia[p];
+                        *theta += dt * *omega;
+                    } else {
+                        *omega = 0.0;
+                    }
+                });
+        });
+        self.state.x = xs;
+        self.state.v = vs;
+        self.state.theta = thetas;
+        self.state.omega = omegas;
     }
 
     /// The work of the loads at their points of application (the centre's displacement plus
