@@ -57,19 +57,10 @@ poisson_ratio = {nu}
 [[dem.discs]]
 kind = "file"
 path = "{}"
-[[dem.walls]]
-name = "bottom"
-point = [0.0, -1.0]
-normal = [0.0, 1.0]
-touch = true
-[[dem.walls]]
-name = "top"
-point = [0.0, 1.0]
-normal = [0.0, -1.0]
-velocity = [0.0, -0.005]
-touch = true
-"#,
-        file.display()
+{}{}"#,
+        file.display(),
+        plate("bottom", [0.0, 1.0], 0.0),
+        plate("top", [0.0, -1.0], 0.005),
     )
 }
 
@@ -311,18 +302,12 @@ count = [40, 40]
 region = { edge = "top", width = 5e-4 }
 force = [3e4, 0.0]
 ramp = 1e-4
-[[dem.walls]]
-name = "bottom"
-point = [0.0, -1.0]
-normal = [0.0, 1.0]
-touch = true
-[[dem.walls]]
-name = "top"
-point = [0.0, 1.0]
-normal = [0.0, -1.0]
-velocity = [0.0, -2.0]
-touch = true
 "#;
+    let text = format!(
+        "{text}{}{}",
+        plate("bottom", [0.0, 1.0], 0.0),
+        plate("top", [0.0, -1.0], 2.0)
+    );
     let run = |threads: usize| {
         let text = text.replace("THREADS", &format!("threads = {threads}"));
         let mut e = engine(&text, scenes());

@@ -310,13 +310,7 @@ impl Region {
     /// The discs (centres `x`, radii `r`) of the region, in index order.
     pub fn select(&self, x: &[[f64; 2]], r: &[f64]) -> Vec<u32> {
         if let (Some(edge), Some(width)) = (self.edge, self.width) {
-            let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-            for (p, rp) in x.iter().zip(r) {
-                for k in 0..2 {
-                    lo[k] = lo[k].min(p[k] - rp);
-                    hi[k] = hi[k].max(p[k] + rp);
-                }
-            }
+            let (lo, hi) = span(x, r);
             return (0..x.len() as u32)
                 .filter(|&i| {
                     let (p, rp) = (x[i as usize], r[i as usize]);
@@ -334,6 +328,18 @@ impl Region {
             .filter(|&i| (0..2).all(|k| x[i as usize][k] >= min[k] && x[i as usize][k] <= max[k]))
             .collect()
     }
+}
+
+/// The box the discs (centres `x`, radii `r`) span: its lower and upper corners.
+pub fn span(x: &[[f64; 2]], r: &[f64]) -> ([f64; 2], [f64; 2]) {
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for (p, rp) in x.iter().zip(r) {
+        for k in 0..2 {
+            lo[k] = lo[k].min(p[k] - rp);
+            hi[k] = hi[k].max(p[k] + rp);
+        }
+    }
+    (lo, hi)
 }
 
 impl std::fmt::Display for Region {

@@ -700,13 +700,7 @@ impl DiscEngine {
                         )
                     })?;
                     if m.margin > 0.0 {
-                        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-                        for (p, r) in x.iter().zip(&radius) {
-                            for k in 0..2 {
-                                lo[k] = lo[k].min(p[k] - r);
-                                hi[k] = hi[k].max(p[k] + r);
-                            }
-                        }
+                        let (lo, hi) = config::span(&x, &radius);
                         let inside = |p: u32| {
                             (0..2).all(|k| {
                                 x[p as usize][k] >= lo[k] + m.margin
@@ -1712,14 +1706,9 @@ impl DiscEngine {
     /// The macroscopic stress σ̄ = (1/V) Σ_p V_p σ_p (4.1)–(4.3) over the box the discs span.
     pub fn macroscopic_stress(&self) -> [f64; 3] {
         let s = &self.state;
-        let mut lo = [f64::INFINITY; 2];
-        let mut hi = [f64::NEG_INFINITY; 2];
+        let (lo, hi) = config::span(&s.x, &self.radius);
         let mut sum = [0.0; 3];
         for p in 0..s.x.len() {
-            for k in 0..2 {
-                lo[k] = lo[k].min(s.x[p][k] - self.radius[p]);
-                hi[k] = hi[k].max(s.x[p][k] + self.radius[p]);
-            }
             for (sk, st) in sum.iter_mut().zip(s.stress[p]) {
                 *sk += self.volume[p] * st;
             }
@@ -1840,13 +1829,7 @@ impl DiscEngine {
             "coordination_initial".to_string(),
             2.0 * touching.len() as f64 / n_discs,
         ));
-        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        for (p, r) in s.x.iter().zip(&self.radius) {
-            for k in 0..2 {
-                lo[k] = lo[k].min(p[k] - r);
-                hi[k] = hi[k].max(p[k] + r);
-            }
-        }
+        let (lo, hi) = config::span(&s.x, &self.radius);
         let area = (hi[0] - lo[0]) * (hi[1] - lo[1]) * self.cfg.depth;
         let r2 = self.radius.iter().map(|r| r * r).sum::<f64>() / n_discs;
         let (kn, kt) = (c.normal_stiffness, c.tangential_stiffness);
