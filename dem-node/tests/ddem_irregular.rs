@@ -1,6 +1,7 @@
 //! Madan's irregular sample (§4.5) at CI size: a random packing pressed together by four
 //! servo plates (scenes/ddem-pack.toml with 400 discs), written as a disc file, read back as
-//! a bonded sample, and its DDEM stability limit (Table 4.4) and critical step (4.30).
+//! a bonded sample: its DDEM stability limit (Table 4.4) and critical step (4.30), the
+//! micro–macro moduli (uniaxial, biaxial, shear; Bagi's strain), and the parallel step.
 
 use dem::discs::{parse_scene_table, DiscEngine};
 use std::path::Path;
@@ -107,6 +108,29 @@ fn an_irregular_packing_by_servo_plates_has_the_stability_limit_of_table_4_4() {
             run.as_ref().err().map(|e| e.to_string())
         );
         assert_eq!(run.is_ok(), stable, "ρ = {rho}: {run:?}");
+    }
+    // the critical step (2.14)–(2.16) with the non-viscous damping α = 0.2 (2.7)–(2.8): the
+    // undamped 2/ω_max over √(1 + α); the sample (DDEM E_p = 2e11, M Fig. 4.12) runs just
+    // below it and diverges a little above
+    let text = sample(&file, 2e11, 0.45);
+    let e = engine(&text, dir.path());
+    let l = e.limits();
+    let r_min = e.radii().iter().copied().fold(f64::MAX, f64::min);
+    let (dt_cr, undamped) = (
+        value(l.clone(), "critical_time_step"),
+        value(l.clone(), "critical_time_step_undamped"),
+    );
+    assert!((dt_cr * 1.2f64.sqrt() / undamped - 1.0).abs() < 1e-12);
+    let m_min = 2000.0 * std::f64::consts::PI * r_min * r_min;
+    println!(
+        "Δt_cr = {dt_cr:.4e} s (undamped {undamped:.4e} s, α_cr = {:.3} of √(m_min/k_n), the thesis' 0.929)",
+        dt_cr / (m_min / 7e10f64).sqrt()
+    );
+    for (factor, stable) in [(0.99, true), (1.02, false)] {
+        let dt = factor * dt_cr;
+        let text = text.replace("time_step = 4e-8", &format!("time_step = {dt:e}"));
+        let run = engine(&text, dir.path()).advance(20_000);
+        assert_eq!(run.is_ok(), stable, "Δt = {factor} Δt_cr: {run:?}");
     }
 }
 

@@ -1818,7 +1818,16 @@ impl DiscEngine {
         let m_red = m_min * m_max / (m_min + m_max);
         let beta = c.normal_damping * 2.0 * (m_red / c.normal_stiffness).sqrt();
         let zeta = beta * (2.0 / critical) / 2.0;
-        let damped = critical * ((1.0 + zeta * zeta).sqrt() - zeta);
+        // the non-viscous damping (2.7)–(2.8) scales the force by 1 ± α (1 + α while it opposes
+        // the velocity): a stiffer oscillator over half a cycle, Δt_cr / √(1 + α). The
+        // irregular 4979-disc sample with α = 0.2 (M §4.5) runs stable at 0.925 of the
+        // undamped step and diverges at 0.93 (the bound: 0.913)
+        let alpha = self
+            .cfg
+            .damping
+            .translational
+            .max(self.cfg.damping.rotational);
+        let damped = critical * ((1.0 + zeta * zeta).sqrt() - zeta) / (1.0 + alpha).sqrt();
         l.push(("critical_time_step".to_string(), damped));
         l.push(("critical_time_step_undamped".to_string(), critical));
         l.push(("contacts_initial".to_string(), touching.len() as f64));
