@@ -208,7 +208,7 @@ pub fn assess(
     ) {
         let damped = match d.get("critical_time_step_undamped") {
             Some(&u) if u > crit => format!(
-                "; the viscous contact damping shortens it from 2/ν_max = {u:.4e} s by (√(1 + ζ²) − ζ)"
+                "; damping shortens it from 2/ν_max = {u:.4e} s (viscous contact damping by √(1 + ζ²) − ζ, non-viscous α by 1/√(1 + α))"
             ),
             _ => String::new(),
         };

@@ -60,6 +60,12 @@ pub struct DiscConfig {
     /// The uniaxial-compression measurement (Madan §4.4: E and ν of the sample).
     #[serde(default)]
     pub measure: Option<UniaxialConfig>,
+    /// An initial displacement pulse (Madan (5.5), the wave-propagation bar).
+    #[serde(default)]
+    pub pulse: Option<PulseConfig>,
+    /// Discs whose displacement `discs.csv` records (`<name>.ux`, `<name>.uy`).
+    #[serde(default)]
+    pub probes: Vec<ProbeConfig>,
     #[serde(default)]
     pub output: DiscOutput,
     /// Threads of the step (default: all cores); any count gives the same bits.
@@ -460,6 +466,30 @@ fn default_fit() -> [f64; 2] {
     [0.4, 0.8]
 }
 
+/// `[dem.pulse]`: at t = 0, after the bonds are made, each disc is displaced along
+/// `direction` by u = `amplitude` · ½ (1 + cos(2π ξ/`wavelength`)) for 0 ≤ ξ ≤ `wavelength`/2,
+/// ξ the distance of its centre from `start` along `direction`, at rest (our reading of
+/// Madan (5.5), A cos(2πx/L + 1) on 0 ≤ x ≤ L/2: a smooth half-bell from A at the end of the
+/// bar to 0).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PulseConfig {
+    pub direction: [f64; 2],
+    /// The point the pulse starts from (m); default: the lowest centre along `direction`.
+    #[serde(default)]
+    pub start: Option<[f64; 2]>,
+    pub amplitude: f64,
+    pub wavelength: f64,
+}
+
+/// `[[dem.probes]]`: the disc whose centre lies nearest `point`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ProbeConfig {
+    pub name: String,
+    pub point: [f64; 2],
+}
+
 /// `[dem.output]`.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -797,6 +827,37 @@ impl DiscConfig {
                 e.push(ValueError {
                     path: "dem.measure.fit".into(),
                     message: format!("must be two load fractions 0 ≤ a < b ≤ 1, got {:?}", m.fit),
+                });
+            }
+        }
+        if let Some(pl) = &self.pulse {
+            let n = (pl.direction[0].powi(2) + pl.direction[1].powi(2)).sqrt();
+            if !(n.is_finite() && n > 0.0) {
+                e.push(ValueError {
+                    path: "dem.pulse.direction".into(),
+                    message: format!("must be a finite non-zero vector, got {:?}", pl.direction),
+                });
+            }
+            if !pl.amplitude.is_finite() {
+                e.push(ValueError {
+                    path: "dem.pulse.amplitude".into(),
+                    message: format!("must be finite, got {}", pl.amplitude),
+                });
+            }
+            positive("dem.pulse.wavelength", pl.wavelength, &mut e);
+        }
+        let mut probe_names = std::collections::BTreeSet::new();
+        for (i, pr) in self.probes.iter().enumerate() {
+            if pr.name.is_empty() || !probe_names.insert(pr.name.clone()) {
+                e.push(ValueError {
+                    path: format!("dem.probes[{i}].name"),
+                    message: format!("`{}` must be a name no other probe has", pr.name),
+                });
+            }
+            if !pr.point.iter().all(|v| v.is_finite()) {
+                e.push(ValueError {
+                    path: format!("dem.probes[{i}].point"),
+                    message: "must be finite".into(),
                 });
             }
         }

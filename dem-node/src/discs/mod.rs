@@ -316,6 +316,8 @@ pub struct DiscEngine {
     wall_force_new: Vec<V2>,
     /// Limits at t = 0 (see [`DiscEngine::limits`]).
     initial_limits: Vec<(String, f64)>,
+    /// The probes' names and discs.
+    probes: Vec<(String, u32)>,
     /// `dem.threads`: the engine's own pool (None: rayon's global one, all cores).
     pool: Option<rayon::ThreadPool>,
     output: output::OutputState,
@@ -784,6 +786,18 @@ impl DiscEngine {
             wall_force: vec![[0.0; 2]; walls.len()],
             wall_state: vec![vec![PairState::default(); n]; walls.len()],
         };
+        let probes = cfg
+            .probes
+            .iter()
+            .map(|pr| {
+                let near = (0..n)
+                    .min_by(|&a, &b| {
+                        norm2(sub(x[a], pr.point)).total_cmp(&norm2(sub(x[b], pr.point)))
+                    })
+                    .unwrap_or(0);
+                (pr.name.clone(), near as u32)
+            })
+            .collect();
         let mut e = DiscEngine {
             cfg: cfg.clone(),
             dt: cfg.time_step,
@@ -813,6 +827,7 @@ impl DiscEngine {
             wall_force_new: vec![[0.0; 2]; walls.len()],
             walls,
             initial_limits: Vec::new(),
+            probes,
             pool,
             output: output::OutputState::default(),
         };
@@ -835,6 +850,23 @@ impl DiscEngine {
             }
         }
         e.initial_limits = e.compute_limits();
+        if let Some(pl) = &cfg.pulse {
+            // (5.5): displaced at rest after the bonds; x0 stays the packing
+            let d = scale(pl.direction, 1.0 / norm2(pl.direction));
+            let start = pl.start.unwrap_or_else(|| {
+                let lo = e.x0.iter().map(|p| dot2(*p, d)).fold(f64::INFINITY, f64::min);
+                scale(d, lo)
+            });
+            for p in 0..n {
+                let xi = dot2(sub(e.x0[p], start), d);
+                if (0.0..=0.5 * pl.wavelength).contains(&xi) {
+                    let u = pl.amplitude
+                        * 0.5
+                        * (1.0 + (2.0 * std::f64::consts::PI * xi / pl.wavelength).cos());
+                    e.state.x[p] = add(e.state.x[p], scale(d, u));
+                }
+            }
+        }
         // the row of the state at t = 0
         let first = output::row(&e);
         e.output.pending.push(first);
@@ -1009,6 +1041,17 @@ impl DiscEngine {
             Some(p) => p.install(f),
             None => f(),
         }
+    }
+
+    /// Each probe's name, disc and displacement from the packing.
+    pub fn probe_readings(&self) -> Vec<(String, u32, V2)> {
+        self.probes
+            .iter()
+            .map(|(name, p)| {
+                let p = *p as usize;
+                (name.clone(), p as u32, sub(self.state.x[p], self.x0[p]))
+            })
+            .collect()
     }
 
     /// Pair k's contact of this evaluation (a pure function of the state: the same for any

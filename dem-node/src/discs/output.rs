@@ -47,6 +47,10 @@ pub(super) fn columns(e: &DiscEngine) -> Vec<String> {
         c.push(format!("{name}.force"));
         c.push(format!("{name}.displacement"));
     }
+    for (name, _, _) in e.probe_readings() {
+        c.push(format!("{name}.ux"));
+        c.push(format!("{name}.uy"));
+    }
     c
 }
 
@@ -96,6 +100,9 @@ pub(super) fn row(e: &DiscEngine) -> Vec<f64> {
     for (_, force, shift) in e.wall_readings() {
         r.push(force);
         r.push(shift);
+    }
+    for (_, _, u) in e.probe_readings() {
+        r.extend(u);
     }
     r
 }
