@@ -3,25 +3,12 @@
 //! a bonded sample: its DDEM stability limit (Table 4.4) and critical step (4.30), the
 //! micro–macro moduli (uniaxial, biaxial, shear; Bagi's strain), and the parallel step.
 
-use dem::discs::{parse_scene_table, DiscEngine};
+mod common;
+use common::{disc_engine as engine, disc_plate as plate, value};
 use std::path::Path;
 
 fn scenes() -> &'static Path {
     Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes"))
-}
-
-fn engine(text: &str, base: &Path) -> DiscEngine {
-    let cfg = parse_scene_table(text, "dem")
-        .unwrap_or_else(|e| panic!("{e}"))
-        .expect("[dem]");
-    DiscEngine::from_config(&cfg, base).unwrap_or_else(|e| panic!("{e}"))
-}
-
-fn value(list: Vec<(String, f64)>, name: &str) -> f64 {
-    list.into_iter()
-        .find(|(k, _)| k == name)
-        .unwrap_or_else(|| panic!("no {name}"))
-        .1
 }
 
 /// scenes/ddem-pack.toml with `count` discs in a box of solid fraction 0.5.
@@ -75,7 +62,7 @@ fn an_irregular_packing_by_servo_plates_has_the_stability_limit_of_table_4_4() {
     let side = (400.0 * std::f64::consts::PI * 1.469e-7 / 0.5f64).sqrt();
     let target = 1e6 * 0.8 * side;
     for wall in ["bottom", "top", "left", "right"] {
-        let f = value(r.clone(), &format!("{wall}.force"));
+        let f = value(&r, &format!("{wall}.force"));
         assert!(
             (f / target - 1.0).abs() < 0.02,
             "{wall}: {f} N vs {target} N"
@@ -89,19 +76,19 @@ fn an_irregular_packing_by_servo_plates_has_the_stability_limit_of_table_4_4() {
     assert_eq!(e.positions(), pack.positions());
     assert_eq!(e.radii(), pack.radii());
     let l = e.limits();
-    let solid = value(l.clone(), "solid_fraction_initial");
-    let coordination = value(l.clone(), "coordination_initial");
+    let solid = value(&l, "solid_fraction_initial");
+    let coordination = value(&l, "coordination_initial");
     assert!(solid > 0.8, "{solid}");
     // ν_p = 0.45: Table 4.4's limit k_n/E_p = 0.660 (E_p = 1.06e11 stable, 1.05e11 not); this
     // sample (coordination ~3.3, frictionless compaction; the thesis' 5.8) within 5 %
-    let limit = value(l.clone(), "ddem_kn_over_ep_limit");
+    let limit = value(&l, "ddem_kn_over_ep_limit");
     println!("solid fraction {solid:.3}, coordination {coordination:.2}, k_n/E_p limit {limit:.4} (Table 4.4: 0.660)");
     assert!((limit / 0.660 - 1.0).abs() < 0.05, "{limit}");
     // the lagged scheme under the moving plate: stable 3 % below the limit, diverging 3 % above
     for (factor, stable) in [(0.97, true), (1.03, false)] {
         let ep = 7e10 / (factor * limit);
         let mut e = engine(&sample(&file, ep, 0.45), dir.path());
-        let rho = value(e.limits(), "ddem_spectral_radius");
+        let rho = value(&e.limits(), "ddem_spectral_radius");
         let run = e.advance(25_000);
         println!(
             "k_n/E_p = {factor} × limit: ρ = {rho:.4}, {:?}",
@@ -117,8 +104,8 @@ fn an_irregular_packing_by_servo_plates_has_the_stability_limit_of_table_4_4() {
     let l = e.limits();
     let r_min = e.radii().iter().copied().fold(f64::MAX, f64::min);
     let (dt_cr, undamped) = (
-        value(l.clone(), "critical_time_step"),
-        value(l.clone(), "critical_time_step_undamped"),
+        value(&l, "critical_time_step"),
+        value(&l, "critical_time_step_undamped"),
     );
     assert!((dt_cr * 1.2f64.sqrt() / undamped - 1.0).abs() < 1e-12);
     let m_min = 2000.0 * std::f64::consts::PI * r_min * r_min;
@@ -172,23 +159,11 @@ csv_every = 100
     )
 }
 
-fn plate(name: &str, normal: [f64; 2], speed: f64) -> String {
-    format!(
-        "[[dem.walls]]\nname = \"{name}\"\npoint = [{}, {}]\nnormal = [{}, {}]\nvelocity = [{}, {}]\ntouch = true\n",
-        -normal[0],
-        -normal[1],
-        normal[0],
-        normal[1],
-        speed * normal[0],
-        speed * normal[1]
-    )
-}
-
 fn run_test(file: &Path, gap: f64, drive: &str, steps: u64) -> Vec<(String, f64)> {
     let dir = file.parent().unwrap();
     let mut e = engine(&micro_scene(file, gap, drive), dir);
     let l = e.limits();
-    let dt_cr = value(l.clone(), "critical_time_step");
+    let dt_cr = value(&l, "critical_time_step");
     assert!(e.time_step() < dt_cr, "Δt {} vs {dt_cr}", e.time_step());
     e.advance(steps).unwrap();
     let mut r = e.results();
@@ -257,24 +232,24 @@ fn micro_macro_moduli_of_an_irregular_sample_agree_across_tests_and_with_voigt()
         &format!("{uniaxial}[dem.ddem]\nyoungs_modulus = 2e11\npoisson_ratio = 0.35\n"),
         steps,
     );
-    let e = value(uni.clone(), "youngs_modulus");
-    let nu = value(uni.clone(), "poisson_ratio");
-    let k = value(bi.clone(), "bulk_modulus");
-    let g = value(sh.clone(), "shear_modulus");
+    let e = value(&uni, "youngs_modulus");
+    let nu = value(&uni, "poisson_ratio");
+    let k = value(&bi, "bulk_modulus");
+    let g = value(&sh, "shear_modulus");
     let (ev, nuv, kv, gv) = (
-        value(uni.clone(), "voigt_youngs_modulus"),
-        value(uni.clone(), "voigt_poisson_ratio"),
-        value(uni.clone(), "voigt_bulk_modulus"),
-        value(uni.clone(), "voigt_shear_modulus"),
+        value(&uni, "voigt_youngs_modulus"),
+        value(&uni, "voigt_poisson_ratio"),
+        value(&uni, "voigt_bulk_modulus"),
+        value(&uni, "voigt_shear_modulus"),
     );
     let (k2, g2) = (e / (2.0 * (1.0 - nu)), e / (2.0 * (1.0 + nu)));
     let (e_d, nu_d) = (
-        value(ddem.clone(), "youngs_modulus"),
-        value(ddem.clone(), "poisson_ratio"),
+        value(&ddem, "youngs_modulus"),
+        value(&ddem, "poisson_ratio"),
     );
     println!(
         "coordination {:.2}; E {e:.4e} (Voigt {ev:.4e}), ν {nu:.4} (Voigt {nuv:.4}), K {k:.4e} (E/(2(1−ν)) {k2:.4e}, Voigt {kv:.4e}), G {g:.4e} (E/(2(1+ν)) {g2:.4e}, Voigt {gv:.4e}); DDEM E {e_d:.4e}, ν {nu_d:.4}",
-        value(uni.clone(), "coordination_initial"),
+        value(&uni, "coordination_initial"),
     );
     // the biaxial and shear tests agree with the uniaxial E, ν through the 2-D relations
     // (M Fig. 4.20): 8.8 % and 1.7 % at this size
@@ -337,8 +312,8 @@ ramp = 1e-4
         let mut e = engine(&text, scenes());
         e.advance(1500).unwrap();
         let r = e.results();
-        assert!(value(r.clone(), "top.force") > 1e4, "{r:?}");
-        assert!(value(r, "bonds_broken") > 0.0);
+        assert!(value(&r, "top.force") > 1e4, "{r:?}");
+        assert!(value(&r, "bonds_broken") > 0.0);
         e.snapshot()
     };
     let one = run(1);

@@ -5,29 +5,9 @@
 //! (k_n/E_p = 0.18, ν_p = 0.45 as the thesis' Fig. 5.4; k_t/k_n = 0.5). The bar stands along
 //! y; its top discs are held along the bar (the thesis' fixed right edge).
 
-use dem::discs::{parse_scene_table, DiscEngine};
+mod common;
+use common::{disc_engine as engine, disc_plate, value};
 use std::path::Path;
-
-fn engine(text: &str, base: &Path) -> DiscEngine {
-    let cfg = parse_scene_table(text, "dem")
-        .unwrap_or_else(|e| panic!("{e}"))
-        .expect("[dem]");
-    DiscEngine::from_config(&cfg, base).unwrap_or_else(|e| panic!("{e}"))
-}
-
-fn value(list: &[(String, f64)], name: &str) -> f64 {
-    list.iter()
-        .find(|(k, _)| k == name)
-        .unwrap_or_else(|| panic!("no {name}"))
-        .1
-}
-
-fn plate(name: &str, normal: [f64; 2], velocity: [f64; 2], extra: &str) -> String {
-    format!(
-        "[[dem.walls]]\nname = \"{name}\"\npoint = [{}, {}]\nnormal = [{}, {}]\nvelocity = [{}, {}]\ntouch = true\n{extra}",
-        -normal[0], -normal[1], normal[0], normal[1], velocity[0], velocity[1]
-    )
-}
 
 /// 682 discs dropped at random into a 3.0 × 21.6 mm box (solid fraction 0.5) and pressed
 /// together by four plates servo-controlled to 1 MPa; written to `dir`/discs_final.csv.
@@ -135,8 +115,8 @@ fn deformable_discs_slow_a_longitudinal_pulse_as_much_as_they_soften_the_bar() {
         // force over the bar's width (4.19)–(4.22)
         let load = format!(
             "{}{}[dem.measure]\nplate = \"top\"\nsection = {}\nfit = [0.2, 0.5]\ntop = {{ edge = \"top\", width = 3e-4 }}\nbottom = {{ edge = \"bottom\", width = 3e-4 }}\nleft = {{ edge = \"left\", width = 3e-4 }}\nright = {{ edge = \"right\", width = 3e-4 }}\n",
-            plate("bottom", [0.0, 1.0], [0.0, 0.0], ""),
-            plate("top", [0.0, -1.0], [0.0, -0.005], ""),
+            disc_plate("bottom", [0.0, 1.0], 0.0),
+            disc_plate("top", [0.0, -1.0], 0.005),
             hi[0] - lo[0]
         );
         let mut e = engine(&sample(&file, 4e-8, table, &load), dir.path());

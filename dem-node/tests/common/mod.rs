@@ -62,3 +62,33 @@ pub fn hertz_duration_integral() -> f64 {
     }
     s * h / 3.0
 }
+
+/// A 2-D disc engine (`model = "discs-2d"`) of a scene text; files relative to `base`.
+pub fn disc_engine(text: &str, base: &std::path::Path) -> dem::discs::DiscEngine {
+    let cfg = dem::discs::parse_scene_table(text, "dem")
+        .unwrap_or_else(|e| panic!("{e}"))
+        .expect("[dem]");
+    dem::discs::DiscEngine::from_config(&cfg, base).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// The value of `name` in a list of results or limits.
+pub fn value(list: &[(String, f64)], name: &str) -> f64 {
+    list.iter()
+        .find(|(k, _)| k == name)
+        .unwrap_or_else(|| panic!("no {name}"))
+        .1
+}
+
+/// A rigid plate of a disc scene touching the sample at t = 0, moving into it at `speed`
+/// along its `normal`.
+pub fn disc_plate(name: &str, normal: [f64; 2], speed: f64) -> String {
+    format!(
+        "[[dem.walls]]\nname = \"{name}\"\npoint = [{}, {}]\nnormal = [{}, {}]\nvelocity = [{}, {}]\ntouch = true\n",
+        -normal[0],
+        -normal[1],
+        normal[0],
+        normal[1],
+        speed * normal[0],
+        speed * normal[1]
+    )
+}
