@@ -484,7 +484,11 @@ fn bagis_strain_and_the_macroscopic_stress_give_the_sc_samples_moduli() {
     let text = scene("ddem-sc.toml", &[]);
     let start = text.find("[dem.measure]").unwrap();
     let end = text.find("[dem.output]").unwrap();
-    let text = format!("{}{measure}{}", &text[..start], &text[end + "[dem.output]".len()..]);
+    let text = format!(
+        "{}{measure}{}",
+        &text[..start],
+        &text[end + "[dem.output]".len()..]
+    );
     let mut e = engine(&text);
     // before the first step: no samples, no moduli, and no panic
     assert!(!e.results().iter().any(|(k, _)| k == "youngs_modulus"));

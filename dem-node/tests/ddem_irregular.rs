@@ -183,7 +183,7 @@ fn micro_macro_moduli_of_an_irregular_sample_agree_across_tests_and_with_voigt()
     };
     let gap = 2e-5; // neighbours up to 2e-5 m apart bonded at rest
     let steps = 30_000; // 0.9 ms
-    // uniaxial: the top plate at 5 mm/s onto the bottom one, the sides free (M §4.5)
+                        // uniaxial: the top plate at 5 mm/s onto the bottom one, the sides free (M §4.5)
     let uniaxial = format!(
         "{}{}{}",
         plate("bottom", [0.0, 1.0], 0.0),

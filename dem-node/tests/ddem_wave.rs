@@ -107,7 +107,11 @@ fn deformable_discs_slow_a_longitudinal_pulse_as_much_as_they_soften_the_bar() {
         let e = engine(&sample(&file, 4e-8, "", ""), dir.path());
         dem::discs::config::span(e.positions(), e.radii())
     };
-    println!("bar {:.3} × {:.3} mm", 1e3 * (hi[0] - lo[0]), 1e3 * (hi[1] - lo[1]));
+    println!(
+        "bar {:.3} × {:.3} mm",
+        1e3 * (hi[0] - lo[0]),
+        1e3 * (hi[1] - lo[1])
+    );
     let mut found = Vec::new();
     for (name, table) in [("standard DEM", ""), ("DDEM", ddem)] {
         // E of the bar: the top plate at 5 mm/s onto the bottom one for 1 ms, sides free; the
@@ -126,7 +130,10 @@ fn deformable_discs_slow_a_longitudinal_pulse_as_much_as_they_soften_the_bar() {
         // the bar's mean density: the discs' mass over the box they span
         let (x, rad) = (e.positions(), e.radii());
         let (lo, hi) = dem::discs::config::span(x, rad);
-        let mass: f64 = rad.iter().map(|r| 2000.0 * std::f64::consts::PI * r * r).sum();
+        let mass: f64 = rad
+            .iter()
+            .map(|r| 2000.0 * std::f64::consts::PI * r * r)
+            .sum();
         let rho = mass / ((hi[0] - lo[0]) * (hi[1] - lo[1]));
         let c_static = (young / rho).sqrt();
         // the wave: a half-bell of 10 µm over the bottom 5 mm (L = 10 mm), the top discs
@@ -158,7 +165,10 @@ fn deformable_discs_slow_a_longitudinal_pulse_as_much_as_they_soften_the_bar() {
             100.0 * (c / c_static - 1.0)
         );
         // the pulse runs at the static bar speed √(E/ρ) (5.1): +0.2 % and +0.0 % here
-        assert!((c / c_static - 1.0).abs() < 0.03, "{name}: {c} vs {c_static}");
+        assert!(
+            (c / c_static - 1.0).abs() < 0.03,
+            "{name}: {c} vs {c_static}"
+        );
         found.push((dt, young, c / c_static));
     }
     // the deformable discs slow the pulse exactly as much as they soften the bar: the

@@ -155,7 +155,9 @@ mod tests {
         // a deterministic irregular cloud
         let mut s = 12345u64;
         let mut r = || {
-            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             (s >> 11) as f64 / (1u64 << 53) as f64
         };
         (0..n).map(|_| [r() * 0.05, r() * 0.03]).collect()
@@ -188,7 +190,11 @@ mod tests {
         }
         // the triangles tile the convex hull: the area lies below the bounding box's and
         // every centre is a corner of some triangle
-        assert!(m.area < 0.05 * 0.03 && m.area > 0.9 * 0.05 * 0.03, "{}", m.area);
+        assert!(
+            m.area < 0.05 * 0.03 && m.area > 0.9 * 0.05 * 0.03,
+            "{}",
+            m.area
+        );
         let mut seen = vec![false; x.len()];
         for t in &m.triangles {
             for &p in t {
@@ -203,7 +209,11 @@ mod tests {
         // (4.6) of the piecewise-linear field equals (1/2S) ∮ (u n + n u) dL over the hull:
         // a rectangle's corners plus interior points, u nonlinear inside
         let mut x = vec![[0.0, 0.0], [0.04, 0.0], [0.04, 0.02], [0.0, 0.02]];
-        x.extend(scatter(200).iter().map(|p| [0.001 + 0.7 * p[0], 0.001 + 0.6 * p[1]]));
+        x.extend(
+            scatter(200)
+                .iter()
+                .map(|p| [0.001 + 0.7 * p[0], 0.001 + 0.6 * p[1]]),
+        );
         let m = BagiMesh::new(&x).unwrap();
         let u: Vec<V2> = x
             .iter()
@@ -236,12 +246,18 @@ mod tests {
             q[0] > 0.01 && q[0] < 0.04 && q[1] > 0.01 && q[1] < 0.02
         };
         assert!(m.retain(inside));
-        assert!(m.area < 0.5 * all && m.area > 0.1 * all, "{} of {all}", m.area);
+        assert!(
+            m.area < 0.5 * all && m.area > 0.1 * all,
+            "{} of {all}",
+            m.area
+        );
         assert!(m.triangles.iter().flatten().all(|&p| inside(p)));
         // still exact for an affine field
         let u: Vec<V2> = x.iter().map(|p| [3e-4 * p[1], -1e-3 * p[1]]).collect();
         let e = m.strain(&u);
-        assert!((e[0]).abs() < 1e-15 && (e[1] + 1e-3).abs() < 1e-15 && (e[2] - 1.5e-4).abs() < 1e-15);
+        assert!(
+            (e[0]).abs() < 1e-15 && (e[1] + 1e-3).abs() < 1e-15 && (e[2] - 1.5e-4).abs() < 1e-15
+        );
         assert!(!m.retain(|_| false));
     }
 

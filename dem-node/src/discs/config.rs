@@ -784,7 +784,11 @@ impl DiscConfig {
             }
         }
         for (i, c) in self.constraints.iter().enumerate() {
-            let finite = c.velocity.iter().chain(c.gradient.iter().flatten()).chain(&c.origin);
+            let finite = c
+                .velocity
+                .iter()
+                .chain(c.gradient.iter().flatten())
+                .chain(&c.origin);
             if !finite.into_iter().all(|v| v.is_finite()) {
                 e.push(ValueError {
                     path: format!("dem.constraints[{i}].velocity"),
@@ -812,13 +816,16 @@ impl DiscConfig {
                     Some(a) => positive("dem.measure.section", a, &mut e),
                     None => e.push(ValueError {
                         path: "dem.measure.section".into(),
-                        message: "the centres' strain needs the sample's width `section` (m)".into(),
+                        message: "the centres' strain needs the sample's width `section` (m)"
+                            .into(),
                     }),
                 }
                 if m.test != TestKind::Uniaxial {
                     e.push(ValueError {
                         path: "dem.measure.test".into(),
-                        message: "biaxial and shear tests take Bagi's strain: set strain = \"bagi\"".into(),
+                        message:
+                            "biaxial and shear tests take Bagi's strain: set strain = \"bagi\""
+                                .into(),
                     });
                 }
             }

@@ -854,7 +854,10 @@ impl DiscEngine {
             // (5.5): displaced at rest after the bonds; x0 stays the packing
             let d = scale(pl.direction, 1.0 / norm2(pl.direction));
             let start = pl.start.unwrap_or_else(|| {
-                let lo = e.x0.iter().map(|p| dot2(*p, d)).fold(f64::INFINITY, f64::min);
+                let lo =
+                    e.x0.iter()
+                        .map(|p| dot2(*p, d))
+                        .fold(f64::INFINITY, f64::min);
                 scale(d, lo)
             });
             for p in 0..n {
@@ -1393,7 +1396,8 @@ impl DiscEngine {
         // the moving parts out of the state, so that the rest can be read meanwhile
         let st = &mut self.state;
         let (mut xs, mut vs) = (std::mem::take(&mut st.x), std::mem::take(&mut st.v));
-        let (mut thetas, mut omegas) = (std::mem::take(&mut st.theta), std::mem::take(&mut st.omega));
+        let (mut thetas, mut omegas) =
+            (std::mem::take(&mut st.theta), std::mem::take(&mut st.omega));
         let this = &*self;
         this.parallel(|| {
             xs.par_iter_mut()
@@ -2008,7 +2012,12 @@ impl DiscEngine {
         ));
         if let Some(v) = self.measurement() {
             for (k, name) in [
-                "stress_xx", "stress_yy", "stress_xy", "strain_xx", "strain_yy", "strain_xy",
+                "stress_xx",
+                "stress_yy",
+                "stress_xy",
+                "strain_xx",
+                "strain_yy",
+                "strain_xy",
             ]
             .into_iter()
             .enumerate()
