@@ -501,3 +501,45 @@ fn bagis_strain_and_the_macroscopic_stress_give_the_sc_samples_moduli() {
     // the stress at rest after the hold: 90 kN over 18 mm
     assert!((result(&e, "stress_yy") + 5e6).abs() < 5e6 * 1e-3);
 }
+
+#[test]
+fn bad_motions_threads_and_pulses_are_refused_naming_the_field() {
+    let base = scene("ddem-hcp.toml", &[]);
+    for (edit, field) in [
+        // a motion along y that `fix` does not hold
+        (
+            "fix = [\"x\"]",
+            "fix = [\"x\"]\nvelocity = [0.0, 1e-3]",
+        ),
+        ("[dem.contact]", "threads = 100000\n\n[dem.contact]"),
+        (
+            "[dem.output]",
+            "[dem.pulse]\ndirection = [0.0, 1.0]\namplitude = 1e-6\nwavelength = 0.0\n\n[dem.output]",
+        ),
+        // the lattice twice: discs on one centre (found once the pairs are listed)
+        (
+            "[[dem.loads]]",
+            "[[dem.discs]]\nkind = \"lattice\"\narrangement = \"hexagonal\"\nradius = 0.001\nspacing = 0.002\nfirst = [0.001, 0.0]\ncount = [6, 1]\n\n[[dem.loads]]",
+        ),
+    ]
+    .iter()
+    .zip([
+        "dem.constraints[0].velocity",
+        "dem.threads",
+        "dem.pulse.wavelength",
+        "have the same centre",
+    ])
+    {
+        let text = base.replacen(edit.0, edit.1, 1);
+        assert_ne!(text, base);
+        // refused when the scene is read (with its line) or when the engine is built
+        let err = match parse_scene_table(&text, "dem") {
+            Err(e) => e.to_string(),
+            Ok(cfg) => DiscEngine::from_config(&cfg.unwrap(), scenes())
+                .err()
+                .unwrap_or_else(|| panic!("{field}: accepted"))
+                .to_string(),
+        };
+        assert!(err.contains(field), "{field}: {err}");
+    }
+}

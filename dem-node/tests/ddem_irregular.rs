@@ -225,6 +225,14 @@ fn micro_macro_moduli_of_an_irregular_sample_agree_across_tests_and_with_voigt()
         ),
         steps,
     );
+    // the driven boundary's work (its reactions over the prescribed motion) pays for what
+    // the sample stores, the rest going to the damping
+    let (work, stored) = (
+        value(&sh, "external_work"),
+        value(&sh, "kinetic_energy") + value(&sh, "contact_energy"),
+    );
+    println!("shear: W_ext {work:.4e} J, E_k + E_el {stored:.4e} J");
+    assert!(work >= stored && work < 1.01 * stored, "{work} vs {stored}");
     // the DDEM sample of Figs. 4.13–4.14: E_p = 2e11 (k_n/E_p = 0.35), ν_p = 0.35
     let ddem = run_test(
         &file,

@@ -57,7 +57,7 @@ pub struct DiscConfig {
     /// Rigid plates (straight walls).
     #[serde(default)]
     pub walls: Vec<PlateConfig>,
-    /// The uniaxial-compression measurement (Madan §4.4: E and ν of the sample).
+    /// The measurement of a compression or shear test (Madan §4.4–4.5: E, ν, K or G).
     #[serde(default)]
     pub measure: Option<UniaxialConfig>,
     /// An initial displacement pulse (Madan (5.5), the wave-propagation bar).
@@ -456,8 +456,8 @@ pub struct UniaxialConfig {
     #[serde(default)]
     pub margin: f64,
     /// The load fractions between which the moduli are fitted (default [0.4, 0.8]): of the
-    /// ramped loads, or of the peak stress (|σ_yy|, |σ_h| or |σ_xy|) of the loading branch
-    /// when a plate or prescribed motion drives the test.
+    /// ramped loads with the centres' strain, or of the peak stress (|σ_yy|, |σ_h| or |σ_xy|)
+    /// of the loading branch when a plate, prescribed motion or Bagi's strain is used.
     #[serde(default = "default_fit")]
     pub fit: [f64; 2],
 }
@@ -571,11 +571,16 @@ impl DiscConfig {
         positive("dem.depth", self.depth, &mut e);
         positive("dem.density", self.density, &mut e);
         positive("dem.skin", self.skin, &mut e);
-        if self.threads == Some(0) {
-            e.push(ValueError {
-                path: "dem.threads".into(),
-                message: "must be at least 1".into(),
-            });
+        if let Some(t) = self.threads {
+            let most = crate::resources::max_threads();
+            if t == 0 || t > most {
+                e.push(ValueError {
+                    path: "dem.threads".into(),
+                    message: format!(
+                        "must be between 1 and {most} (4 × the cores available), got {t}"
+                    ),
+                });
+            }
         }
         let c = &self.contact;
         positive("dem.contact.normal_stiffness", c.normal_stiffness, &mut e);
@@ -795,6 +800,17 @@ impl DiscConfig {
                     message: "velocity, gradient and origin must be finite".into(),
                 });
             }
+            for (k, (dof, name)) in [(Dof::X, "x"), (Dof::Y, "y")].into_iter().enumerate() {
+                let moves = c.velocity[k] != 0.0 || c.gradient[k].iter().any(|g| *g != 0.0);
+                if moves && !c.fix.contains(&dof) {
+                    e.push(ValueError {
+                        path: format!("dem.constraints[{i}].velocity"),
+                        message: format!(
+                            "prescribes a motion along {name}, which `fix` does not hold: add \"{name}\" to fix"
+                        ),
+                    });
+                }
+            }
         }
         if let Some(m) = &self.measure {
             if m.strain == StrainKind::Centres {
@@ -852,6 +868,12 @@ impl DiscConfig {
                 });
             }
             positive("dem.pulse.wavelength", pl.wavelength, &mut e);
+            if pl.start.is_some_and(|s| !s.iter().all(|v| v.is_finite())) {
+                e.push(ValueError {
+                    path: "dem.pulse.start".into(),
+                    message: "must be finite".into(),
+                });
+            }
         }
         let mut probe_names = std::collections::BTreeSet::new();
         for (i, pr) in self.probes.iter().enumerate() {

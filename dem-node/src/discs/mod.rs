@@ -21,7 +21,7 @@ pub mod ddem;
 mod output;
 
 pub use bagi::BagiMesh;
-use config::{DiscConfig, DiscSource, Dof, Model, Region, Scheme, StrainKind, TestKind};
+use config::{DiscConfig, DiscSource, Dof, Model, Scheme, StrainKind, TestKind};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -105,7 +105,7 @@ pub struct PairState {
     pub active: bool,
     /// The tangential spring's elongation u_t along t (m), incremental (2.27)–(2.32).
     pub ut: f64,
-    /// Elastic normal force f_ne = k_n h_c (N, compression positive) (2.54).
+    /// Elastic normal force f_ne = k_n (h_c − rest) (N, compression positive) (2.54).
     pub fn_elastic: f64,
     /// Elastic tangential force on j along t (N).
     pub ft_elastic: f64,
@@ -293,6 +293,8 @@ pub struct DiscEngine {
     free: Vec<[bool; 3]>,
     /// The velocity of each fixed coordinate (zero unless a constraint prescribes one).
     prescribed: Vec<V2>,
+    /// The (disc, coordinate) pairs with a non-zero prescribed velocity.
+    driven: Vec<(u32, u8)>,
     loads: Vec<Load>,
     /// Discs with a load, sorted, and the index of each disc among them (u32::MAX: none).
     loaded: Vec<u32>,
@@ -410,15 +412,11 @@ fn read_disc_file(path: &Path, field: &str) -> Result<Vec<(V2, f64)>, DiscError>
     Ok(out)
 }
 
-fn in_region(x: &[V2], radius: &[f64], r: &Region) -> Vec<u32> {
-    r.select(x, radius)
-}
-
 /// The linear contact law of a touching or bonded pair (M (2.25)–(2.40)): the elastic normal
-/// force k_n h_c, the viscous c_n = ξ_n 2√(m_red k_n) (2.33)–(2.37), the incremental
-/// tangential spring u_t with its dashpot, bond breaking at φ_n in tension or φ_t in shear
-/// (2.38)–(2.39), then (unbonded) no tension and Coulomb sliding |f_t| ≤ μ f_n (2.40). `v_n`,
-/// `v_t`: the second body's contact point relative to the first's along n and t = ẑ × n.
+/// force k_n h_c (a bond at rest: k_n (h_c − its t = 0 overlap)), the viscous c_n = ξ_n
+/// 2√(m_red k_n) (2.33)–(2.37), the incremental tangential spring u_t with its dashpot, bond
+/// breaking at φ_n in tension or φ_t in shear (2.38)–(2.39), then (unbonded) no tension and
+/// Coulomb sliding |f_t| ≤ μ f_n (2.40). `v_n`, `v_t`: the second body's contact point relative to the first's along n and t = ẑ × n.
 /// Returns the new state (inactive for an unbonded pair apart) and whether a bond broke.
 fn contact_law(
     c: &config::ContactConfig,
@@ -583,7 +581,7 @@ impl DiscEngine {
         let mut free = vec![[true; 3]; n];
         let mut prescribed = vec![[0.0; 2]; n];
         for (k, c) in cfg.constraints.iter().enumerate() {
-            let discs = in_region(&x, &radius, &c.region);
+            let discs = c.region.select(&x, &radius);
             if discs.is_empty() {
                 return Err(config_err(
                     format!("dem.constraints[{k}].region"),
@@ -637,7 +635,7 @@ impl DiscEngine {
             .collect();
         let mut loads = Vec::new();
         for (k, ld) in cfg.loads.iter().enumerate() {
-            let discs = in_region(&x, &radius, &ld.region);
+            let discs = ld.region.select(&x, &radius);
             if discs.is_empty() {
                 return Err(config_err(
                     format!("dem.loads[{k}].region"),
@@ -671,7 +669,7 @@ impl DiscEngine {
                         ("right", &m.right),
                     ] {
                         let r = r.unwrap_or_default();
-                        let s = in_region(&x, &radius, &r);
+                        let s = r.select(&x, &radius);
                         if s.is_empty() {
                             return Err(config_err(
                                 format!("dem.measure.{name}"),
@@ -807,6 +805,11 @@ impl DiscEngine {
             volume,
             x0: x,
             free,
+            driven: (0..n)
+                .flat_map(|p| (0..2).map(move |k| (p, k)))
+                .filter(|&(p, k)| prescribed[p][k] != 0.0)
+                .map(|(p, k)| (p as u32, k as u8))
+                .collect(),
             prescribed,
             loads,
             loaded,
@@ -831,12 +834,12 @@ impl DiscEngine {
             pool,
             output: output::OutputState::default(),
         };
-        e.check_coincident()?;
         // the first list holds every pair the bond tolerance (2.21) reaches
         let skin = e.state.list_skin;
         e.state.list_skin = skin.max(1.01 * cfg.contact.bond_gap.unwrap_or(0.0));
         e.build_list();
         e.state.list_skin = skin;
+        e.check_coincident()?;
         // bonds at t = 0 (2.21)
         if let Some(g) = cfg.contact.bond_gap {
             for (k, &(i, j)) in e.state.pairs.iter().enumerate() {
@@ -1409,9 +1412,14 @@ impl DiscEngine {
                     let mut f = this.force[p];
                     let mut tq = this.torque[p];
                     if at > 0.0 {
-                        let speed = norm2(*v);
+                        // over the free coordinates only: a held or driven coordinate's force
+                        // is cancelled by its reaction, its velocity prescribed
+                        let free = this.free[p];
+                        let fm = [f[0] * free[0] as u8 as f64, f[1] * free[1] as u8 as f64];
+                        let vm = [v[0] * free[0] as u8 as f64, v[1] * free[1] as u8 as f64];
+                        let speed = norm2(vm);
                         if speed > 0.0 {
-                            f = sub(f, scale(*v, at * norm2(f) / speed));
+                            f = sub(f, scale(vm, at * norm2(fm) / speed));
                         }
                     }
                     if ar > 0.0 && *omega != 0.0 {
@@ -1458,6 +1466,12 @@ impl DiscEngine {
             self.state.work_external += dot2(mid, sub(u, self.state.load_point[k]));
             self.state.load_point[k] = u;
             self.state.load_previous[k] = f;
+        }
+        // the reactions of coordinates driven at a prescribed velocity, R = −F over the
+        // step's move v Δt
+        for &(p, k) in &self.driven {
+            let (p, k) = (p as usize, k as usize);
+            self.state.work_external -= self.force[p][k] * self.prescribed[p][k] * self.dt;
         }
     }
 
