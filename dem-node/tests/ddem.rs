@@ -512,6 +512,28 @@ fn bad_motions_threads_and_pulses_are_refused_naming_the_field() {
             "fix = [\"x\"]\nvelocity = [0.0, 1e-3]",
         ),
         ("[dem.contact]", "threads = 100000\n\n[dem.contact]"),
+        // a period shorter than twice a pair's reach
+        (
+            "[dem.contact]",
+            "[dem.periodic]\nx = [0.0, 0.001]\n\n[dem.contact]",
+        ),
+        // a wall across a periodic axis
+        (
+            "[dem.output]",
+            "[dem.periodic]\nx = [0.0, 0.1]\n\n[[dem.walls]]\nname = \"side\"\npoint = [0.0, 0.0]\nnormal = [1.0, 0.0]\n\n[dem.output]",
+        ),
+        // a servo gain beyond 1
+        (
+            "[dem.output]",
+            "[[dem.walls]]\nname = \"lid\"\npoint = [0.0, 0.03]\nnormal = [0.0, -1.0]\npressure = 1e6\nlength = 0.01\nmax_speed = 1.0\ngain = 1.5\n\n[dem.output]",
+        ),
+        // a probe with neither a point nor a region
+        ("[dem.output]", "[[dem.probes]]\nname = \"p\"\n\n[dem.output]"),
+        // Bagi's strain without the periodic images
+        (
+            "[dem.output]",
+            "[dem.periodic]\nx = [0.0, 0.1]\n\n[dem.measure]\nstrain = \"bagi\"\ntest = \"biaxial\"\n\n[dem.output]",
+        ),
         (
             "[dem.output]",
             "[dem.pulse]\ndirection = [0.0, 1.0]\namplitude = 1e-6\nwavelength = 0.0\n\n[dem.output]",
@@ -526,6 +548,11 @@ fn bad_motions_threads_and_pulses_are_refused_naming_the_field() {
     .zip([
         "dem.constraints[0].velocity",
         "dem.threads",
+        "dem.periodic.x",
+        "dem.walls[0].normal",
+        "dem.walls[0].gain",
+        "dem.probes[0]",
+        "dem.measure.strain",
         "dem.pulse.wavelength",
         "have the same centre",
     ])
@@ -542,4 +569,96 @@ fn bad_motions_threads_and_pulses_are_refused_naming_the_field() {
         };
         assert!(err.contains(field), "{field}: {err}");
     }
+}
+
+/// A bonded hexagonal strip of 8 × 6 discs (R = 1 mm, touching) periodic along x over its
+/// 16 mm width, the bottom row held, the top row pressed down and sideways, DDEM, k_t > 0;
+/// `shift` (m) moves every disc along x (the period stays): the seam runs elsewhere.
+fn strip(shift: f64) -> String {
+    format!(
+        r#"
+[dem]
+model = "discs-2d"
+time_step = 1e-7
+density = 2000.0
+[dem.periodic]
+x = [0.0, 0.016]
+[dem.contact]
+normal_stiffness = 7e10
+tangential_stiffness = 3.5e10
+bond_gap = 1e-9
+[dem.ddem]
+youngs_modulus = 2e11
+poisson_ratio = 0.35
+[[dem.discs]]
+kind = "lattice"
+arrangement = "hexagonal"
+radius = 0.001
+spacing = 0.002
+first = [{}, 0.001]
+count = [8, 6]
+[[dem.constraints]]
+region = {{ edge = "bottom", width = 1e-4 }}
+fix = ["x", "y"]
+[[dem.loads]]
+region = {{ edge = "top", width = 1e-4 }}
+force = [3e3, -1e4]
+ramp = 2e-5
+"#,
+        0.001 + shift
+    )
+}
+
+#[test]
+fn a_periodic_strip_has_no_seam() {
+    let mut a = engine(&strip(0.0));
+    // 8 bonds around each row's ring, 16 between each pair of rows: every interior disc has
+    // the six neighbours of the hexagonal packing
+    assert_eq!(result(&a, "bonds"), 6.0 * 8.0 + 5.0 * 16.0);
+    // the strip moved by 5.37 periods: other discs face each other across the cell's sides
+    let mut b = engine(&strip(5.37 * 0.016));
+    a.advance(400).unwrap();
+    b.advance(400).unwrap();
+    let most = a
+        .positions()
+        .iter()
+        .zip(a.initial_positions())
+        .map(|(x, x0)| (x[0] - x0[0]).hypot(x[1] - x0[1]))
+        .fold(0.0, f64::max);
+    assert!(most > 1e-7, "the strip deforms: {most}");
+    for (p, ((xa, a0), (xb, b0))) in a
+        .positions()
+        .iter()
+        .zip(a.initial_positions())
+        .zip(b.positions().iter().zip(b.initial_positions()))
+        .enumerate()
+    {
+        for k in 0..2 {
+            let (ua, ub) = (xa[k] - a0[k], xb[k] - b0[k]);
+            assert!(
+                (ua - ub).abs() < 1e-9 * most,
+                "disc {p}, axis {k}: {ua:e} against {ub:e}"
+            );
+        }
+    }
+    // the lattice repeats every spacing along x: each row moves as one, the seam included
+    let u: Vec<[f64; 2]> = a
+        .positions()
+        .iter()
+        .zip(a.initial_positions())
+        .map(|(x, x0)| [x[0] - x0[0], x[1] - x0[1]])
+        .collect();
+    for row in u.chunks(8) {
+        for d in row {
+            for k in 0..2 {
+                assert!((d[k] - row[0][k]).abs() < 1e-9 * most, "{row:?}");
+            }
+        }
+    }
+    assert!(
+        u[47][0] > 0.1 * most,
+        "the top row moves sideways: {:?}",
+        u[47]
+    );
+    assert_eq!(result(&a, "bonds_broken"), 0.0);
 }

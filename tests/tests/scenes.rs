@@ -40,7 +40,10 @@ fn every_shipped_scene_checks() {
         | "ddem-uniaxial-dem.toml"
         | "ddem-biaxial.toml"
         | "ddem-shear.toml" => Some(("out/ddem-pack/dem/discs_final.csv", "dem.discs[0].path")),
-        "ddem-wave.toml" => Some(("out/ddem-bar-pack/dem/discs_final.csv", "dem.discs[0].path")),
+        "ddem-wave.toml" | "ddem-shear-wave.toml" => Some((
+            "out/ddem-wave-pack/dem/discs_final.csv",
+            "dem.discs[0].path",
+        )),
         _ => None,
     };
     for name in names {

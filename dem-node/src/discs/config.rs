@@ -66,6 +66,9 @@ pub struct DiscConfig {
     /// Discs whose displacement `discs.csv` records (`<name>.ux`, `<name>.uy`).
     #[serde(default)]
     pub probes: Vec<ProbeConfig>,
+    /// Periodic boundaries: the axes along which the sample repeats (Madan ch. 5's shear wave).
+    #[serde(default)]
+    pub periodic: PeriodicConfig,
     #[serde(default)]
     pub output: DiscOutput,
     /// Threads of the step (default: all cores); any count gives the same bits.
@@ -267,6 +270,11 @@ pub struct PlateConfig {
     pub length: Option<f64>,
     #[serde(default)]
     pub max_speed: Option<f64>,
+    /// The servo's gain g: the plate moves at g (F_target − F)/(Δt k_n n_contacts), closing
+    /// this fraction of the force error per step against a packing as stiff as its contacts
+    /// (default 0.2; up to 1; a loose packing is softer and the plate slower).
+    #[serde(default = "default_gain")]
+    pub gain: f64,
     /// The plate stops moving at this time (s; default never).
     #[serde(default)]
     pub stop: Option<f64>,
@@ -407,7 +415,9 @@ pub enum TestKind {
     /// Isotropic biaxial compression: K = Δσ_h/Δε_vol, σ_h = (σ_xx + σ_yy)/2, ε_vol = ε_xx +
     /// ε_yy (4.33)–(4.35).
     Biaxial,
-    /// Pure shear: G = Δσ_xy/(2Δε_xy) (4.36).
+    /// Pure shear: G = Δσ_xy/(2Δε_xy) (4.36); with the centres' strain, simple shear of a
+    /// slab: 2ε_xy = γ the change of the x offset between the mean centres of `top` and
+    /// `bottom` over their initial distance, σ_xy the macroscopic stress (4.3).
     Shear,
 }
 
@@ -462,12 +472,16 @@ pub struct UniaxialConfig {
     pub fit: [f64; 2],
 }
 
+fn default_gain() -> f64 {
+    0.2
+}
+
 fn default_fit() -> [f64; 2] {
     [0.4, 0.8]
 }
 
 /// `[dem.pulse]`: at t = 0, after the bonds are made, each disc is displaced along
-/// `direction` by u = `amplitude` · ½ (1 + cos(2π ξ/`wavelength`)) for 0 ≤ ξ ≤ `wavelength`/2,
+/// `displacement` (default `direction`) by u = `amplitude` · ½ (1 + cos(2π ξ/`wavelength`)) for 0 ≤ ξ ≤ `wavelength`/2,
 /// ξ the distance of its centre from `start` along `direction`, at rest (our reading of
 /// Madan (5.5), A cos(2πx/L + 1) on 0 ≤ x ≤ L/2: a smooth half-bell from A at the end of the
 /// bar to 0).
@@ -475,6 +489,10 @@ fn default_fit() -> [f64; 2] {
 #[serde(deny_unknown_fields)]
 pub struct PulseConfig {
     pub direction: [f64; 2],
+    /// The direction the discs are displaced in (default `direction`: a longitudinal pulse;
+    /// across it: a shear pulse).
+    #[serde(default)]
+    pub displacement: Option<[f64; 2]>,
     /// The point the pulse starts from (m); default: the lowest centre along `direction`.
     #[serde(default)]
     pub start: Option<[f64; 2]>,
@@ -482,12 +500,43 @@ pub struct PulseConfig {
     pub wavelength: f64,
 }
 
-/// `[[dem.probes]]`: the disc whose centre lies nearest `point`.
+/// `[dem.periodic]`: the sample repeats along x over `x = [min, max]` and/or along y over
+/// `y = [min, max]` (m): pairs interact across the cell's sides through the nearest image.
+/// Centres are not wrapped back into the cell (displacements stay continuous).
+#[derive(Debug, Clone, Copy, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PeriodicConfig {
+    #[serde(default)]
+    pub x: Option<[f64; 2]>,
+    #[serde(default)]
+    pub y: Option<[f64; 2]>,
+}
+
+impl PeriodicConfig {
+    /// Per axis (the cell's lower side, its length), the length 0 where not periodic.
+    pub fn cell(&self) -> ([f64; 2], [f64; 2]) {
+        let mut lo = [0.0; 2];
+        let mut len = [0.0; 2];
+        for (k, a) in [self.x, self.y].into_iter().enumerate() {
+            if let Some([a, b]) = a {
+                lo[k] = a;
+                len[k] = b - a;
+            }
+        }
+        (lo, len)
+    }
+}
+
+/// `[[dem.probes]]`: the disc whose centre lies nearest `point`, or the mean of the discs of
+/// a `region` (a layer across a plane wave).
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ProbeConfig {
     pub name: String,
-    pub point: [f64; 2],
+    #[serde(default)]
+    pub point: Option<[f64; 2]>,
+    #[serde(default)]
+    pub region: Option<Region>,
 }
 
 /// `[dem.output]`.
@@ -757,6 +806,12 @@ impl DiscConfig {
                 }
                 _ => {}
             }
+            if !(w.gain > 0.0 && w.gain <= 1.0) {
+                e.push(ValueError {
+                    path: format!("{path}.gain"),
+                    message: format!("must lie in (0, 1], got {}", w.gain),
+                });
+            }
             if let Some(t) = w.stop {
                 non_negative(&format!("{path}.stop"), t, &mut e);
             }
@@ -813,7 +868,18 @@ impl DiscConfig {
             }
         }
         if let Some(m) = &self.measure {
-            if m.strain == StrainKind::Centres {
+            if m.strain == StrainKind::Centres && m.test == TestKind::Shear {
+                // simple shear of a slab: the mean centres of top and bottom, σ̄_xy (4.3)
+                for (k, r) in [("top", &m.top), ("bottom", &m.bottom)] {
+                    match r {
+                        Some(r) => region(&format!("dem.measure.{k}"), r, &mut e),
+                        None => e.push(ValueError {
+                            path: format!("dem.measure.{k}"),
+                            message: "a shear test with the centres' strain needs the regions top and bottom (or strain = \"bagi\")".into(),
+                        }),
+                    }
+                }
+            } else if m.strain == StrainKind::Centres {
                 for (k, r) in [
                     ("top", &m.top),
                     ("bottom", &m.bottom),
@@ -839,9 +905,7 @@ impl DiscConfig {
                 if m.test != TestKind::Uniaxial {
                     e.push(ValueError {
                         path: "dem.measure.test".into(),
-                        message:
-                            "biaxial and shear tests take Bagi's strain: set strain = \"bagi\""
-                                .into(),
+                        message: "a biaxial test takes Bagi's strain: set strain = \"bagi\"".into(),
                     });
                 }
             }
@@ -860,6 +924,15 @@ impl DiscConfig {
                     path: "dem.pulse.direction".into(),
                     message: format!("must be a finite non-zero vector, got {:?}", pl.direction),
                 });
+            }
+            if let Some(u) = pl.displacement {
+                let n = (u[0].powi(2) + u[1].powi(2)).sqrt();
+                if !(n.is_finite() && n > 0.0) {
+                    e.push(ValueError {
+                        path: "dem.pulse.displacement".into(),
+                        message: format!("must be a finite non-zero vector, got {u:?}"),
+                    });
+                }
             }
             if !pl.amplitude.is_finite() {
                 e.push(ValueError {
@@ -883,10 +956,49 @@ impl DiscConfig {
                     message: format!("`{}` must be a name no other probe has", pr.name),
                 });
             }
-            if !pr.point.iter().all(|v| v.is_finite()) {
-                e.push(ValueError {
+            match (&pr.point, &pr.region) {
+                (Some(p), None) if !p.iter().all(|v| v.is_finite()) => e.push(ValueError {
                     path: format!("dem.probes[{i}].point"),
                     message: "must be finite".into(),
+                }),
+                (None, Some(r)) => region(&format!("dem.probes[{i}].region"), r, &mut e),
+                (Some(_), None) => {}
+                _ => e.push(ValueError {
+                    path: format!("dem.probes[{i}]"),
+                    message: "reads the disc nearest a `point` or the mean of a `region`'s discs: give one of them".into(),
+                }),
+            }
+        }
+        for (k, (axis, a)) in [("x", self.periodic.x), ("y", self.periodic.y)]
+            .into_iter()
+            .enumerate()
+        {
+            let Some([lo, hi]) = a else { continue };
+            if !(lo.is_finite() && hi.is_finite() && hi > lo) {
+                e.push(ValueError {
+                    path: format!("dem.periodic.{axis}"),
+                    message: format!("must be [min, max] with min < max, got [{lo}, {hi}]"),
+                });
+            }
+            for (i, w) in self.walls.iter().enumerate() {
+                if w.normal[k] != 0.0 {
+                    e.push(ValueError {
+                        path: format!("dem.walls[{i}].normal"),
+                        message: format!(
+                            "the sample is periodic along {axis}: a wall must lie along it (its normal without a {axis} component), got {:?}",
+                            w.normal
+                        ),
+                    });
+                }
+            }
+            if self
+                .measure
+                .as_ref()
+                .is_some_and(|m| m.strain == StrainKind::Bagi)
+            {
+                e.push(ValueError {
+                    path: "dem.measure.strain".into(),
+                    message: "Bagi's strain triangulates the centres without their periodic images: with dem.periodic use strain = \"centres\"".into(),
                 });
             }
         }

@@ -156,6 +156,20 @@ struct State {
     wall_velocity: Vec<V2>,
     wall_force: Vec<V2>,
     wall_state: Vec<Vec<PairState>>,
+    /// Per probe: the largest displacement along the pulse so far and when (a wave's arrival).
+    #[serde(default)]
+    probe_track: Vec<ProbeTrack>,
+}
+
+/// A probe's reading along the pulse's displacement (its displacement's length without a
+/// pulse) at the last two steps, and its largest value so far with the time of that peak (a
+/// parabola through the three readings around it).
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
+struct ProbeTrack {
+    before: f64,
+    last: f64,
+    peak: f64,
+    peak_time: f64,
 }
 
 /// A rigid plate (a straight wall), its unit normal pointing into the sample.
@@ -165,8 +179,8 @@ struct Wall {
     point: V2,
     normal: V2,
     velocity: Option<V2>,
-    /// (pressure, length, max_speed) of a servo-controlled wall.
-    servo: Option<(f64, f64, f64)>,
+    /// (pressure, length, max_speed, gain) of a servo-controlled wall.
+    servo: Option<(f64, f64, f64, f64)>,
     stop: Option<f64>,
 }
 
@@ -183,39 +197,98 @@ impl Rng {
 }
 
 /// `count` non-overlapping discs in the box by random sequential addition, largest first.
+/// The nearest periodic image of the branch vector `d`: along each axis of period
+/// `len[k] > 0`, d_k − len_k · round(d_k/len_k).
+fn image(mut d: V2, len: [f64; 2]) -> V2 {
+    for k in 0..2 {
+        if len[k] > 0.0 {
+            d[k] -= len[k] * (d[k] / len[k]).round();
+        }
+    }
+    d
+}
+
+/// A grid of square-ish cells at least `cell` wide for neighbour searches; along a periodic
+/// axis a whole number of cells spans the period and the indices wrap.
+#[derive(Debug, Clone, Copy)]
+struct Grid {
+    lo: [f64; 2],
+    size: [f64; 2],
+    /// Cells along a periodic axis (0: unbounded).
+    count: [i64; 2],
+}
+
+impl Grid {
+    fn new(cell: f64, lo: [f64; 2], len: [f64; 2]) -> Grid {
+        let mut g = Grid {
+            lo: [0.0; 2],
+            size: [cell; 2],
+            count: [0; 2],
+        };
+        for k in 0..2 {
+            if len[k] > 0.0 {
+                let n = ((len[k] / cell).floor() as i64).max(1);
+                g.lo[k] = lo[k];
+                g.size[k] = len[k] / n as f64;
+                g.count[k] = n;
+            }
+        }
+        g
+    }
+
+    fn wrap(&self, c: (i64, i64)) -> (i64, i64) {
+        let w = |a: i64, n: i64| if n > 0 { a.rem_euclid(n) } else { a };
+        (w(c.0, self.count[0]), w(c.1, self.count[1]))
+    }
+
+    fn key(&self, p: V2) -> (i64, i64) {
+        self.wrap((
+            ((p[0] - self.lo[0]) / self.size[0]).floor() as i64,
+            ((p[1] - self.lo[1]) / self.size[1]).floor() as i64,
+        ))
+    }
+}
+
+/// `count` discs placed at random in the box without overlaps (random sequential addition,
+/// largest first). Along a periodic axis (`period`: the cell's lower side and length, length 0
+/// where not periodic) the discs fill the box edge to edge and keep clear of each other's
+/// periodic images.
 fn random_discs(
     count: usize,
     min: V2,
     max: V2,
     radius: &config::Triangular,
     seed: u64,
+    period: ([f64; 2], [f64; 2]),
 ) -> Result<Vec<(V2, f64)>, String> {
     let mut rng = Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
     let mut radii: Vec<f64> = (0..count).map(|_| radius.quantile(rng.uniform())).collect();
     radii.sort_by(|a, b| b.total_cmp(a));
-    let cell = 2.0 * radius.max;
-    let key = |p: V2| ((p[0] / cell).floor() as i64, (p[1] / cell).floor() as i64);
-    let mut grid: std::collections::HashMap<(i64, i64), Vec<usize>> = Default::default();
+    let grid = Grid::new(2.0 * radius.max, period.0, period.1);
+    let len = period.1;
+    let mut cells: std::collections::HashMap<(i64, i64), Vec<usize>> = Default::default();
     let mut out: Vec<(V2, f64)> = Vec::with_capacity(count);
     let area = (max[0] - min[0]) * (max[1] - min[1]);
     for (k, &r) in radii.iter().enumerate() {
         let mut placed = false;
-        if max[0] - min[0] > 2.0 * r && max[1] - min[1] > 2.0 * r {
+        // the margin from the box's sides: none along a periodic axis
+        let margin = [0, 1].map(|a| if len[a] > 0.0 { 0.0 } else { r });
+        if (0..2).all(|a| max[a] - min[a] > 2.0 * margin[a]) {
             for _ in 0..10_000 {
-                let p = [
-                    min[0] + r + rng.uniform() * (max[0] - min[0] - 2.0 * r),
-                    min[1] + r + rng.uniform() * (max[1] - min[1] - 2.0 * r),
-                ];
-                let (a, b) = key(p);
+                let p = [0, 1].map(|a| {
+                    min[a] + margin[a] + rng.uniform() * (max[a] - min[a] - 2.0 * margin[a])
+                });
+                let (a, b) = grid.key(p);
                 let free = (-1..=1).all(|da| {
                     (-1..=1).all(|db| {
-                        grid.get(&(a + da, b + db)).is_none_or(|v| {
-                            v.iter().all(|&q| norm2(sub(out[q].0, p)) >= out[q].1 + r)
+                        cells.get(&grid.wrap((a + da, b + db))).is_none_or(|v| {
+                            v.iter()
+                                .all(|&q| norm2(image(sub(out[q].0, p), len)) >= out[q].1 + r)
                         })
                     })
                 });
                 if free {
-                    grid.entry((a, b)).or_default().push(out.len());
+                    cells.entry((a, b)).or_default().push(out.len());
                     out.push((p, r));
                     placed = true;
                     break;
@@ -262,6 +335,10 @@ struct Measure {
     right: Vec<u32>,
     height0: f64,
     width0: f64,
+    /// Simple shear of a slab (the centres' strain): the initial x offset of the mean top
+    /// centre from the mean bottom one.
+    offset0: f64,
+    slab: bool,
     section: f64,
     fit: [f64; 2],
     /// The wall whose force is the load.
@@ -303,6 +380,9 @@ pub struct DiscEngine {
     measure: Option<Measure>,
     r_mean: f64,
     r_max: f64,
+    /// The periodic cell (`dem.periodic`): its lower corner and its lengths (0: not periodic).
+    period_lo: V2,
+    period: V2,
     state: State,
     /// Scratch of a step.
     force: Vec<V2>,
@@ -319,7 +399,7 @@ pub struct DiscEngine {
     /// Limits at t = 0 (see [`DiscEngine::limits`]).
     initial_limits: Vec<(String, f64)>,
     /// The probes' names and discs.
-    probes: Vec<(String, u32)>,
+    probes: Vec<(String, Vec<u32>)>,
     /// `dem.threads`: the engine's own pool (None: rayon's global one, all cores).
     pool: Option<rayon::ThreadPool>,
     output: output::OutputState,
@@ -544,7 +624,7 @@ impl DiscEngine {
                     radius: dist,
                     seed,
                 } => {
-                    let discs = random_discs(*count, *min, *max, dist, *seed)
+                    let discs = random_discs(*count, *min, *max, dist, *seed, cfg.periodic.cell())
                         .map_err(|m| config_err(format!("dem.discs[{k}]"), m))?;
                     for (p, r) in discs {
                         x.push(p);
@@ -578,6 +658,24 @@ impl DiscEngine {
             .collect();
         let r_mean = radius.iter().sum::<f64>() / n as f64;
         let r_max = radius.iter().copied().fold(0.0, f64::max);
+        let (period_lo, period) = cfg.periodic.cell();
+        for (k, axis) in ["x", "y"].into_iter().enumerate() {
+            // the nearest image is the only one in reach: a pair's centres, with the list's
+            // skin (also covering 5 % strains) or the bond tolerance, stay within half a period
+            let reach = 2.0 * r_max
+                + (cfg.skin * r_mean)
+                    .max(0.2 * r_max)
+                    .max(cfg.contact.bond_gap.unwrap_or(0.0));
+            if period[k] > 0.0 && period[k] <= 2.0 * reach {
+                return Err(config_err(
+                    format!("dem.periodic.{axis}"),
+                    format!(
+                        "the period {:e} m must exceed twice a pair's reach {reach:e} m (two of the largest discs with the list's skin)",
+                        period[k]
+                    ),
+                ));
+            }
+        }
         let mut free = vec![[true; 3]; n];
         let mut prescribed = vec![[0.0; 2]; n];
         for (k, c) in cfg.constraints.iter().enumerate() {
@@ -626,9 +724,14 @@ impl DiscEngine {
                     point,
                     normal,
                     velocity: w.velocity,
-                    servo: w
-                        .pressure
-                        .map(|p| (p, w.length.unwrap_or(1.0), w.max_speed.unwrap_or(0.0))),
+                    servo: w.pressure.map(|p| {
+                        (
+                            p,
+                            w.length.unwrap_or(1.0),
+                            w.max_speed.unwrap_or(0.0),
+                            w.gain,
+                        )
+                    }),
                     stop: w.stop,
                 }
             })
@@ -661,7 +764,35 @@ impl DiscEngine {
                 let mut sets = Vec::new();
                 let mut height0 = 0.0;
                 let mut width0 = 0.0;
-                if m.strain == StrainKind::Centres {
+                let mut offset0 = 0.0;
+                let slab = m.strain == StrainKind::Centres && m.test == TestKind::Shear;
+                if slab {
+                    // simple shear: the mean centres of top and bottom
+                    for (name, r) in [("top", &m.top), ("bottom", &m.bottom)] {
+                        let r = r.unwrap_or_default();
+                        let s = r.select(&x, &radius);
+                        if s.is_empty() {
+                            return Err(config_err(
+                                format!("dem.measure.{name}"),
+                                format!("holds no disc ({r})"),
+                            ));
+                        }
+                        sets.push(s);
+                    }
+                    let mean = |s: &[u32], k: usize| {
+                        s.iter().map(|&p| x[p as usize][k]).sum::<f64>() / s.len() as f64
+                    };
+                    height0 = mean(&sets[0], 1) - mean(&sets[1], 1);
+                    offset0 = mean(&sets[0], 0) - mean(&sets[1], 0);
+                    if height0 <= 0.0 {
+                        return Err(config_err(
+                            "dem.measure",
+                            format!(
+                                "the top discs must lie above the bottom ones (mean distance {height0:e} m)"
+                            ),
+                        ));
+                    }
+                } else if m.strain == StrainKind::Centres {
                     for (name, r) in [
                         ("top", &m.top),
                         ("bottom", &m.bottom),
@@ -732,6 +863,8 @@ impl DiscEngine {
                     right,
                     height0,
                     width0,
+                    offset0,
+                    slab,
                     section: m.section.unwrap_or(1.0),
                     fit: m.fit,
                     plate: m
@@ -783,19 +916,26 @@ impl DiscEngine {
                 .collect(),
             wall_force: vec![[0.0; 2]; walls.len()],
             wall_state: vec![vec![PairState::default(); n]; walls.len()],
+            probe_track: Vec::new(),
         };
-        let probes = cfg
-            .probes
-            .iter()
-            .map(|pr| {
-                let near = (0..n)
-                    .min_by(|&a, &b| {
-                        norm2(sub(x[a], pr.point)).total_cmp(&norm2(sub(x[b], pr.point)))
-                    })
-                    .unwrap_or(0);
-                (pr.name.clone(), near as u32)
-            })
-            .collect();
+        let mut probes = Vec::new();
+        for (k, pr) in cfg.probes.iter().enumerate() {
+            let discs = match (&pr.point, &pr.region) {
+                (Some(point), _) => (0..n)
+                    .min_by(|&a, &b| norm2(sub(x[a], *point)).total_cmp(&norm2(sub(x[b], *point))))
+                    .map(|p| vec![p as u32])
+                    .unwrap_or_default(),
+                (None, Some(r)) => r.select(&x, &radius),
+                (None, None) => Vec::new(),
+            };
+            if discs.is_empty() {
+                return Err(config_err(
+                    format!("dem.probes[{k}]"),
+                    format!("`{}` reads no disc", pr.name),
+                ));
+            }
+            probes.push((pr.name.clone(), discs));
+        }
         let mut e = DiscEngine {
             cfg: cfg.clone(),
             dt: cfg.time_step,
@@ -818,6 +958,8 @@ impl DiscEngine {
             measure,
             r_mean,
             r_max,
+            period_lo,
+            period,
             state,
             force: vec![[0.0; 2]; n],
             torque: vec![0.0; n],
@@ -856,6 +998,7 @@ impl DiscEngine {
         if let Some(pl) = &cfg.pulse {
             // (5.5): displaced at rest after the bonds; x0 stays the packing
             let d = scale(pl.direction, 1.0 / norm2(pl.direction));
+            let along = pl.displacement.map_or(d, |u| scale(u, 1.0 / norm2(u)));
             let start = pl.start.unwrap_or_else(|| {
                 let lo =
                     e.x0.iter()
@@ -869,10 +1012,20 @@ impl DiscEngine {
                     let u = pl.amplitude
                         * 0.5
                         * (1.0 + (2.0 * std::f64::consts::PI * xi / pl.wavelength).cos());
-                    e.state.x[p] = add(e.state.x[p], scale(d, u));
+                    e.state.x[p] = add(e.state.x[p], scale(along, u));
                 }
             }
         }
+        let values = e.probe_values();
+        e.state.probe_track = values
+            .into_iter()
+            .map(|v| ProbeTrack {
+                before: v,
+                last: v,
+                peak: v,
+                peak_time: 0.0,
+            })
+            .collect();
         // the row of the state at t = 0
         let first = output::row(&e);
         e.output.pending.push(first);
@@ -882,7 +1035,7 @@ impl DiscEngine {
     /// Two discs at one place make no contact normal: refuse them by name.
     fn check_coincident(&self) -> Result<(), DiscError> {
         for &(i, j) in &self.state.pairs {
-            let d = norm2(sub(self.state.x[j as usize], self.state.x[i as usize]));
+            let d = norm2(self.branch(i as usize, j as usize));
             if d <= 1e-9 * self.r_mean {
                 return Err(config_err(
                     "dem.discs",
@@ -896,8 +1049,13 @@ impl DiscEngine {
         Ok(())
     }
 
+    /// The branch vector from disc i's centre to disc j's (the nearest periodic image).
+    fn branch(&self, i: usize, j: usize) -> V2 {
+        image(sub(self.state.x[j], self.state.x[i]), self.period)
+    }
+
     fn gap(&self, i: usize, j: usize) -> f64 {
-        norm2(sub(self.state.x[j], self.state.x[i])) - self.radius[i] - self.radius[j]
+        norm2(self.branch(i, j)) - self.radius[i] - self.radius[j]
     }
 
     /// Rebuilds the candidate pairs (centre distance below R_i + R_j + skin) from a cell grid,
@@ -905,22 +1063,24 @@ impl DiscEngine {
     fn build_list(&mut self) {
         let s = &mut self.state;
         let skin = s.list_skin;
-        let cell = 2.0 * self.r_max + skin;
+        let grid = Grid::new(2.0 * self.r_max + skin, self.period_lo, self.period);
+        let len = self.period;
         let n = s.x.len();
-        let key = |p: V2| ((p[0] / cell).floor() as i64, (p[1] / cell).floor() as i64);
         let mut order: Vec<(i64, i64, u32)> = (0..n)
             .map(|i| {
-                let (a, b) = key(s.x[i]);
+                let (a, b) = grid.key(s.x[i]);
                 (a, b, i as u32)
             })
             .collect();
         order.sort_unstable();
         let mut pairs = Vec::new();
         for i in 0..n {
-            let (a, b) = key(s.x[i]);
+            let (a, b) = grid.key(s.x[i]);
             for da in -1..=1 {
                 for db in -1..=1 {
-                    let c = (a + da, b + db);
+                    // (with fewer than three cells across a period a cell comes twice: the
+                    // pairs are deduplicated below)
+                    let c = grid.wrap((a + da, b + db));
                     let start = order.partition_point(|o| (o.0, o.1) < c);
                     for o in &order[start..] {
                         if (o.0, o.1) != c {
@@ -930,7 +1090,7 @@ impl DiscEngine {
                         if j <= i {
                             continue;
                         }
-                        let d = norm2(sub(s.x[j], s.x[i]));
+                        let d = norm2(image(sub(s.x[j], s.x[i]), len));
                         if d < self.radius[i] + self.radius[j] + skin {
                             pairs.push((i as u32, j as u32));
                         }
@@ -1049,13 +1209,84 @@ impl DiscEngine {
         }
     }
 
-    /// Each probe's name, disc and displacement from the packing.
-    pub fn probe_readings(&self) -> Vec<(String, u32, V2)> {
+    /// A probe's reading: its mean displacement along the pulse's displacement, or its length.
+    fn probe_values(&self) -> Vec<f64> {
+        let along = self.cfg.pulse.as_ref().map(|pl| {
+            let u = pl.displacement.unwrap_or(pl.direction);
+            scale(u, 1.0 / norm2(u))
+        });
+        self.probe_readings()
+            .into_iter()
+            .map(|(_, _, u)| along.map_or(norm2(u), |a| dot2(u, a)))
+            .collect()
+    }
+
+    /// The probes' peaks: a reading below the last one that was above the one before makes
+    /// the last one a local maximum; the largest so far is the wave's arrival.
+    fn track_probes(&mut self) {
+        if self.probes.is_empty() {
+            return;
+        }
+        let values = self.probe_values();
+        let t = self.state.time;
+        for (tr, r) in self.state.probe_track.iter_mut().zip(values) {
+            if tr.last > tr.before && tr.last >= r && tr.last > tr.peak {
+                let curve = tr.before - 2.0 * tr.last + r;
+                let shift = if curve < 0.0 {
+                    0.5 * (tr.before - r) / curve
+                } else {
+                    0.0
+                };
+                tr.peak = tr.last;
+                // the last reading was at t − Δt; the parabola's top lies `shift` steps on
+                tr.peak_time = t - self.dt * (1.0 - shift);
+            }
+            tr.before = tr.last;
+            tr.last = r;
+        }
+    }
+
+    /// The speed of a wave past the probes: the least-squares slope of their positions along
+    /// the pulse's direction over their peak times (probes that peaked after t = 0; at least
+    /// two, at different places), and the fit's coefficient of determination r² (near 1: one
+    /// pulse running past the probes at one speed; far from it: no coherent wave).
+    pub fn wave_speed(&self) -> Option<(f64, f64)> {
+        let pl = self.cfg.pulse.as_ref()?;
+        let d = scale(pl.direction, 1.0 / norm2(pl.direction));
+        let pts: Vec<(f64, f64)> = self
+            .probe_readings()
+            .iter()
+            .zip(&self.state.probe_track)
+            .filter(|(_, tr)| tr.peak_time > 0.0)
+            .map(|((_, at, _), tr)| (tr.peak_time, dot2(*at, d)))
+            .collect();
+        if pts.len() < 2 {
+            return None;
+        }
+        let n = pts.len() as f64;
+        let mt = pts.iter().map(|p| p.0).sum::<f64>() / n;
+        let ms = pts.iter().map(|p| p.1).sum::<f64>() / n;
+        let sts: f64 = pts.iter().map(|p| (p.0 - mt) * (p.1 - ms)).sum();
+        let stt: f64 = pts.iter().map(|p| (p.0 - mt).powi(2)).sum();
+        let sss: f64 = pts.iter().map(|p| (p.1 - ms).powi(2)).sum();
+        (stt > 0.0 && sss > 0.0).then(|| (sts / stt, sts * sts / (stt * sss)))
+    }
+
+    /// Each probe's name, its discs' mean centre in the packing and their mean displacement
+    /// from it.
+    pub fn probe_readings(&self) -> Vec<(String, V2, V2)> {
         self.probes
             .iter()
-            .map(|(name, p)| {
-                let p = *p as usize;
-                (name.clone(), p as u32, sub(self.state.x[p], self.x0[p]))
+            .map(|(name, discs)| {
+                let mut at = [0.0; 2];
+                let mut u = [0.0; 2];
+                for &p in discs {
+                    let p = p as usize;
+                    at = add(at, self.x0[p]);
+                    u = add(u, sub(self.state.x[p], self.x0[p]));
+                }
+                let w = 1.0 / discs.len() as f64;
+                (name.clone(), scale(at, w), scale(u, w))
             })
             .collect()
     }
@@ -1071,7 +1302,7 @@ impl DiscEngine {
         let (i, j) = (i as usize, j as usize);
         {
             let old = s.pair_state[k];
-            let d = sub(s.x[j], s.x[i]);
+            let d = image(sub(s.x[j], s.x[i]), self.period);
             let dist = norm2(d);
             let n = scale(d, 1.0 / dist);
             let (ri, rj) = (self.radius[i], self.radius[j]);
@@ -1267,6 +1498,7 @@ impl DiscEngine {
         self.state.step += 1;
         self.state.time = self.state.step as f64 * self.dt;
         self.check_finite()?;
+        self.track_probes();
         if self.state.step % self.cfg.output.csv_every == 0 {
             let row = output::row(self);
             self.output.pending.push(row);
@@ -1484,14 +1716,14 @@ impl DiscEngine {
             let stopped = wall.stop.is_some_and(|s| t >= s);
             let v = if stopped {
                 [0.0; 2]
-            } else if let Some((pressure, length, speed)) = wall.servo {
-                // v = g (F_target − F) with g = 0.2/(Δt k_w), k_w = k_n × the wall's contacts:
-                // the force closes 20 % of its error per step (a larger gain against the
-                // stiff contacts oscillates), at most `max_speed` while approaching
+            } else if let Some((pressure, length, speed, gain)) = wall.servo {
+                // v = g (F_target − F)/(Δt k_w), k_w = k_n × the wall's contacts: the force
+                // closes the fraction g of its error per step (default 0.2: a larger gain
+                // against the stiff contacts oscillates), at most `max_speed` while approaching
                 let push = -dot2(self.state.wall_force[w], wall.normal);
                 let target = pressure * length * self.cfg.depth;
                 let k_w = self.cfg.contact.normal_stiffness * self.wall_contacts[w].max(1) as f64;
-                let v = (0.2 * (target - push) / (self.dt * k_w)).clamp(-speed, speed);
+                let v = (gain * (target - push) / (self.dt * k_w)).clamp(-speed, speed);
                 scale(wall.normal, v)
             } else {
                 wall.velocity.unwrap_or([0.0; 2])
@@ -1547,6 +1779,12 @@ impl DiscEngine {
         let mean = |set: &[u32], k: usize| {
             set.iter().map(|&p| s.x[p as usize][k]).sum::<f64>() / set.len() as f64
         };
+        if m.slab {
+            // γ = 2ε_xy: the top's shift against the bottom over their distance
+            let gamma = (mean(&m.top, 0) - mean(&m.bottom, 0) - m.offset0) / m.height0;
+            let st = self.macroscopic_stress();
+            return Some([st[0], st[1], st[2], 0.0, 0.0, 0.5 * gamma]);
+        }
         let load: f64 = match m.plate {
             // the plate's push, compressive: a negative stress as from loads pressing down
             Some(w) => dot2(s.wall_force[w], self.walls[w].normal),
@@ -1764,10 +2002,16 @@ impl DiscEngine {
         self.state.work_external
     }
 
-    /// The macroscopic stress σ̄ = (1/V) Σ_p V_p σ_p (4.1)–(4.3) over the box the discs span.
+    /// The macroscopic stress σ̄ = (1/V) Σ_p V_p σ_p (4.1)–(4.3) over the box the discs span
+    /// (along a periodic axis: the period).
     pub fn macroscopic_stress(&self) -> [f64; 3] {
         let s = &self.state;
-        let (lo, hi) = config::span(&s.x, &self.radius);
+        let (mut lo, mut hi) = config::span(&s.x, &self.radius);
+        for k in 0..2 {
+            if self.period[k] > 0.0 {
+                (lo[k], hi[k]) = (0.0, self.period[k]);
+            }
+        }
         let mut sum = [0.0; 3];
         for p in 0..s.x.len() {
             for (sk, st) in sum.iter_mut().zip(s.stress[p]) {
@@ -1817,7 +2061,7 @@ impl DiscEngine {
         let springs: Vec<ddem::Spring> = touching
             .iter()
             .map(|&(i, j)| {
-                let d = sub(s.x[j], s.x[i]);
+                let d = self.branch(i, j);
                 let n = scale(d, 1.0 / norm2(d));
                 ddem::Spring {
                     i,
@@ -1931,7 +2175,7 @@ impl DiscEngine {
                 .iter()
                 .enumerate()
                 .flat_map(|(k, &(i, j))| {
-                    let dv = sub(s.x[j], s.x[i]);
+                    let dv = self.branch(i, j);
                     let n = scale(dv, 1.0 / norm2(dv));
                     [
                         ddem::End {
@@ -2044,6 +2288,14 @@ impl DiscEngine {
             r.push((format!("{name}.displacement"), shift));
         }
         r.extend(self.moduli());
+        for ((name, _), tr) in self.probes.iter().zip(&self.state.probe_track) {
+            r.push((format!("{name}.peak"), tr.peak));
+            r.push((format!("{name}.peak_time"), tr.peak_time));
+        }
+        if let Some((c, r2)) = self.wave_speed() {
+            r.push(("wave_speed".to_string(), c));
+            r.push(("wave_speed_r2".to_string(), r2));
+        }
         if self.cfg.ddem.as_ref().map(|d| d.scheme) == Some(Scheme::FixedPoint) {
             r.push((
                 "iterations_most".to_string(),

@@ -245,18 +245,32 @@ fn write_contacts_vtk(path: &Path, e: &DiscEngine) -> Result<(), DiscError> {
         .filter(|&k| st.pair_state[k].active)
         .collect();
     let m = active.len();
+    // a contact across a periodic side ends at its partner's image: an extra point
+    let mut ends = Vec::with_capacity(m);
+    let mut extra = Vec::new();
+    for &k in &active {
+        let (i, j) = (st.pairs[k].0 as usize, st.pairs[k].1 as usize);
+        let d = e.branch(i, j);
+        if d == [st.x[j][0] - st.x[i][0], st.x[j][1] - st.x[i][1]] {
+            ends.push((i, j));
+        } else {
+            ends.push((i, n + extra.len()));
+            extra.push([st.x[i][0] + d[0], st.x[i][1] + d[1]]);
+        }
+    }
     let mut s = String::with_capacity(60 * (n + m) + 256);
     let _ = writeln!(
         s,
-        "# vtk DataFile Version 3.0\ncosim disc contacts t = {:e} s\nASCII\nDATASET POLYDATA\nPOINTS {n} double",
-        e.time()
+        "# vtk DataFile Version 3.0\ncosim disc contacts t = {:e} s\nASCII\nDATASET POLYDATA\nPOINTS {} double",
+        e.time(),
+        n + extra.len()
     );
-    for x in &st.x {
+    for x in st.x.iter().chain(&extra) {
         let _ = writeln!(s, "{:e} {:e} 0", x[0], x[1]);
     }
     let _ = writeln!(s, "LINES {m} {}", 3 * m);
-    for &k in &active {
-        let _ = writeln!(s, "2 {} {}", st.pairs[k].0, st.pairs[k].1);
+    for (a, b) in ends {
+        let _ = writeln!(s, "2 {a} {b}");
     }
     let _ = writeln!(s, "CELL_DATA {m}");
     type Field = fn(&super::PairState) -> f64;
