@@ -384,6 +384,9 @@ pub struct DiscEngine {
     period_lo: V2,
     period: V2,
     state: State,
+    /// Each disc's pairs in the list's order: `adjacency.1[adjacency.0[p]..adjacency.0[p + 1]]`
+    /// holds 2k for pair k with p its first disc, 2k + 1 with p its second (rebuilt with the list).
+    adjacency: (Vec<u32>, Vec<u32>),
     /// Scratch of a step.
     force: Vec<V2>,
     torque: Vec<f64>,
@@ -961,6 +964,7 @@ impl DiscEngine {
             period_lo,
             period,
             state,
+            adjacency: (Vec::new(), Vec::new()),
             force: vec![[0.0; 2]; n],
             torque: vec![0.0; n],
             external: vec![[0.0; 2]; n],
@@ -1119,6 +1123,29 @@ impl DiscEngine {
         s.pairs = pairs;
         s.pair_state = states;
         s.x_build = s.x.clone();
+        self.build_adjacency();
+    }
+
+    /// Each disc's pairs, in the order of the list (see `adjacency`).
+    fn build_adjacency(&mut self) {
+        let n = self.state.x.len();
+        let mut start = vec![0u32; n + 1];
+        for &(i, j) in &self.state.pairs {
+            start[i as usize + 1] += 1;
+            start[j as usize + 1] += 1;
+        }
+        for p in 0..n {
+            start[p + 1] += start[p];
+        }
+        let mut fill = start.clone();
+        let mut list = vec![0u32; start[n] as usize];
+        for (k, &(i, j)) in self.state.pairs.iter().enumerate() {
+            for (p, side) in [(i, 0), (j, 1)] {
+                list[fill[p as usize] as usize] = 2 * k as u32 + side;
+                fill[p as usize] += 1;
+            }
+        }
+        self.adjacency = (start, list);
     }
 
     /// The list is valid while no pair outside it can touch: 2 δ_max + 2 R_max ε_max < skin
@@ -1387,77 +1414,100 @@ impl DiscEngine {
     /// reactions into `self.force` / `self.torque`, and the particle stresses (2.41)–(2.45)
     /// into `self.stress_new`.
     fn assemble(&mut self) {
-        let n = self.state.x.len();
-        for p in 0..n {
-            self.force[p] = self.external[p];
-            self.torque[p] = 0.0;
-            self.stress_new[p] = [0.0; 3];
-        }
-        for (k, &(i, j)) in self.state.pairs.iter().enumerate() {
-            let e = &self.eval[k];
-            if !e.state.active {
-                continue;
-            }
-            let (i, j) = (i as usize, j as usize);
-            let n_ = e.n;
-            let t = [-n_[1], n_[0]];
-            let fj = add(scale(n_, e.state.fn_total), scale(t, e.state.ft_total));
-            let fi = scale(fj, -1.0);
-            self.force[j] = add(self.force[j], fj);
-            self.force[i] = add(self.force[i], fi);
-            // moments s × f with s_i = R_i n, s_j = −R_j n: both −R f_t
-            self.torque[i] -= self.radius[i] * e.state.ft_total;
-            self.torque[j] -= self.radius[j] * e.state.ft_total;
-            add_stress(&mut self.stress_new[i], scale(n_, self.radius[i]), fi);
-            add_stress(&mut self.stress_new[j], scale(n_, -self.radius[j]), fj);
-        }
+        // the walls' totals (the force the discs exert on each, in disc order)
         for w in 0..self.walls.len() {
             let mut on_wall = [0.0; 2];
             self.wall_contacts[w] = 0;
-            for p in 0..n {
-                let e = &self.eval_walls[w][p];
-                if !e.state.active {
-                    continue;
+            for e in &self.eval_walls[w] {
+                if e.state.active {
+                    self.wall_contacts[w] += 1;
+                    let nw = e.n;
+                    let t = [-nw[1], nw[0]];
+                    on_wall = sub(
+                        on_wall,
+                        add(scale(nw, e.state.fn_total), scale(t, e.state.ft_total)),
+                    );
                 }
-                self.wall_contacts[w] += 1;
-                let nw = e.n;
-                let t = [-nw[1], nw[0]];
-                let f = add(scale(nw, e.state.fn_total), scale(t, e.state.ft_total));
-                self.force[p] = add(self.force[p], f);
-                self.torque[p] -= self.radius[p] * e.state.ft_total;
-                add_stress(&mut self.stress_new[p], scale(nw, -self.radius[p]), f);
-                on_wall = sub(on_wall, f);
             }
             self.wall_force_new[w] = on_wall;
         }
-        let t = self.state.time;
-        for p in 0..n {
-            // loads act at the point opposite their direction, s = −R F̂ (pushing on the
-            // surface), as do the reactions of fixed coordinates: end discs then deform as
-            // interior ones do
-            let load = if self.loaded_index[p] != u32::MAX {
-                self.load_on(p, t)
-            } else {
-                [0.0; 2]
-            };
-            let reaction: V2 = std::array::from_fn(|k| {
-                if self.free[p][k] {
-                    0.0
-                } else {
-                    -self.force[p][k]
-                }
-            });
-            for f in [load, reaction] {
-                let size = norm2(f);
-                if size > 0.0 {
-                    add_stress(&mut self.stress_new[p], scale(f, -self.radius[p] / size), f);
-                }
+        // each disc gathers its contacts in the list's order: the same sums on any thread
+        // count (and as a scatter over the pairs would give)
+        let mut force = std::mem::take(&mut self.force);
+        let mut torque = std::mem::take(&mut self.torque);
+        let mut stress = std::mem::take(&mut self.stress_new);
+        let this = &*self;
+        this.parallel(|| {
+            force
+                .par_iter_mut()
+                .zip(torque.par_iter_mut())
+                .zip(stress.par_iter_mut())
+                .with_min_len(PAR_MIN)
+                .enumerate()
+                .for_each(|(p, ((f, m), st))| this.gather(p, f, m, st));
+        });
+        self.force = force;
+        self.torque = torque;
+        self.stress_new = stress;
+    }
+
+    /// Disc p's force, moment and particle stress σ̃ (2.41)–(2.46) from its contacts, walls,
+    /// load and the reactions of its held coordinates.
+    fn gather(&self, p: usize, force: &mut V2, torque: &mut f64, stress: &mut [f64; 3]) {
+        let r = self.radius[p];
+        let mut f_sum = self.external[p];
+        let mut m_sum = 0.0;
+        let mut st = [0.0; 3];
+        let (start, list) = &self.adjacency;
+        for &code in &list[start[p] as usize..start[p + 1] as usize] {
+            let e = &self.eval[(code / 2) as usize];
+            if !e.state.active {
+                continue;
             }
-            let v = self.volume[p];
-            for c in &mut self.stress_new[p] {
-                *c /= v;
+            let n_ = e.n;
+            let t = [-n_[1], n_[0]];
+            let fj = add(scale(n_, e.state.fn_total), scale(t, e.state.ft_total));
+            // moments s × f with s_i = R_i n, s_j = −R_j n: both −R f_t
+            m_sum -= r * e.state.ft_total;
+            if code % 2 == 0 {
+                let fi = scale(fj, -1.0);
+                f_sum = add(f_sum, fi);
+                add_stress(&mut st, scale(n_, r), fi);
+            } else {
+                f_sum = add(f_sum, fj);
+                add_stress(&mut st, scale(n_, -r), fj);
             }
         }
+        for evals in &self.eval_walls {
+            let e = &evals[p];
+            if !e.state.active {
+                continue;
+            }
+            let nw = e.n;
+            let t = [-nw[1], nw[0]];
+            let f = add(scale(nw, e.state.fn_total), scale(t, e.state.ft_total));
+            f_sum = add(f_sum, f);
+            m_sum -= r * e.state.ft_total;
+            add_stress(&mut st, scale(nw, -r), f);
+        }
+        // loads act at the point opposite their direction, s = −R F̂ (pushing on the surface),
+        // as do the reactions of fixed coordinates: end discs then deform as interior ones do
+        let load = if self.loaded_index[p] != u32::MAX {
+            self.load_on(p, self.state.time)
+        } else {
+            [0.0; 2]
+        };
+        let reaction: V2 = std::array::from_fn(|k| if self.free[p][k] { 0.0 } else { -f_sum[k] });
+        for f in [load, reaction] {
+            let size = norm2(f);
+            if size > 0.0 {
+                add_stress(&mut st, scale(f, -r / size), f);
+            }
+        }
+        let v = self.volume[p];
+        *force = f_sum;
+        *torque = m_sum;
+        *stress = st.map(|c| c / v);
     }
 
     /// One step of Δt.
@@ -2328,7 +2378,15 @@ impl DiscEngine {
                 self.loaded.len()
             )));
         }
+        if s.probe_track.len() != self.probes.len() {
+            return Err(DiscError::Snapshot(format!(
+                "the snapshot tracks {} probes, this scene has {}",
+                s.probe_track.len(),
+                self.probes.len()
+            )));
+        }
         self.state = s;
+        self.build_adjacency();
         self.output.pending.clear();
         self.output.last_vtk_step = None;
         Ok(())
