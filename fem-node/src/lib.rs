@@ -30,6 +30,7 @@ mod model;
 pub mod nonlinear;
 pub mod output;
 pub mod resources;
+pub mod shell;
 pub mod surface;
 
 pub use config::{parse_scene_section, parse_scene_table};

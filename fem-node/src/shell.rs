@@ -1,0 +1,313 @@
+//! The MITC4 shell element (Dvorkin & Bathe 1984; Bathe, *Finite Element Procedures*, §5.4):
+//! a 4-node degenerated shell with mixed interpolation of the transverse shear strains, free
+//! of shear locking as the thickness goes to zero. Linear, small displacements; six degrees
+//! of freedom per node (three translations, three rotations in the global frame), the
+//! rotation about the director held by a small Hughes–Brezzi drilling stiffness.
+//!
+//! Geometry and displacement (t ∈ [−1, 1] through the thickness a):
+//!   X(r, s, t) = Σ N_i (x_i + t a/2 V_i),   U(r, s, t) = Σ N_i (u_i + t a/2 θ_i × V_i),
+//! V_i the nodal directors (unit normals of the mid-surface, averaged over the elements at a
+//! node on a smooth surface). Covariant strains ε̃_ij = ½ (g_i · U_,j + g_j · U_,i); ε̃_rr,
+//! ε̃_ss and ε̃_rs at the integration points, ε̃_rt from the tying points (0, ±1) and ε̃_st from
+//! (±1, 0) (the MITC interpolation), ε̃_tt dropped (plane stress). They are turned into a
+//! local Cartesian frame (e1 along g_r, e3 normal to the mid-surface) and the plane-stress law
+//! with the shear correction κ = 5/6 gives the stress. 2 × 2 points in the plane, 2 through
+//! the thickness.
+//!
+//! Degrees of freedom in the element vector: node i's (u_x, u_y, u_z, θ_x, θ_y, θ_z) at 6i..6i+6.
+
+use nalgebra::{Matrix3, Vector3};
+
+/// Degrees of freedom of one element.
+pub const DOFS: usize = 24;
+
+/// An element's stiffness, row-major 24 × 24.
+pub type Stiffness = [[f64; DOFS]; DOFS];
+
+/// Bilinear shape functions and their derivatives (∂/∂r, ∂/∂s) at (r, s); nodes at
+/// (−1, −1), (1, −1), (1, 1), (−1, 1) counter-clockwise.
+fn shape(r: f64, s: f64) -> ([f64; 4], [[f64; 2]; 4]) {
+    const C: [[f64; 2]; 4] = [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]];
+    let mut n = [0.0; 4];
+    let mut d = [[0.0; 2]; 4];
+    for i in 0..4 {
+        let (ri, si) = (C[i][0], C[i][1]);
+        n[i] = 0.25 * (1.0 + ri * r) * (1.0 + si * s);
+        d[i] = [0.25 * ri * (1.0 + si * s), 0.25 * si * (1.0 + ri * r)];
+    }
+    (n, d)
+}
+
+fn v3(a: [f64; 3]) -> Vector3<f64> {
+    Vector3::new(a[0], a[1], a[2])
+}
+
+/// The element's geometry: corner positions, unit directors and thickness.
+#[derive(Debug, Clone, Copy)]
+pub struct Geometry {
+    pub x: [[f64; 3]; 4],
+    pub director: [[f64; 3]; 4],
+    pub thickness: f64,
+}
+
+/// Linear isotropic elastic shell material.
+#[derive(Debug, Clone, Copy)]
+pub struct Material {
+    pub youngs_modulus: f64,
+    pub poisson_ratio: f64,
+}
+
+/// The unit normals of a flat or warped quadrilateral at its corners, g_r × g_s: the
+/// directors of a lone element (meshes average them over the elements at a node).
+pub fn corner_normals(x: &[[f64; 3]; 4]) -> [[f64; 3]; 4] {
+    const C: [[f64; 2]; 4] = [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]];
+    let mut out = [[0.0; 3]; 4];
+    for (k, c) in C.iter().enumerate() {
+        let (_, d) = shape(c[0], c[1]);
+        let mut gr = Vector3::zeros();
+        let mut gs = Vector3::zeros();
+        for i in 0..4 {
+            gr += d[i][0] * v3(x[i]);
+            gs += d[i][1] * v3(x[i]);
+        }
+        let n = gr.cross(&gs).normalize();
+        out[k] = [n.x, n.y, n.z];
+    }
+    out
+}
+
+/// Covariant base vectors at (r, s, t) and the rows (24 entries each) that map the element's
+/// degrees of freedom to U_,r, U_,s, U_,t dotted with a vector: `dot_rows(w)[b]` · q = w · U_,b.
+struct Point {
+    g: [Vector3<f64>; 3],
+    /// dU/dξ_b as a linear map: for each b, per node the translation weight c_u (times the unit
+    /// matrix) and the rotation weight c_θ: U_,b = Σ_i c_u u_i + c_θ θ_i × V_i.
+    cu: [[f64; 4]; 3],
+    ct: [[f64; 4]; 3],
+}
+
+fn point(geo: &Geometry, r: f64, s: f64, t: f64) -> Point {
+    let (n, d) = shape(r, s);
+    let h = 0.5 * geo.thickness;
+    let mut g = [Vector3::zeros(); 3];
+    let mut cu = [[0.0; 4]; 3];
+    let mut ct = [[0.0; 4]; 3];
+    for i in 0..4 {
+        let xi = v3(geo.x[i]);
+        let vi = v3(geo.director[i]);
+        for b in 0..2 {
+            g[b] += d[i][b] * (xi + t * h * vi);
+            cu[b][i] = d[i][b];
+            ct[b][i] = d[i][b] * t * h;
+        }
+        g[2] += n[i] * h * vi;
+        cu[2][i] = 0.0;
+        ct[2][i] = n[i] * h;
+    }
+    Point { g, cu, ct }
+}
+
+impl Point {
+    /// The row of w · U_,b over the 24 degrees of freedom.
+    fn row(&self, geo: &Geometry, w: &Vector3<f64>, b: usize) -> [f64; DOFS] {
+        let mut out = [0.0; DOFS];
+        for i in 0..4 {
+            // w · (c_u u_i) and w · (c_θ θ_i × V_i) = c_θ θ_i · (V_i × w)
+            let vw = v3(geo.director[i]).cross(w);
+            for k in 0..3 {
+                out[6 * i + k] = self.cu[b][i] * w[k];
+                out[6 * i + 3 + k] = self.ct[b][i] * vw[k];
+            }
+        }
+        out
+    }
+
+    /// The row of the covariant strain ε̃_ab = ½ (g_a · U_,b + g_b · U_,a).
+    fn strain(&self, geo: &Geometry, a: usize, b: usize) -> [f64; DOFS] {
+        let p = self.row(geo, &self.g[a], b);
+        let q = self.row(geo, &self.g[b], a);
+        std::array::from_fn(|k| 0.5 * (p[k] + q[k]))
+    }
+}
+
+/// The MITC4 stiffness of one element (24 × 24, symmetric), with the drilling stiffness.
+pub fn stiffness(geo: &Geometry, mat: Material) -> Stiffness {
+    let (e, nu) = (mat.youngs_modulus, mat.poisson_ratio);
+    let shear = e / (2.0 * (1.0 + nu));
+    let kappa = 5.0 / 6.0;
+    // plane stress in the local frame: (ε11, ε22, γ12, γ13, γ23)
+    let c = e / (1.0 - nu * nu);
+    let dmat = [
+        [c, c * nu, 0.0, 0.0, 0.0],
+        [c * nu, c, 0.0, 0.0, 0.0],
+        [0.0, 0.0, shear, 0.0, 0.0],
+        [0.0, 0.0, 0.0, kappa * shear, 0.0],
+        [0.0, 0.0, 0.0, 0.0, kappa * shear],
+    ];
+    let gp = 1.0 / 3f64.sqrt();
+    let mut k = [[0.0; DOFS]; DOFS];
+    for &t in &[-gp, gp] {
+        // the tying points' transverse shear strains at this t: ε̃_rt at A (0, 1), C (0, −1);
+        // ε̃_st at D (1, 0), B (−1, 0)
+        let ert_a = point(geo, 0.0, 1.0, t).strain(geo, 0, 2);
+        let ert_c = point(geo, 0.0, -1.0, t).strain(geo, 0, 2);
+        let est_d = point(geo, 1.0, 0.0, t).strain(geo, 1, 2);
+        let est_b = point(geo, -1.0, 0.0, t).strain(geo, 1, 2);
+        for &r in &[-gp, gp] {
+            for &s in &[-gp, gp] {
+                let p = point(geo, r, s, t);
+                let jac = Matrix3::from_columns(&p.g);
+                let det = jac.determinant();
+                let inv = jac.try_inverse().expect("a degenerate shell element");
+                // contravariant base vectors: rows of J⁻¹
+                let gc: [Vector3<f64>; 3] =
+                    std::array::from_fn(|a| inv.row(a).transpose().into_owned());
+                let e3 = p.g[0].cross(&p.g[1]).normalize();
+                let e1 = p.g[0].normalize();
+                let e2 = e3.cross(&e1);
+                let frame = [e1, e2, e3];
+                // covariant strain rows ε̃_ab (a ≤ b), the MITC shear interpolated
+                let mut cov = [[[0.0; DOFS]; 3]; 3];
+                cov[0][0] = p.strain(geo, 0, 0);
+                cov[1][1] = p.strain(geo, 1, 1);
+                cov[0][1] = p.strain(geo, 0, 1);
+                cov[0][2] = std::array::from_fn(|q| {
+                    0.5 * (1.0 + s) * ert_a[q] + 0.5 * (1.0 - s) * ert_c[q]
+                });
+                cov[1][2] = std::array::from_fn(|q| {
+                    0.5 * (1.0 + r) * est_d[q] + 0.5 * (1.0 - r) * est_b[q]
+                });
+                for a in 0..3 {
+                    for b in 0..a {
+                        cov[a][b] = cov[b][a];
+                    }
+                }
+                // local strains ε_kl = Σ_ab ε̃_ab (g^a · e_k)(g^b · e_l)
+                let tr: [[f64; 3]; 3] =
+                    std::array::from_fn(|a| std::array::from_fn(|kk| gc[a].dot(&frame[kk])));
+                let local = |kk: usize, l: usize| -> [f64; DOFS] {
+                    let mut out = [0.0; DOFS];
+                    for a in 0..3 {
+                        for b in 0..3 {
+                            let f = tr[a][kk] * tr[b][l];
+                            if f != 0.0 {
+                                for q in 0..DOFS {
+                                    out[q] += f * cov[a][b][q];
+                                }
+                            }
+                        }
+                    }
+                    out
+                };
+                let e11 = local(0, 0);
+                let e22 = local(1, 1);
+                let e12 = local(0, 1);
+                let e13 = local(0, 2);
+                let e23 = local(1, 2);
+                let bm: [[f64; DOFS]; 5] = [
+                    e11,
+                    e22,
+                    std::array::from_fn(|q| 2.0 * e12[q]),
+                    std::array::from_fn(|q| 2.0 * e13[q]),
+                    std::array::from_fn(|q| 2.0 * e23[q]),
+                ];
+                let w = det.abs();
+                let mut db = [[0.0; DOFS]; 5];
+                for i in 0..5 {
+                    for j in 0..5 {
+                        if dmat[i][j] != 0.0 {
+                            for q in 0..DOFS {
+                                db[i][q] += dmat[i][j] * bm[j][q];
+                            }
+                        }
+                    }
+                }
+                for i in 0..5 {
+                    for a in 0..DOFS {
+                        if bm[i][a] == 0.0 {
+                            continue;
+                        }
+                        let f = w * bm[i][a];
+                        for b in 0..DOFS {
+                            k[a][b] += f * db[i][b];
+                        }
+                    }
+                }
+            }
+        }
+    }
+    add_drilling(geo, mat, &mut k);
+    k
+}
+
+/// Hughes–Brezzi drilling stiffness: γ ∫ (θ · e3 − ω3)² dA with ω3 = ½ (e2 · U_,1 − e1 · U_,2)
+/// the mid-surface's in-plane rotation, γ = 1e-3 G a (small: it only holds the rotation about
+/// the director, which the shell theory leaves without stiffness; zero for rigid motions).
+fn add_drilling(geo: &Geometry, mat: Material, k: &mut Stiffness) {
+    let shear = mat.youngs_modulus / (2.0 * (1.0 + mat.poisson_ratio));
+    let gamma = 1e-3 * shear * geo.thickness;
+    let gp = 1.0 / 3f64.sqrt();
+    for &r in &[-gp, gp] {
+        for &s in &[-gp, gp] {
+            let p = point(geo, r, s, 0.0);
+            let (n, _) = shape(r, s);
+            let jac = Matrix3::from_columns(&p.g);
+            let det = jac.determinant().abs();
+            let inv = jac.try_inverse().expect("a degenerate shell element");
+            let gc: [Vector3<f64>; 3] =
+                std::array::from_fn(|a| inv.row(a).transpose().into_owned());
+            let e3 = p.g[0].cross(&p.g[1]).normalize();
+            let e1 = p.g[0].normalize();
+            let e2 = e3.cross(&e1);
+            // w · U_,x_l = Σ_b (w · U_,b)(g^b · e_l), b over r, s (the mid-surface: t = 0)
+            let grad = |w: &Vector3<f64>, l: &Vector3<f64>| -> [f64; DOFS] {
+                let mut out = [0.0; DOFS];
+                for b in 0..3 {
+                    let f = gc[b].dot(l);
+                    let row = p.row(geo, w, b);
+                    for q in 0..DOFS {
+                        out[q] += f * row[q];
+                    }
+                }
+                out
+            };
+            let a = grad(&e2, &e1);
+            let b = grad(&e1, &e2);
+            let mut row: [f64; DOFS] = std::array::from_fn(|q| -0.5 * (a[q] - b[q]));
+            for i in 0..4 {
+                for c in 0..3 {
+                    row[6 * i + 3 + c] += n[i] * e3[c];
+                }
+            }
+            let w = gamma * det * 2.0 / geo.thickness;
+            for a in 0..DOFS {
+                if row[a] == 0.0 {
+                    continue;
+                }
+                for b in 0..DOFS {
+                    k[a][b] += w * row[a] * row[b];
+                }
+            }
+        }
+    }
+}
+
+/// Consistent nodal forces of a pressure or area load q (force per area, a global vector) on
+/// the mid-surface: ∫ N_i q dA (translations only).
+pub fn area_load(geo: &Geometry, q: [f64; 3]) -> [f64; DOFS] {
+    let gp = 1.0 / 3f64.sqrt();
+    let mut f = [0.0; DOFS];
+    for &r in &[-gp, gp] {
+        for &s in &[-gp, gp] {
+            let p = point(geo, r, s, 0.0);
+            let (n, _) = shape(r, s);
+            let da = p.g[0].cross(&p.g[1]).norm();
+            for i in 0..4 {
+                for c in 0..3 {
+                    f[6 * i + c] += n[i] * q[c] * da;
+                }
+            }
+        }
+    }
+    f
+}

@@ -1,0 +1,381 @@
+//! The MITC4 shell element (`fem::shell`): rigid-body modes and rank, the membrane and bending
+//! patch tests, a cantilever plate against beam theory down to thickness/length 1e-3 (no shear
+//! locking), and the Scordelis–Lo roof against its reference value.
+
+#![allow(clippy::needless_range_loop)]
+
+use fem::shell::{self, Geometry, Material, DOFS};
+use nalgebra::{DMatrix, DVector, SymmetricEigen};
+
+/// A mesh of quadrilateral shells with a dense global system (6 dofs per node).
+struct Shells {
+    x: Vec<[f64; 3]>,
+    quads: Vec<[usize; 4]>,
+    thickness: f64,
+    mat: Material,
+}
+
+impl Shells {
+    /// Directors: the normals of the elements at a node, averaged.
+    fn directors(&self) -> Vec<[f64; 3]> {
+        let mut d = vec![[0.0; 3]; self.x.len()];
+        for q in &self.quads {
+            let n = shell::corner_normals(&q.map(|i| self.x[i]));
+            for (k, &i) in q.iter().enumerate() {
+                for c in 0..3 {
+                    d[i][c] += n[k][c];
+                }
+            }
+        }
+        for v in &mut d {
+            let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            *v = v.map(|c| c / l);
+        }
+        d
+    }
+
+    fn geometry(&self, q: &[usize; 4], d: &[[f64; 3]]) -> Geometry {
+        Geometry {
+            x: q.map(|i| self.x[i]),
+            director: q.map(|i| d[i]),
+            thickness: self.thickness,
+        }
+    }
+
+    fn stiffness(&self) -> DMatrix<f64> {
+        let n = 6 * self.x.len();
+        let d = self.directors();
+        let mut k = DMatrix::zeros(n, n);
+        for q in &self.quads {
+            let ke = shell::stiffness(&self.geometry(q, &d), self.mat);
+            for a in 0..DOFS {
+                for b in 0..DOFS {
+                    k[(6 * q[a / 6] + a % 6, 6 * q[b / 6] + b % 6)] += ke[a][b];
+                }
+            }
+        }
+        k
+    }
+
+    /// The consistent nodal forces of an area load q (force per area).
+    fn area_load(&self, q: [f64; 3]) -> DVector<f64> {
+        let d = self.directors();
+        let mut f = DVector::zeros(6 * self.x.len());
+        for quad in &self.quads {
+            let fe = shell::area_load(&self.geometry(quad, &d), q);
+            for a in 0..DOFS {
+                f[6 * quad[a / 6] + a % 6] += fe[a];
+            }
+        }
+        f
+    }
+
+    /// Solves K u = f with the dofs of `fixed` held at `value`.
+    fn solve(&self, f: &DVector<f64>, fixed: &[(usize, f64)]) -> DVector<f64> {
+        let k = self.stiffness();
+        let n = k.nrows();
+        let mut held = vec![None; n];
+        for &(dof, v) in fixed {
+            held[dof] = Some(v);
+        }
+        let free: Vec<usize> = (0..n).filter(|&i| held[i].is_none()).collect();
+        let mut kf = DMatrix::zeros(free.len(), free.len());
+        let mut rhs = DVector::zeros(free.len());
+        for (a, &i) in free.iter().enumerate() {
+            rhs[a] = f[i];
+            for j in 0..n {
+                if let Some(v) = held[j] {
+                    rhs[a] -= k[(i, j)] * v;
+                }
+            }
+            for (b, &j) in free.iter().enumerate() {
+                kf[(a, b)] = k[(i, j)];
+            }
+        }
+        let sol = kf
+            .cholesky()
+            .expect("the constrained stiffness is positive definite")
+            .solve(&rhs);
+        let mut u = DVector::zeros(n);
+        for i in 0..n {
+            u[i] = held[i].unwrap_or(0.0);
+        }
+        for (a, &i) in free.iter().enumerate() {
+            u[i] = sol[a];
+        }
+        u
+    }
+}
+
+/// A structured grid of nx × ny quads mapping (ξ, η) ∈ [0, 1]² through `map`.
+fn grid(
+    nx: usize,
+    ny: usize,
+    map: impl Fn(f64, f64) -> [f64; 3],
+) -> (Vec<[f64; 3]>, Vec<[usize; 4]>) {
+    let mut x = Vec::new();
+    for j in 0..=ny {
+        for i in 0..=nx {
+            x.push(map(i as f64 / nx as f64, j as f64 / ny as f64));
+        }
+    }
+    let id = |i: usize, j: usize| j * (nx + 1) + i;
+    let mut q = Vec::new();
+    for j in 0..ny {
+        for i in 0..nx {
+            q.push([id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)]);
+        }
+    }
+    (x, q)
+}
+
+const STEEL: Material = Material {
+    youngs_modulus: 2.1e11,
+    poisson_ratio: 0.3,
+};
+
+#[test]
+fn a_warped_element_has_six_rigid_modes_and_no_spurious_one() {
+    let x = [
+        [0.0, 0.0, 0.0],
+        [1.2, 0.1, 0.05],
+        [1.1, 0.9, -0.04],
+        [-0.1, 1.0, 0.03],
+    ];
+    for thickness in [0.1, 1e-3] {
+        let geo = Geometry {
+            x,
+            director: shell::corner_normals(&x),
+            thickness,
+        };
+        let ke = shell::stiffness(&geo, STEEL);
+        let k = DMatrix::from_fn(DOFS, DOFS, |a, b| ke[a][b]);
+        let asym = (&k - k.transpose()).amax() / k.amax();
+        assert!(asym < 1e-12, "symmetric: {asym}");
+        // rigid motions u = c + ω × x, θ = ω: no force
+        for m in 0..6 {
+            let mut q = DVector::zeros(DOFS);
+            for i in 0..4 {
+                let mut w = [0.0; 3];
+                if m < 3 {
+                    q[6 * i + m] = 1.0;
+                    continue;
+                }
+                w[m - 3] = 1.0;
+                let xi = x[i];
+                let u = [
+                    w[1] * xi[2] - w[2] * xi[1],
+                    w[2] * xi[0] - w[0] * xi[2],
+                    w[0] * xi[1] - w[1] * xi[0],
+                ];
+                for c in 0..3 {
+                    q[6 * i + c] = u[c];
+                    q[6 * i + 3 + c] = w[c];
+                }
+            }
+            let f = &k * &q;
+            assert!(
+                f.amax() < 1e-9 * k.amax(),
+                "mode {m}: {}",
+                f.amax() / k.amax()
+            );
+        }
+        // exactly six zero eigenvalues (the drilling stiffness included)
+        let eig = SymmetricEigen::new(k.clone()).eigenvalues;
+        let top = eig.amax();
+        let zero = eig.iter().filter(|v| v.abs() < 1e-10 * top).count();
+        let mut sorted: Vec<f64> = eig.iter().copied().collect();
+        sorted.sort_by(f64::total_cmp);
+        assert_eq!(zero, 6, "t = {thickness}: {:?}", &sorted[..8]);
+    }
+}
+
+/// The MacNeal–Harder patch: a 0.24 × 0.12 rectangle, four interior nodes, five elements.
+fn patch() -> (Vec<[f64; 3]>, Vec<[usize; 4]>, Vec<usize>) {
+    let x = vec![
+        [0.0, 0.0, 0.0],
+        [0.24, 0.0, 0.0],
+        [0.24, 0.12, 0.0],
+        [0.0, 0.12, 0.0],
+        [0.04, 0.02, 0.0],
+        [0.18, 0.03, 0.0],
+        [0.16, 0.08, 0.0],
+        [0.08, 0.08, 0.0],
+    ];
+    let quads = vec![
+        [0, 1, 5, 4],
+        [1, 2, 6, 5],
+        [2, 3, 7, 6],
+        [3, 0, 4, 7],
+        [4, 5, 6, 7],
+    ];
+    (x, quads, vec![0, 1, 2, 3])
+}
+
+#[test]
+fn the_patch_tests_are_passed() {
+    let (x, quads, boundary) = patch();
+    let mat = Material {
+        youngs_modulus: 1e6,
+        poisson_ratio: 0.25,
+    };
+    let mesh = Shells {
+        x: x.clone(),
+        quads,
+        thickness: 0.001,
+        mat,
+    };
+    let f = DVector::zeros(6 * x.len());
+    // membrane: u = 1e-3 (x + y/2), v = 1e-3 (y + x/2); the boundary holds the exact field,
+    // the interior nodes must follow it
+    let membrane = |p: [f64; 3]| [1e-3 * (p[0] + 0.5 * p[1]), 1e-3 * (p[1] + 0.5 * p[0]), 0.0];
+    // bending: w = 1e-3 (x² + xy + y²)/2, θ_x = ∂w/∂y, θ_y = −∂w/∂x (rotations of the normal)
+    let bending = |p: [f64; 3]| {
+        let (x, y) = (p[0], p[1]);
+        [
+            1e-3 * (x * x + x * y + y * y) / 2.0,
+            1e-3 * (x + 2.0 * y) / 2.0,
+            -1e-3 * (2.0 * x + y) / 2.0,
+        ]
+    };
+    let membrane_field = |p: [f64; 3]| {
+        let u = membrane(p);
+        [u[0], u[1], u[2], 0.0, 0.0, 0.0]
+    };
+    let bending_field = |p: [f64; 3]| {
+        let b = bending(p);
+        [0.0, 0.0, b[0], b[1], b[2], 0.0]
+    };
+    type Field<'a> = &'a dyn Fn([f64; 3]) -> [f64; 6];
+    let cases: [(&str, Field); 2] = [("membrane", &membrane_field), ("bending", &bending_field)];
+    for (name, exact) in cases {
+        let mut fixed = Vec::new();
+        for &n in &boundary {
+            let e = exact(x[n]);
+            for c in 0..6 {
+                // the drilling rotation of the membrane field: ½(∂v/∂x − ∂u/∂y) = 0 here
+                fixed.push((6 * n + c, e[c]));
+            }
+        }
+        let u = mesh.solve(&f, &fixed);
+        for n in 4..8 {
+            let e = exact(x[n]);
+            for c in 0..5 {
+                let scale = 1e-3 * 0.24;
+                assert!(
+                    (u[6 * n + c] - e[c]).abs() < 1e-6 * scale,
+                    "{name}: node {n} dof {c}: {} against {}",
+                    u[6 * n + c],
+                    e[c]
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn a_thin_cantilever_plate_bends_as_the_beam_does() {
+    // L = 1 m, width 0.1 m, ν = 0 (plate and beam agree), tip load P spread over the end
+    let (len, width, p) = (1.0, 0.1, 1.0);
+    let mat = Material {
+        youngs_modulus: 2.1e11,
+        poisson_ratio: 0.0,
+    };
+    for thickness in [1e-2, 1e-3] {
+        let (x, quads) = grid(16, 2, |a, b| [len * a, width * b, 0.0]);
+        let mesh = Shells {
+            x: x.clone(),
+            quads,
+            thickness,
+            mat,
+        };
+        let mut f = DVector::zeros(6 * x.len());
+        let tip: Vec<usize> = (0..x.len())
+            .filter(|&n| (x[n][0] - len).abs() < 1e-12)
+            .collect();
+        // consistent end load of a uniform line load: ¼, ½, ¼ over the three tip nodes
+        for &n in &tip {
+            let edge = x[n][1] == 0.0 || (x[n][1] - width).abs() < 1e-12;
+            f[6 * n + 2] = if edge { 0.25 * p } else { 0.5 * p };
+        }
+        let fixed: Vec<(usize, f64)> = (0..x.len())
+            .filter(|&n| x[n][0] == 0.0)
+            .flat_map(|n| (0..6).map(move |c| (6 * n + c, 0.0)))
+            .collect();
+        let u = mesh.solve(&f, &fixed);
+        let w = tip.iter().map(|&n| u[6 * n + 2]).sum::<f64>() / tip.len() as f64;
+        let inertia = width * thickness.powi(3) / 12.0;
+        let beam = p * len.powi(3) / (3.0 * mat.youngs_modulus * inertia);
+        // Timoshenko's shear part, κ = 5/6: P L/(κ G A)
+        let shear = p * len / (5.0 / 6.0 * mat.youngs_modulus / 2.0 * width * thickness);
+        let want = beam + shear;
+        println!(
+            "t/L = {thickness:e}: w = {w:.6e} against {want:.6e} ({:+.3} %)",
+            100.0 * (w / want - 1.0)
+        );
+        assert!(
+            (w / want - 1.0).abs() < 0.01,
+            "t = {thickness}: {w} vs {want}"
+        );
+    }
+}
+
+#[test]
+fn the_scordelis_lo_roof_meets_its_reference_deflection() {
+    // R = 25, L = 50, 40° half-angle, t = 0.25, E = 4.32e8, ν = 0, self-weight 90 per unit
+    // area; ends on rigid diaphragms (u_x = u_z = 0), free straight edges; the quarter with
+    // symmetry. Reference: the vertical deflection at the middle of a free edge, 0.3024
+    // (MacNeal & Harder 1985; 0.3086 by deep-shell theory).
+    let (r, half_len, phi) = (25.0, 25.0, 40f64.to_radians());
+    let mat = Material {
+        youngs_modulus: 4.32e8,
+        poisson_ratio: 0.0,
+    };
+    let mut found = Vec::new();
+    for n in [8, 16] {
+        // ξ along the axis y from the diaphragm (0) to mid-span (1), η around from the crown
+        // (0) to the free edge (1)
+        let (x, quads) = grid(n, n, |a, b| {
+            let th = phi * b;
+            [r * th.sin(), half_len * a, r * th.cos()]
+        });
+        let mesh = Shells {
+            x: x.clone(),
+            quads,
+            thickness: 0.25,
+            mat,
+        };
+        let f = mesh.area_load([0.0, 0.0, -90.0]);
+        let mut fixed = Vec::new();
+        for (i, p) in x.iter().enumerate() {
+            if p[1].abs() < 1e-9 {
+                // the diaphragm: u_x = u_z = 0
+                fixed.extend([(6 * i, 0.0), (6 * i + 2, 0.0)]);
+            }
+            if (p[1] - half_len).abs() < 1e-9 {
+                // symmetry at mid-span: u_y = 0, θ_x = θ_z = 0
+                fixed.extend([(6 * i + 1, 0.0), (6 * i + 3, 0.0), (6 * i + 5, 0.0)]);
+            }
+            if p[0].abs() < 1e-9 {
+                // symmetry at the crown: u_x = 0, θ_y = θ_z = 0
+                fixed.extend([(6 * i, 0.0), (6 * i + 4, 0.0), (6 * i + 5, 0.0)]);
+            }
+        }
+        fixed.sort_by_key(|a| a.0);
+        fixed.dedup_by_key(|a| a.0);
+        let u = mesh.solve(&f, &fixed);
+        let edge_mid = x
+            .iter()
+            .position(|p| (p[1] - half_len).abs() < 1e-9 && (p[0] - r * phi.sin()).abs() < 1e-9)
+            .unwrap();
+        let w = -u[6 * edge_mid + 2];
+        println!(
+            "Scordelis–Lo {n} × {n}: {w:.5} ({:+.2} % of 0.3024)",
+            100.0 * (w / 0.3024 - 1.0)
+        );
+        found.push(w);
+    }
+    // MITC4 converges to it from either side within a few % at 16 × 16
+    assert!((found[1] / 0.3024 - 1.0).abs() < 0.02, "{found:?}");
+    assert!((found[1] / 0.3024 - 1.0).abs() < (found[0] / 0.3024 - 1.0).abs() + 0.005);
+}
