@@ -527,6 +527,11 @@ fn bad_motions_threads_and_pulses_are_refused_naming_the_field() {
             "[dem.output]",
             "[[dem.walls]]\nname = \"lid\"\npoint = [0.0, 0.03]\nnormal = [0.0, -1.0]\npressure = 1e6\nlength = 0.01\nmax_speed = 1.0\ngain = 1.5\n\n[dem.output]",
         ),
+        // regions Bagi's strain would not read
+        (
+            "[dem.output]",
+            "[dem.measure]\nstrain = \"bagi\"\ntest = \"biaxial\"\nsection = 0.01\n\n[dem.output]",
+        ),
         // a probe with neither a point nor a region
         ("[dem.output]", "[[dem.probes]]\nname = \"p\"\n\n[dem.output]"),
         // Bagi's strain without the periodic images
@@ -551,6 +556,7 @@ fn bad_motions_threads_and_pulses_are_refused_naming_the_field() {
         "dem.periodic.x",
         "dem.walls[0].normal",
         "dem.walls[0].gain",
+        "dem.measure.section",
         "dem.probes[0]",
         "dem.measure.strain",
         "dem.pulse.wavelength",

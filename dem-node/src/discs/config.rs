@@ -909,6 +909,39 @@ impl DiscConfig {
                     });
                 }
             }
+            // keys the chosen measurement would not read: refused rather than ignored
+            let slab = m.strain == StrainKind::Centres && m.test == TestKind::Shear;
+            let unused: Vec<(&str, bool)> = match m.strain {
+                StrainKind::Bagi => vec![
+                    ("top", m.top.is_some()),
+                    ("bottom", m.bottom.is_some()),
+                    ("left", m.left.is_some()),
+                    ("right", m.right.is_some()),
+                    ("section", m.section.is_some()),
+                    ("plate", m.plate.is_some()),
+                ],
+                StrainKind::Centres if slab => vec![
+                    ("left", m.left.is_some()),
+                    ("right", m.right.is_some()),
+                    ("section", m.section.is_some()),
+                    ("plate", m.plate.is_some()),
+                    ("margin", m.margin != 0.0),
+                ],
+                StrainKind::Centres => vec![("margin", m.margin != 0.0)],
+            };
+            for (key, given) in unused {
+                if given {
+                    let how = match (m.strain, slab) {
+                        (StrainKind::Bagi, _) => "Bagi's strain and the macroscopic stress (4.3) over the whole sample",
+                        (_, true) => "a slab's simple shear (the mean centres of top and bottom, the macroscopic σ_xy)",
+                        _ => "the centres' strain (margin belongs to Bagi's)",
+                    };
+                    e.push(ValueError {
+                        path: format!("dem.measure.{key}"),
+                        message: format!("is not used by {how}: remove it"),
+                    });
+                }
+            }
             non_negative("dem.measure.margin", m.margin, &mut e);
             if !(0.0 <= m.fit[0] && m.fit[0] < m.fit[1] && m.fit[1] <= 1.0) {
                 e.push(ValueError {
