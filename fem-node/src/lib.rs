@@ -25,6 +25,7 @@ pub mod config;
 pub mod element;
 pub mod history;
 pub mod material;
+pub mod membrane;
 pub mod mesh;
 mod model;
 pub mod nonlinear;
