@@ -311,3 +311,45 @@ pub fn area_load(geo: &Geometry, q: [f64; 3]) -> [f64; DOFS] {
     }
     f
 }
+
+/// The element's mass (24 × 24): consistent, ρ ∫ N_i N_j a dA for the translations and the
+/// rotary inertia ρ a³/12 ∫ N_i N_j dA (about the in-plane axes, and a small fraction of it
+/// about the director, so the drilling rotation has a mass) for the rotations; or lumped, each
+/// corner's share ∫ N_i dA of both on the diagonal.
+pub fn mass(geo: &Geometry, density: f64, lumped: bool) -> Stiffness {
+    let gp = 1.0 / 3f64.sqrt();
+    let a = geo.thickness;
+    let mut m = [[0.0; DOFS]; DOFS];
+    for &r in &[-gp, gp] {
+        for &s in &[-gp, gp] {
+            let p = point(geo, r, s, 0.0);
+            let (n, _) = shape(r, s);
+            let da = p.g[0].cross(&p.g[1]).norm();
+            for i in 0..4 {
+                let v = v3(geo.director[i]);
+                for j in 0..4 {
+                    let w = if lumped {
+                        if i != j {
+                            continue;
+                        }
+                        n[i] * da
+                    } else {
+                        n[i] * n[j] * da
+                    };
+                    let rot = density * a.powi(3) / 12.0 * w;
+                    for c in 0..3 {
+                        m[6 * i + c][6 * j + c] += density * a * w;
+                        for d in 0..3 {
+                            // J (1 − V⊗V) + 1e-2 J V⊗V about the director
+                            let vv = 0.5
+                                * (v[c] * v[d] + v3(geo.director[j])[c] * v3(geo.director[j])[d]);
+                            let unit = if c == d { 1.0 } else { 0.0 };
+                            m[6 * i + 3 + c][6 * j + 3 + d] += rot * (unit - 0.99 * vv);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    m
+}

@@ -503,3 +503,71 @@ fn the_pinched_cylinder_converges_to_its_reference_deflection() {
     assert!(found[0] < found[1] && found[1] < found[2], "{found:?}");
     assert!((found[2] - 1.0).abs() < 0.05, "{found:?}");
 }
+
+#[test]
+fn a_simply_supported_plate_vibrates_at_its_closed_form_frequency() {
+    // 1 × 1 m, 10 mm steel; ω_11 = 2π² √(D/(ρ t)), D = E t³/(12 (1 − ν²))
+    let (t, rho): (f64, f64) = (0.01, 7850.0);
+    let d = STEEL.youngs_modulus * t.powi(3) / (12.0 * (1.0 - STEEL.poisson_ratio.powi(2)));
+    let want = 2.0 * std::f64::consts::PI.powi(2) * (d / (rho * t)).sqrt();
+    let (x, quads) = grid(12, 12, |a, b| [a, b, 0.0]);
+    let mesh = Shells {
+        x: x.clone(),
+        quads,
+        thickness: t,
+        mat: STEEL,
+    };
+    let k = mesh.stiffness();
+    let dirs = mesh.directors();
+    // edges: w = 0, in-plane translations held, the rotation along the edge held (hard
+    // simple support), the rotation about the edge free
+    let mut held = vec![false; 6 * x.len()];
+    for (i, p) in x.iter().enumerate() {
+        let on_x = p[0] == 0.0 || p[0] == 1.0;
+        let on_y = p[1] == 0.0 || p[1] == 1.0;
+        if on_x || on_y {
+            for c in 0..3 {
+                held[6 * i + c] = true;
+            }
+        }
+        if on_x {
+            held[6 * i + 3] = true;
+        }
+        if on_y {
+            held[6 * i + 4] = true;
+        }
+    }
+    let free: Vec<usize> = (0..held.len()).filter(|&i| !held[i]).collect();
+    for lumped in [false, true] {
+        let mut m = DMatrix::<f64>::zeros(6 * x.len(), 6 * x.len());
+        for q in &mesh.quads {
+            let me = shell::mass(&mesh.geometry(q, &dirs), rho, lumped);
+            for a in 0..DOFS {
+                for b in 0..DOFS {
+                    m[(6 * q[a / 6] + a % 6, 6 * q[b / 6] + b % 6)] += me[a][b];
+                }
+            }
+        }
+        let kf = DMatrix::from_fn(free.len(), free.len(), |a, b| k[(free[a], free[b])]);
+        let mf = DMatrix::from_fn(free.len(), free.len(), |a, b| m[(free[a], free[b])]);
+        // the mass's total: ρ t A on each translation
+        let total: f64 = (0..x.len()).map(|i| m.row(6 * i).sum()).sum();
+        assert!((total / (rho * t) - 1.0).abs() < 1e-12, "{total}");
+        let l = mf.cholesky().expect("a positive mass").l();
+        let li = l.clone().try_inverse().unwrap();
+        let a = &li * kf * li.transpose();
+        let a = 0.5 * (&a + a.transpose());
+        let lowest = a
+            .symmetric_eigenvalues()
+            .iter()
+            .copied()
+            .fold(f64::INFINITY, f64::min);
+        let omega = lowest.sqrt();
+        println!(
+            "{} mass: ω_11 = {omega:.3} rad/s against {want:.3} ({:+.2} %)",
+            if lumped { "lumped" } else { "consistent" },
+            100.0 * (omega / want - 1.0)
+        );
+        assert!((omega / want - 1.0).abs() < 0.02, "{omega} vs {want}");
+    }
+}
