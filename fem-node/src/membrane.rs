@@ -14,6 +14,7 @@
 //! forces (12 × 12 per element: cheap for membranes of a few hundred elements, and exact
 //! enough for Newton's quadratic convergence to show).
 
+use crate::shell::shape;
 use nalgebra::{Matrix2, Matrix3x2, Vector2, Vector3};
 
 /// Degrees of freedom of one element (three translations per node).
@@ -42,18 +43,6 @@ impl Ogden {
     pub fn shear_modulus(&self) -> f64 {
         0.5 * self.terms.iter().map(|(m, a)| m * a).sum::<f64>()
     }
-}
-
-fn shape(r: f64, s: f64) -> ([f64; 4], [[f64; 2]; 4]) {
-    const C: [[f64; 2]; 4] = [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]];
-    let mut n = [0.0; 4];
-    let mut d = [[0.0; 2]; 4];
-    for i in 0..4 {
-        let (ri, si) = (C[i][0], C[i][1]);
-        n[i] = 0.25 * (1.0 + ri * r) * (1.0 + si * s);
-        d[i] = [0.25 * ri * (1.0 + si * s), 0.25 * si * (1.0 + ri * r)];
-    }
-    (n, d)
 }
 
 fn v3(a: [f64; 3]) -> Vector3<f64> {

@@ -25,8 +25,8 @@ pub const DOFS: usize = 24;
 pub type Stiffness = [[f64; DOFS]; DOFS];
 
 /// Bilinear shape functions and their derivatives (∂/∂r, ∂/∂s) at (r, s); nodes at
-/// (−1, −1), (1, −1), (1, 1), (−1, 1) counter-clockwise.
-fn shape(r: f64, s: f64) -> ([f64; 4], [[f64; 2]; 4]) {
+/// (−1, −1), (1, −1), (1, 1), (−1, 1) counter-clockwise (also the membrane's).
+pub(crate) fn shape(r: f64, s: f64) -> ([f64; 4], [[f64; 2]; 4]) {
     const C: [[f64; 2]; 4] = [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]];
     let mut n = [0.0; 4];
     let mut d = [[0.0; 2]; 4];
@@ -107,7 +107,27 @@ fn point(geo: &Geometry, r: f64, s: f64, t: f64) -> Point {
     Point { g, cu, ct }
 }
 
+/// At a point: |det J|, the contravariant base vectors (rows of J⁻¹) and the local Cartesian
+/// frame (e1 along g_r, e3 normal to g_r and g_s).
+struct Frame {
+    det: f64,
+    gc: [Vector3<f64>; 3],
+    e: [Vector3<f64>; 3],
+}
+
 impl Point {
+    fn frame(&self) -> Frame {
+        let jac = Matrix3::from_columns(&self.g);
+        let inv = jac.try_inverse().expect("a degenerate shell element");
+        let e3 = self.g[0].cross(&self.g[1]).normalize();
+        let e1 = self.g[0].normalize();
+        Frame {
+            det: jac.determinant().abs(),
+            gc: std::array::from_fn(|a| inv.row(a).transpose().into_owned()),
+            e: [e1, e3.cross(&e1), e3],
+        }
+    }
+
     /// The row of w · U_,b over the 24 degrees of freedom.
     fn row(&self, geo: &Geometry, w: &Vector3<f64>, b: usize) -> [f64; DOFS] {
         let mut out = [0.0; DOFS];
@@ -156,16 +176,7 @@ pub fn stiffness(geo: &Geometry, mat: Material) -> Stiffness {
         for &r in &[-gp, gp] {
             for &s in &[-gp, gp] {
                 let p = point(geo, r, s, t);
-                let jac = Matrix3::from_columns(&p.g);
-                let det = jac.determinant();
-                let inv = jac.try_inverse().expect("a degenerate shell element");
-                // contravariant base vectors: rows of J⁻¹
-                let gc: [Vector3<f64>; 3] =
-                    std::array::from_fn(|a| inv.row(a).transpose().into_owned());
-                let e3 = p.g[0].cross(&p.g[1]).normalize();
-                let e1 = p.g[0].normalize();
-                let e2 = e3.cross(&e1);
-                let frame = [e1, e2, e3];
+                let Frame { det, gc, e: frame } = p.frame();
                 // covariant strain rows ε̃_ab (a ≤ b), the MITC shear interpolated
                 let mut cov = [[[0.0; DOFS]; 3]; 3];
                 cov[0][0] = p.strain(geo, 0, 0);
@@ -211,7 +222,7 @@ pub fn stiffness(geo: &Geometry, mat: Material) -> Stiffness {
                     std::array::from_fn(|q| 2.0 * e13[q]),
                     std::array::from_fn(|q| 2.0 * e23[q]),
                 ];
-                let w = det.abs();
+                let w = det;
                 let mut db = [[0.0; DOFS]; 5];
                 for i in 0..5 {
                     for j in 0..5 {
@@ -251,14 +262,11 @@ fn add_drilling(geo: &Geometry, mat: Material, k: &mut Stiffness) {
         for &s in &[-gp, gp] {
             let p = point(geo, r, s, 0.0);
             let (n, _) = shape(r, s);
-            let jac = Matrix3::from_columns(&p.g);
-            let det = jac.determinant().abs();
-            let inv = jac.try_inverse().expect("a degenerate shell element");
-            let gc: [Vector3<f64>; 3] =
-                std::array::from_fn(|a| inv.row(a).transpose().into_owned());
-            let e3 = p.g[0].cross(&p.g[1]).normalize();
-            let e1 = p.g[0].normalize();
-            let e2 = e3.cross(&e1);
+            let Frame {
+                det,
+                gc,
+                e: [e1, e2, e3],
+            } = p.frame();
             // w · U_,x_l = Σ_b (w · U_,b)(g^b · e_l), b over r, s (the mid-surface: t = 0)
             let grad = |w: &Vector3<f64>, l: &Vector3<f64>| -> [f64; DOFS] {
                 let mut out = [0.0; DOFS];

@@ -769,9 +769,15 @@ impl DiscEngine {
                 let mut width0 = 0.0;
                 let mut offset0 = 0.0;
                 let slab = m.strain == StrainKind::Centres && m.test == TestKind::Shear;
-                if slab {
-                    // simple shear: the mean centres of top and bottom
-                    for (name, r) in [("top", &m.top), ("bottom", &m.bottom)] {
+                if m.strain == StrainKind::Centres {
+                    // the sets' discs (a slab's shear reads only top and bottom)
+                    let all = [
+                        ("top", &m.top),
+                        ("bottom", &m.bottom),
+                        ("left", &m.left),
+                        ("right", &m.right),
+                    ];
+                    for (name, r) in &all[..if slab { 2 } else { 4 }] {
                         let r = r.unwrap_or_default();
                         let s = r.select(&x, &radius);
                         if s.is_empty() {
@@ -782,9 +788,11 @@ impl DiscEngine {
                         }
                         sets.push(s);
                     }
-                    let mean = |s: &[u32], k: usize| {
-                        s.iter().map(|&p| x[p as usize][k]).sum::<f64>() / s.len() as f64
-                    };
+                }
+                let mean = |s: &[u32], k: usize| {
+                    s.iter().map(|&p| x[p as usize][k]).sum::<f64>() / s.len() as f64
+                };
+                if slab {
                     height0 = mean(&sets[0], 1) - mean(&sets[1], 1);
                     offset0 = mean(&sets[0], 0) - mean(&sets[1], 0);
                     if height0 <= 0.0 {
@@ -796,25 +804,6 @@ impl DiscEngine {
                         ));
                     }
                 } else if m.strain == StrainKind::Centres {
-                    for (name, r) in [
-                        ("top", &m.top),
-                        ("bottom", &m.bottom),
-                        ("left", &m.left),
-                        ("right", &m.right),
-                    ] {
-                        let r = r.unwrap_or_default();
-                        let s = r.select(&x, &radius);
-                        if s.is_empty() {
-                            return Err(config_err(
-                                format!("dem.measure.{name}"),
-                                format!("holds no disc ({r})"),
-                            ));
-                        }
-                        sets.push(s);
-                    }
-                    let mean = |s: &[u32], k: usize| {
-                        s.iter().map(|&p| x[p as usize][k]).sum::<f64>() / s.len() as f64
-                    };
                     height0 = mean(&sets[0], 1) - mean(&sets[1], 1);
                     width0 = mean(&sets[3], 0) - mean(&sets[2], 0);
                     if height0 <= 0.0 || width0 <= 0.0 {
