@@ -1,4 +1,4 @@
-//! A finite-strain 4-node membrane with the incompressible Ogden law (the confining rubber
+//! A finite-strain 4-node (and 3-node) membrane with the incompressible Ogden law (the confining rubber
 //! membrane of Wellmann's triaxial test, W ch. 4.3.4: a 0.3 mm sheet, three-term Ogden; the
 //! element after Gruttmann & Taylor 1992, plane stress by incompressibility), and follower
 //! pressure on the deformed surface.
@@ -16,9 +16,6 @@
 
 use crate::shell::shape;
 use nalgebra::{Matrix2, Matrix3x2, Vector2, Vector3};
-
-/// Degrees of freedom of one element (three translations per node).
-pub const DOFS: usize = 12;
 
 /// The incompressible Ogden law in plane stress: terms (μ_p, α_p).
 #[derive(Debug, Clone)]
@@ -49,15 +46,43 @@ fn v3(a: [f64; 3]) -> Vector3<f64> {
     Vector3::new(a[0], a[1], a[2])
 }
 
-const GAUSS: [f64; 2] = [-0.577_350_269_189_625_8, 0.577_350_269_189_625_8];
+/// The integration points of an element with `corners` corners (4: 2 × 2 Gauss; 3: the
+/// centroid, the linear triangle's strain being constant): weight, shape functions and their
+/// derivatives (∂/∂r, ∂/∂s).
+type Rule = Vec<(f64, Vec<f64>, Vec<[f64; 2]>)>;
 
-/// The tangent vectors (∂x/∂r, ∂x/∂s) at (r, s) of the corners `x`.
-fn tangents(x: &[[f64; 3]; 4], d: &[[f64; 2]; 4]) -> (Vector3<f64>, Vector3<f64>) {
+fn rule(corners: usize) -> Rule {
+    match corners {
+        4 => {
+            let g = 1.0 / 3f64.sqrt();
+            let mut out = Vec::with_capacity(4);
+            for r in [-g, g] {
+                for s in [-g, g] {
+                    let (n, d) = shape(r, s);
+                    out.push((1.0, n.to_vec(), d.to_vec()));
+                }
+            }
+            out
+        }
+        3 => {
+            let t = 1.0 / 3.0;
+            vec![(
+                0.5,
+                vec![1.0 - t - t, t, t],
+                vec![[-1.0, -1.0], [1.0, 0.0], [0.0, 1.0]],
+            )]
+        }
+        n => panic!("a membrane element has 3 or 4 corners, not {n}"),
+    }
+}
+
+/// The tangent vectors (∂x/∂r, ∂x/∂s) of the corners `x` at a point with derivatives `d`.
+fn tangents(x: &[[f64; 3]], d: &[[f64; 2]]) -> (Vector3<f64>, Vector3<f64>) {
     let mut gr = Vector3::zeros();
     let mut gs = Vector3::zeros();
-    for i in 0..4 {
-        gr += d[i][0] * v3(x[i]);
-        gs += d[i][1] * v3(x[i]);
+    for (xi, di) in x.iter().zip(d) {
+        gr += di[0] * v3(*xi);
+        gs += di[1] * v3(*xi);
     }
     (gr, gs)
 }
@@ -65,66 +90,59 @@ fn tangents(x: &[[f64; 3]; 4], d: &[[f64; 2]; 4]) -> (Vector3<f64>, Vector3<f64>
 /// The stretches and stresses at one point: (λ_1, λ_2, σ_1, σ_2).
 pub type PointState = (f64, f64, f64, f64);
 
-/// Internal forces of an element with reference corners `x0`, current corners `x`, reference
-/// thickness `t0`; also each Gauss point's principal stretches and stresses.
+/// Internal forces (3 per corner) of a 4-node (bilinear) or 3-node (linear) element with
+/// reference corners `x0`, current corners `x`, reference thickness `t0`; also each
+/// integration point's principal stretches and stresses.
 pub fn internal_forces(
-    x0: &[[f64; 3]; 4],
-    x: &[[f64; 3]; 4],
+    x0: &[[f64; 3]],
+    x: &[[f64; 3]],
     t0: f64,
     law: &Ogden,
-) -> ([f64; DOFS], [PointState; 4]) {
-    let mut f = [0.0; DOFS];
-    let mut states = [(1.0, 1.0, 0.0, 0.0); 4];
-    let mut k = 0;
-    for &r in &GAUSS {
-        for &s in &GAUSS {
-            let (_, d) = shape(r, s);
-            let (gr0, gs0) = tangents(x0, &d);
-            let e1 = gr0.normalize();
-            let e3 = gr0.cross(&gs0).normalize();
-            let e2 = e3.cross(&e1);
-            let j0 = Matrix2::new(gr0.dot(&e1), gs0.dot(&e1), gr0.dot(&e2), gs0.dot(&e2));
-            let da0 = j0.determinant();
-            let j0inv = j0.try_inverse().expect("a degenerate membrane element");
-            let (gr, gs) = tangents(x, &d);
-            let g = Matrix3x2::from_columns(&[gr, gs]);
-            let fgrad = g * j0inv;
-            let c = fgrad.transpose() * fgrad;
-            let eig = c.symmetric_eigen();
-            let (l1, l2) = (eig.eigenvalues[0].sqrt(), eig.eigenvalues[1].sqrt());
-            let (s1, s2) = law.principal_stress(l1, l2);
-            let n1: Vector2<f64> = eig.eigenvectors.column(0).into_owned();
-            let n2: Vector2<f64> = eig.eigenvectors.column(1).into_owned();
-            let pk2 =
-                n1 * n1.transpose() * (s1 / (l1 * l1)) + n2 * n2.transpose() * (s2 / (l2 * l2));
-            let p = fgrad * pk2;
-            for i in 0..4 {
-                let b = j0inv.transpose() * Vector2::new(d[i][0], d[i][1]);
-                let fi = p * b * (t0 * da0);
-                for c in 0..3 {
-                    f[3 * i + c] += fi[c];
-                }
+) -> (Vec<f64>, Vec<PointState>) {
+    let nc = x0.len();
+    let mut f = vec![0.0; 3 * nc];
+    let mut states = Vec::new();
+    for (w, _, d) in rule(nc) {
+        let (gr0, gs0) = tangents(x0, &d);
+        let e1 = gr0.normalize();
+        let e3 = gr0.cross(&gs0).normalize();
+        let e2 = e3.cross(&e1);
+        let j0 = Matrix2::new(gr0.dot(&e1), gs0.dot(&e1), gr0.dot(&e2), gs0.dot(&e2));
+        let da0 = j0.determinant();
+        let j0inv = j0.try_inverse().expect("a degenerate membrane element");
+        let (gr, gs) = tangents(x, &d);
+        let g = Matrix3x2::from_columns(&[gr, gs]);
+        let fgrad = g * j0inv;
+        let c = fgrad.transpose() * fgrad;
+        let eig = c.symmetric_eigen();
+        let (l1, l2) = (eig.eigenvalues[0].sqrt(), eig.eigenvalues[1].sqrt());
+        let (s1, s2) = law.principal_stress(l1, l2);
+        let n1: Vector2<f64> = eig.eigenvectors.column(0).into_owned();
+        let n2: Vector2<f64> = eig.eigenvectors.column(1).into_owned();
+        let pk2 = n1 * n1.transpose() * (s1 / (l1 * l1)) + n2 * n2.transpose() * (s2 / (l2 * l2));
+        let p = fgrad * pk2;
+        for (i, di) in d.iter().enumerate() {
+            let b = j0inv.transpose() * Vector2::new(di[0], di[1]);
+            let fi = p * b * (t0 * da0 * w);
+            for c in 0..3 {
+                f[3 * i + c] += fi[c];
             }
-            states[k] = (l1, l2, s1, s2);
-            k += 1;
         }
+        states.push((l1, l2, s1, s2));
     }
     (f, states)
 }
 
 /// Nodal forces of a pressure `p` on the current surface, along g_r × g_s (the side the corner
 /// order's right-hand normal points to): ∫ N_i p (g_r × g_s) dr ds.
-pub fn pressure_forces(x: &[[f64; 3]; 4], p: f64) -> [f64; DOFS] {
-    let mut f = [0.0; DOFS];
-    for &r in &GAUSS {
-        for &s in &GAUSS {
-            let (n, d) = shape(r, s);
-            let (gr, gs) = tangents(x, &d);
-            let a = gr.cross(&gs) * p;
-            for i in 0..4 {
-                for c in 0..3 {
-                    f[3 * i + c] += n[i] * a[c];
-                }
+pub fn pressure_forces(x: &[[f64; 3]], p: f64) -> Vec<f64> {
+    let mut f = vec![0.0; 3 * x.len()];
+    for (w, n, d) in rule(x.len()) {
+        let (gr, gs) = tangents(x, &d);
+        let a = gr.cross(&gs) * (p * w);
+        for (i, ni) in n.iter().enumerate() {
+            for c in 0..3 {
+                f[3 * i + c] += ni * a[c];
             }
         }
     }
@@ -132,28 +150,30 @@ pub fn pressure_forces(x: &[[f64; 3]; 4], p: f64) -> [f64; DOFS] {
 }
 
 /// The tangent ∂(f_int − f_pressure)/∂x of one element by central differences (step h, m):
-/// row-major 12 × 12 (not symmetric: the follower pressure).
+/// rows and columns over the element's 3 × corners degrees of freedom (not symmetric: the
+/// follower pressure).
 pub fn tangent(
-    x0: &[[f64; 3]; 4],
-    x: &[[f64; 3]; 4],
+    x0: &[[f64; 3]],
+    x: &[[f64; 3]],
     t0: f64,
     law: &Ogden,
     p: f64,
     h: f64,
-) -> [[f64; DOFS]; DOFS] {
-    let residual = |xx: &[[f64; 3]; 4]| {
+) -> Vec<Vec<f64>> {
+    let m = 3 * x.len();
+    let residual = |xx: &[[f64; 3]]| {
         let (fi, _) = internal_forces(x0, xx, t0, law);
         let fp = pressure_forces(xx, p);
-        std::array::from_fn::<f64, DOFS, _>(|a| fi[a] - fp[a])
+        fi.iter().zip(&fp).map(|(a, b)| a - b).collect::<Vec<f64>>()
     };
-    let mut k = [[0.0; DOFS]; DOFS];
-    for b in 0..DOFS {
-        let mut xp = *x;
-        let mut xm = *x;
+    let mut k = vec![vec![0.0; m]; m];
+    for b in 0..m {
+        let mut xp = x.to_vec();
+        let mut xm = x.to_vec();
         xp[b / 3][b % 3] += h;
         xm[b / 3][b % 3] -= h;
         let (rp, rm) = (residual(&xp), residual(&xm));
-        for a in 0..DOFS {
+        for a in 0..m {
             k[a][b] = (rp[a] - rm[a]) / (2.0 * h);
         }
     }

@@ -5,7 +5,7 @@
 
 #![allow(clippy::needless_range_loop)]
 
-use fem::membrane::{self, Ogden, DOFS};
+use fem::membrane::{self, Ogden};
 use nalgebra::{DMatrix, DVector};
 
 /// Wellmann's membrane rubber: μ = 0.5 MPa, (1.491μ, 1.3), (0.003μ, 5), (−0.0237μ, −2).
@@ -121,6 +121,36 @@ fn a_balloon_inflates_along_the_closed_form_pressure_stretch_curve() {
         .map(|k| closed(k as f64 / 100.0))
         .fold(0.0, f64::max);
     let (x0, quads) = octant(6, r0);
+    // the same octant as quads and as triangles (each quad cut along a diagonal)
+    let tris: Vec<Vec<usize>> = quads
+        .iter()
+        .flat_map(|q| [vec![q[0], q[1], q[2]], vec![q[0], q[2], q[3]]])
+        .collect();
+    let quads: Vec<Vec<usize>> = quads.iter().map(|q| q.to_vec()).collect();
+    // (the linear triangles, all cut one way, keep the sphere round within 1 %, the quads
+    // within 0.5 %)
+    for (name, elements, round) in [("4-node", quads, 5e-3), ("3-node", tris, 1e-2)] {
+        let worst = inflate(&x0, &elements, r0, t0, &law, peak, &closed, round);
+        println!("{name}: worst {:.3} %", 100.0 * worst);
+        assert!(worst < 0.01, "{name}: {worst}");
+    }
+}
+
+/// Inflates the membrane `elements` over `x0` by Newton in eight pressure steps to 0.9 of
+/// `peak`, the radii within `round` of their mean; the largest relative gap between the pressure and the closed form at the mean
+/// stretch.
+#[allow(clippy::too_many_arguments)]
+fn inflate(
+    x0: &[[f64; 3]],
+    elements: &[Vec<usize>],
+    r0: f64,
+    t0: f64,
+    law: &Ogden,
+    peak: f64,
+    closed: &dyn Fn(f64) -> f64,
+    round: f64,
+) -> f64 {
+    let quads = elements;
     let n = x0.len();
     // symmetry: nodes on a coordinate plane keep that coordinate
     let mut held = vec![false; 3 * n];
@@ -132,7 +162,7 @@ fn a_balloon_inflates_along_the_closed_form_pressure_stretch_curve() {
         }
     }
     let free: Vec<usize> = (0..3 * n).filter(|&d| !held[d]).collect();
-    let mut x = x0.clone();
+    let mut x = x0.to_vec();
     let mut worst = 0.0f64;
     for step in 1..=8 {
         let p = 0.9 * peak * step as f64 / 8.0;
@@ -140,15 +170,16 @@ fn a_balloon_inflates_along_the_closed_form_pressure_stretch_curve() {
         for iter in 0..30 {
             let mut rhs = DVector::<f64>::zeros(3 * n);
             let mut k = DMatrix::<f64>::zeros(3 * n, 3 * n);
-            for q in &quads {
-                let (xe0, xe) = (q.map(|i| x0[i]), q.map(|i| x[i]));
-                let (fi, _) = membrane::internal_forces(&xe0, &xe, t0, &law);
+            for q in quads {
+                let xe0: Vec<[f64; 3]> = q.iter().map(|&i| x0[i]).collect();
+                let xe: Vec<[f64; 3]> = q.iter().map(|&i| x[i]).collect();
+                let (fi, _) = membrane::internal_forces(&xe0, &xe, t0, law);
                 let fp = membrane::pressure_forces(&xe, p);
-                let ke = membrane::tangent(&xe0, &xe, t0, &law, p, 1e-7 * r0);
-                for a in 0..DOFS {
+                let ke = membrane::tangent(&xe0, &xe, t0, law, p, 1e-7 * r0);
+                for a in 0..fi.len() {
                     let ga = 3 * q[a / 3] + a % 3;
                     rhs[ga] -= fi[a] - fp[a];
-                    for b in 0..DOFS {
+                    for b in 0..fi.len() {
                         k[(ga, 3 * q[b / 3] + b % 3)] += ke[a][b];
                     }
                 }
@@ -184,7 +215,7 @@ fn a_balloon_inflates_along_the_closed_form_pressure_stretch_curve() {
         let err = p / closed(l) - 1.0;
         println!("p = {p:.1} Pa: λ = {l:.4}, closed form p(λ) = {:.1} Pa ({:+.3} %), radii within {spread:.1e}", closed(l), 100.0 * err);
         worst = worst.max(err.abs());
-        assert!(spread < 5e-3, "{spread}");
+        assert!(spread < round, "{spread}");
     }
-    assert!(worst < 0.01, "{worst}");
+    worst
 }
