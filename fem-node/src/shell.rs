@@ -361,3 +361,68 @@ pub fn mass(geo: &Geometry, density: f64, lumped: bool) -> Stiffness {
     }
     m
 }
+
+/// Rotates `v` by the rotation vector `theta` (Rodrigues: about θ/|θ| by |θ|).
+pub fn rotate(v: [f64; 3], theta: [f64; 3]) -> [f64; 3] {
+    let (v, t) = (v3(v), v3(theta));
+    let angle = t.norm();
+    if angle < 1e-300 {
+        return [v.x, v.y, v.z];
+    }
+    let k = t / angle;
+    let r = v * angle.cos() + k.cross(&v) * angle.sin() + k * k.dot(&v) * (1.0 - angle.cos());
+    [r.x, r.y, r.z]
+}
+
+/// The coupling's view of a shell node (Ullrich Fig. 2.6, (3.9)): the two reference-surface
+/// points at ± a/2 along the rotated director, from the mid-surface node's position `x`,
+/// rotation vector `theta` and reference director `director`; (top, bottom).
+pub fn surface_points(
+    x: [f64; 3],
+    theta: [f64; 3],
+    director: [f64; 3],
+    thickness: f64,
+) -> ([f64; 3], [f64; 3]) {
+    let d = rotate(director, theta);
+    let h = 0.5 * thickness;
+    (
+        std::array::from_fn(|c| x[c] + h * d[c]),
+        std::array::from_fn(|c| x[c] - h * d[c]),
+    )
+}
+
+/// The velocities of the two reference-surface points: v ± ω × (a/2 d) with d the rotated
+/// director.
+pub fn surface_velocities(
+    v: [f64; 3],
+    omega: [f64; 3],
+    theta: [f64; 3],
+    director: [f64; 3],
+    thickness: f64,
+) -> ([f64; 3], [f64; 3]) {
+    let d = v3(rotate(director, theta)) * (0.5 * thickness);
+    let w = v3(omega).cross(&d);
+    (
+        std::array::from_fn(|c| v[c] + w[c]),
+        std::array::from_fn(|c| v[c] - w[c]),
+    )
+}
+
+/// The forces the DEM puts on a shell node's two reference-surface points, carried to the
+/// mid-surface node: the force F_top + F_bottom ((3.9)) and the moment of the pair about the
+/// node, (a/2 d) × (F_top − F_bottom) — the node then carries the same resultant and moment
+/// about any point as the two surface forces did.
+pub fn surface_forces_to_node(
+    f_top: [f64; 3],
+    f_bottom: [f64; 3],
+    theta: [f64; 3],
+    director: [f64; 3],
+    thickness: f64,
+) -> ([f64; 3], [f64; 3]) {
+    let d = v3(rotate(director, theta)) * (0.5 * thickness);
+    let m = d.cross(&(v3(f_top) - v3(f_bottom)));
+    (
+        std::array::from_fn(|c| f_top[c] + f_bottom[c]),
+        [m.x, m.y, m.z],
+    )
+}

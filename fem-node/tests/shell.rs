@@ -571,3 +571,52 @@ fn a_simply_supported_plate_vibrates_at_its_closed_form_frequency() {
         assert!((omega / want - 1.0).abs() < 0.02, "{omega} vs {want}");
     }
 }
+
+#[test]
+fn the_coupling_surfaces_follow_the_node_and_carry_its_force_and_moment() {
+    let (x, theta, dir, t) = ([0.3, -0.2, 1.1], [0.2, -0.4, 0.1], [0.0, 0.6, 0.8], 0.01);
+    let (top, bottom) = shell::surface_points(x, theta, dir, t);
+    // the points lie a thickness apart, symmetric about the node, along the rotated director
+    let gap: f64 = (0..3)
+        .map(|c| (top[c] - bottom[c]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    assert!((gap - t).abs() < 1e-15);
+    for c in 0..3 {
+        assert!((0.5 * (top[c] + bottom[c]) - x[c]).abs() < 1e-15);
+    }
+    // the director turned by θ and back by −θ is the director again
+    let back = shell::rotate(shell::rotate(dir, theta), theta.map(|c| -c));
+    for c in 0..3 {
+        assert!((back[c] - dir[c]).abs() < 1e-15);
+    }
+    // velocities: the rigid motion of the thickness, v ± ω × (a/2 d), checked by moving the
+    // node a little along v, ω
+    let (v, w) = ([1.0, 2.0, -0.5], [3.0, -1.0, 2.0]);
+    let dt = 1e-7;
+    let (vt, vb) = shell::surface_velocities(v, w, theta, dir, t);
+    let d_now = shell::rotate(dir, theta);
+    let d_next = shell::rotate(d_now, w.map(|c| c * dt));
+    for c in 0..3 {
+        let top_next = x[c] + v[c] * dt + 0.5 * t * d_next[c];
+        let bottom_next = x[c] + v[c] * dt - 0.5 * t * d_next[c];
+        assert!(((top_next - top[c]) / dt - vt[c]).abs() < 1e-6);
+        assert!(((bottom_next - bottom[c]) / dt - vb[c]).abs() < 1e-6);
+    }
+    // forces: the node's force and moment equal the pair's resultant and moment about the
+    // origin
+    let (ft, fb) = ([2.0, -1.0, 5.0], [-0.5, 3.0, 1.0]);
+    let (f, m) = shell::surface_forces_to_node(ft, fb, theta, dir, t);
+    let cross = |a: [f64; 3], b: [f64; 3]| {
+        [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ]
+    };
+    let (mt, mb, mx) = (cross(top, ft), cross(bottom, fb), cross(x, f));
+    for c in 0..3 {
+        assert!((f[c] - ft[c] - fb[c]).abs() < 1e-15);
+        assert!((mx[c] + m[c] - mt[c] - mb[c]).abs() < 1e-12, "moment {c}");
+    }
+}
