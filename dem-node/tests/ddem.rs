@@ -666,5 +666,16 @@ fn a_periodic_strip_has_no_seam() {
         "the top row moves sideways: {:?}",
         u[47]
     );
+    // a period 1 mm short of the strip: its ends overlap across the side, refused by name
+    let short = strip(0.0).replace("x = [0.0, 0.016]", "x = [0.0, 0.015]");
+    let cfg = parse_scene_table(&short, "dem").unwrap().unwrap();
+    let err = DiscEngine::from_config(&cfg, scenes())
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        err.contains("dem.periodic.x") && err.contains("overlap"),
+        "{err}"
+    );
     assert_eq!(result(&a, "bonds_broken"), 0.0);
 }

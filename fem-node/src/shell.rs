@@ -323,7 +323,8 @@ pub fn area_load(geo: &Geometry, q: [f64; 3]) -> [f64; DOFS] {
 /// The element's mass (24 × 24): consistent, ρ ∫ N_i N_j a dA for the translations and the
 /// rotary inertia ρ a³/12 ∫ N_i N_j dA (about the in-plane axes, and a small fraction of it
 /// about the director, so the drilling rotation has a mass) for the rotations; or lumped, each
-/// corner's share ∫ N_i dA of both on the diagonal.
+/// corner's share ∫ N_i dA of both: diagonal in the translations, a 3 × 3 block per node in
+/// the rotations (ρ a³/12 (1 − 0.99 V⊗V), diagonal only when the director lies along an axis).
 pub fn mass(geo: &Geometry, density: f64, lumped: bool) -> Stiffness {
     let gp = 1.0 / 3f64.sqrt();
     let a = geo.thickness;

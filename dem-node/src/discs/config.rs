@@ -1007,7 +1007,7 @@ impl DiscConfig {
             .enumerate()
         {
             let Some([lo, hi]) = a else { continue };
-            if !(lo.is_finite() && hi.is_finite() && hi > lo) {
+            if !(lo.is_finite() && hi.is_finite() && hi > lo && (hi - lo).is_finite()) {
                 e.push(ValueError {
                     path: format!("dem.periodic.{axis}"),
                     message: format!("must be [min, max] with min < max, got [{lo}, {hi}]"),
@@ -1024,16 +1024,17 @@ impl DiscConfig {
                     });
                 }
             }
-            if self
+        }
+        if (self.periodic.x.is_some() || self.periodic.y.is_some())
+            && self
                 .measure
                 .as_ref()
                 .is_some_and(|m| m.strain == StrainKind::Bagi)
-            {
-                e.push(ValueError {
-                    path: "dem.measure.strain".into(),
-                    message: "Bagi's strain triangulates the centres without their periodic images: with dem.periodic use strain = \"centres\"".into(),
-                });
-            }
+        {
+            e.push(ValueError {
+                path: "dem.measure.strain".into(),
+                message: "Bagi's strain triangulates the centres without their periodic images: with dem.periodic use strain = \"centres\"".into(),
+            });
         }
         if self.output.csv_every == 0 {
             e.push(ValueError {

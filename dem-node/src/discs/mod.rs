@@ -668,7 +668,7 @@ impl DiscEngine {
             let reach = 2.0 * r_max
                 + (cfg.skin * r_mean)
                     .max(0.2 * r_max)
-                    .max(cfg.contact.bond_gap.unwrap_or(0.0));
+                    .max(1.01 * cfg.contact.bond_gap.unwrap_or(0.0));
             if period[k] > 0.0 && period[k] <= 2.0 * reach {
                 return Err(config_err(
                     format!("dem.periodic.{axis}"),
@@ -975,6 +975,7 @@ impl DiscEngine {
         e.build_list();
         e.state.list_skin = skin;
         e.check_coincident()?;
+        e.check_seam()?;
         // bonds at t = 0 (2.21)
         if let Some(g) = cfg.contact.bond_gap {
             for (k, &(i, j)) in e.state.pairs.iter().enumerate() {
@@ -1035,6 +1036,33 @@ impl DiscEngine {
                     format!(
                         "discs {i} and {j} have the same centre {:?}",
                         self.state.x[i as usize]
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// A sample that does not fit its period overlaps its own images across the cell's sides:
+    /// refuse pairs that overlap across a side by more than 5 % of the smaller radius.
+    fn check_seam(&self) -> Result<(), DiscError> {
+        if self.period == [0.0; 2] {
+            return Ok(());
+        }
+        for &(i, j) in &self.state.pairs {
+            let (i, j) = (i as usize, j as usize);
+            let direct = sub(self.state.x[j], self.state.x[i]);
+            let d = self.branch(i, j);
+            if d == direct {
+                continue;
+            }
+            let overlap = self.radius[i] + self.radius[j] - norm2(d);
+            if overlap > 0.05 * self.radius[i].min(self.radius[j]) {
+                let axis = if d[0] != direct[0] { "x" } else { "y" };
+                return Err(config_err(
+                    format!("dem.periodic.{axis}"),
+                    format!(
+                        "discs {i} and {j} overlap by {overlap:e} m across the periodic side: the sample does not fit the period (its discs must repeat across it without overlapping)"
                     ),
                 ));
             }
@@ -1227,9 +1255,10 @@ impl DiscEngine {
 
     /// A probe's reading: its mean displacement along the pulse's displacement, or its length.
     fn probe_values(&self) -> Vec<f64> {
+        // along the pulse's displacement, signed so the pulse itself is a peak
         let along = self.cfg.pulse.as_ref().map(|pl| {
             let u = pl.displacement.unwrap_or(pl.direction);
-            scale(u, 1.0 / norm2(u))
+            scale(u, pl.amplitude.signum() / norm2(u))
         });
         self.probe_readings()
             .into_iter()
@@ -2045,20 +2074,28 @@ impl DiscEngine {
     /// (along a periodic axis: the period).
     pub fn macroscopic_stress(&self) -> [f64; 3] {
         let s = &self.state;
-        let (mut lo, mut hi) = config::span(&s.x, &self.radius);
-        for k in 0..2 {
-            if self.period[k] > 0.0 {
-                (lo[k], hi[k]) = (0.0, self.period[k]);
-            }
-        }
         let mut sum = [0.0; 3];
         for p in 0..s.x.len() {
             for (sk, st) in sum.iter_mut().zip(s.stress[p]) {
                 *sk += self.volume[p] * st;
             }
         }
-        let v = (hi[0] - lo[0]) * (hi[1] - lo[1]) * self.cfg.depth;
+        let v = self.sample_area();
         sum.map(|c| c / v)
+    }
+
+    /// The sample's volume: the box the discs span (along a periodic axis: the period) times
+    /// the depth.
+    fn sample_area(&self) -> f64 {
+        let (lo, hi) = config::span(&self.state.x, &self.radius);
+        let side = |k: usize| {
+            if self.period[k] > 0.0 {
+                self.period[k]
+            } else {
+                hi[k] - lo[k]
+            }
+        };
+        side(0) * side(1) * self.cfg.depth
     }
 
     /// The limits of the scene, for the coordinator's checks: `time_step`,
@@ -2182,8 +2219,7 @@ impl DiscEngine {
             "coordination_initial".to_string(),
             2.0 * touching.len() as f64 / n_discs,
         ));
-        let (lo, hi) = config::span(&s.x, &self.radius);
-        let area = (hi[0] - lo[0]) * (hi[1] - lo[1]) * self.cfg.depth;
+        let area = self.sample_area();
         let r2 = self.radius.iter().map(|r| r * r).sum::<f64>() / n_discs;
         let (kn, kt) = (c.normal_stiffness, c.tangential_stiffness);
         let voigt = 4.0 * touching.len() as f64 * r2 * kn / area;
@@ -2366,6 +2402,29 @@ impl DiscEngine {
                 s.load_point.len(),
                 self.loaded.len()
             )));
+        }
+        let pairs_ok = s.pairs.iter().all(|&(i, j)| i < j && (j as usize) < n);
+        let walls_ok = s.wall_state.iter().all(|w| w.len() == n)
+            && [
+                s.wall_shift.len(),
+                s.wall_velocity.len(),
+                s.wall_force.len(),
+            ]
+            .iter()
+            .all(|&l| l == self.walls.len());
+        let discs_ok = [
+            s.v.len(),
+            s.theta.len(),
+            s.omega.len(),
+            s.x_build.len(),
+            s.stress.len(),
+        ]
+        .iter()
+        .all(|&l| l == n);
+        if !(pairs_ok && walls_ok && discs_ok) {
+            return Err(DiscError::Snapshot(
+                "the snapshot's pairs, walls or per-disc arrays do not fit this scene".into(),
+            ));
         }
         if s.probe_track.len() != self.probes.len() {
             return Err(DiscError::Snapshot(format!(
