@@ -375,6 +375,19 @@ pub fn rotate(v: [f64; 3], theta: [f64; 3]) -> [f64; 3] {
     [r.x, r.y, r.z]
 }
 
+/// The half-thickness arm a/2 d along the director d turned by the rotation vector `theta`.
+fn arm(theta: [f64; 3], director: [f64; 3], thickness: f64) -> Vector3<f64> {
+    v3(rotate(director, theta)) * (0.5 * thickness)
+}
+
+/// (a + w, a − w).
+fn plus_minus(a: [f64; 3], w: Vector3<f64>) -> ([f64; 3], [f64; 3]) {
+    (
+        std::array::from_fn(|c| a[c] + w[c]),
+        std::array::from_fn(|c| a[c] - w[c]),
+    )
+}
+
 /// The coupling's view of a shell node (Ullrich Fig. 2.6, (3.9)): the two reference-surface
 /// points at ± a/2 along the rotated director, from the mid-surface node's position `x`,
 /// rotation vector `theta` and reference director `director`; (top, bottom).
@@ -384,12 +397,7 @@ pub fn surface_points(
     director: [f64; 3],
     thickness: f64,
 ) -> ([f64; 3], [f64; 3]) {
-    let d = rotate(director, theta);
-    let h = 0.5 * thickness;
-    (
-        std::array::from_fn(|c| x[c] + h * d[c]),
-        std::array::from_fn(|c| x[c] - h * d[c]),
-    )
+    plus_minus(x, arm(theta, director, thickness))
 }
 
 /// The velocities of the two reference-surface points: v ± ω × (a/2 d) with d the rotated
@@ -401,12 +409,7 @@ pub fn surface_velocities(
     director: [f64; 3],
     thickness: f64,
 ) -> ([f64; 3], [f64; 3]) {
-    let d = v3(rotate(director, theta)) * (0.5 * thickness);
-    let w = v3(omega).cross(&d);
-    (
-        std::array::from_fn(|c| v[c] + w[c]),
-        std::array::from_fn(|c| v[c] - w[c]),
-    )
+    plus_minus(v, v3(omega).cross(&arm(theta, director, thickness)))
 }
 
 /// The forces the DEM puts on a shell node's two reference-surface points, carried to the
@@ -420,8 +423,7 @@ pub fn surface_forces_to_node(
     director: [f64; 3],
     thickness: f64,
 ) -> ([f64; 3], [f64; 3]) {
-    let d = v3(rotate(director, theta)) * (0.5 * thickness);
-    let m = d.cross(&(v3(f_top) - v3(f_bottom)));
+    let m = arm(theta, director, thickness).cross(&(v3(f_top) - v3(f_bottom)));
     (
         std::array::from_fn(|c| f_top[c] + f_bottom[c]),
         [m.x, m.y, m.z],
