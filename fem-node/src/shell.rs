@@ -375,9 +375,14 @@ pub fn rotate(v: [f64; 3], theta: [f64; 3]) -> [f64; 3] {
     [r.x, r.y, r.z]
 }
 
-/// The half-thickness arm a/2 d along the director d turned by the rotation vector `theta`.
-fn arm(theta: [f64; 3], director: [f64; 3], thickness: f64) -> Vector3<f64> {
-    v3(rotate(director, theta)) * (0.5 * thickness)
+/// A shell node as the coupling sees it (Ullrich Fig. 2.6, (3.9)): its rotation vector
+/// `theta`, its reference director and the thickness a; the two reference-surface points lie
+/// at ± a/2 along the director turned by θ.
+#[derive(Debug, Clone, Copy)]
+pub struct SurfaceNode {
+    pub theta: [f64; 3],
+    pub director: [f64; 3],
+    pub thickness: f64,
 }
 
 /// (a + w, a − w).
@@ -388,44 +393,31 @@ fn plus_minus(a: [f64; 3], w: Vector3<f64>) -> ([f64; 3], [f64; 3]) {
     )
 }
 
-/// The coupling's view of a shell node (Ullrich Fig. 2.6, (3.9)): the two reference-surface
-/// points at ± a/2 along the rotated director, from the mid-surface node's position `x`,
-/// rotation vector `theta` and reference director `director`; (top, bottom).
-pub fn surface_points(
-    x: [f64; 3],
-    theta: [f64; 3],
-    director: [f64; 3],
-    thickness: f64,
-) -> ([f64; 3], [f64; 3]) {
-    plus_minus(x, arm(theta, director, thickness))
-}
+impl SurfaceNode {
+    /// The half-thickness arm a/2 d along the turned director d.
+    fn arm(&self) -> Vector3<f64> {
+        v3(rotate(self.director, self.theta)) * (0.5 * self.thickness)
+    }
 
-/// The velocities of the two reference-surface points: v ± ω × (a/2 d) with d the rotated
-/// director.
-pub fn surface_velocities(
-    v: [f64; 3],
-    omega: [f64; 3],
-    theta: [f64; 3],
-    director: [f64; 3],
-    thickness: f64,
-) -> ([f64; 3], [f64; 3]) {
-    plus_minus(v, v3(omega).cross(&arm(theta, director, thickness)))
-}
+    /// The two reference-surface points (top, bottom) of the node at `x`.
+    pub fn points(&self, x: [f64; 3]) -> ([f64; 3], [f64; 3]) {
+        plus_minus(x, self.arm())
+    }
 
-/// The forces the DEM puts on a shell node's two reference-surface points, carried to the
-/// mid-surface node: the force F_top + F_bottom ((3.9)) and the moment of the pair about the
-/// node, (a/2 d) × (F_top − F_bottom) — the node then carries the same resultant and moment
-/// about any point as the two surface forces did.
-pub fn surface_forces_to_node(
-    f_top: [f64; 3],
-    f_bottom: [f64; 3],
-    theta: [f64; 3],
-    director: [f64; 3],
-    thickness: f64,
-) -> ([f64; 3], [f64; 3]) {
-    let m = arm(theta, director, thickness).cross(&(v3(f_top) - v3(f_bottom)));
-    (
-        std::array::from_fn(|c| f_top[c] + f_bottom[c]),
-        [m.x, m.y, m.z],
-    )
+    /// Their velocities v ± ω × (a/2 d).
+    pub fn velocities(&self, v: [f64; 3], omega: [f64; 3]) -> ([f64; 3], [f64; 3]) {
+        plus_minus(v, v3(omega).cross(&self.arm()))
+    }
+
+    /// The forces the DEM puts on the two points, carried to the node: the force F_top +
+    /// F_bottom ((3.9)) and the moment of the pair about the node, (a/2 d) × (F_top − F_bottom)
+    /// — the node then carries the same resultant and moment about any point as the two
+    /// surface forces did.
+    pub fn forces_to_node(&self, f_top: [f64; 3], f_bottom: [f64; 3]) -> ([f64; 3], [f64; 3]) {
+        let m = self.arm().cross(&(v3(f_top) - v3(f_bottom)));
+        (
+            std::array::from_fn(|c| f_top[c] + f_bottom[c]),
+            [m.x, m.y, m.z],
+        )
+    }
 }

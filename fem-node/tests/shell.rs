@@ -575,7 +575,12 @@ fn a_simply_supported_plate_vibrates_at_its_closed_form_frequency() {
 #[test]
 fn the_coupling_surfaces_follow_the_node_and_carry_its_force_and_moment() {
     let (x, theta, dir, t) = ([0.3, -0.2, 1.1], [0.2, -0.4, 0.1], [0.0, 0.6, 0.8], 0.01);
-    let (top, bottom) = shell::surface_points(x, theta, dir, t);
+    let node = shell::SurfaceNode {
+        theta,
+        director: dir,
+        thickness: t,
+    };
+    let (top, bottom) = node.points(x);
     // the points lie a thickness apart, symmetric about the node, along the rotated director
     let gap: f64 = (0..3)
         .map(|c| (top[c] - bottom[c]).powi(2))
@@ -594,7 +599,7 @@ fn the_coupling_surfaces_follow_the_node_and_carry_its_force_and_moment() {
     // node a little along v, ω
     let (v, w) = ([1.0, 2.0, -0.5], [3.0, -1.0, 2.0]);
     let dt = 1e-7;
-    let (vt, vb) = shell::surface_velocities(v, w, theta, dir, t);
+    let (vt, vb) = node.velocities(v, w);
     let d_now = shell::rotate(dir, theta);
     let d_next = shell::rotate(d_now, w.map(|c| c * dt));
     for c in 0..3 {
@@ -606,7 +611,7 @@ fn the_coupling_surfaces_follow_the_node_and_carry_its_force_and_moment() {
     // forces: the node's force and moment equal the pair's resultant and moment about the
     // origin
     let (ft, fb) = ([2.0, -1.0, 5.0], [-0.5, 3.0, 1.0]);
-    let (f, m) = shell::surface_forces_to_node(ft, fb, theta, dir, t);
+    let (f, m) = node.forces_to_node(ft, fb);
     let cross = |a: [f64; 3], b: [f64; 3]| {
         [
             a[1] * b[2] - a[2] * b[1],
