@@ -476,6 +476,13 @@ fn default_gain() -> f64 {
     0.2
 }
 
+impl UniaxialConfig {
+    /// Simple shear of a slab: a shear test with the centres' strain.
+    pub fn slab(&self) -> bool {
+        self.strain == StrainKind::Centres && self.test == TestKind::Shear
+    }
+}
+
 fn default_fit() -> [f64; 2] {
     [0.4, 0.8]
 }
@@ -581,6 +588,16 @@ fn positive(path: &str, v: f64, out: &mut Vec<ValueError>) {
         out.push(ValueError {
             path: path.into(),
             message: format!("must be a positive number, got {v}"),
+        });
+    }
+}
+
+fn direction(path: &str, v: [f64; 2], out: &mut Vec<ValueError>) {
+    let n = (v[0].powi(2) + v[1].powi(2)).sqrt();
+    if !(n.is_finite() && n > 0.0) {
+        out.push(ValueError {
+            path: path.into(),
+            message: format!("must be a finite non-zero vector, got {v:?}"),
         });
     }
 }
@@ -868,7 +885,8 @@ impl DiscConfig {
             }
         }
         if let Some(m) = &self.measure {
-            if m.strain == StrainKind::Centres && m.test == TestKind::Shear {
+            let slab = m.slab();
+            if slab {
                 // simple shear of a slab: the mean centres of top and bottom, σ̄_xy (4.3)
                 for (k, r) in [("top", &m.top), ("bottom", &m.bottom)] {
                     match r {
@@ -910,7 +928,6 @@ impl DiscConfig {
                 }
             }
             // keys the chosen measurement would not read: refused rather than ignored
-            let slab = m.strain == StrainKind::Centres && m.test == TestKind::Shear;
             let unused: Vec<(&str, bool)> = match m.strain {
                 StrainKind::Bagi => vec![
                     ("top", m.top.is_some()),
@@ -951,21 +968,9 @@ impl DiscConfig {
             }
         }
         if let Some(pl) = &self.pulse {
-            let n = (pl.direction[0].powi(2) + pl.direction[1].powi(2)).sqrt();
-            if !(n.is_finite() && n > 0.0) {
-                e.push(ValueError {
-                    path: "dem.pulse.direction".into(),
-                    message: format!("must be a finite non-zero vector, got {:?}", pl.direction),
-                });
-            }
+            direction("dem.pulse.direction", pl.direction, &mut e);
             if let Some(u) = pl.displacement {
-                let n = (u[0].powi(2) + u[1].powi(2)).sqrt();
-                if !(n.is_finite() && n > 0.0) {
-                    e.push(ValueError {
-                        path: "dem.pulse.displacement".into(),
-                        message: format!("must be a finite non-zero vector, got {u:?}"),
-                    });
-                }
+                direction("dem.pulse.displacement", u, &mut e);
             }
             if !pl.amplitude.is_finite() {
                 e.push(ValueError {

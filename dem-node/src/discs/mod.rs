@@ -197,6 +197,18 @@ impl Rng {
 }
 
 /// `count` non-overlapping discs in the box by random sequential addition, largest first.
+/// The least-squares line through the points (x, y): its slope and the coefficient of
+/// determination r² (NaN where the x or y do not vary).
+fn line_fit(pts: &[(f64, f64)]) -> (f64, f64) {
+    let n = pts.len() as f64;
+    let mx = pts.iter().map(|p| p.0).sum::<f64>() / n;
+    let my = pts.iter().map(|p| p.1).sum::<f64>() / n;
+    let sxy: f64 = pts.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+    let sxx: f64 = pts.iter().map(|p| (p.0 - mx).powi(2)).sum();
+    let syy: f64 = pts.iter().map(|p| (p.1 - my).powi(2)).sum();
+    (sxy / sxx, sxy * sxy / (sxx * syy))
+}
+
 /// The nearest periodic image of the branch vector `d`: along each axis of period
 /// `len[k] > 0`, d_k − len_k · round(d_k/len_k).
 fn image(mut d: V2, len: [f64; 2]) -> V2 {
@@ -338,7 +350,6 @@ struct Measure {
     /// Simple shear of a slab (the centres' strain): the initial x offset of the mean top
     /// centre from the mean bottom one.
     offset0: f64,
-    slab: bool,
     section: f64,
     fit: [f64; 2],
     /// The wall whose force is the load.
@@ -768,7 +779,7 @@ impl DiscEngine {
                 let mut height0 = 0.0;
                 let mut width0 = 0.0;
                 let mut offset0 = 0.0;
-                let slab = m.strain == StrainKind::Centres && m.test == TestKind::Shear;
+                let slab = m.slab();
                 if m.strain == StrainKind::Centres {
                     // the sets' discs (a slab's shear reads only top and bottom)
                     let all = [
@@ -856,7 +867,6 @@ impl DiscEngine {
                     height0,
                     width0,
                     offset0,
-                    slab,
                     section: m.section.unwrap_or(1.0),
                     fit: m.fit,
                     plate: m
@@ -1051,11 +1061,10 @@ impl DiscEngine {
         }
         for &(i, j) in &self.state.pairs {
             let (i, j) = (i as usize, j as usize);
-            let direct = sub(self.state.x[j], self.state.x[i]);
-            let d = self.branch(i, j);
-            if d == direct {
+            let Some(d) = self.across(i, j) else {
                 continue;
-            }
+            };
+            let direct = sub(self.state.x[j], self.state.x[i]);
             let overlap = self.radius[i] + self.radius[j] - norm2(d);
             if overlap > 0.05 * self.radius[i].min(self.radius[j]) {
                 let axis = if d[0] != direct[0] { "x" } else { "y" };
@@ -1073,6 +1082,12 @@ impl DiscEngine {
     /// The branch vector from disc i's centre to disc j's (the nearest periodic image).
     fn branch(&self, i: usize, j: usize) -> V2 {
         image(sub(self.state.x[j], self.state.x[i]), self.period)
+    }
+
+    /// The branch vector of a pair that reaches across a periodic side (None within the cell).
+    fn across(&self, i: usize, j: usize) -> Option<V2> {
+        let d = self.branch(i, j);
+        (d != sub(self.state.x[j], self.state.x[i])).then_some(d)
     }
 
     fn gap(&self, i: usize, j: usize) -> f64 {
@@ -1260,9 +1275,12 @@ impl DiscEngine {
             let u = pl.displacement.unwrap_or(pl.direction);
             scale(u, pl.amplitude.signum() / norm2(u))
         });
-        self.probe_readings()
-            .into_iter()
-            .map(|(_, _, u)| along.map_or(norm2(u), |a| dot2(u, a)))
+        self.probes
+            .iter()
+            .map(|(_, discs)| {
+                let u = self.probe_mean(discs).1;
+                along.map_or(norm2(u), |a| dot2(u, a))
+            })
             .collect()
     }
 
@@ -1299,22 +1317,14 @@ impl DiscEngine {
         let pl = self.cfg.pulse.as_ref()?;
         let d = scale(pl.direction, 1.0 / norm2(pl.direction));
         let pts: Vec<(f64, f64)> = self
-            .probe_readings()
+            .probes
             .iter()
             .zip(&self.state.probe_track)
             .filter(|(_, tr)| tr.peak_time > 0.0)
-            .map(|((_, at, _), tr)| (tr.peak_time, dot2(*at, d)))
+            .map(|((_, discs), tr)| (tr.peak_time, dot2(self.probe_mean(discs).0, d)))
             .collect();
-        if pts.len() < 2 {
-            return None;
-        }
-        let n = pts.len() as f64;
-        let mt = pts.iter().map(|p| p.0).sum::<f64>() / n;
-        let ms = pts.iter().map(|p| p.1).sum::<f64>() / n;
-        let sts: f64 = pts.iter().map(|p| (p.0 - mt) * (p.1 - ms)).sum();
-        let stt: f64 = pts.iter().map(|p| (p.0 - mt).powi(2)).sum();
-        let sss: f64 = pts.iter().map(|p| (p.1 - ms).powi(2)).sum();
-        (stt > 0.0 && sss > 0.0).then(|| (sts / stt, sts * sts / (stt * sss)))
+        let (c, r2) = line_fit(&pts);
+        (pts.len() >= 2 && c.is_finite() && r2.is_finite()).then_some((c, r2))
     }
 
     /// Each probe's name, its discs' mean centre in the packing and their mean displacement
@@ -1323,17 +1333,23 @@ impl DiscEngine {
         self.probes
             .iter()
             .map(|(name, discs)| {
-                let mut at = [0.0; 2];
-                let mut u = [0.0; 2];
-                for &p in discs {
-                    let p = p as usize;
-                    at = add(at, self.x0[p]);
-                    u = add(u, sub(self.state.x[p], self.x0[p]));
-                }
-                let w = 1.0 / discs.len() as f64;
-                (name.clone(), scale(at, w), scale(u, w))
+                let (at, u) = self.probe_mean(discs);
+                (name.clone(), at, u)
             })
             .collect()
+    }
+
+    /// The discs' mean centre in the packing and their mean displacement from it.
+    fn probe_mean(&self, discs: &[u32]) -> (V2, V2) {
+        let mut at = [0.0; 2];
+        let mut u = [0.0; 2];
+        for &p in discs {
+            let p = p as usize;
+            at = add(at, self.x0[p]);
+            u = add(u, sub(self.state.x[p], self.x0[p]));
+        }
+        let w = 1.0 / discs.len() as f64;
+        (scale(at, w), scale(u, w))
     }
 
     /// Pair k's contact of this evaluation (a pure function of the state: the same for any
@@ -1347,7 +1363,7 @@ impl DiscEngine {
         let (i, j) = (i as usize, j as usize);
         {
             let old = s.pair_state[k];
-            let d = image(sub(s.x[j], s.x[i]), self.period);
+            let d = self.branch(i, j);
             let dist = norm2(d);
             let n = scale(d, 1.0 / dist);
             let (ri, rj) = (self.radius[i], self.radius[j]);
@@ -1847,7 +1863,7 @@ impl DiscEngine {
         let mean = |set: &[u32], k: usize| {
             set.iter().map(|&p| s.x[p as usize][k]).sum::<f64>() / set.len() as f64
         };
-        if m.slab {
+        if m.bagi.is_none() && m.test == TestKind::Shear {
             // γ = 2ε_xy: the top's shift against the bottom over their distance
             let gamma = (mean(&m.top, 0) - mean(&m.bottom, 0) - m.offset0) / m.height0;
             let st = self.macroscopic_stress();
@@ -1938,12 +1954,8 @@ impl DiscEngine {
             return Vec::new();
         }
         let slope = |xs: &dyn Fn(&[f64; 7]) -> f64, ys: &dyn Fn(&[f64; 7]) -> f64| {
-            let n = pts.len() as f64;
-            let mx = pts.iter().map(|p| xs(p)).sum::<f64>() / n;
-            let my = pts.iter().map(|p| ys(p)).sum::<f64>() / n;
-            let sxy: f64 = pts.iter().map(|p| (xs(p) - mx) * (ys(p) - my)).sum();
-            let sxx: f64 = pts.iter().map(|p| (xs(p) - mx).powi(2)).sum();
-            sxy / sxx
+            let xy: Vec<(f64, f64)> = pts.iter().map(|p| (xs(p), ys(p))).collect();
+            line_fit(&xy).0
         };
         match m.test {
             TestKind::Uniaxial => vec![

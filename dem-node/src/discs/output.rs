@@ -250,12 +250,12 @@ fn write_contacts_vtk(path: &Path, e: &DiscEngine) -> Result<(), DiscError> {
     let mut extra = Vec::new();
     for &k in &active {
         let (i, j) = (st.pairs[k].0 as usize, st.pairs[k].1 as usize);
-        let d = e.branch(i, j);
-        if d == [st.x[j][0] - st.x[i][0], st.x[j][1] - st.x[i][1]] {
-            ends.push((i, j));
-        } else {
-            ends.push((i, n + extra.len()));
-            extra.push([st.x[i][0] + d[0], st.x[i][1] + d[1]]);
+        match e.across(i, j) {
+            None => ends.push((i, j)),
+            Some(d) => {
+                ends.push((i, n + extra.len()));
+                extra.push([st.x[i][0] + d[0], st.x[i][1] + d[1]]);
+            }
         }
     }
     let mut s = String::with_capacity(60 * (n + m) + 256);
