@@ -14,7 +14,7 @@
 //! forces (12 × 12 per element: cheap for membranes of a few hundred elements, and exact
 //! enough for Newton's quadratic convergence to show).
 
-use crate::shell::shape;
+use crate::shell::{shape, GAUSS};
 use nalgebra::{Matrix2, Matrix3x2, Vector2, Vector3};
 
 /// The incompressible Ogden law in plane stress: terms (μ_p, α_p).
@@ -54,10 +54,9 @@ type Rule = Vec<(f64, Vec<f64>, Vec<[f64; 2]>)>;
 fn rule(corners: usize) -> Rule {
     match corners {
         4 => {
-            let g = 1.0 / 3f64.sqrt();
             let mut out = Vec::with_capacity(4);
-            for r in [-g, g] {
-                for s in [-g, g] {
+            for r in GAUSS {
+                for s in GAUSS {
                     let (n, d) = shape(r, s);
                     out.push((1.0, n.to_vec(), d.to_vec()));
                 }

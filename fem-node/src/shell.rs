@@ -18,6 +18,9 @@
 
 use nalgebra::{Matrix3, Vector3};
 
+/// The two-point Gauss rule's abscissae ±1/√3 (weights 1), also the membrane's.
+pub(crate) const GAUSS: [f64; 2] = [-0.577_350_269_189_625_8, 0.577_350_269_189_625_8];
+
 /// Degrees of freedom of one element.
 pub const DOFS: usize = 24;
 
@@ -164,17 +167,16 @@ pub fn stiffness(geo: &Geometry, mat: Material) -> Stiffness {
         [0.0, 0.0, 0.0, kappa * shear, 0.0],
         [0.0, 0.0, 0.0, 0.0, kappa * shear],
     ];
-    let gp = 1.0 / 3f64.sqrt();
     let mut k = [[0.0; DOFS]; DOFS];
-    for &t in &[-gp, gp] {
+    for &t in &GAUSS {
         // the tying points' transverse shear strains at this t: ε̃_rt at A (0, 1), C (0, −1);
         // ε̃_st at D (1, 0), B (−1, 0)
         let ert_a = point(geo, 0.0, 1.0, t).strain(geo, 0, 2);
         let ert_c = point(geo, 0.0, -1.0, t).strain(geo, 0, 2);
         let est_d = point(geo, 1.0, 0.0, t).strain(geo, 1, 2);
         let est_b = point(geo, -1.0, 0.0, t).strain(geo, 1, 2);
-        for &r in &[-gp, gp] {
-            for &s in &[-gp, gp] {
+        for &r in &GAUSS {
+            for &s in &GAUSS {
                 let p = point(geo, r, s, t);
                 let Frame { det, gc, e: frame } = p.frame();
                 // covariant strain rows ε̃_ab (a ≤ b), the MITC shear interpolated
@@ -257,9 +259,8 @@ pub fn stiffness(geo: &Geometry, mat: Material) -> Stiffness {
 fn add_drilling(geo: &Geometry, mat: Material, k: &mut Stiffness) {
     let shear = mat.youngs_modulus / (2.0 * (1.0 + mat.poisson_ratio));
     let gamma = 1e-3 * shear * geo.thickness;
-    let gp = 1.0 / 3f64.sqrt();
-    for &r in &[-gp, gp] {
-        for &s in &[-gp, gp] {
+    for &r in &GAUSS {
+        for &s in &GAUSS {
             let p = point(geo, r, s, 0.0);
             let (n, _) = shape(r, s);
             let Frame {
@@ -300,20 +301,24 @@ fn add_drilling(geo: &Geometry, mat: Material, k: &mut Stiffness) {
     }
 }
 
+/// The mid-surface's 2 × 2 points: the shape functions there and the area element |g_r × g_s|.
+fn mid_surface(geo: &Geometry) -> impl Iterator<Item = ([f64; 4], f64)> + '_ {
+    GAUSS.iter().flat_map(move |&r| {
+        GAUSS.iter().map(move |&s| {
+            let p = point(geo, r, s, 0.0);
+            (shape(r, s).0, p.g[0].cross(&p.g[1]).norm())
+        })
+    })
+}
+
 /// Consistent nodal forces of a pressure or area load q (force per area, a global vector) on
 /// the mid-surface: ∫ N_i q dA (translations only).
 pub fn area_load(geo: &Geometry, q: [f64; 3]) -> [f64; DOFS] {
-    let gp = 1.0 / 3f64.sqrt();
     let mut f = [0.0; DOFS];
-    for &r in &[-gp, gp] {
-        for &s in &[-gp, gp] {
-            let p = point(geo, r, s, 0.0);
-            let (n, _) = shape(r, s);
-            let da = p.g[0].cross(&p.g[1]).norm();
-            for i in 0..4 {
-                for c in 0..3 {
-                    f[6 * i + c] += n[i] * q[c] * da;
-                }
+    for (n, da) in mid_surface(geo) {
+        for i in 0..4 {
+            for c in 0..3 {
+                f[6 * i + c] += n[i] * q[c] * da;
             }
         }
     }
@@ -326,35 +331,29 @@ pub fn area_load(geo: &Geometry, q: [f64; 3]) -> [f64; DOFS] {
 /// corner's share ∫ N_i dA of both: diagonal in the translations, a 3 × 3 block per node in
 /// the rotations (ρ a³/12 (1 − 0.99 V⊗V), diagonal only when the director lies along an axis).
 pub fn mass(geo: &Geometry, density: f64, lumped: bool) -> Stiffness {
-    let gp = 1.0 / 3f64.sqrt();
     let a = geo.thickness;
+    let dirs = geo.director.map(v3);
     let mut m = [[0.0; DOFS]; DOFS];
-    for &r in &[-gp, gp] {
-        for &s in &[-gp, gp] {
-            let p = point(geo, r, s, 0.0);
-            let (n, _) = shape(r, s);
-            let da = p.g[0].cross(&p.g[1]).norm();
-            for i in 0..4 {
-                let v = v3(geo.director[i]);
-                for j in 0..4 {
-                    let w = if lumped {
-                        if i != j {
-                            continue;
-                        }
-                        n[i] * da
-                    } else {
-                        n[i] * n[j] * da
-                    };
-                    let rot = density * a.powi(3) / 12.0 * w;
-                    for c in 0..3 {
-                        m[6 * i + c][6 * j + c] += density * a * w;
-                        for d in 0..3 {
-                            // J (1 − V⊗V) + 1e-2 J V⊗V about the director
-                            let vv = 0.5
-                                * (v[c] * v[d] + v3(geo.director[j])[c] * v3(geo.director[j])[d]);
-                            let unit = if c == d { 1.0 } else { 0.0 };
-                            m[6 * i + 3 + c][6 * j + 3 + d] += rot * (unit - 0.99 * vv);
-                        }
+    for (n, da) in mid_surface(geo) {
+        for i in 0..4 {
+            for j in 0..4 {
+                let w = if lumped {
+                    if i != j {
+                        continue;
+                    }
+                    n[i] * da
+                } else {
+                    n[i] * n[j] * da
+                };
+                let rot = density * a.powi(3) / 12.0 * w;
+                let (vi, vj) = (dirs[i], dirs[j]);
+                for c in 0..3 {
+                    m[6 * i + c][6 * j + c] += density * a * w;
+                    for d in 0..3 {
+                        // J (1 − V⊗V) + 1e-2 J V⊗V about the director
+                        let vv = 0.5 * (vi[c] * vi[d] + vj[c] * vj[d]);
+                        let unit = if c == d { 1.0 } else { 0.0 };
+                        m[6 * i + 3 + c][6 * j + 3 + d] += rot * (unit - 0.99 * vv);
                     }
                 }
             }

@@ -70,25 +70,29 @@ impl Shells {
         f
     }
 
-    /// Solves K u = f with the dofs of `fixed` held at zero, by the FEM's sparse Cholesky
-    /// (faer) on a pattern of the shells' six dofs per node.
-    fn solve_sparse(&self, f: &DVector<f64>, fixed: &[usize]) -> DVector<f64> {
+    /// Solves K u = f with the dofs of `fixed` held at their values, by the FEM's sparse
+    /// Cholesky (faer) on a pattern of the shells' six dofs per node.
+    fn solve(&self, f: &DVector<f64>, fixed: &[(usize, f64)]) -> DVector<f64> {
         use std::collections::BTreeMap;
         let n = 6 * self.x.len();
-        let mut eq = vec![u32::MAX; n];
-        let mut held = vec![false; n];
-        for &d in fixed {
-            held[d] = true;
+        let mut held = vec![None; n];
+        for &(d, v) in fixed {
+            held[d] = Some(v);
         }
+        let mut eq = vec![u32::MAX; n];
         let mut m = 0u32;
         for d in 0..n {
-            if !held[d] {
+            if held[d].is_none() {
                 eq[d] = m;
                 m += 1;
             }
         }
+        let mut b: Vec<f64> = (0..n)
+            .filter(|&i| held[i].is_none())
+            .map(|i| f[i])
+            .collect();
         let d = self.directors();
-        // columns of the free equations: (row → value), both triangles
+        // columns of the free equations: (row → value), both triangles; held dofs move to b
         let mut cols: Vec<BTreeMap<u32, f64>> = vec![BTreeMap::new(); m as usize];
         for q in &self.quads {
             let ke = shell::stiffness(&self.geometry(q, &d), self.mat);
@@ -97,10 +101,11 @@ impl Shells {
                 if ea == u32::MAX {
                     continue;
                 }
-                for b in 0..DOFS {
-                    let eb = eq[6 * q[b / 6] + b % 6];
-                    if eb != u32::MAX {
-                        *cols[eb as usize].entry(ea).or_insert(0.0) += ke[a][b];
+                for c in 0..DOFS {
+                    let dof = 6 * q[c / 6] + c % 6;
+                    match held[dof] {
+                        Some(v) => b[ea as usize] -= ke[a][c] * v,
+                        None => *cols[eq[dof] as usize].entry(ea).or_insert(0.0) += ke[a][c],
                     }
                 }
             }
@@ -121,52 +126,10 @@ impl Shells {
             row_idx,
             order: (0..m).collect(),
         };
-        let factor = fem::assembly::Factor::new(&pattern, &vals, &mut None).unwrap();
-        let mut b: Vec<f64> = (0..n).filter(|&i| !held[i]).map(|i| f[i]).collect();
+        let factor = fem::assembly::Factor::new(&pattern, &vals, &mut None)
+            .expect("the constrained stiffness is positive definite");
         factor.solve_in_place(&mut b);
-        let mut u = DVector::zeros(n);
-        for i in 0..n {
-            if eq[i] != u32::MAX {
-                u[i] = b[eq[i] as usize];
-            }
-        }
-        u
-    }
-
-    /// Solves K u = f with the dofs of `fixed` held at `value`.
-    fn solve(&self, f: &DVector<f64>, fixed: &[(usize, f64)]) -> DVector<f64> {
-        let k = self.stiffness();
-        let n = k.nrows();
-        let mut held = vec![None; n];
-        for &(dof, v) in fixed {
-            held[dof] = Some(v);
-        }
-        let free: Vec<usize> = (0..n).filter(|&i| held[i].is_none()).collect();
-        let mut kf = DMatrix::zeros(free.len(), free.len());
-        let mut rhs = DVector::zeros(free.len());
-        for (a, &i) in free.iter().enumerate() {
-            rhs[a] = f[i];
-            for j in 0..n {
-                if let Some(v) = held[j] {
-                    rhs[a] -= k[(i, j)] * v;
-                }
-            }
-            for (b, &j) in free.iter().enumerate() {
-                kf[(a, b)] = k[(i, j)];
-            }
-        }
-        let sol = kf
-            .cholesky()
-            .expect("the constrained stiffness is positive definite")
-            .solve(&rhs);
-        let mut u = DVector::zeros(n);
-        for i in 0..n {
-            u[i] = held[i].unwrap_or(0.0);
-        }
-        for (a, &i) in free.iter().enumerate() {
-            u[i] = sol[a];
-        }
-        u
+        DVector::from_fn(n, |i, _| held[i].unwrap_or_else(|| b[eq[i] as usize]))
     }
 }
 
@@ -494,7 +457,8 @@ fn the_pinched_cylinder_converges_to_its_reference_deflection() {
         }
         fixed.sort_unstable();
         fixed.dedup();
-        let u = mesh.solve_sparse(&f, &fixed);
+        let fixed: Vec<(usize, f64)> = fixed.into_iter().map(|d| (d, 0.0)).collect();
+        let u = mesh.solve(&f, &fixed);
         let w = -u[6 * crown + 2] / 1.8248e-5;
         println!("pinched cylinder {n} × {n}: {w:.4} of the reference");
         found.push(w);
