@@ -28,10 +28,14 @@ pub const FIXED: u32 = u32::MAX;
 impl DofMap {
     /// Free dofs are those of nodes used by elements and not fixed.
     pub fn new(fixed: &[bool], used: &[bool]) -> DofMap {
+        DofMap::with_stride(fixed, used, 3)
+    }
+    /// The same with `per_node` dofs per node (6 for shells).
+    pub fn with_stride(fixed: &[bool], used: &[bool], per_node: usize) -> DofMap {
         let mut eq = vec![FIXED; fixed.len()];
         let mut n = 0u32;
         for d in 0..fixed.len() {
-            if !fixed[d] && used[d / 3] {
+            if !fixed[d] && used[d / per_node] {
                 eq[d] = n;
                 n += 1;
             }
@@ -80,19 +84,39 @@ pub struct Pattern {
 
 impl Pattern {
     pub fn build(mesh: &Mesh, dofs: &DofMap) -> Result<Pattern, FemError> {
-        let nn = mesh.num_nodes();
+        Pattern::for_elements(
+            &mesh.nodes,
+            mesh.num_elements(),
+            |e| mesh.element_nodes(e),
+            dofs,
+            3,
+        )
+    }
+
+    /// The pattern of elements given by `element_nodes(e)`, e < `n_elements`, over nodes at
+    /// `coords` with `per_node` dofs each (3 for solids, 6 for shells).
+    pub fn for_elements<'a>(
+        coords: &[[f64; 3]],
+        n_elements: usize,
+        element_nodes: impl Fn(usize) -> &'a [u32] + Sync,
+        dofs: &DofMap,
+        per_node: usize,
+    ) -> Result<Pattern, FemError> {
+        let nn = coords.len();
         // node → elements incidence (CSR)
         let mut count = vec![0u32; nn + 1];
-        for &n in &mesh.conn {
-            count[n as usize + 1] += 1;
+        for e in 0..n_elements {
+            for &n in element_nodes(e) {
+                count[n as usize + 1] += 1;
+            }
         }
         for i in 0..nn {
             count[i + 1] += count[i];
         }
         let mut fill = count.clone();
-        let mut node_elems = vec![0u32; mesh.conn.len()];
-        for e in 0..mesh.num_elements() {
-            for &n in mesh.element_nodes(e) {
+        let mut node_elems = vec![0u32; count[nn] as usize];
+        for e in 0..n_elements {
+            for &n in element_nodes(e) {
                 node_elems[fill[n as usize] as usize] = e as u32;
                 fill[n as usize] += 1;
             }
@@ -103,7 +127,7 @@ impl Pattern {
             .map(|n| {
                 let mut v = Vec::new();
                 for &e in &node_elems[count[n] as usize..count[n + 1] as usize] {
-                    v.extend_from_slice(mesh.element_nodes(e as usize));
+                    v.extend_from_slice(element_nodes(e as usize));
                 }
                 v.sort_unstable();
                 v.dedup();
@@ -113,14 +137,15 @@ impl Pattern {
         let mut col_ptr = Vec::with_capacity(dofs.n_eq + 1);
         col_ptr.push(0u32);
         let mut row_idx: Vec<u32> = Vec::new();
+        let k = per_node;
         for n in 0..nn {
-            for c in 0..3 {
-                if dofs.eq[3 * n + c] == FIXED {
+            for c in 0..k {
+                if dofs.eq[k * n + c] == FIXED {
                     continue;
                 }
                 for &m in &adj[n] {
-                    for d in 0..3 {
-                        let e = dofs.eq[3 * m as usize + d];
+                    for d in 0..k {
+                        let e = dofs.eq[k * m as usize + d];
                         if e != FIXED {
                             row_idx.push(e);
                         }
@@ -135,13 +160,13 @@ impl Pattern {
             }
         }
         let active: Vec<bool> = (0..nn)
-            .map(|n| (0..3).any(|c| dofs.eq[3 * n + c] != FIXED))
+            .map(|n| (0..k).any(|c| dofs.eq[k * n + c] != FIXED))
             .collect();
-        let node_order = nested_dissection(&mesh.nodes, &adj, &active);
+        let node_order = nested_dissection(coords, &adj, &active);
         let mut order = Vec::with_capacity(dofs.n_eq);
         for n in node_order {
-            for c in 0..3 {
-                let e = dofs.eq[3 * n as usize + c];
+            for c in 0..k {
+                let e = dofs.eq[k * n as usize + c];
                 if e != FIXED {
                     order.push(e);
                 }
@@ -166,7 +191,7 @@ impl Pattern {
 
     /// Position of entry (row, col) if present.
     #[inline]
-    fn find(&self, row: u32, col: u32) -> Option<usize> {
+    pub fn find(&self, row: u32, col: u32) -> Option<usize> {
         let (a, b) = (
             self.col_ptr[col as usize] as usize,
             self.col_ptr[col as usize + 1] as usize,

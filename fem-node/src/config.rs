@@ -56,6 +56,30 @@ pub struct FemConfig {
     /// Linear solver of static analyses (`solver = "auto" | "direct" | "mixed"`).
     #[serde(default)]
     pub solver: LinearSolver,
+    /// `[fem.shell]`: the section of shell meshes (MITC4; FEM.md "Thin structures").
+    #[serde(default)]
+    pub shell: Option<ShellSection>,
+}
+
+/// `[fem.shell]`: the section of the shells of a shell mesh.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ShellSection {
+    /// Thickness [m] of every shell the mesh file gives none (Abaqus *SHELL SECTION gives
+    /// its own, which wins).
+    pub thickness: Option<f64>,
+}
+
+/// Which reference surfaces of a shell the DEM sees (Ullrich Fig. 2.6).
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum ShellFaces {
+    /// The surface at +t/2 along the director (corners counter-clockwise seen from it).
+    Top,
+    /// The surface at −t/2.
+    Bottom,
+    #[default]
+    Both,
 }
 
 /// How static analyses solve K u = F.
@@ -105,6 +129,15 @@ pub enum MeshSpec {
         divisions: Option<[usize; 3]>,
         element: ElementKind,
     },
+    /// Structured rectangle of MITC4 shells (`element = "mitc4"`): `size` has one zero
+    /// component, the normal axis (the shells' directors point along +axis); the mid-surface
+    /// lies at `origin`'s coordinate on it.
+    Plate {
+        size: [f64; 3],
+        origin: [f64; 3],
+        element_size: Option<f64>,
+        divisions: Option<[usize; 3]>,
+    },
 }
 
 #[derive(Deserialize)]
@@ -117,7 +150,8 @@ struct MeshTable {
     origin: Option<[f64; 3]>,
     element_size: Option<f64>,
     divisions: Option<[usize; 3]>,
-    element: Option<ElementKind>,
+    /// A volume element kind, or "mitc4" for a plate of shells.
+    element: Option<String>,
 }
 
 #[derive(Deserialize, Clone, Copy, PartialEq, Eq)]
@@ -170,12 +204,33 @@ impl<'de> Deserialize<'de> for MeshSpec {
                         "mesh.hex8 applies to mesh files; for a box use element = \"hex8i\" or \"hex8b\"",
                     ));
                 }
+                let origin = t.origin.unwrap_or([0.0; 3]);
+                let element = match t.element.as_deref() {
+                    None => ElementKind::Hex8,
+                    Some("mitc4") => {
+                        return Ok(MeshSpec::Plate {
+                            size,
+                            origin,
+                            element_size: t.element_size,
+                            divisions: t.divisions,
+                        })
+                    }
+                    Some(name) => ElementKind::deserialize(de::value::StrDeserializer::<
+                        de::value::Error,
+                    >::new(name))
+                    .map_err(|_| {
+                        de::Error::custom(format!(
+                            "mesh.element: unknown element \"{name}\", expected one of tet4, \
+                             tet10, hex8, hex8i, hex8b, hex20 (volumes) or mitc4 (shells)"
+                        ))
+                    })?,
+                };
                 Ok(MeshSpec::Box {
                     size,
-                    origin: t.origin.unwrap_or([0.0; 3]),
+                    origin,
                     element_size: t.element_size,
                     divisions: t.divisions,
-                    element: t.element.unwrap_or(ElementKind::Hex8),
+                    element,
                 })
             }
         }
@@ -530,6 +585,10 @@ pub struct Support {
     /// History scaling `displacement`.
     #[serde(default)]
     pub history: Option<String>,
+    /// Shell meshes: rotations held about these axes (default all three: with the default
+    /// `fix`, a clamp; `rotations = []` for a hinge).
+    #[serde(default)]
+    pub rotations: Option<Vec<Axis>>,
 }
 
 fn all_axes() -> Vec<Axis> {
@@ -571,6 +630,9 @@ pub enum Load {
 #[serde(deny_unknown_fields)]
 pub struct InterfaceSpec {
     pub on: Selector,
+    /// Shell meshes: the reference surfaces the DEM sees (default both).
+    #[serde(default)]
+    pub faces: Option<ShellFaces>,
 }
 
 /// `[[fem.probes]]`: a named node (by file id) or the node nearest to a point.
@@ -876,6 +938,33 @@ impl FemConfig {
                     return Err(("fem.mesh".into(), "empty mesh file path".into()));
                 }
             }
+            MeshSpec::Plate { size, origin, .. } => {
+                let zeros = size.iter().filter(|&&s| s == 0.0).count();
+                if zeros != 1 || size.iter().any(|&s| !(s.is_finite() && s >= 0.0)) {
+                    return Err((
+                        "fem.mesh.size".into(),
+                        format!(
+                            "a plate of shells (element = \"mitc4\") has two sizes > 0 m and one \
+                             0 (its normal axis), got {size:?}"
+                        ),
+                    ));
+                }
+                if origin.iter().any(|o| !o.is_finite()) {
+                    return Err(("fem.mesh.origin".into(), "must be finite".into()));
+                }
+                let div = self
+                    .mesh
+                    .plate_divisions()
+                    .map_err(|m| ("fem.mesh".to_string(), m))?;
+                let nodes = (div[0] as u64 + 1) * (div[1] as u64 + 1);
+                crate::resources::check_memory(
+                    &format!("the generated plate ({div:?} shells, {nodes} nodes)"),
+                    // six dofs per node: twice a solid node's share
+                    2.0 * crate::resources::model_bytes(nodes, (div[0] * div[1]) as u64),
+                    crate::resources::available_memory(),
+                )
+                .map_err(|m| ("fem.mesh".to_string(), m))?;
+            }
             MeshSpec::Box {
                 size,
                 element_size,
@@ -1080,6 +1169,44 @@ impl FemConfig {
 }
 
 impl MeshSpec {
+    /// The in-plane divisions of a generated plate (its two nonzero axes in increasing
+    /// order): `divisions` on those axes, or `size / element_size` rounded, at least 1.
+    pub fn plate_divisions(&self) -> Result<[usize; 2], String> {
+        let MeshSpec::Plate {
+            size,
+            element_size,
+            divisions,
+            ..
+        } = self
+        else {
+            return Err("not a plate".into());
+        };
+        let axes: Vec<usize> = (0..3).filter(|&k| size[k] != 0.0).collect();
+        let d = match (divisions, element_size) {
+            (Some(_), Some(_)) => {
+                return Err("give either element_size or divisions, not both".into())
+            }
+            (None, None) => {
+                return Err("a generated plate needs element_size (or divisions)".into())
+            }
+            (Some(d), None) => axes.iter().map(|&k| d[k] as f64).collect::<Vec<_>>(),
+            (None, Some(h)) => {
+                if !(h.is_finite() && *h > 0.0) {
+                    return Err(format!("element_size: must be > 0 m, got {h}"));
+                }
+                axes.iter()
+                    .map(|&k| (size[k] / h).round().max(1.0))
+                    .collect()
+            }
+        };
+        if d.iter().any(|n| !(1.0..=1e6).contains(n)) {
+            return Err(format!(
+                "divisions: 1 to 10⁶ shells along each in-plane axis, got {d:?}"
+            ));
+        }
+        Ok([d[0] as usize, d[1] as usize])
+    }
+
     /// Divisions of a generated box (`divisions`, or `size / element_size` rounded, at least
     /// 1); `None` for a file or when a division does not fit in 32 bits (see
     /// [`box_size_check`], which refuses such a box).

@@ -32,12 +32,107 @@ pub mod nonlinear;
 pub mod output;
 pub mod resources;
 pub mod shell;
+mod shell_model;
 pub mod surface;
 
 pub use config::{parse_scene_section, parse_scene_table};
 pub use element::ElementKind;
 pub use mesh::Mesh;
 pub use model::Model;
+pub use shell_model::ShellModel;
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// What the `fem-node` adapter asks of a structure, volume ([`Model`]) or shells
+/// ([`ShellModel`]); [`build`] picks the kind from the scene's mesh.
+pub trait Structure: Send {
+    fn time(&self) -> f64;
+    /// The coupled surface in the reference configuration.
+    fn interface_mesh(&self) -> InterfaceMesh;
+    /// Nodal interface forces [N], flat xyz in interface node order, held until the next call.
+    fn set_interface_forces(&mut self, forces: &[f64]) -> Result<(), FemError>;
+    fn held_interface_forces(&self) -> &[f64];
+    /// Positions, velocities and accelerations of the interface nodes (flat xyz).
+    fn interface_kinematics(&self) -> (Vec<f64>, Vec<f64>, Vec<f64>);
+    fn advance(&mut self, dt: f64) -> Result<(), FemError>;
+    fn solve_static(&mut self) -> Result<(), FemError>;
+    /// Figures for the coordinator's up-front checks (FEM.md).
+    fn limits(&mut self) -> Result<BTreeMap<String, f64>, FemError>;
+    fn warnings(&self) -> Vec<String>;
+    fn snapshot(&self) -> Vec<u8>;
+    fn restore(&mut self, bytes: &[u8]) -> Result<(), FemError>;
+    fn write_outputs(&mut self, out_dir: &Path) -> Result<(), FemError>;
+    /// Result quantities for `summary.json`.
+    fn results(&self) -> Vec<(String, f64)>;
+}
+
+macro_rules! structure_by_delegation {
+    ($t:ty) => {
+        impl Structure for $t {
+            fn time(&self) -> f64 {
+                <$t>::time(self)
+            }
+            fn interface_mesh(&self) -> InterfaceMesh {
+                <$t>::interface_mesh(self)
+            }
+            fn set_interface_forces(&mut self, forces: &[f64]) -> Result<(), FemError> {
+                <$t>::set_interface_forces(self, forces)
+            }
+            fn held_interface_forces(&self) -> &[f64] {
+                <$t>::held_interface_forces(self)
+            }
+            fn interface_kinematics(&self) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+                <$t>::interface_kinematics(self)
+            }
+            fn advance(&mut self, dt: f64) -> Result<(), FemError> {
+                <$t>::advance(self, dt)
+            }
+            fn solve_static(&mut self) -> Result<(), FemError> {
+                <$t>::solve_static(self)
+            }
+            fn limits(&mut self) -> Result<BTreeMap<String, f64>, FemError> {
+                <$t>::limits(self)
+            }
+            fn warnings(&self) -> Vec<String> {
+                <$t>::warnings(self)
+            }
+            fn snapshot(&self) -> Vec<u8> {
+                <$t>::snapshot(self)
+            }
+            fn restore(&mut self, bytes: &[u8]) -> Result<(), FemError> {
+                <$t>::restore(self, bytes)
+            }
+            fn write_outputs(&mut self, out_dir: &Path) -> Result<(), FemError> {
+                <$t>::write_outputs(self, out_dir)
+            }
+            fn results(&self) -> Vec<(String, f64)> {
+                <$t>::results(self)
+            }
+        }
+    };
+}
+structure_by_delegation!(Model);
+structure_by_delegation!(ShellModel);
+
+/// Builds the structure of a scene's `[fem]` table: shells for a generated plate or a mesh
+/// file without volume elements, a volume model otherwise. Relative mesh paths are resolved
+/// against `base_dir`.
+pub fn build(cfg: &config::FemConfig, base_dir: &Path) -> Result<Box<dyn Structure>, FemError> {
+    if ShellModel::is_plate(cfg) {
+        return Ok(Box::new(ShellModel::from_config(cfg)?));
+    }
+    if let config::MeshSpec::File { path, .. } = &cfg.mesh {
+        cfg.validate()
+            .map_err(|(field, message)| FemError::Config { field, message })?;
+        let mesh = Mesh::read(&base_dir.join(path))?;
+        if mesh.kinds.is_empty() {
+            return Ok(Box::new(ShellModel::from_mesh(cfg, mesh)?));
+        }
+        return Ok(Box::new(Model::from_mesh(cfg, mesh)?));
+    }
+    Ok(Box::new(Model::from_config(cfg, base_dir)?))
+}
 
 /// The coupled surface handed to the DEM side (reference configuration).
 #[derive(Clone, Debug, PartialEq)]

@@ -15,73 +15,116 @@ pub fn write_vtu(
     stress: &[[f64; 6]],
     cell_scalars: &[(&str, &[f64])],
 ) -> std::io::Result<()> {
-    let mut s = String::with_capacity(64 * mesh.num_nodes() + 128 * mesh.num_elements());
+    let types: Vec<u8> = mesh.kinds.iter().map(|k| k.vtk_type()).collect();
+    let von: Vec<f64> = stress.iter().map(von_mises).collect();
+    let flat: Vec<f64> = stress.iter().flatten().copied().collect();
+    let mut cells = vec![("von_mises", 1, &von[..]), ("stress", 6, &flat[..])];
+    cells.extend(cell_scalars.iter().map(|(n, d)| (*n, 1, *d)));
+    write_grid(
+        path,
+        &mesh.nodes,
+        &mesh.conn,
+        &mesh.offsets[1..],
+        &types,
+        &[("displacement", u), ("velocity", v)],
+        &cells,
+    )
+}
+
+/// VTK's quadrilateral cell type.
+pub const VTK_QUAD: u8 = 9;
+
+/// Writes cells of one type with `per_cell` nodes each (`conn` flat): 3-component point
+/// vectors (the first is the active one) and scalar cell data.
+pub fn write_cells(
+    path: &Path,
+    points: &[[f64; 3]],
+    conn: &[u32],
+    per_cell: usize,
+    vtk_type: u8,
+    point_vectors: &[(&str, &[f64])],
+    cell_scalars: &[(&str, &[f64])],
+) -> std::io::Result<()> {
+    let n = conn.len() / per_cell;
+    let ends: Vec<usize> = (1..=n).map(|c| c * per_cell).collect();
+    let cells: Vec<(&str, usize, &[f64])> = cell_scalars.iter().map(|(a, d)| (*a, 1, *d)).collect();
+    write_grid(
+        path,
+        points,
+        conn,
+        &ends,
+        &vec![vtk_type; n],
+        point_vectors,
+        &cells,
+    )
+}
+
+/// The `.vtu` writer behind both: cell c has nodes `conn[ends[c − 1]..ends[c]]` and type
+/// `types[c]`; `cell_arrays` are (name, components, flat values).
+fn write_grid(
+    path: &Path,
+    points: &[[f64; 3]],
+    conn: &[u32],
+    ends: &[usize],
+    types: &[u8],
+    point_vectors: &[(&str, &[f64])],
+    cell_arrays: &[(&str, usize, &[f64])],
+) -> std::io::Result<()> {
+    let mut s = String::with_capacity(64 * points.len() + 128 * ends.len());
     let _ = writeln!(s, "<?xml version=\"1.0\"?>");
     let _ = writeln!(s, "<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">");
     let _ = writeln!(s, "<UnstructuredGrid>");
     let _ = writeln!(
         s,
         "<Piece NumberOfPoints=\"{}\" NumberOfCells=\"{}\">",
-        mesh.num_nodes(),
-        mesh.num_elements()
+        points.len(),
+        ends.len()
     );
     s.push_str(
         "<Points>\n<DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"ascii\">\n",
     );
-    for p in &mesh.nodes {
+    for p in points {
         let _ = writeln!(s, "{:e} {:e} {:e}", p[0], p[1], p[2]);
     }
     s.push_str("</DataArray>\n</Points>\n<Cells>\n<DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n");
-    for e in 0..mesh.num_elements() {
-        let nodes: Vec<String> = mesh
-            .element_nodes(e)
-            .iter()
-            .map(|n| n.to_string())
-            .collect();
+    let mut start = 0;
+    for &end in ends {
+        let nodes: Vec<String> = conn[start..end].iter().map(|n| n.to_string()).collect();
         let _ = writeln!(s, "{}", nodes.join(" "));
+        start = end;
     }
     s.push_str("</DataArray>\n<DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">\n");
-    for e in 0..mesh.num_elements() {
-        let _ = write!(s, "{} ", mesh.offsets[e + 1]);
+    for end in ends {
+        let _ = write!(s, "{end} ");
     }
     s.push_str("\n</DataArray>\n<DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">\n");
-    for k in &mesh.kinds {
-        let _ = write!(s, "{} ", k.vtk_type());
+    for t in types {
+        let _ = write!(s, "{t} ");
     }
-    s.push_str("\n</DataArray>\n</Cells>\n<PointData Vectors=\"displacement\">\n");
-    for (name, data) in [("displacement", u), ("velocity", v)] {
+    let active = point_vectors.first().map_or("", |p| p.0);
+    let _ = writeln!(
+        s,
+        "\n</DataArray>\n</Cells>\n<PointData Vectors=\"{active}\">"
+    );
+    for (name, data) in point_vectors {
         let _ = writeln!(s, "<DataArray type=\"Float64\" Name=\"{name}\" NumberOfComponents=\"3\" format=\"ascii\">");
         for c in data.chunks(3) {
             let _ = writeln!(s, "{:e} {:e} {:e}", c[0], c[1], c[2]);
         }
         s.push_str("</DataArray>\n");
     }
-    s.push_str("</PointData>\n<CellData Scalars=\"von_mises\">\n");
-    s.push_str("<DataArray type=\"Float64\" Name=\"von_mises\" format=\"ascii\">\n");
-    for st in stress {
-        let _ = write!(s, "{:e} ", von_mises(st));
-    }
-    s.push_str("\n</DataArray>\n");
-    s.push_str(
-        "<DataArray type=\"Float64\" Name=\"stress\" NumberOfComponents=\"6\" format=\"ascii\">\n",
-    );
-    for st in stress {
+    let scalars = cell_arrays.first().map_or("", |c| c.0);
+    let _ = writeln!(s, "</PointData>\n<CellData Scalars=\"{scalars}\">");
+    for (name, k, data) in cell_arrays {
         let _ = writeln!(
             s,
-            "{:e} {:e} {:e} {:e} {:e} {:e}",
-            st[0], st[1], st[2], st[3], st[4], st[5]
+            "<DataArray type=\"Float64\" Name=\"{name}\" NumberOfComponents=\"{k}\" format=\"ascii\">"
         );
-    }
-    s.push_str("</DataArray>\n");
-    for (name, data) in cell_scalars {
-        let _ = writeln!(
-            s,
-            "<DataArray type=\"Float64\" Name=\"{name}\" format=\"ascii\">"
-        );
-        for v in data.iter() {
-            let _ = write!(s, "{v:e} ");
+        for c in data.chunks(*k) {
+            let row: Vec<String> = c.iter().map(|x| format!("{x:e}")).collect();
+            let _ = writeln!(s, "{}", row.join(" "));
         }
-        s.push_str("\n</DataArray>\n");
+        s.push_str("</DataArray>\n");
     }
     s.push_str("</CellData>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n");
     std::fs::write(path, s)

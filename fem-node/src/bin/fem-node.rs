@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use clap::Parser;
-use fem::Model;
+use fem::Structure;
 use proto::cli::NodeArgs;
 use proto::node::{main_with, total, NodeError, Solver, Trace, WindowReport};
 use proto::participant::{Participant, Side};
@@ -27,7 +27,7 @@ struct Args {
 }
 
 struct FemNode {
-    model: Option<Model>,
+    model: Option<Box<dyn Structure>>,
     /// The single coupled interface of this node (name, nodes).
     interface: Option<(String, usize)>,
     out_dir: PathBuf,
@@ -62,7 +62,7 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 fn pressure_equivalent(
     cfg: &fem::config::FemConfig,
     base: &Path,
-    coupled: &Model,
+    coupled: &dyn Structure,
 ) -> Result<BTreeMap<String, f64>, NodeError> {
     let Some(iface) = cfg.interface.as_ref() else {
         return Ok(BTreeMap::new());
@@ -117,7 +117,7 @@ fn pressure_equivalent(
         history: None,
     });
     let mut reference =
-        Model::from_config(&reference_cfg, base).map_err(|e| fem_error(ErrorCode::Internal, e))?;
+        fem::build(&reference_cfg, base).map_err(|e| fem_error(ErrorCode::Internal, e))?;
     reference
         .solve_static()
         .map_err(|e| fem_error(ErrorCode::Internal, e))?;
@@ -152,7 +152,7 @@ fn fem_error(code: ErrorCode, e: impl std::fmt::Display) -> NodeError {
 }
 
 impl FemNode {
-    fn model(&mut self) -> Result<&mut Model, NodeError> {
+    fn model(&mut self) -> Result<&mut Box<dyn Structure>, NodeError> {
         self.model.as_mut().ok_or_else(|| {
             NodeError::new(ErrorCode::Protocol, "a window command came before `init`")
         })
@@ -194,8 +194,8 @@ impl Solver for FemNode {
     ) -> Result<(BTreeMap<String, f64>, Vec<String>), NodeError> {
         let cfg = init.scene_table(fem::parse_scene_table)?;
         let base = init.scene_dir();
-        let mut model = Model::from_config(&cfg, base)
-            .map_err(|e| scene_error(format!("{}: {e}", init.scene_path)))?;
+        let mut model =
+            fem::build(&cfg, base).map_err(|e| scene_error(format!("{}: {e}", init.scene_path)))?;
         self.config = Some((cfg.clone(), base.to_path_buf()));
         self.out_dir = init.node_out_dir(p.node())?;
         self.trace = init.trace.then(Trace::default);
@@ -296,7 +296,7 @@ impl Solver for FemNode {
                 .map_err(|e| fem_error(ErrorCode::Unstable, format!("window {}: {e}", w.window)))?;
             // one-way coupling: compare with the pure-FEM solve under the same total load
             if let Some((cfg, base)) = &self.config {
-                self.reference = pressure_equivalent(cfg, base, model)?;
+                self.reference = pressure_equivalent(cfg, base, model.as_ref())?;
             }
         } else {
             model

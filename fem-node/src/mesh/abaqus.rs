@@ -1,5 +1,6 @@
 //! Abaqus / CalculiX `.inp` reader: *NODE, *ELEMENT (C3D4, C3D10, C3D8, C3D8I, C3D20),
-//! *NSET / *ELSET (with GENERATE and nested set names). Other keywords are skipped.
+//! *NSET / *ELSET (with GENERATE and nested set names); in a deck without volume elements,
+//! S4 / S4R shells and their *SHELL SECTION thicknesses. Other keywords are skipped.
 
 use super::{sort_dedup, Mesh};
 use crate::element::ElementKind;
@@ -17,6 +18,14 @@ enum Block {
     /// become node sets (e.g. the faces Gmsh exports for physical surfaces).
     AuxElement {
         elset: Option<String>,
+        /// S4 / S4R: a shell if the deck has no volume elements.
+        shell: bool,
+    },
+    /// *SHELL SECTION, ELSET=...: the next data line starts with the thickness.
+    ShellSection {
+        elset: String,
+        line: usize,
+        done: bool,
     },
     Nset {
         name: String,
@@ -69,6 +78,9 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
     let mut block = Block::None;
     let mut aux_elems: HashMap<u64, Vec<u32>> = HashMap::new();
     let mut aux_sets: std::collections::BTreeMap<String, Vec<u32>> = Default::default();
+    let mut shell_index: HashMap<u64, u32> = HashMap::new();
+    // *SHELL SECTION: (element set, line, thickness)
+    let mut sections: Vec<(String, usize, f64)> = Vec::new();
     // Element data may continue over several lines (trailing comma).
     let mut pending: Vec<u64> = Vec::new();
     let mut pending_line = 0usize;
@@ -107,7 +119,10 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
                         .to_ascii_uppercase();
                     match element_kind(&ty) {
                         Some(kind) => Block::Element { kind, elset: params.get("ELSET").cloned() },
-                        None if is_auxiliary_type(&ty) => Block::AuxElement { elset: params.get("ELSET").cloned() },
+                        None if is_auxiliary_type(&ty) => Block::AuxElement {
+                            elset: params.get("ELSET").cloned(),
+                            shell: ty == "S4" || ty == "S4R",
+                        },
                         None => {
                             return Err(err(
                                 ln,
@@ -129,6 +144,14 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
                         .cloned()
                         .ok_or_else(|| err(ln, "*ELSET without ELSET=".into()))?,
                     generate: params.contains_key("GENERATE"),
+                },
+                "SHELL SECTION" => Block::ShellSection {
+                    elset: params
+                        .get("ELSET")
+                        .cloned()
+                        .ok_or_else(|| err(ln, "*SHELL SECTION without ELSET=".into()))?,
+                    line: ln,
+                    done: false,
                 },
                 "INCLUDE" => {
                     return Err(err(
@@ -232,7 +255,37 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
                     ));
                 }
             }
-            Block::AuxElement { elset } => {
+            Block::ShellSection {
+                elset,
+                line: kw_line,
+                done,
+            } => {
+                if *done {
+                    return Err(err(
+                        ln,
+                        format!("*SHELL SECTION (line {kw_line}): one data line (the thickness) expected, found another: '{line}'"),
+                    ));
+                }
+                let t: f64 = fields[0].parse().map_err(|_| {
+                    err(
+                        ln,
+                        format!(
+                            "*SHELL SECTION, ELSET={elset}: bad thickness '{}'",
+                            fields[0]
+                        ),
+                    )
+                })?;
+                if !(t > 0.0 && t.is_finite()) {
+                    return Err(err(ln, format!("*SHELL SECTION, ELSET={elset}: the thickness must be positive, got {t}")));
+                }
+                sections.push((elset.clone(), *kw_line, t));
+                block = Block::ShellSection {
+                    elset: elset.clone(),
+                    line: *kw_line,
+                    done: true,
+                };
+            }
+            Block::AuxElement { elset, shell } => {
                 if pending.is_empty() {
                     pending_line = ln;
                 }
@@ -259,6 +312,25 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
                             .entry(s.clone())
                             .or_default()
                             .extend_from_slice(&nodes);
+                    }
+                    if *shell {
+                        if nodes.len() != 4 {
+                            return Err(err(
+                                pending_line,
+                                format!("element {id}: {} nodes given, S4 expects 4", nodes.len()),
+                            ));
+                        }
+                        let s = mesh.shells.push(
+                            [nodes[0], nodes[1], nodes[2], nodes[3]],
+                            id,
+                            pending_line,
+                        );
+                        shell_index.insert(id, s);
+                        if let Some(set) = elset {
+                            mesh.shells.sets.entry(set.clone()).or_default().push(s);
+                        }
+                    } else {
+                        mesh.shells.unsupported.push((id, pending_line, "a surface element other than S4/S4R (shell models take 4-node S4 or S4R)"));
                     }
                     aux_elems.insert(id, nodes);
                     pending.clear();
@@ -349,6 +421,9 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
             gen_lines.entry(key).or_default().push(v);
         } else if let Ok(id) = tok.parse::<u64>() {
             if let Some(nodes) = aux_elems.get(&id) {
+                if let Some(&s) = shell_index.get(&id) {
+                    mesh.shells.sets.entry(name.clone()).or_default().push(s);
+                }
                 aux_sets.entry(name).or_default().extend_from_slice(nodes);
                 continue;
             }
@@ -357,19 +432,29 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
                 .ok_or_else(|| err(ln, format!("*ELSET {name} references missing element {id}")))?;
             mesh.elem_sets.entry(name).or_default().push(*ix);
         } else {
-            let members = mesh.elem_set(&tok).cloned().ok_or_else(|| {
-                err(
+            let shells = mesh.shells.set(&tok).cloned();
+            let members = mesh.elem_set(&tok).cloned();
+            if members.is_none() && shells.is_none() {
+                return Err(err(
                     ln,
                     format!("*ELSET {name} references unknown element set '{tok}'"),
-                )
-            })?;
-            mesh.elem_sets.entry(name).or_default().extend(members);
+                ));
+            }
+            if let Some(s) = shells {
+                mesh.shells.sets.entry(name.clone()).or_default().extend(s);
+            }
+            if let Some(m) = members {
+                mesh.elem_sets.entry(name).or_default().extend(m);
+            }
         }
     }
     for key in order {
         let v = &gen_lines[&key];
         for id in generate(&key.0, key.1, v)? {
             if let Some(nodes) = aux_elems.get(&id) {
+                if let Some(&s) = shell_index.get(&id) {
+                    mesh.shells.sets.entry(key.0.clone()).or_default().push(s);
+                }
                 aux_sets
                     .entry(key.0.clone())
                     .or_default()
@@ -405,5 +490,20 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
     for v in mesh.elem_sets.values_mut() {
         *v = sort_dedup(std::mem::take(v));
     }
+    for v in mesh.shells.sets.values_mut() {
+        *v = sort_dedup(std::mem::take(v));
+    }
+    for (set, ln, t) in sections {
+        let members = mesh.shells.set(&set).cloned().ok_or_else(|| {
+            err(
+                ln,
+                format!("*SHELL SECTION: unknown shell element set '{set}'"),
+            )
+        })?;
+        for s in members {
+            mesh.shells.thickness[s as usize] = t;
+        }
+    }
+    mesh.settle_shells();
     Ok(mesh)
 }

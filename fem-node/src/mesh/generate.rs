@@ -166,3 +166,64 @@ fn signed_volume(v: &[[usize; 3]; 4]) -> i64 {
     a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
         + a[2] * (b[0] * c[1] - b[1] * c[0])
 }
+
+/// A rectangle of 4-node shells: `size` has one zero component, the normal axis n; the two
+/// in-plane axes a = n + 1, b = n + 2 (cyclic) carry `div` = [divisions along the lower, the
+/// higher axis index] shells. Corners run counter-clockwise about +n, so the directors point
+/// along +n. Node sets: the in-plane edges (`xmin`, `xmax`, ...) and `all`; shell set `all`.
+pub fn plate_mesh(origin: [f64; 3], size: [f64; 3], div: [usize; 2]) -> Mesh {
+    let n = (0..3).find(|&k| size[k] == 0.0).unwrap_or(2);
+    let (a, b) = ((n + 1) % 3, (n + 2) % 3);
+    // divisions along a and b (div is ordered by axis index)
+    let (da, db) = if a < b {
+        (div[0], div[1])
+    } else {
+        (div[1], div[0])
+    };
+    let mut mesh = Mesh {
+        source: "<generated mitc4 plate>".into(),
+        ..Default::default()
+    };
+    let names = [["xmin", "xmax"], ["ymin", "ymax"], ["zmin", "zmax"]];
+    let id = |i: usize, j: usize| (j * (da + 1) + i) as u32;
+    for j in 0..=db {
+        for i in 0..=da {
+            let mut x = origin;
+            x[a] += size[a] * i as f64 / da as f64;
+            x[b] += size[b] * j as f64 / db as f64;
+            let node = id(i, j);
+            mesh.nodes.push(x);
+            mesh.node_ids.push(node as u64 + 1);
+            for (axis, f, last) in [(a, i, da), (b, j, db)] {
+                if f == 0 {
+                    mesh.node_sets
+                        .entry(names[axis][0].into())
+                        .or_default()
+                        .push(node);
+                }
+                if f == last {
+                    mesh.node_sets
+                        .entry(names[axis][1].into())
+                        .or_default()
+                        .push(node);
+                }
+            }
+        }
+    }
+    mesh.node_sets
+        .insert("all".into(), (0..mesh.nodes.len() as u32).collect());
+    for j in 0..db {
+        for i in 0..da {
+            let e = mesh.shells.len() as u64 + 1;
+            mesh.shells.push(
+                [id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)],
+                e,
+                0,
+            );
+        }
+    }
+    mesh.shells
+        .sets
+        .insert("all".into(), (0..mesh.shells.len() as u32).collect());
+    mesh
+}

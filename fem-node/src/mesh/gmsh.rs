@@ -1,5 +1,7 @@
 //! Gmsh `.msh` version 4.1 ASCII reader. Physical groups become named node sets (all nodes of
-//! the group's elements, any dimension) and, for 3-D groups, element sets.
+//! the group's elements, any dimension) and, for 3-D groups, element sets. A mesh without
+//! volume elements is a shell mesh: its 4-node quadrangles are the shells, its 2-D groups
+//! their sets.
 
 use super::{sort_dedup, Mesh};
 use crate::element::ElementKind;
@@ -273,6 +275,26 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
                                 .or_default()
                                 .extend_from_slice(&local);
                         }
+                        if tdim == 2 {
+                            // surface elements: shells if the mesh turns out to have no
+                            // volume elements (`settle_shells`), otherwise only faces
+                            if nn == 4 {
+                                let s = mesh.shells.push(
+                                    [local[0], local[1], local[2], local[3]],
+                                    v[0],
+                                    el,
+                                );
+                                for &p in &phys {
+                                    mesh.shells
+                                        .sets
+                                        .entry(group_name_of(&phys_names, (dim, p)))
+                                        .or_default()
+                                        .push(s);
+                                }
+                            } else {
+                                mesh.shells.unsupported.push((v[0], el, "a Gmsh element of type 2/9/10/16 (only 4-node quadrangles, type 3, make shells)"));
+                            }
+                        }
                         if let Some(kind) = kind {
                             if let Some(prev) = elem_id_seen.insert(v[0], el) {
                                 return Err(ls.err(
@@ -326,12 +348,7 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
     if !elements_seen {
         return Err(ls.err(ls.line, "missing $Elements section"));
     }
-    let group_name = |key: &(usize, i64)| {
-        phys_names
-            .get(key)
-            .cloned()
-            .unwrap_or_else(|| format!("{}", key.1))
-    };
+    let group_name = |key: &(usize, i64)| group_name_of(&phys_names, *key);
     for (key, nodes) in group_nodes {
         let name = group_name(&key);
         let set = mesh.node_sets.entry(name).or_default();
@@ -345,5 +362,14 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
             .or_default()
             .extend(elems);
     }
+    mesh.settle_shells();
     Ok(mesh)
+}
+
+/// A physical group's name, or its tag when it has none.
+fn group_name_of(names: &HashMap<(usize, i64), String>, key: (usize, i64)) -> String {
+    names
+        .get(&key)
+        .cloned()
+        .unwrap_or_else(|| format!("{}", key.1))
 }

@@ -5,7 +5,7 @@ mod abaqus;
 mod generate;
 mod gmsh;
 
-pub use generate::box_mesh;
+pub use generate::{box_mesh, plate_mesh};
 
 use crate::element::{self, ElementKind};
 use crate::FemError;
@@ -33,6 +33,52 @@ pub struct Mesh {
     pub elem_sets: BTreeMap<String, Vec<u32>>,
     /// Where the mesh came from, for error messages.
     pub source: String,
+    /// Four-node shell elements of a mesh without volume elements (Gmsh quadrangles, Abaqus
+    /// S4/S4R); empty when the mesh has volume elements (its quadrangles are then faces).
+    pub shells: Shells,
+}
+
+/// Quadrilateral shell elements: corners counter-clockwise about the shell's normal.
+#[derive(Clone, Debug, Default)]
+pub struct Shells {
+    pub quads: Vec<[u32; 4]>,
+    /// The file's element ids.
+    pub ids: Vec<u64>,
+    /// Line of each element's definition in its file (0 for generated meshes).
+    pub lines: Vec<usize>,
+    /// Thickness [m] from the file's shell section (Abaqus *SHELL SECTION); NaN where the file
+    /// gives none.
+    pub thickness: Vec<f64>,
+    /// Named element sets of shells (Gmsh 2-D physical groups, Abaqus ELSET=).
+    pub sets: BTreeMap<String, Vec<u32>>,
+    /// Surface elements a shell model cannot use (triangles), by (id, line): reported when a
+    /// shell model is built from the mesh.
+    pub unsupported: Vec<(u64, usize, &'static str)>,
+}
+
+impl Shells {
+    pub fn len(&self) -> usize {
+        self.quads.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.quads.is_empty()
+    }
+    pub(crate) fn push(&mut self, quad: [u32; 4], id: u64, line: usize) -> u32 {
+        self.quads.push(quad);
+        self.ids.push(id);
+        self.lines.push(line);
+        self.thickness.push(f64::NAN);
+        (self.quads.len() - 1) as u32
+    }
+    /// Shell set by name (exact, then case-insensitive).
+    pub fn set(&self, name: &str) -> Option<&Vec<u32>> {
+        self.sets.get(name).or_else(|| {
+            self.sets
+                .iter()
+                .find(|(k, _)| k.eq_ignore_ascii_case(name))
+                .map(|(_, v)| v)
+        })
+    }
 }
 
 impl Mesh {
@@ -112,13 +158,32 @@ impl Mesh {
         Ok(mesh)
     }
 
-    /// Detects inverted or degenerate elements from the Jacobian at the integration points.
+    /// Whether this is a shell mesh (quadrangles and no volume elements).
+    pub fn is_shell_mesh(&self) -> bool {
+        self.kinds.is_empty() && !self.shells.is_empty()
+    }
+
+    /// Keeps the surface elements as shells only when there is no volume element (then they
+    /// are the model); otherwise they are faces, already recorded as node sets.
+    pub(crate) fn settle_shells(&mut self) {
+        if !self.kinds.is_empty() {
+            self.shells = Shells::default();
+        }
+    }
+
+    /// Detects inverted or degenerate elements from the Jacobian at the integration points
+    /// (shell meshes are checked when their model is built).
     pub fn check_elements(&self) -> Result<(), FemError> {
         if self.kinds.is_empty() {
+            if !self.shells.is_empty() || !self.shells.unsupported.is_empty() {
+                return Ok(());
+            }
             return Err(FemError::Mesh {
                 file: self.source.clone(),
                 line: 0,
-                message: "mesh has no volume elements (tet4, tet10, hex8, hex20)".into(),
+                message: "mesh has no volume elements (tet4, tet10, hex8, hex20) and no \
+                          four-node shells (Gmsh quadrangles, Abaqus S4/S4R)"
+                    .into(),
             });
         }
         let bad: Option<(usize, element::BadJacobian)> = (0..self.num_elements())
@@ -201,7 +266,7 @@ impl Mesh {
     /// Marks which nodes are referenced by at least one element.
     pub fn used_nodes(&self) -> Vec<bool> {
         let mut used = vec![false; self.num_nodes()];
-        for &n in &self.conn {
+        for &n in self.conn.iter().chain(self.shells.quads.iter().flatten()) {
             used[n as usize] = true;
         }
         used

@@ -122,6 +122,13 @@ impl Model {
             .map_err(|(field, message)| FemError::Config { field, message })?;
         let mesh = match &cfg.mesh {
             MeshSpec::File { path, .. } => Mesh::read(&base_dir.join(path))?,
+            MeshSpec::Plate { .. } => {
+                return Err(FemError::Config {
+                    field: "fem.mesh.element".into(),
+                    message: "a plate of shells is a crate::ShellModel (fem::build picks it)"
+                        .into(),
+                })
+            }
             MeshSpec::Box {
                 size,
                 origin,
@@ -177,6 +184,40 @@ impl Model {
                 tracing::debug!("  {what}: {:?}", t0.elapsed());
             }
         };
+        if mesh.kinds.is_empty() {
+            return Err(FemError::Mesh {
+                file: mesh.source.clone(),
+                line: 0,
+                message: "no volume elements (a shell mesh is a crate::ShellModel: fem::build \
+                          picks it)"
+                    .into(),
+            });
+        }
+        for (i, s) in cfg.supports.iter().enumerate() {
+            if s.rotations.is_some() {
+                return Err(FemError::Config {
+                    field: format!("fem.supports[{i}].rotations"),
+                    message: "rotations are shell dofs; a volume mesh has translations only".into(),
+                });
+            }
+        }
+        if cfg.shell.is_some() {
+            return Err(FemError::Config {
+                field: "fem.shell".into(),
+                message: format!(
+                    "{} is a volume mesh; [fem.shell] describes shells",
+                    mesh.source
+                ),
+            });
+        }
+        if cfg.interface.as_ref().is_some_and(|i| i.faces.is_some()) {
+            return Err(FemError::Config {
+                field: "fem.interface.faces".into(),
+                message: "faces (top / bottom) are the sides of shells; a volume mesh's \
+                          interface is its exterior surface"
+                    .into(),
+            });
+        }
         mesh.check_elements()?;
         lap("check_elements");
         let (materials, elem_mat) = newton::assign_materials(cfg, &mesh)?;
