@@ -68,6 +68,10 @@ pub struct ShellSection {
     /// Thickness [m] of every shell the mesh file gives none (Abaqus *SHELL SECTION gives
     /// its own, which wins).
     pub thickness: Option<f64>,
+    /// Geometrically nonlinear (large rotations, Green–Lagrange strains; Newton iterations
+    /// under `[fem.newton]`). Default false: linear.
+    #[serde(default)]
+    pub nonlinear: bool,
 }
 
 /// Which reference surfaces of a shell the DEM sees (Ullrich Fig. 2.6).

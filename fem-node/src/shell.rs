@@ -153,43 +153,126 @@ impl Point {
     }
 }
 
-/// The MITC4 stiffness of one element (24 × 24, symmetric), with the drilling stiffness.
-pub fn stiffness(geo: &Geometry, mat: Material) -> Stiffness {
+/// The plane-stress law in the local frame on (ε11, ε22, γ12, γ13, γ23), shear correction 5/6.
+fn plane_stress(mat: Material) -> [[f64; 5]; 5] {
     let (e, nu) = (mat.youngs_modulus, mat.poisson_ratio);
     let shear = e / (2.0 * (1.0 + nu));
     let kappa = 5.0 / 6.0;
-    // plane stress in the local frame: (ε11, ε22, γ12, γ13, γ23)
     let c = e / (1.0 - nu * nu);
-    let dmat = [
+    [
         [c, c * nu, 0.0, 0.0, 0.0],
         [c * nu, c, 0.0, 0.0, 0.0],
         [0.0, 0.0, shear, 0.0, 0.0],
         [0.0, 0.0, 0.0, kappa * shear, 0.0],
         [0.0, 0.0, 0.0, 0.0, kappa * shear],
-    ];
-    let mut k = [[0.0; DOFS]; DOFS];
+    ]
+}
+
+/// The deformed state of an element for the geometrically nonlinear path: its current
+/// geometry (corners X + u, directors R(θ) V⁰) and per node the tangent T(θ) of the rotation
+/// vector (δV = (T δθ) × V).
+struct Deformed {
+    geo: Geometry,
+    t: [Matrix3<f64>; 4],
+    /// The nodes' displacements and director changes R(θ) V⁰ − V⁰, from which the strains
+    /// are formed without subtracting the large positions (their round-off would be the
+    /// strains' floor: 10⁻¹⁶ × position / element size).
+    du: [Vector3<f64>; 4],
+    dv: [Vector3<f64>; 4],
+}
+
+impl Deformed {
+    fn new(reference: &Geometry, q: &[f64; DOFS]) -> Deformed {
+        let theta = |i: usize| [q[6 * i + 3], q[6 * i + 4], q[6 * i + 5]];
+        Deformed {
+            geo: Geometry {
+                x: std::array::from_fn(|i| {
+                    std::array::from_fn(|c| reference.x[i][c] + q[6 * i + c])
+                }),
+                director: std::array::from_fn(|i| rotate(reference.director[i], theta(i))),
+                thickness: reference.thickness,
+            },
+            t: std::array::from_fn(|i| rotation_tangent(theta(i))),
+            du: std::array::from_fn(|i| Vector3::new(q[6 * i], q[6 * i + 1], q[6 * i + 2])),
+            dv: std::array::from_fn(|i| rotation_change(reference.director[i], theta(i))),
+        }
+    }
+
+    /// g_a − G_a at (r, s, t), a = r, s, t.
+    fn base_change(&self, r: f64, s: f64, t: f64) -> [Vector3<f64>; 3] {
+        let (n, d) = shape(r, s);
+        let h = 0.5 * self.geo.thickness;
+        let mut out = [Vector3::zeros(); 3];
+        for i in 0..4 {
+            for b in 0..2 {
+                out[b] += d[i][b] * (self.du[i] + t * h * self.dv[i]);
+            }
+            out[2] += n[i] * h * self.dv[i];
+        }
+        out
+    }
+}
+
+/// R(θ) v − v = sin φ k × v + (1 − cos φ) k × (k × v), k = θ/φ, without cancellation.
+fn rotation_change(v: [f64; 3], theta: [f64; 3]) -> Vector3<f64> {
+    let (v, t) = (v3(v), v3(theta));
+    let phi = t.norm();
+    if phi < 1e-300 {
+        return Vector3::zeros();
+    }
+    let k = t / phi;
+    let half = (0.5 * phi).sin();
+    k.cross(&v) * phi.sin() + k.cross(&k.cross(&v)) * (2.0 * half * half)
+}
+
+/// T(θ) = I + (1 − cos φ)/φ² [θ]× + (φ − sin φ)/φ³ [θ]×², φ = |θ|: δ(R(θ) v) = (T δθ) × R v.
+fn rotation_tangent(theta: [f64; 3]) -> Matrix3<f64> {
+    let t = v3(theta);
+    let phi = t.norm();
+    let w = t.cross_matrix();
+    let p2 = phi * phi;
+    // (1 − cos φ)/φ² = 2 sin²(φ/2)/φ²; (φ − sin φ)/φ³ by its series below 0.1 (error < 1e-16)
+    let a = if phi < 1e-8 {
+        0.5
+    } else {
+        let half = (0.5 * phi).sin();
+        2.0 * half * half / p2
+    };
+    let b = if phi < 0.1 {
+        1.0 / 6.0 - p2 / 120.0 + p2 * p2 / 5040.0 - p2 * p2 * p2 / 362_880.0
+    } else {
+        (phi - phi.sin()) / (p2 * phi)
+    };
+    Matrix3::identity() + w * a + w * w * b
+}
+
+/// Visits the 2 × 2 × 2 points of the MITC4 interpolation with |det J| and the rows of the
+/// five local strains (ε11, ε22, γ12, γ13, γ23) over the 24 dofs: the small-strain
+/// ε̃_ab = ½ (g_a · U_,b + g_b · U_,a), the transverse shears from the tying points (0, ±1) and
+/// (±1, 0), mapped to the local frame.
+fn strain_points(geo: &Geometry, mut visit: impl FnMut(f64, &[[f64; DOFS]; 5])) {
+    let covariant =
+        |r: f64, s: f64, t: f64, a: usize, b: usize| point(geo, r, s, t).strain(geo, a, b);
     for &t in &GAUSS {
         // the tying points' transverse shear strains at this t: ε̃_rt at A (0, 1), C (0, −1);
         // ε̃_st at D (1, 0), B (−1, 0)
-        let ert_a = point(geo, 0.0, 1.0, t).strain(geo, 0, 2);
-        let ert_c = point(geo, 0.0, -1.0, t).strain(geo, 0, 2);
-        let est_d = point(geo, 1.0, 0.0, t).strain(geo, 1, 2);
-        let est_b = point(geo, -1.0, 0.0, t).strain(geo, 1, 2);
+        let ert_a = covariant(0.0, 1.0, t, 0, 2);
+        let ert_c = covariant(0.0, -1.0, t, 0, 2);
+        let est_d = covariant(1.0, 0.0, t, 1, 2);
+        let est_b = covariant(-1.0, 0.0, t, 1, 2);
         for &r in &GAUSS {
             for &s in &GAUSS {
-                let p = point(geo, r, s, t);
-                let Frame { det, gc, e: frame } = p.frame();
+                let Frame { det, gc, e: frame } = point(geo, r, s, t).frame();
                 // covariant strain rows ε̃_ab (a ≤ b), the MITC shear interpolated
+                let mix = |w1: f64, x: &[f64; DOFS], y: &[f64; DOFS]| -> [f64; DOFS] {
+                    std::array::from_fn(|q| w1 * x[q] + (1.0 - w1) * y[q])
+                };
                 let mut cov = [[[0.0; DOFS]; 3]; 3];
-                cov[0][0] = p.strain(geo, 0, 0);
-                cov[1][1] = p.strain(geo, 1, 1);
-                cov[0][1] = p.strain(geo, 0, 1);
-                cov[0][2] = std::array::from_fn(|q| {
-                    0.5 * (1.0 + s) * ert_a[q] + 0.5 * (1.0 - s) * ert_c[q]
-                });
-                cov[1][2] = std::array::from_fn(|q| {
-                    0.5 * (1.0 + r) * est_d[q] + 0.5 * (1.0 - r) * est_b[q]
-                });
+                cov[0][0] = covariant(r, s, t, 0, 0);
+                cov[1][1] = covariant(r, s, t, 1, 1);
+                cov[0][1] = covariant(r, s, t, 0, 1);
+                cov[0][2] = mix(0.5 * (1.0 + s), &ert_a, &ert_c);
+                cov[1][2] = mix(0.5 * (1.0 + r), &est_d, &est_b);
                 for a in 0..3 {
                     for b in 0..a {
                         cov[a][b] = cov[b][a];
@@ -198,11 +281,11 @@ pub fn stiffness(geo: &Geometry, mat: Material) -> Stiffness {
                 // local strains ε_kl = Σ_ab ε̃_ab (g^a · e_k)(g^b · e_l)
                 let tr: [[f64; 3]; 3] =
                     std::array::from_fn(|a| std::array::from_fn(|kk| gc[a].dot(&frame[kk])));
-                let local = |kk: usize, l: usize| -> [f64; DOFS] {
+                let local = |kk: usize, l: usize, scale: f64| -> [f64; DOFS] {
                     let mut out = [0.0; DOFS];
                     for a in 0..3 {
                         for b in 0..3 {
-                            let f = tr[a][kk] * tr[b][l];
+                            let f = scale * tr[a][kk] * tr[b][l];
                             if f != 0.0 {
                                 for q in 0..DOFS {
                                     out[q] += f * cov[a][b][q];
@@ -212,45 +295,266 @@ pub fn stiffness(geo: &Geometry, mat: Material) -> Stiffness {
                     }
                     out
                 };
-                let e11 = local(0, 0);
-                let e22 = local(1, 1);
-                let e12 = local(0, 1);
-                let e13 = local(0, 2);
-                let e23 = local(1, 2);
-                let bm: [[f64; DOFS]; 5] = [
-                    e11,
-                    e22,
-                    std::array::from_fn(|q| 2.0 * e12[q]),
-                    std::array::from_fn(|q| 2.0 * e13[q]),
-                    std::array::from_fn(|q| 2.0 * e23[q]),
-                ];
-                let w = det;
-                let mut db = [[0.0; DOFS]; 5];
-                for i in 0..5 {
-                    for j in 0..5 {
-                        if dmat[i][j] != 0.0 {
-                            for q in 0..DOFS {
-                                db[i][q] += dmat[i][j] * bm[j][q];
-                            }
-                        }
-                    }
-                }
-                for i in 0..5 {
-                    for a in 0..DOFS {
-                        if bm[i][a] == 0.0 {
-                            continue;
-                        }
-                        let f = w * bm[i][a];
-                        for b in 0..DOFS {
-                            k[a][b] += f * db[i][b];
-                        }
+                visit(
+                    det,
+                    &[
+                        local(0, 0, 1.0),
+                        local(1, 1, 1.0),
+                        local(0, 1, 2.0),
+                        local(0, 2, 2.0),
+                        local(1, 2, 2.0),
+                    ],
+                );
+            }
+        }
+    }
+}
+
+/// The MITC4 stiffness of one element (24 × 24, symmetric), with the drilling stiffness.
+pub fn stiffness(geo: &Geometry, mat: Material) -> Stiffness {
+    let dmat = plane_stress(mat);
+    let mut k = [[0.0; DOFS]; DOFS];
+    strain_points(geo, |w, bm| {
+        let mut db = [[0.0; DOFS]; 5];
+        for i in 0..5 {
+            for j in 0..5 {
+                if dmat[i][j] != 0.0 {
+                    for q in 0..DOFS {
+                        db[i][q] += dmat[i][j] * bm[j][q];
                     }
                 }
             }
         }
-    }
+        for i in 0..5 {
+            for a in 0..DOFS {
+                if bm[i][a] == 0.0 {
+                    continue;
+                }
+                let f = w * bm[i][a];
+                for b in 0..DOFS {
+                    k[a][b] += f * db[i][b];
+                }
+            }
+        }
+    });
     add_drilling(geo, mat, &mut k);
     k
+}
+
+/// The internal forces of the geometrically nonlinear MITC4 element (Dvorkin & Bathe 1984's
+/// total Lagrangian form): f = ∫ (∂E/∂q)ᵀ D E dV₀ with the Green–Lagrange strains E of the
+/// element displaced by `q` (translations, and rotation vectors turning the directors:
+/// V = R(θ) V⁰), plus the drilling stiffness's K_d q — a linear term, exact while the
+/// rotations about the director stay small. Large rotations, small strains (the law is the
+/// linear one, on E).
+pub fn internal_forces(geo: &Geometry, mat: Material, q: &[f64; DOFS]) -> [f64; DOFS] {
+    nonlinear_element(geo, mat, q, None)
+}
+
+/// The tangent ∂f/∂q of [`internal_forces`]: the material part ∫ Bᵀ D B dV₀ with the deformed
+/// strain rows, and the geometric part Σ W^ab ½ (J_aᵀ J_b + J_bᵀ J_a) — W^ab the stress pulled
+/// back to the covariant strains, J_a = ∂g_a/∂q — without the second derivative of a node's
+/// director in its own rotation (a quasi-Newton tangent, exact for the translations; central
+/// differences of the forces gave no fewer iterations at ten times the cost).
+pub fn tangent(geo: &Geometry, mat: Material, q: &[f64; DOFS]) -> Stiffness {
+    let mut k = [[0.0; DOFS]; DOFS];
+    nonlinear_element(geo, mat, q, Some(&mut k));
+    // symmetric in exact arithmetic: average the round-off away
+    for a in 0..DOFS {
+        for b in 0..a {
+            let m = 0.5 * (k[a][b] + k[b][a]);
+            k[a][b] = m;
+            k[b][a] = m;
+        }
+    }
+    k
+}
+
+/// The nonlinear element's forces, and with `tangent` its tangent added there.
+fn nonlinear_element(
+    geo: &Geometry,
+    mat: Material,
+    q: &[f64; DOFS],
+    mut tangent: Option<&mut Stiffness>,
+) -> [f64; DOFS] {
+    let dmat = plane_stress(mat);
+    let d = Deformed::new(geo, q);
+    // per node ∂V/∂θ = −[V]× T(θ)
+    let dvdt: [Matrix3<f64>; 4] =
+        std::array::from_fn(|i| -(v3(d.geo.director[i]).cross_matrix() * d.t[i]));
+    let mut f = [0.0; DOFS];
+    // at (r, s, t): the deformed point (base vectors and the rows' weights)
+    let deformed_point = |r: f64, s: f64, t: f64| point(&d.geo, r, s, t);
+    // ∂ε̃_ab/∂q at a deformed point, the rotation columns through T(θ)
+    let row = |p: &Point, a: usize, b: usize| -> [f64; DOFS] {
+        let mut row = p.strain(&d.geo, a, b);
+        for i in 0..4 {
+            let rot =
+                d.t[i].transpose() * Vector3::new(row[6 * i + 3], row[6 * i + 4], row[6 * i + 5]);
+            for k in 0..3 {
+                row[6 * i + 3 + k] = rot[k];
+            }
+        }
+        row
+    };
+    // ε̃_ab = ½ (G_a · Δ_b + Δ_a · G_b + Δ_a · Δ_b), Δ = g − G from the displacements
+    let value = |r: f64, s: f64, t: f64, a: usize, b: usize| -> f64 {
+        let g = point(geo, r, s, t).g;
+        let dg = d.base_change(r, s, t);
+        0.5 * (g[a].dot(&dg[b]) + dg[a].dot(&g[b]) + dg[a].dot(&dg[b]))
+    };
+    // J_x = ∂g_x/∂q at a deformed point, 3 × 24: node i's columns [cu_x,i I | ct_x,i ∂V_i/∂θ_i]
+    let jacobians = |p: &Point| -> [[[f64; DOFS]; 3]; 3] {
+        std::array::from_fn(|x| {
+            let mut j = [[0.0; DOFS]; 3];
+            for i in 0..4 {
+                for c in 0..3 {
+                    j[c][6 * i + c] = p.cu[x][i];
+                    for m in 0..3 {
+                        j[c][6 * i + 3 + m] = p.ct[x][i] * dvdt[i][(c, m)];
+                    }
+                }
+            }
+            j
+        })
+    };
+    // k += w ½ (J_aᵀ J_b + J_bᵀ J_a)
+    let geometric = |k: &mut Stiffness, j: &[[[f64; DOFS]; 3]; 3], a: usize, b: usize, w: f64| {
+        if w == 0.0 {
+            return;
+        }
+        let (ja, jb) = (&j[a], &j[b]);
+        for x in 0..DOFS {
+            for y in 0..DOFS {
+                let mut v = 0.0;
+                for c in 0..3 {
+                    v += ja[c][x] * jb[c][y] + jb[c][x] * ja[c][y];
+                }
+                k[x][y] += 0.5 * w * v;
+            }
+        }
+    };
+    const KL: [(usize, usize, f64); 5] = [
+        (0, 0, 1.0),
+        (1, 1, 1.0),
+        (0, 1, 2.0),
+        (0, 2, 2.0),
+        (1, 2, 2.0),
+    ];
+    for &t in &GAUSS {
+        // tying points: ε̃_rt at A (0, 1), C (0, −1); ε̃_st at D (1, 0), B (−1, 0)
+        let tying = [
+            (0.0, 1.0, 0usize),
+            (0.0, -1.0, 0),
+            (1.0, 0.0, 1),
+            (-1.0, 0.0, 1),
+        ];
+        let tp = tying.map(|(r, s, _)| deformed_point(r, s, t));
+        let tv = tying.map(|(r, s, a)| value(r, s, t, a, 2));
+        let trow: [[f64; DOFS]; 4] = std::array::from_fn(|k| row(&tp[k], tying[k].2, 2));
+        let mut tw = [0.0; 4];
+        for &r in &GAUSS {
+            for &s in &GAUSS {
+                let Frame { det, gc, e: frame } = point(geo, r, s, t).frame();
+                let p = deformed_point(r, s, t);
+                let (wa, wd) = (0.5 * (1.0 + s), 0.5 * (1.0 + r));
+                let mut cov = [[0.0; 3]; 3];
+                cov[0][0] = value(r, s, t, 0, 0);
+                cov[1][1] = value(r, s, t, 1, 1);
+                cov[0][1] = value(r, s, t, 0, 1);
+                cov[0][2] = wa * tv[0] + (1.0 - wa) * tv[1];
+                cov[1][2] = wd * tv[2] + (1.0 - wd) * tv[3];
+                cov[1][0] = cov[0][1];
+                cov[2][0] = cov[0][2];
+                cov[2][1] = cov[1][2];
+                let tr: [[f64; 3]; 3] =
+                    std::array::from_fn(|a| std::array::from_fn(|k| gc[a].dot(&frame[k])));
+                // local strains (ε11, ε22, γ12, γ13, γ23) = Σ_ab c_i^ab ε̃_ab
+                let c = |i: usize, a: usize, b: usize| {
+                    let (k, l, scale) = KL[i];
+                    scale * tr[a][k] * tr[b][l]
+                };
+                // the coefficient of ε̃_ab (a ≤ b, symmetric pairs summed) in strain i
+                let cs = |i: usize, a: usize, b: usize| {
+                    c(i, a, b) + if a != b { c(i, b, a) } else { 0.0 }
+                };
+                let e: [f64; 5] = std::array::from_fn(|i| {
+                    (0..3)
+                        .flat_map(|a| (0..3).map(move |b| (a, b)))
+                        .map(|(a, b)| c(i, a, b) * cov[a][b])
+                        .sum()
+                });
+                let stress: [f64; 5] =
+                    std::array::from_fn(|i| (0..5).map(|j| dmat[i][j] * e[j]).sum::<f64>());
+                let w = |a: usize, b: usize| -> f64 {
+                    det * (0..5).map(|i| stress[i] * cs(i, a, b)).sum::<f64>()
+                };
+                let rows = [row(&p, 0, 0), row(&p, 1, 1), row(&p, 0, 1)];
+                for (k, (a, b)) in [(0, 0), (1, 1), (0, 1)].into_iter().enumerate() {
+                    let wk = w(a, b);
+                    for x in 0..DOFS {
+                        f[x] += wk * rows[k][x];
+                    }
+                }
+                let (wrt, wst) = (w(0, 2), w(1, 2));
+                tw[0] += wa * wrt;
+                tw[1] += (1.0 - wa) * wrt;
+                tw[2] += wd * wst;
+                tw[3] += (1.0 - wd) * wst;
+                if let Some(k) = tangent.as_deref_mut() {
+                    // B_i = Σ_ab cs_i^ab ∂ε̃_ab/∂q, the shears through the tying rows
+                    let bm: [[f64; DOFS]; 5] = std::array::from_fn(|i| {
+                        std::array::from_fn(|x| {
+                            cs(i, 0, 0) * rows[0][x]
+                                + cs(i, 1, 1) * rows[1][x]
+                                + cs(i, 0, 1) * rows[2][x]
+                                + cs(i, 0, 2) * (wa * trow[0][x] + (1.0 - wa) * trow[1][x])
+                                + cs(i, 1, 2) * (wd * trow[2][x] + (1.0 - wd) * trow[3][x])
+                        })
+                    });
+                    for i in 0..5 {
+                        let db: [f64; DOFS] = std::array::from_fn(|x| {
+                            (0..5).map(|j| dmat[i][j] * bm[j][x]).sum::<f64>()
+                        });
+                        for x in 0..DOFS {
+                            if bm[i][x] == 0.0 {
+                                continue;
+                            }
+                            let fx = det * bm[i][x];
+                            for y in 0..DOFS {
+                                k[x][y] += fx * db[y];
+                            }
+                        }
+                    }
+                    let j = jacobians(&p);
+                    for (a, b) in [(0, 0), (1, 1), (0, 1)] {
+                        geometric(k, &j, a, b, w(a, b));
+                    }
+                }
+            }
+        }
+        for (k, (_, _, a)) in tying.iter().enumerate() {
+            for x in 0..DOFS {
+                f[x] += tw[k] * trow[k][x];
+            }
+            if let Some(kt) = tangent.as_deref_mut() {
+                geometric(kt, &jacobians(&tp[k]), *a, 2, tw[k]);
+            }
+        }
+    }
+    let mut kd = [[0.0; DOFS]; DOFS];
+    add_drilling(geo, mat, &mut kd);
+    for a in 0..DOFS {
+        f[a] += (0..DOFS).map(|b| kd[a][b] * q[b]).sum::<f64>();
+    }
+    if let Some(k) = tangent {
+        for a in 0..DOFS {
+            for b in 0..DOFS {
+                k[a][b] += kd[a][b];
+            }
+        }
+    }
+    f
 }
 
 /// Hughes–Brezzi drilling stiffness: γ ∫ (θ · e3 − ω3)² dA with ω3 = ½ (e2 · U_,1 − e1 · U_,2)

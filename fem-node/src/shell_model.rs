@@ -8,8 +8,8 @@
 //! node of the coupled shells; the top surface's keep the mesh's node ids, the bottom's are
 //! shifted by the largest node id (id + max id).
 
-use crate::assembly::{DofMap, Factor, Pattern, Symbolic, FIXED};
-use crate::config::{Analysis, FemConfig, Load, MeshSpec, Output, ShellFaces};
+use crate::assembly::{DofMap, Factor, LuFactor, Pattern, Symbolic, SymbolicLu, FIXED};
+use crate::config::{Analysis, FemConfig, Load, MeshSpec, NewtonConfig, Output, ShellFaces};
 use crate::history::History;
 use crate::mesh::{plate_mesh, Mesh};
 use crate::output;
@@ -40,6 +40,13 @@ struct State {
     accel_ready: bool,
     windows: u64,
     csv_started: bool,
+    /// Nonlinear shells: Newton iterations and solves (static increments or Bossak steps)
+    /// so far.
+    newton_iterations: u64,
+    newton_solves: u64,
+    /// Nonlinear Bossak steps: the full displacements and Jacobian coefficients (ck, cm) of
+    /// the tangent kept between steps, to rebuild it after a restore.
+    tangent_at: Option<(Vec<f64>, f64, f64)>,
 }
 
 /// The coupled reference surfaces: per interface node its mid-surface node and side (+1 top,
@@ -62,6 +69,11 @@ pub struct ShellModel {
     material: shell::Material,
     density: f64,
     analysis: Analysis,
+    /// Geometrically nonlinear: internal forces from the Green–Lagrange strains, Newton.
+    nonlinear: bool,
+    newton: NewtonConfig,
+    /// Relative residuals of every Newton iteration of the last solve or step.
+    last_newton: Vec<f64>,
     dofs: DofMap,
     pattern: Pattern,
     k: Vec<f64>,
@@ -70,6 +82,9 @@ pub struct ShellModel {
     /// Lumped translational mass per node [kg].
     node_mass: Vec<f64>,
     symbolic: Option<Symbolic>,
+    lu_symbolic: Option<SymbolicLu>,
+    /// The tangent kept between nonlinear Bossak steps (taken at `State::tangent_at`).
+    kept: Option<Tangent>,
     k_factor: Option<Factor>,
     eff_factor: Option<(u64, Factor)>,
     m_factor: Option<Factor>,
@@ -489,6 +504,9 @@ impl ShellModel {
                 accel_ready: false,
                 windows: 0,
                 csv_started: false,
+                newton_iterations: 0,
+                newton_solves: 0,
+                tangent_at: None,
             },
             mesh,
             thickness,
@@ -497,12 +515,17 @@ impl ShellModel {
             material,
             density,
             analysis: cfg.analysis.clone(),
+            nonlinear: cfg.shell.as_ref().is_some_and(|s| s.nonlinear),
+            newton: cfg.newton.clone(),
+            last_newton: Vec::new(),
             dofs,
             pattern,
             k,
             m,
             node_mass,
             symbolic: None,
+            lu_symbolic: None,
+            kept: None,
             k_factor: None,
             eff_factor: None,
             m_factor: None,
@@ -636,6 +659,7 @@ impl ShellModel {
             return Err(FemError::TimeStep(dt));
         }
         match self.analysis {
+            Analysis::Dynamic { .. } if self.nonlinear => self.bossak_nonlinear(dt)?,
             Analysis::Dynamic { .. } => self.bossak_step(dt)?,
             _ => {
                 self.st.time += dt;
@@ -645,8 +669,12 @@ impl ShellModel {
         Ok(())
     }
 
-    /// K u = F(t) at the current time (loads and interface forces).
+    /// K u = F(t) at the current time (loads and interface forces); nonlinear shells:
+    /// f_int(u) = F(t) by Newton in `[fem.newton] increments` from the last solution's load.
     pub fn solve_static(&mut self) -> Result<(), FemError> {
+        if self.nonlinear {
+            return self.newton_static();
+        }
         if self.k_factor.is_none() {
             self.k_factor = Some(Factor::new(&self.pattern, &self.k, &mut self.symbolic)?);
         }
@@ -785,6 +813,341 @@ impl ShellModel {
         Ok(())
     }
 
+    /// The element's geometry in the reference configuration.
+    fn geometry(&self, e: usize) -> Geometry {
+        let q = self.mesh.shells.quads[e];
+        Geometry {
+            x: q.map(|n| self.mesh.nodes[n as usize]),
+            director: q.map(|n| self.directors[n as usize]),
+            thickness: self.thickness[e],
+        }
+    }
+
+    /// The element's 24 dofs from a full vector.
+    fn element_dofs(&self, e: usize, full: &[f64]) -> [f64; DOFS] {
+        let q = self.mesh.shells.quads[e];
+        std::array::from_fn(|a| full[6 * q[a / 6] as usize + a % 6])
+    }
+
+    /// f_int(u) of the nonlinear shells on the free equations (elements in parallel, their
+    /// forces added in element order: the same sum for any thread count).
+    fn free_internal_forces(&self, u: &[f64]) -> Vec<f64> {
+        let fe: Vec<[f64; DOFS]> = (0..self.mesh.shells.len())
+            .into_par_iter()
+            .map(|e| {
+                shell::internal_forces(&self.geometry(e), self.material, &self.element_dofs(e, u))
+            })
+            .collect();
+        let mut full = vec![0.0; self.num_dofs()];
+        for (e, f) in fe.iter().enumerate() {
+            scatter(&mut full, &self.mesh.shells.quads[e], f);
+        }
+        self.dofs.gather(&full)
+    }
+
+    /// ck K_T(u) + cm M on the pattern (K_T by central differences of the element forces).
+    fn tangent_values(&self, u: &[f64], ck: f64, cm: f64) -> Vec<f64> {
+        let ke: Vec<shell::Stiffness> = (0..self.mesh.shells.len())
+            .into_par_iter()
+            .map(|e| shell::tangent(&self.geometry(e), self.material, &self.element_dofs(e, u)))
+            .collect();
+        let mut vals: Vec<f64> = self.m.iter().map(|m| cm * m).collect();
+        for (e, k) in ke.iter().enumerate() {
+            let q = self.mesh.shells.quads[e];
+            let eq: [u32; DOFS] =
+                std::array::from_fn(|a| self.dofs.eq[6 * q[a / 6] as usize + a % 6]);
+            for c in 0..DOFS {
+                if eq[c] == FIXED {
+                    continue;
+                }
+                for r in 0..DOFS {
+                    if eq[r] != FIXED {
+                        vals[self.pattern.find(eq[r], eq[c]).expect("in the pattern")] +=
+                            ck * k[r][c];
+                    }
+                }
+            }
+        }
+        vals
+    }
+
+    /// Newton on f_int(u) = λ F(t) + (1 − λ) F_prev, λ over `increments` equal steps, each
+    /// halved on failure up to `max_cutbacks` times; a tangent at the increment's start,
+    /// renewed whenever an iteration cuts the residual by less than 4×.
+    fn newton_static(&mut self) -> Result<(), FemError> {
+        let f_end = self.dofs.gather(&self.external_forces(self.st.time));
+        let u0 = self.dofs.gather(&self.st.u);
+        let f_start = self.free_internal_forces(&self.st.u);
+        let n_inc = self.newton.increments.max(1) as f64;
+        let (mut lambda, mut step, mut cutbacks) = (0.0f64, 1.0 / n_inc, 0u32);
+        self.last_newton.clear();
+        let mut u = u0;
+        while lambda < 1.0 - 1e-12 {
+            let target = (lambda + step).min(1.0);
+            let load: Vec<f64> = f_start
+                .iter()
+                .zip(&f_end)
+                .map(|(a, b)| a + target * (b - a))
+                .collect();
+            match self.newton_solve(&u, &load, 1.0, 0.0, None) {
+                Ok(next) => {
+                    u = next;
+                    lambda = target;
+                    cutbacks = 0;
+                    step = (2.0 * step).min(1.0 / n_inc);
+                }
+                Err(why) => {
+                    cutbacks += 1;
+                    if cutbacks > self.newton.max_cutbacks {
+                        return Err(FemError::Solver(format!(
+                            "Newton iterations of the shells did not converge at t = {} s: load \
+                             factor {lambda:.4} → {target:.4} after {} cut-backs; {why}. Try more \
+                             [fem.newton] increments or smaller load changes per window",
+                            self.st.time, self.newton.max_cutbacks
+                        )));
+                    }
+                    step *= 0.5;
+                }
+            }
+        }
+        self.dofs.scatter(&u, &mut self.st.u);
+        self.st.v.fill(0.0);
+        self.st.a.fill(0.0);
+        self.st.accel_ready = false;
+        Ok(())
+    }
+
+    /// Newton iterations from the free displacements `u` for f_int(u) + extra(u) = load with
+    /// the Jacobian ck K_T + cm M (`extra` adds the inertia and damping terms of a dynamic
+    /// step and its scale). Returns the converged u.
+    fn newton_solve(
+        &mut self,
+        start: &[f64],
+        load: &[f64],
+        ck: f64,
+        cm: f64,
+        dynamic: Option<&BossakTerms>,
+    ) -> Result<Vec<f64>, String> {
+        let tol = self.newton.force_tolerance;
+        let mut u = start.to_vec();
+        let mut full = self.st.u.clone();
+        let mut tangent: Option<Tangent> = None;
+        let mut last = f64::INFINITY;
+        let load_norm = load.iter().map(|v| v * v).sum::<f64>().sqrt();
+        for it in 0..self.newton.max_iterations {
+            self.dofs.scatter(&u, &mut full);
+            let fint = self.free_internal_forces(&full);
+            let (extra_f, extra_scale) = match dynamic {
+                Some(terms) => self.inertia(terms, &u),
+                None => (vec![0.0; u.len()], 0.0),
+            };
+            let mut r: Vec<f64> = (0..u.len())
+                .map(|i| load[i] - fint[i] - extra_f[i])
+                .collect();
+            let fint_norm = fint.iter().map(|v| v * v).sum::<f64>().sqrt();
+            let scale = load_norm
+                .max(fint_norm)
+                .max(extra_scale)
+                .max(f64::MIN_POSITIVE);
+            let rn = r.iter().map(|v| v * v).sum::<f64>().sqrt() / scale;
+            if !rn.is_finite() {
+                return Err("non-finite residual".into());
+            }
+            self.last_newton.push(rn);
+            self.st.newton_iterations += 1;
+            if rn <= tol {
+                self.st.newton_solves += 1;
+                return Ok(u);
+            }
+            // statics: a tangent from the start; a Bossak step: the tangent kept from an
+            // earlier step (or the initial stiffness) while it converges fast; then a tangent
+            // here, renewed whenever an iteration cuts the residual by less than 4×
+            if (it == 0 && dynamic.is_none()) || (it > 0 && rn > 0.25 * last) {
+                let fresh = self.factor_tangent(&full, ck, cm)?;
+                if dynamic.is_some() {
+                    self.kept = Some(fresh);
+                    self.st.tangent_at = Some((full.clone(), ck, cm));
+                } else {
+                    tangent = Some(fresh);
+                }
+            }
+            last = rn;
+            if dynamic.is_some() && self.kept.is_none() {
+                self.restore_kept(ck, cm)?;
+            }
+            match tangent.as_ref().or(if dynamic.is_some() {
+                self.kept.as_ref()
+            } else {
+                None
+            }) {
+                Some(t) => t.solve_in_place(&mut r),
+                None => self
+                    .initial_factor(ck, cm)
+                    .map_err(|e| e.to_string())?
+                    .solve_in_place(&mut r),
+            }
+            if r.iter().any(|v| !v.is_finite()) {
+                return Err("non-finite correction (singular tangent)".into());
+            }
+            for (ui, d) in u.iter_mut().zip(&r) {
+                *ui += d;
+            }
+        }
+        Err(format!(
+            "no convergence in {} iterations (relative residual {last:.2e}, tolerance {tol:.0e})",
+            self.newton.max_iterations
+        ))
+    }
+
+    /// A factor of ck K_T(u) + cm M: Cholesky, or LU where an iterate off the equilibrium
+    /// path has an indefinite tangent.
+    fn factor_tangent(&mut self, full: &[f64], ck: f64, cm: f64) -> Result<Tangent, String> {
+        let vals = self.tangent_values(full, ck, cm);
+        Ok(
+            match Factor::new(&self.pattern, &vals, &mut self.symbolic) {
+                Ok(f) => Tangent::Cholesky(f),
+                Err(_) => Tangent::Lu(Box::new(
+                    LuFactor::new(&self.pattern, &vals, &mut self.lu_symbolic)
+                        .map_err(|e| format!("tangent: {e}"))?,
+                )),
+            },
+        )
+    }
+
+    /// Rebuilds the kept tangent from the state it was taken at (after a restore: so that a
+    /// resumed run iterates as the uninterrupted one), if it was taken for these coefficients.
+    fn restore_kept(&mut self, ck: f64, cm: f64) -> Result<(), String> {
+        match self.st.tangent_at.clone() {
+            Some((u, k, m)) if k == ck && m == cm => {
+                self.kept = Some(self.factor_tangent(&u, ck, cm)?);
+            }
+            Some(_) => self.st.tangent_at = None,
+            None => {}
+        }
+        Ok(())
+    }
+
+    /// The cached factor of ck K₀ + cm M (K for statics, the Bossak matrix for a step size).
+    fn initial_factor(&mut self, ck: f64, cm: f64) -> Result<&Factor, FemError> {
+        if cm == 0.0 && ck == 1.0 {
+            if self.k_factor.is_none() {
+                self.k_factor = Some(Factor::new(&self.pattern, &self.k, &mut self.symbolic)?);
+            }
+            return Ok(self.k_factor.as_ref().expect("set"));
+        }
+        let key = ck.to_bits() ^ cm.to_bits().rotate_left(17);
+        if self.eff_factor.as_ref().map(|(bits, _)| *bits) != Some(key) {
+            let vals: Vec<f64> = self
+                .k
+                .iter()
+                .zip(&self.m)
+                .map(|(k, m)| ck * k + cm * m)
+                .collect();
+            self.eff_factor = None;
+            self.eff_factor = Some((key, Factor::new(&self.pattern, &vals, &mut self.symbolic)?));
+        }
+        Ok(&self.eff_factor.as_ref().expect("set").1)
+    }
+
+    /// One Bossak step of the nonlinear shells: Newton on u_{n+1} (a_{n+1}, v_{n+1} follow
+    /// from the Newmark updates) for
+    /// M[(1−α_B) a_{n+1} + α_B a_n] + C v_{n+1} + f_int(u_{n+1}) = F_{n+1}, C = a M + b K₀,
+    /// Jacobian (1−α_B)/(βΔt²) M + γ/(βΔt) C + K_T (the step's one, scaled).
+    fn bossak_nonlinear(&mut self, dt: f64) -> Result<(), FemError> {
+        let Analysis::Dynamic { alpha_b, .. } = self.analysis else {
+            unreachable!("dynamic analyses only")
+        };
+        let (ra, rb) = self.rayleigh();
+        let gamma = 0.5 - alpha_b;
+        let beta = 0.25 * (1.0 - alpha_b).powi(2);
+        let n = self.dofs.n_eq;
+        if !self.st.accel_ready {
+            // M a₀ = F(t₀) − f_int(u₀) − C v₀
+            let v = self.dofs.gather(&self.st.v);
+            let mut rhs = self.dofs.gather(&self.external_forces(self.st.time));
+            let fint = self.free_internal_forces(&self.st.u);
+            let mut cv = vec![0.0; n];
+            let mut kv = vec![0.0; n];
+            self.pattern.mul(&self.m, &v, &mut cv);
+            self.pattern.mul(&self.k, &v, &mut kv);
+            for i in 0..n {
+                rhs[i] -= fint[i] + ra * cv[i] + rb * kv[i];
+            }
+            if self.m_factor.is_none() {
+                self.m_factor = Some(Factor::new(&self.pattern, &self.m, &mut self.symbolic)?);
+            }
+            self.m_factor
+                .as_ref()
+                .expect("set")
+                .solve_in_place(&mut rhs);
+            self.dofs.scatter(&rhs, &mut self.st.a);
+            self.st.accel_ready = true;
+        }
+        let u = self.dofs.gather(&self.st.u);
+        let v = self.dofs.gather(&self.st.v);
+        let a = self.dofs.gather(&self.st.a);
+        let ut: Vec<f64> = (0..n)
+            .map(|i| u[i] + dt * v[i] + dt * dt * (0.5 - beta) * a[i])
+            .collect();
+        let vt: Vec<f64> = (0..n).map(|i| v[i] + dt * (1.0 - gamma) * a[i]).collect();
+        let t1 = self.st.time + dt;
+        let load = self.dofs.gather(&self.external_forces(t1));
+        let terms = BossakTerms {
+            ut,
+            vt,
+            a,
+            alpha_b,
+            beta,
+            gamma,
+            dt,
+            ra,
+            rb,
+        };
+        let cm = ((1.0 - alpha_b) + gamma * dt * ra) / (beta * dt * dt);
+        // the damping's b K₀ enters the Jacobian with K₀: folded into ck (K_T ≈ K₀ there)
+        let ck = 1.0 + gamma * rb / (beta * dt);
+        self.last_newton.clear();
+        let start = terms.ut.clone();
+        let u1 = self
+            .newton_solve(&start, &load, ck, cm, Some(&terms))
+            .map_err(|why| {
+                FemError::Solver(format!(
+                    "Newton iterations of the shells' Bossak step did not converge at t = {t1} s \
+                     (Δt = {dt} s); {why}. Try a shorter step or more [fem.newton] max_iterations"
+                ))
+            })?;
+        let (a1, v1) = terms.rates(&u1);
+        check_finite(&u1, "Bossak displacement")?;
+        self.dofs.scatter(&u1, &mut self.st.u);
+        self.dofs.scatter(&v1, &mut self.st.v);
+        self.dofs.scatter(&a1, &mut self.st.a);
+        self.st.time = t1;
+        Ok(())
+    }
+
+    /// The inertia and damping forces M[(1−α_B) a + α_B a_n] + C v of a Bossak step at the
+    /// free displacements `x`, and their norm.
+    fn inertia(&self, t: &BossakTerms, x: &[f64]) -> (Vec<f64>, f64) {
+        let n = x.len();
+        let (a1, v1) = t.rates(x);
+        let mix: Vec<f64> = (0..n)
+            .map(|i| (1.0 - t.alpha_b) * a1[i] + t.alpha_b * t.a[i] + t.ra * v1[i])
+            .collect();
+        let (mut ma, mut kv) = (vec![0.0; n], vec![0.0; n]);
+        self.pattern.mul(&self.m, &mix, &mut ma);
+        if t.rb != 0.0 {
+            self.pattern.mul(&self.k, &v1, &mut kv);
+        }
+        let f: Vec<f64> = (0..n).map(|i| ma[i] + t.rb * kv[i]).collect();
+        let norm = f.iter().map(|v| v * v).sum::<f64>().sqrt();
+        (f, norm)
+    }
+
+    /// Relative residuals of the Newton iterations of the last nonlinear solve or step.
+    pub fn last_newton_residuals(&self) -> &[f64] {
+        &self.last_newton
+    }
+
     /// Total mass ρ t A [kg].
     pub fn total_mass(&self) -> f64 {
         self.node_mass.iter().sum()
@@ -900,6 +1263,7 @@ impl ShellModel {
             )));
         }
         self.st = st;
+        self.kept = None;
         Ok(())
     }
 
@@ -990,6 +1354,12 @@ impl ShellModel {
             .map(|n| norm(part(&self.st.u, n, 0)))
             .fold(0.0, f64::max);
         r.push(("max_displacement".to_string(), umax));
+        if self.nonlinear && self.st.newton_solves > 0 {
+            r.push((
+                "newton_iterations_per_solve".to_string(),
+                self.st.newton_iterations as f64 / self.st.newton_solves as f64,
+            ));
+        }
         r
     }
 
@@ -1034,6 +1404,49 @@ impl ShellModel {
     /// The density and material the shells were built with.
     pub fn material(&self) -> (shell::Material, f64) {
         (self.material, self.density)
+    }
+}
+
+/// A factor of a Newton iteration's tangent.
+enum Tangent {
+    Cholesky(Factor),
+    Lu(Box<LuFactor>),
+}
+
+impl Tangent {
+    fn solve_in_place(&self, b: &mut [f64]) {
+        match self {
+            Tangent::Cholesky(f) => f.solve_in_place(b),
+            Tangent::Lu(f) => f.solve_in_place(b),
+        }
+    }
+}
+
+/// A Bossak step's predictors and constants (the free equations).
+struct BossakTerms {
+    ut: Vec<f64>,
+    vt: Vec<f64>,
+    a: Vec<f64>,
+    alpha_b: f64,
+    beta: f64,
+    gamma: f64,
+    dt: f64,
+    ra: f64,
+    rb: f64,
+}
+
+impl BossakTerms {
+    /// a_{n+1} = (u − ũ)/(βΔt²) and v_{n+1} = ṽ + γΔt a_{n+1} at the displacements u.
+    fn rates(&self, u: &[f64]) -> (Vec<f64>, Vec<f64>) {
+        let h2 = self.beta * self.dt * self.dt;
+        let a: Vec<f64> = u.iter().zip(&self.ut).map(|(x, p)| (x - p) / h2).collect();
+        let v = self
+            .vt
+            .iter()
+            .zip(&a)
+            .map(|(p, q)| p + self.gamma * self.dt * q)
+            .collect();
+        (a, v)
     }
 }
 

@@ -331,6 +331,28 @@ fn snapshot_restore_continues_bitwise_and_outputs_are_written() {
         b.advance(1e-4).unwrap();
     }
     assert_eq!(a.snapshot(), b.snapshot());
+    // nonlinear shells keep a tangent between steps; a restored model rebuilds it from the
+    // state it was taken at, and continues bitwise
+    let heavy = nonlinear(&text).replace("total = [0.0, 0.0, -5.0]", "total = [0.0, 0.0, -50.0]");
+    let mut c = fem::build(&config(&heavy), Path::new(".")).unwrap();
+    for _ in 0..5 {
+        c.advance(1e-4).unwrap();
+    }
+    let mut d = fem::build(&config(&heavy), Path::new(".")).unwrap();
+    d.restore(&c.snapshot()).unwrap();
+    for _ in 0..5 {
+        c.advance(1e-4).unwrap();
+        d.advance(1e-4).unwrap();
+    }
+    assert_eq!(c.snapshot(), d.snapshot());
+    let iterations = c
+        .results()
+        .into_iter()
+        .find(|(k, _)| k == "newton_iterations_per_solve");
+    assert!(
+        iterations.as_ref().is_some_and(|(_, n)| *n > 1.0),
+        "{iterations:?}"
+    );
     let vtu = std::fs::read_to_string(dir.path().join("fem_000003.vtu")).unwrap();
     assert!(vtu.contains("NumberOfCells=\"48\"") && vtu.contains("Name=\"rotation\""));
     let csv = std::fs::read_to_string(dir.path().join("fem_probes.csv")).unwrap();
@@ -412,4 +434,59 @@ fn bad_shell_scenes_are_refused_by_name() {
     .unwrap();
     let e = err(&format!("[fem]\nmesh = \"set.inp\"\n{mat}"), dir.path());
     assert!(e.contains("set.inp:8") && e.contains("'B'"), "{e}");
+}
+
+/// A scene of `strip` with geometrically nonlinear shells.
+fn nonlinear(text: &str) -> String {
+    let linear = format!("shell = {{ thickness = {T} }}");
+    assert!(text.contains(&linear));
+    text.replace(
+        &linear,
+        &format!("shell = {{ thickness = {T}, nonlinear = true }}"),
+    )
+}
+
+#[test]
+fn large_deflection_cantilever_follows_the_elastica() {
+    // Mattiasson (1981): a cantilever under a dead tip load P, k = P L² / EI; tip deflection w
+    // and shortening u over L from the elliptic integrals
+    let i = B * T.powi(3) / 12.0;
+    for (k, u_ref, w_ref) in [(1.0, 0.05643, 0.30172), (4.0, 0.32894, 0.66996)] {
+        let p = -k * E * i / (L * L);
+        let text = nonlinear(&strip(&format!(
+            "{}[fem.newton]\nincrements = 8\n[[fem.probes]]\nname = \"tip\"\npoint = [{L}, 0.0, 0.0]\n",
+            tip_load(p)
+        )));
+        let mut m = shells(&text);
+        m.solve_static().unwrap();
+        let d = m.probe_displacement("tip").unwrap();
+        let (u, w) = (-d[0] / L, -d[2] / L);
+        eprintln!(
+            "k = {k}: w/L = {w:.5} ({w_ref}, {:+.2} %), u/L = {u:.5} ({u_ref}, {:+.2} %); {} iterations",
+            100.0 * (w / w_ref - 1.0),
+            100.0 * (u / u_ref - 1.0),
+            m.last_newton_residuals().len()
+        );
+        assert!((w / w_ref - 1.0).abs() < 1e-2, "k = {k}: w/L {w}");
+        assert!((u / u_ref - 1.0).abs() < 2e-2, "k = {k}: u/L {u}");
+    }
+}
+
+#[test]
+fn nonlinear_dynamics_reduce_to_the_linear_at_small_amplitude() {
+    let dynamic = "[fem.analysis]\ntype = \"dynamic\"\nalpha_b = -0.1\n";
+    let mut lin = shells(&strip(&format!("{dynamic}{}", tip_load(-1e-3))));
+    let mut nl = shells(&nonlinear(&strip(&format!("{dynamic}{}", tip_load(-1e-3)))));
+    for _ in 0..40 {
+        lin.advance(5e-4).unwrap();
+        nl.advance(5e-4).unwrap();
+    }
+    let (a, b) = (lin.displacements(), nl.displacements());
+    let scale = a.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    let diff = a
+        .iter()
+        .zip(b)
+        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+    eprintln!("small amplitude: max |u_nl − u_lin| = {diff:.2e} of {scale:.2e}");
+    assert!(scale > 0.0 && diff < 1e-4 * scale);
 }
