@@ -629,6 +629,20 @@ pub enum Load {
     },
 }
 
+/// A force load's force [N] on each of `count` selected nodes: `per_node`, or `total` split
+/// equally (the scene's validation gives exactly one).
+pub fn nodal_force(
+    per_node: &Option<[f64; 3]>,
+    total: &Option<[f64; 3]>,
+    count: usize,
+) -> [f64; 3] {
+    match (per_node, total) {
+        (Some(p), _) => *p,
+        (None, Some(t)) => t.map(|v| v / count as f64),
+        (None, None) => unreachable!("validated: per_node or total"),
+    }
+}
+
 /// `[fem.interface]`: the coupled part of the exterior surface.
 #[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]

@@ -421,11 +421,7 @@ impl ShellModel {
                     history,
                 } => {
                     let nodes = select_nodes(&mesh, on, &what)?;
-                    let per = match (per_node, total) {
-                        (Some(p), _) => *p,
-                        (None, Some(t)) => t.map(|v| v / nodes.len() as f64),
-                        (None, None) => unreachable!("validated"),
-                    };
+                    let per = crate::config::nodal_force(per_node, total, nodes.len());
                     for n in nodes {
                         for c in 0..3 {
                             f[6 * n as usize + c] += per[c];
@@ -734,6 +730,39 @@ impl ShellModel {
         }
     }
 
+    /// M a₀ = F(t₀) − f(u₀) − C v₀ at the start of dynamic stepping: f = K u, or the
+    /// nonlinear shells' f_int(u); C = a M + b K.
+    fn initial_acceleration(&mut self) -> Result<(), FemError> {
+        let (ra, rb) = self.rayleigh();
+        let n = self.dofs.n_eq;
+        let v = self.dofs.gather(&self.st.v);
+        let mut rhs = self.dofs.gather(&self.external_forces(self.st.time));
+        let stiffness = if self.nonlinear {
+            self.free_internal_forces(&self.st.u)
+        } else {
+            let mut ku = vec![0.0; n];
+            self.pattern
+                .mul(&self.k, &self.dofs.gather(&self.st.u), &mut ku);
+            ku
+        };
+        let (mut mv, mut kv) = (vec![0.0; n], vec![0.0; n]);
+        self.pattern.mul(&self.m, &v, &mut mv);
+        self.pattern.mul(&self.k, &v, &mut kv);
+        for i in 0..n {
+            rhs[i] -= stiffness[i] + ra * mv[i] + rb * kv[i];
+        }
+        if self.m_factor.is_none() {
+            self.m_factor = Some(Factor::new(&self.pattern, &self.m, &mut self.symbolic)?);
+        }
+        self.m_factor
+            .as_ref()
+            .expect("set")
+            .solve_in_place(&mut rhs);
+        self.dofs.scatter(&rhs, &mut self.st.a);
+        self.st.accel_ready = true;
+        Ok(())
+    }
+
     /// One Wood–Bossak–Zienkiewicz step, as the volume model's (REFERENCE A6; (2.85)–(2.87)):
     /// M[(1−α_B) a_{n+1} + α_B a_n] + C v_{n+1} + K u_{n+1} = F_{n+1}, C = a M + b K.
     fn bossak_step(&mut self, dt: f64) -> Result<(), FemError> {
@@ -748,24 +777,7 @@ impl ShellModel {
         let v = self.dofs.gather(&self.st.v);
         let mut tmp = vec![0.0; n];
         if !self.st.accel_ready {
-            // M a₀ = F(t₀) − K (u₀ + b v₀) − a M v₀
-            let mut rhs = self.dofs.gather(&self.external_forces(self.st.time));
-            let w: Vec<f64> = (0..n).map(|i| u[i] + rb * v[i]).collect();
-            self.pattern.mul(&self.k, &w, &mut tmp);
-            let mut mv = vec![0.0; n];
-            self.pattern.mul(&self.m, &v, &mut mv);
-            for i in 0..n {
-                rhs[i] -= tmp[i] + ra * mv[i];
-            }
-            if self.m_factor.is_none() {
-                self.m_factor = Some(Factor::new(&self.pattern, &self.m, &mut self.symbolic)?);
-            }
-            self.m_factor
-                .as_ref()
-                .expect("set")
-                .solve_in_place(&mut rhs);
-            self.dofs.scatter(&rhs, &mut self.st.a);
-            self.st.accel_ready = true;
+            self.initial_acceleration()?;
         }
         let a = self.dofs.gather(&self.st.a);
         let cm = (1.0 - alpha_b) + gamma * dt * ra;
@@ -1062,26 +1074,7 @@ impl ShellModel {
         let beta = 0.25 * (1.0 - alpha_b).powi(2);
         let n = self.dofs.n_eq;
         if !self.st.accel_ready {
-            // M a₀ = F(t₀) − f_int(u₀) − C v₀
-            let v = self.dofs.gather(&self.st.v);
-            let mut rhs = self.dofs.gather(&self.external_forces(self.st.time));
-            let fint = self.free_internal_forces(&self.st.u);
-            let mut cv = vec![0.0; n];
-            let mut kv = vec![0.0; n];
-            self.pattern.mul(&self.m, &v, &mut cv);
-            self.pattern.mul(&self.k, &v, &mut kv);
-            for i in 0..n {
-                rhs[i] -= fint[i] + ra * cv[i] + rb * kv[i];
-            }
-            if self.m_factor.is_none() {
-                self.m_factor = Some(Factor::new(&self.pattern, &self.m, &mut self.symbolic)?);
-            }
-            self.m_factor
-                .as_ref()
-                .expect("set")
-                .solve_in_place(&mut rhs);
-            self.dofs.scatter(&rhs, &mut self.st.a);
-            self.st.accel_ready = true;
+            self.initial_acceleration()?;
         }
         let u = self.dofs.gather(&self.st.u);
         let v = self.dofs.gather(&self.st.v);

@@ -341,11 +341,7 @@ impl Model {
                     history,
                 } => {
                     let nodes = surface::select_nodes(&mesh, on, &what)?;
-                    let per = match (per_node, total) {
-                        (Some(p), _) => *p,
-                        (None, Some(t)) => t.map(|v| v / nodes.len() as f64),
-                        (None, None) => unreachable!("validated"),
-                    };
+                    let per = crate::config::nodal_force(per_node, total, nodes.len());
                     for n in nodes {
                         for c in 0..3 {
                             f[3 * n as usize + c] += per[c];
