@@ -589,8 +589,9 @@ pub struct Support {
     /// History scaling `displacement`.
     #[serde(default)]
     pub history: Option<String>,
-    /// Shell meshes: rotations held about these axes (default all three: with the default
-    /// `fix`, a clamp; `rotations = []` for a hinge).
+    /// Shell meshes: rotations held about these axes (default all three, whatever `fix`
+    /// holds: with the default `fix`, a clamp; `rotations = []` for a hinge; `fix = []` with
+    /// rotations for a support of rotations only, e.g. a symmetry plane).
     #[serde(default)]
     pub rotations: Option<Vec<Axis>>,
 }
@@ -1064,10 +1065,10 @@ impl FemConfig {
         }
         for (i, s) in self.supports.iter().enumerate() {
             check_selector(&s.on, &format!("fem.supports[{i}].on"))?;
-            if s.fix.is_empty() {
+            if s.fix.is_empty() && s.rotations.as_ref().is_none_or(|r| r.is_empty()) {
                 return Err((
                     format!("fem.supports[{i}].fix"),
-                    "fixes no component".into(),
+                    "fixes no component (and no shell rotation)".into(),
                 ));
             }
             if let Some(d) = s.displacement {

@@ -65,6 +65,45 @@ pub trait Structure: Send {
     fn write_outputs(&mut self, out_dir: &Path) -> Result<(), FemError>;
     /// Result quantities for `summary.json`.
     fn results(&self) -> Vec<(String, f64)>;
+    /// The coupled surface's area [m²] and area-weighted normal: a positive `pressure` load
+    /// on the interface's selection pushes against it (a volume: the outward normal).
+    fn pressure_surface(&self) -> (f64, [f64; 3]);
+}
+
+/// The total area and the area-weighted normal (½ Σ (b − a) × (c − a)) of triangles indexing
+/// `points`.
+pub fn area_and_normal(points: &[[f64; 3]], triangles: &[u32]) -> (f64, [f64; 3]) {
+    let (mut area, mut normal) = (0.0, [0.0; 3]);
+    for t in triangles.chunks_exact(3) {
+        let [a, b, c] = [0, 1, 2].map(|k| points[t[k] as usize]);
+        let (e1, e2) = (
+            [b[0] - a[0], b[1] - a[1], b[2] - a[2]],
+            [c[0] - a[0], c[1] - a[1], c[2] - a[2]],
+        );
+        let n = [
+            e1[1] * e2[2] - e1[2] * e2[1],
+            e1[2] * e2[0] - e1[0] * e2[2],
+            e1[0] * e2[1] - e1[1] * e2[0],
+        ];
+        area += 0.5 * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        for i in 0..3 {
+            normal[i] += 0.5 * n[i];
+        }
+    }
+    (area, normal)
+}
+
+impl Model {
+    /// The interface triangles' area and outward area-weighted normal.
+    pub fn pressure_surface(&self) -> (f64, [f64; 3]) {
+        let m = self.interface_mesh();
+        let points: Vec<[f64; 3]> = m
+            .positions
+            .chunks_exact(3)
+            .map(|p| [p[0], p[1], p[2]])
+            .collect();
+        area_and_normal(&points, &m.triangles)
+    }
 }
 
 macro_rules! structure_by_delegation {
@@ -108,6 +147,9 @@ macro_rules! structure_by_delegation {
             }
             fn results(&self) -> Vec<(String, f64)> {
                 <$t>::results(self)
+            }
+            fn pressure_surface(&self) -> (f64, [f64; 3]) {
+                <$t>::pressure_surface(self)
             }
         }
     };

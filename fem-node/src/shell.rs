@@ -79,6 +79,22 @@ pub fn corner_normals(x: &[[f64; 3]; 4]) -> [[f64; 3]; 4] {
     out
 }
 
+/// The smallest signed Jacobian determinant g_r · (g_s × g_t) over the element's 2 × 2 × 2
+/// integration points: ≤ 0 where the thickness is too large for the curvature (or the
+/// directors point against the corners' normal), and the element cannot be integrated.
+pub fn min_jacobian(geo: &Geometry) -> f64 {
+    let mut min = f64::INFINITY;
+    for &t in &GAUSS {
+        for &r in &GAUSS {
+            for &s in &GAUSS {
+                let g = point(geo, r, s, t).g;
+                min = min.min(g[0].dot(&g[1].cross(&g[2])));
+            }
+        }
+    }
+    min
+}
+
 /// Covariant base vectors at (r, s, t) and the rows (24 entries each) that map the element's
 /// degrees of freedom to U_,r, U_,s, U_,t dotted with a vector: `dot_rows(w)[b]` · q = w · U_,b.
 struct Point {

@@ -159,10 +159,7 @@ impl ShellModel {
             message,
         };
         if let Some(&(id, line, what)) = mesh.shells.unsupported.first() {
-            return Err(mesh_err(
-                line,
-                format!("element {id} is {what}; the shells of this engine are 4-node MITC4"),
-            ));
+            return Err(mesh_err(line, format!("element {id} is {what}")));
         }
         if !mesh.is_shell_mesh() {
             return Err(mesh_err(
@@ -170,6 +167,19 @@ impl ShellModel {
                 "no 4-node shells in a mesh without volume elements".into(),
             ));
         }
+        // a mesh file's counts are known only now: refuse a model that cannot fit before the
+        // matrices are built (six dofs a node: twice a volume node's share)
+        crate::resources::check_memory(
+            &format!(
+                "the shell model of {} ({} nodes, {} shells)",
+                mesh.source,
+                mesh.num_nodes(),
+                mesh.shells.len()
+            ),
+            2.0 * crate::resources::model_bytes(mesh.num_nodes() as u64, mesh.shells.len() as u64),
+            crate::resources::available_memory(),
+        )
+        .map_err(|message| config("fem.mesh", message))?;
         let Some(mat) = &cfg.material else {
             return Err(config(
                 "fem.material",
@@ -189,6 +199,47 @@ impl ShellModel {
                 "explicit stepping of shells is not offered (the rotary inertia of a thin \
                  shell makes its stable step tiny); use analysis = \"dynamic\" (Bossak)",
             ));
+        }
+        let nonlinear = cfg.shell.as_ref().is_some_and(|s| s.nonlinear);
+        let defaults = crate::config::NewtonConfig::default();
+        if cfg.newton != defaults && !nonlinear {
+            return Err(config(
+                "fem.newton",
+                "applies to nonlinear shells (shell = { ..., nonlinear = true })",
+            ));
+        }
+        for (given, field) in [
+            (cfg.newton.always, "fem.newton.always"),
+            (cfg.newton.tangent != defaults.tangent, "fem.newton.tangent"),
+            (
+                cfg.newton.displacement_tolerance != defaults.displacement_tolerance,
+                "fem.newton.displacement_tolerance",
+            ),
+            (
+                cfg.solver != crate::config::LinearSolver::Auto,
+                "fem.solver",
+            ),
+            (
+                matches!(
+                    cfg.mesh,
+                    MeshSpec::File {
+                        hex8_incompatible: true,
+                        ..
+                    } | MeshSpec::File {
+                        hex8_bbar: true,
+                        ..
+                    }
+                ),
+                "fem.mesh.hex8",
+            ),
+        ] {
+            if given {
+                return Err(config(
+                    field,
+                    "does not apply to shells (their Newton iterations: force_tolerance, \
+                     max_iterations, increments, max_cutbacks; their solver: sparse Cholesky)",
+                ));
+            }
         }
         if !cfg.strain_gauges.is_empty() {
             return Err(config(
@@ -301,6 +352,23 @@ impl ShellModel {
                         ),
                     ));
                 }
+            }
+        }
+        for (e, q) in mesh.shells.quads.iter().enumerate() {
+            let det = shell::min_jacobian(&Geometry {
+                x: q.map(|n| mesh.nodes[n as usize]),
+                director: q.map(|n| directors[n as usize]),
+                thickness: thickness[e],
+            });
+            if !(det > 0.0) {
+                return Err(mesh_err(
+                    mesh.shells.lines[e],
+                    format!(
+                        "shell {}: its thickness {} m is too large for its curvature (the \
+                         Jacobian through the thickness is {det:.3e} ≤ 0 at an integration point)",
+                        mesh.shells.ids[e], thickness[e]
+                    ),
+                ));
             }
         }
         let node_thickness: Vec<f64> = tsum
@@ -574,7 +642,7 @@ impl ShellModel {
             let id = self.mesh.node_ids[n as usize];
             node_ids.push(if s > 0.0 { id } else { id + max_id });
             let (top, bottom) = self
-                .surface_node(n as usize)
+                .surface_node(n as usize, false)
                 .points(self.mesh.nodes[n as usize]);
             positions.extend(if s > 0.0 { top } else { bottom });
         }
@@ -585,10 +653,37 @@ impl ShellModel {
         }
     }
 
-    /// A node as the coupling sees it, turned by its current rotation.
-    fn surface_node(&self, n: usize) -> SurfaceNode {
+    /// The coupled shells' mid-surface area [m²] and area-weighted normal along their
+    /// directors: the side a positive `pressure` load pushes against, whichever faces the
+    /// grains see.
+    pub fn pressure_surface(&self) -> (f64, [f64; 3]) {
+        let both =
+            self.iface.side.iter().any(|&s| s > 0.0) && self.iface.side.iter().any(|&s| s < 0.0);
+        let mut tris = Vec::new();
+        for t in self.iface.triangles.chunks_exact(3) {
+            let side = self.iface.side[t[0] as usize];
+            if both && side < 0.0 {
+                continue;
+            }
+            let n: [u32; 3] = std::array::from_fn(|k| self.iface.nodes[t[k] as usize]);
+            // bottom triangles run the other way round: back to the director's orientation
+            tris.extend(if side > 0.0 {
+                [n[0], n[1], n[2]]
+            } else {
+                [n[0], n[2], n[1]]
+            });
+        }
+        crate::area_and_normal(&self.mesh.nodes, &tris)
+    }
+
+    /// A node as the coupling sees it, turned by its current rotation (`turned`) or not.
+    fn surface_node(&self, n: usize, turned: bool) -> SurfaceNode {
         SurfaceNode {
-            theta: part(&self.st.u, n, 3),
+            theta: if turned {
+                part(&self.st.u, n, 3)
+            } else {
+                [0.0; 3]
+            },
             director: self.directors[n],
             thickness: self.node_thickness[n],
         }
@@ -630,7 +725,7 @@ impl ShellModel {
         );
         for (&n, &s) in self.iface.nodes.iter().zip(&self.iface.side) {
             let n = n as usize;
-            let node = self.surface_node(n);
+            let node = self.surface_node(n, true);
             let x = self.mesh.nodes[n];
             let u = part(&self.st.u, n, 0);
             let pos = std::array::from_fn(|c| x[c] + u[c]);
@@ -655,7 +750,7 @@ impl ShellModel {
             return Err(FemError::TimeStep(dt));
         }
         match self.analysis {
-            Analysis::Dynamic { .. } if self.nonlinear => self.bossak_nonlinear(dt)?,
+            Analysis::Dynamic { .. } if self.nonlinear => self.bossak_with_cutbacks(dt, 0)?,
             Analysis::Dynamic { .. } => self.bossak_step(dt)?,
             _ => {
                 self.st.time += dt;
@@ -688,7 +783,8 @@ impl ShellModel {
     }
 
     /// The full external force vector at `t`: loads × histories, and the interface forces
-    /// carried to the nodes as forces and moments (Ullrich (3.9)) with the current directors.
+    /// carried to the nodes as forces and moments (Ullrich (3.9)) with the reference directors
+    /// (linear shells) or the turned ones (nonlinear).
     pub fn external_forces(&self, t: f64) -> Vec<f64> {
         let mut f = vec![0.0; self.num_dofs()];
         for (history, pattern) in &self.loads {
@@ -705,7 +801,9 @@ impl ShellModel {
         }
         for (i, (&n, &s)) in self.iface.nodes.iter().zip(&self.iface.side).enumerate() {
             let fi = std::array::from_fn(|c| self.st.interface_forces[3 * i + c]);
-            let node = self.surface_node(n as usize);
+            // linear shells: the arms of the reference configuration (the linear theory's
+            // load; repeated static solves then do not drift), nonlinear: the turned ones
+            let node = self.surface_node(n as usize, self.nonlinear);
             let (force, moment) = if s > 0.0 {
                 node.forces_to_node(fi, [0.0; 3])
             } else {
@@ -940,6 +1038,18 @@ impl ShellModel {
         cm: f64,
         dynamic: Option<&BossakTerms>,
     ) -> Result<Vec<f64>, String> {
+        // a tangent kept for other Jacobian coefficients (another step size) is dropped, with
+        // the state it was taken at, so that a restored run decides alike
+        if dynamic.is_some()
+            && self
+                .st
+                .tangent_at
+                .as_ref()
+                .is_some_and(|(_, k, m)| *k != ck || *m != cm)
+        {
+            self.st.tangent_at = None;
+            self.kept = None;
+        }
         let tol = self.newton.force_tolerance;
         let mut u = start.to_vec();
         let mut full = self.st.u.clone();
@@ -1029,12 +1139,9 @@ impl ShellModel {
     /// Rebuilds the kept tangent from the state it was taken at (after a restore: so that a
     /// resumed run iterates as the uninterrupted one), if it was taken for these coefficients.
     fn restore_kept(&mut self, ck: f64, cm: f64) -> Result<(), String> {
-        match self.st.tangent_at.clone() {
-            Some((u, k, m)) if k == ck && m == cm => {
-                self.kept = Some(self.factor_tangent(&u, ck, cm)?);
-            }
-            Some(_) => self.st.tangent_at = None,
-            None => {}
+        if let Some((u, k, m)) = self.st.tangent_at.clone() {
+            debug_assert!(k == ck && m == cm, "dropped by newton_solve");
+            self.kept = Some(self.factor_tangent(&u, ck, cm)?);
         }
         Ok(())
     }
@@ -1134,6 +1241,27 @@ impl ShellModel {
         let f: Vec<f64> = (0..n).map(|i| ma[i] + t.rb * kv[i]).collect();
         let norm = f.iter().map(|v| v * v).sum::<f64>().sqrt();
         (f, norm)
+    }
+
+    /// A nonlinear Bossak step; when its iterations fail, from the same state as two half
+    /// steps, each of which may be halved again, up to `[fem.newton] max_cutbacks` levels.
+    fn bossak_with_cutbacks(&mut self, dt: f64, level: u32) -> Result<(), FemError> {
+        let saved = self.st.clone();
+        match self.bossak_nonlinear(dt) {
+            Ok(()) => Ok(()),
+            Err(e) if level < self.newton.max_cutbacks => {
+                tracing::debug!("{e}; halving the step");
+                self.st = saved;
+                // the kept factor may be the failed attempt's: rebuilt from the state's record
+                self.kept = None;
+                self.bossak_with_cutbacks(0.5 * dt, level + 1)?;
+                self.bossak_with_cutbacks(0.5 * dt, level + 1)
+            }
+            Err(FemError::Solver(m)) if level > 0 => Err(FemError::Solver(format!(
+                "{m} (after halving the step {level} times)"
+            ))),
+            Err(e) => Err(e),
+        }
     }
 
     /// Relative residuals of the Newton iterations of the last nonlinear solve or step.
@@ -1247,6 +1375,10 @@ impl ShellModel {
         let nd = self.num_dofs();
         if [st.u.len(), st.v.len(), st.a.len()] != [nd; 3]
             || st.interface_forces.len() != self.st.interface_forces.len()
+            || st
+                .tangent_at
+                .as_ref()
+                .is_some_and(|(u, _, _)| u.len() != nd)
         {
             return Err(FemError::Snapshot(format!(
                 "snapshot has {} dofs / {} interface values, the shell model {nd} / {}",

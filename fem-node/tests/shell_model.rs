@@ -234,6 +234,19 @@ fn the_reference_surfaces_carry_forces_and_moments_of_the_dem() {
             "triangle {k} faces the wrong way"
         );
     }
+    // the side a pressure pushes against: the directors' (+z), the coupled shells' area
+    let (area, normal) = m.pressure_surface();
+    assert!(
+        (area - 0.2 * B).abs() < 1e-12 && (normal[2] - area).abs() < 1e-12,
+        "{area} {normal:?}"
+    );
+    for faces in ["top", "bottom"] {
+        let one = shells(&text.replace(
+            "[fem.interface]\n",
+            &format!("[fem.interface]\nfaces = \"{faces}\"\n"),
+        ));
+        assert_eq!(one.pressure_surface(), (area, normal), "{faces}");
+    }
     // forces on the surfaces: the nodes get the same resultant and moment about the origin
     let mut rng = common::Rng(7);
     let f: Vec<f64> = (0..3 * n).map(|_| rng.next()).collect();
@@ -345,6 +358,15 @@ fn snapshot_restore_continues_bitwise_and_outputs_are_written() {
         d.advance(1e-4).unwrap();
     }
     assert_eq!(c.snapshot(), d.snapshot());
+    // a step size change drops the kept tangent in both runs alike
+    let snap = c.snapshot();
+    let mut e = fem::build(&config(&heavy), Path::new(".")).unwrap();
+    e.restore(&snap).unwrap();
+    for dt in [5e-5, 5e-5, 1e-4] {
+        c.advance(dt).unwrap();
+        e.advance(dt).unwrap();
+    }
+    assert_eq!(c.snapshot(), e.snapshot());
     let iterations = c
         .results()
         .into_iter()
@@ -403,7 +425,57 @@ fn bad_shell_scenes_are_refused_by_name() {
         here,
     );
     assert!(e.contains("fem.shell"), "{e}");
+    // settings that do not apply to (linear) shells
+    let e = err(&strip("[fem.newton]\nincrements = 3\n"), here);
+    assert!(e.contains("fem.newton") && e.contains("nonlinear"), "{e}");
+    let e = err(
+        &strip("").replace("[fem]\n", "[fem]\nsolver = \"mixed\"\n"),
+        here,
+    );
+    assert!(e.contains("fem.solver"), "{e}");
+    let e = err(&nonlinear(&strip("[fem.newton]\nalways = true\n")), here);
+    assert!(e.contains("fem.newton.always"), "{e}");
+    // a support of rotations only is a support
+    let rotations_only =
+        strip("") + "[[fem.supports]]\non = { set = \"xmax\" }\nfix = []\nrotations = [\"x\"]\n";
+    assert!(fem::build(&config(&rotations_only), here).is_ok());
     let dir = tempfile::tempdir().unwrap();
+    let mat = "material = { youngs_modulus = 1e9, poisson_ratio = 0.3, density = 1.0 }\n";
+    // a shell too thick for its curvature: a quarter cylinder of radius 10 mm, 40 mm thick
+    let mut inp = String::from("*NODE\n");
+    for j in 0..2 {
+        for i in 0..=4 {
+            let phi = std::f64::consts::FRAC_PI_2 * i as f64 / 4.0;
+            let (x, y, z) = (0.01 * phi.cos(), 0.01 * phi.sin(), 0.01 * j as f64);
+            inp.push_str(&format!("{}, {x}, {y}, {z}\n", j * 5 + i + 1));
+        }
+    }
+    inp.push_str("*ELEMENT, TYPE=S4, ELSET=A\n");
+    for i in 0..4 {
+        inp.push_str(&format!(
+            "{}, {}, {}, {}, {}\n",
+            i + 1,
+            i + 1,
+            i + 6,
+            i + 7,
+            i + 2
+        ));
+    }
+    inp.push_str("*SHELL SECTION, ELSET=A, MATERIAL=S\n0.04\n");
+    std::fs::write(dir.path().join("thick.inp"), inp).unwrap();
+    let e = err(&format!("[fem]\nmesh = \"thick.inp\"\n{mat}"), dir.path());
+    assert!(e.contains("thick.inp:") && e.contains("curvature"), "{e}");
+    // a solid deck keeps parsing with shell sections a shell model could not use
+    std::fs::write(
+        dir.path().join("solid.inp"),
+        "*NODE\n1, 0, 0, 0\n2, 1, 0, 0\n3, 1, 1, 0\n4, 0, 1, 0\n5, 0, 0, 1\n6, 1, 0, 1\n7, 1, 1, 1\n8, 0, 1, 1\n\
+         *ELEMENT, TYPE=C3D8, ELSET=BODY\n1, 1, 2, 3, 4, 5, 6, 7, 8\n\
+         *ELEMENT, TYPE=S3, ELSET=SKIN\n2, 1, 2, 3\n\
+         *SHELL SECTION, ELSET=SKIN, MATERIAL=S, COMPOSITE\n0.001, 3, S\n0.002, 3, S\n\
+         *SHELL SECTION, ELSET=NOWHERE, MATERIAL=S\n0.001\n",
+    )
+    .unwrap();
+    assert!(fem::Mesh::read(&dir.path().join("solid.inp")).is_ok());
     // a fold: two shells at 90°
     std::fs::write(
         dir.path().join("fold.inp"),
@@ -411,7 +483,6 @@ fn bad_shell_scenes_are_refused_by_name() {
          *ELEMENT, TYPE=S4, ELSET=A\n1, 1, 2, 3, 4\n2, 2, 5, 6, 3\n*SHELL SECTION, ELSET=A, MATERIAL=S\n0.01\n",
     )
     .unwrap();
-    let mat = "material = { youngs_modulus = 1e9, poisson_ratio = 0.3, density = 1.0 }\n";
     let e = err(&format!("[fem]\nmesh = \"fold.inp\"\n{mat}"), dir.path());
     assert!(e.contains("fold.inp:") && e.contains("fold"), "{e}");
     // triangles

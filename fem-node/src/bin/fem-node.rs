@@ -67,39 +67,14 @@ fn pressure_equivalent(
     let Some(iface) = cfg.interface.as_ref() else {
         return Ok(BTreeMap::new());
     };
-    let mesh = coupled.interface_mesh();
     let results: BTreeMap<String, f64> = coupled.results().into_iter().collect();
     let total = [
         results.get("interface_force.x").copied().unwrap_or(0.0),
         results.get("interface_force.y").copied().unwrap_or(0.0),
         results.get("interface_force.z").copied().unwrap_or(0.0),
     ];
-    // area and area-weighted outward normal of the interface triangles
-    let (mut area, mut normal) = (0.0, [0.0; 3]);
-    let p = &mesh.positions;
-    for t in mesh.triangles.chunks_exact(3) {
-        let v = |i: u32| {
-            [
-                p[3 * i as usize],
-                p[3 * i as usize + 1],
-                p[3 * i as usize + 2],
-            ]
-        };
-        let (a, b, c) = (v(t[0]), v(t[1]), v(t[2]));
-        let (e1, e2) = (
-            [b[0] - a[0], b[1] - a[1], b[2] - a[2]],
-            [c[0] - a[0], c[1] - a[1], c[2] - a[2]],
-        );
-        let n = [
-            e1[1] * e2[2] - e1[2] * e2[1],
-            e1[2] * e2[0] - e1[0] * e2[2],
-            e1[0] * e2[1] - e1[1] * e2[0],
-        ];
-        area += 0.5 * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-        for i in 0..3 {
-            normal[i] += 0.5 * n[i];
-        }
-    }
+    // area and area-weighted normal the pressure pushes against
+    let (area, normal) = coupled.pressure_surface();
     if area <= 0.0 {
         return Ok(BTreeMap::new());
     }

@@ -18,14 +18,16 @@ enum Block {
     /// become node sets (e.g. the faces Gmsh exports for physical surfaces).
     AuxElement {
         elset: Option<String>,
-        /// S4 / S4R: a shell if the deck has no volume elements.
-        shell: bool,
+        /// The element type (S4 / S4R: a shell if the deck has no volume elements).
+        ty: String,
     },
-    /// *SHELL SECTION, ELSET=...: the next data line starts with the thickness.
+    /// *SHELL SECTION, ELSET=...: the next data line starts with the thickness; `refused`
+    /// says why a shell model cannot use it (COMPOSITE, OFFSET, NODAL THICKNESS).
     ShellSection {
         elset: String,
         line: usize,
         done: bool,
+        refused: Option<String>,
     },
     Nset {
         name: String,
@@ -36,6 +38,17 @@ enum Block {
         generate: bool,
     },
     Skip,
+}
+
+/// Why a lower-dimensional element cannot be a shell of a shell model.
+fn unsupported_type(ty: &str) -> &'static str {
+    if ["T3D", "B31", "B32"].iter().any(|p| ty.starts_with(p)) {
+        "a truss or beam (a shell model takes 4-node S4 or S4R shells only)"
+    } else if ty.starts_with("S3") || ty.starts_with("STRI") || ty.starts_with("M3D3") {
+        "a triangle (a shell model takes 4-node S4 or S4R shells only)"
+    } else {
+        "a surface element other than S4/S4R (a shell model takes 4-node S4 or S4R shells only)"
+    }
 }
 
 /// Lower-dimensional element families that may appear in a deck next to the solid mesh.
@@ -80,7 +93,7 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
     let mut aux_sets: std::collections::BTreeMap<String, Vec<u32>> = Default::default();
     let mut shell_index: HashMap<u64, u32> = HashMap::new();
     // *SHELL SECTION: (element set, line, thickness)
-    let mut sections: Vec<(String, usize, f64)> = Vec::new();
+    let mut sections: Vec<(String, usize, Result<f64, String>)> = Vec::new();
     // Element data may continue over several lines (trailing comma).
     let mut pending: Vec<u64> = Vec::new();
     let mut pending_line = 0usize;
@@ -121,7 +134,7 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
                         Some(kind) => Block::Element { kind, elset: params.get("ELSET").cloned() },
                         None if is_auxiliary_type(&ty) => Block::AuxElement {
                             elset: params.get("ELSET").cloned(),
-                            shell: ty == "S4" || ty == "S4R",
+                            ty: ty.clone(),
                         },
                         None => {
                             return Err(err(
@@ -146,12 +159,14 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
                     generate: params.contains_key("GENERATE"),
                 },
                 "SHELL SECTION" => Block::ShellSection {
-                    elset: params
-                        .get("ELSET")
-                        .cloned()
-                        .ok_or_else(|| err(ln, "*SHELL SECTION without ELSET=".into()))?,
+                    elset: params.get("ELSET").cloned().unwrap_or_default(),
                     line: ln,
                     done: false,
+                    refused: ["COMPOSITE", "OFFSET", "NODAL THICKNESS"]
+                        .into_iter()
+                        .find(|k| params.contains_key(*k))
+                        .map(|k| format!("{k} is not supported (a homogeneous section on the mid-surface, one thickness per element set)"))
+                        .or_else(|| (!params.contains_key("ELSET")).then(|| "no ELSET=".to_string())),
                 },
                 "INCLUDE" => {
                     return Err(err(
@@ -259,33 +274,36 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
                 elset,
                 line: kw_line,
                 done,
+                refused,
             } => {
-                if *done {
-                    return Err(err(
-                        ln,
-                        format!("*SHELL SECTION (line {kw_line}): one data line (the thickness) expected, found another: '{line}'"),
-                    ));
+                // read only for shell models (applied at the end when the deck has no volume
+                // elements); a solid deck's shell sections are skipped as before
+                let parsed = if let Some(why) = refused {
+                    Err(why.clone())
+                } else if *done {
+                    Err(format!(
+                        "one data line (the thickness) expected, found another: '{line}'"
+                    ))
+                } else {
+                    match fields[0].parse::<f64>() {
+                        Ok(t) if t > 0.0 && t.is_finite() => Ok(t),
+                        Ok(t) => Err(format!(
+                            "ELSET={elset}: the thickness must be positive, got {t}"
+                        )),
+                        Err(_) => Err(format!("ELSET={elset}: bad thickness '{}'", fields[0])),
+                    }
+                };
+                if !*done || parsed.is_err() {
+                    sections.push((elset.clone(), if *done { ln } else { *kw_line }, parsed));
                 }
-                let t: f64 = fields[0].parse().map_err(|_| {
-                    err(
-                        ln,
-                        format!(
-                            "*SHELL SECTION, ELSET={elset}: bad thickness '{}'",
-                            fields[0]
-                        ),
-                    )
-                })?;
-                if !(t > 0.0 && t.is_finite()) {
-                    return Err(err(ln, format!("*SHELL SECTION, ELSET={elset}: the thickness must be positive, got {t}")));
-                }
-                sections.push((elset.clone(), *kw_line, t));
                 block = Block::ShellSection {
                     elset: elset.clone(),
                     line: *kw_line,
                     done: true,
+                    refused: refused.clone(),
                 };
             }
-            Block::AuxElement { elset, shell } => {
+            Block::AuxElement { elset, ty } => {
                 if pending.is_empty() {
                     pending_line = ln;
                 }
@@ -313,11 +331,14 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
                             .or_default()
                             .extend_from_slice(&nodes);
                     }
-                    if *shell {
+                    if ty == "S4" || ty == "S4R" {
                         if nodes.len() != 4 {
                             return Err(err(
                                 pending_line,
-                                format!("element {id}: {} nodes given, S4 expects 4", nodes.len()),
+                                format!(
+                                    "element {id}: {} nodes given, {ty} expects 4",
+                                    nodes.len()
+                                ),
                             ));
                         }
                         let s = mesh.shells.push(
@@ -330,7 +351,9 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
                             mesh.shells.sets.entry(set.clone()).or_default().push(s);
                         }
                     } else {
-                        mesh.shells.unsupported.push((id, pending_line, "a surface element other than S4/S4R (shell models take 4-node S4 or S4R)"));
+                        mesh.shells
+                            .unsupported
+                            .push((id, pending_line, unsupported_type(ty)));
                     }
                     aux_elems.insert(id, nodes);
                     pending.clear();
@@ -493,7 +516,9 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
     for v in mesh.shells.sets.values_mut() {
         *v = sort_dedup(std::mem::take(v));
     }
-    for (set, ln, t) in sections {
+    // shell sections matter only to a shell model (no volume elements)
+    for (set, ln, t) in sections.into_iter().filter(|_| mesh.kinds.is_empty()) {
+        let t = t.map_err(|why| err(ln, format!("*SHELL SECTION: {why}")))?;
         let members = mesh.shells.set(&set).cloned().ok_or_else(|| {
             err(
                 ln,
