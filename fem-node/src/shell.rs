@@ -573,6 +573,66 @@ fn nonlinear_element(
     f
 }
 
+/// The stresses (σ11, σ22, σ12, τ13, τ23) in the local frame (e1 along g_r, e3 normal) at the
+/// element's centre on its top (t = +1) and bottom (t = −1) surfaces, of the element displaced
+/// by `q`: the small strains (linear) or the Green–Lagrange strains, giving the second
+/// Piola–Kirchhoff stresses (`nonlinear`); the transverse shears from the tying points as in
+/// the stiffness.
+pub fn surface_stresses(
+    geo: &Geometry,
+    mat: Material,
+    q: &[f64; DOFS],
+    nonlinear: bool,
+) -> [[f64; 5]; 2] {
+    let dmat = plane_stress(mat);
+    let d = Deformed::new(geo, q);
+    let value = |r: f64, s: f64, t: f64, a: usize, b: usize| -> f64 {
+        if nonlinear {
+            let g = point(geo, r, s, t).g;
+            let dg = d.base_change(r, s, t);
+            0.5 * (g[a].dot(&dg[b]) + dg[a].dot(&g[b]) + dg[a].dot(&dg[b]))
+        } else {
+            let row = point(geo, r, s, t).strain(geo, a, b);
+            row.iter().zip(q).map(|(x, y)| x * y).sum()
+        }
+    };
+    [1.0, -1.0].map(|t| {
+        let mut cov = [[0.0; 3]; 3];
+        cov[0][0] = value(0.0, 0.0, t, 0, 0);
+        cov[1][1] = value(0.0, 0.0, t, 1, 1);
+        cov[0][1] = value(0.0, 0.0, t, 0, 1);
+        cov[0][2] = 0.5 * (value(0.0, 1.0, t, 0, 2) + value(0.0, -1.0, t, 0, 2));
+        cov[1][2] = 0.5 * (value(1.0, 0.0, t, 1, 2) + value(-1.0, 0.0, t, 1, 2));
+        cov[1][0] = cov[0][1];
+        cov[2][0] = cov[0][2];
+        cov[2][1] = cov[1][2];
+        let Frame { gc, e: frame, .. } = point(geo, 0.0, 0.0, t).frame();
+        let tr: [[f64; 3]; 3] =
+            std::array::from_fn(|a| std::array::from_fn(|k| gc[a].dot(&frame[k])));
+        let local = |k: usize, l: usize, scale: f64| -> f64 {
+            (0..3)
+                .flat_map(|a| (0..3).map(move |b| (a, b)))
+                .map(|(a, b)| scale * tr[a][k] * tr[b][l] * cov[a][b])
+                .sum()
+        };
+        let e = [
+            local(0, 0, 1.0),
+            local(1, 1, 1.0),
+            local(0, 1, 2.0),
+            local(0, 2, 2.0),
+            local(1, 2, 2.0),
+        ];
+        std::array::from_fn(|i| (0..5).map(|j| dmat[i][j] * e[j]).sum::<f64>())
+    })
+}
+
+/// The von Mises stress of a shell's (σ11, σ22, σ12, τ13, τ23).
+pub fn von_mises(s: &[f64; 5]) -> f64 {
+    (s[0] * s[0] - s[0] * s[1] + s[1] * s[1] + 3.0 * (s[2] * s[2] + s[3] * s[3] + s[4] * s[4]))
+        .max(0.0)
+        .sqrt()
+}
+
 /// Hughes–Brezzi drilling stiffness: γ ∫ (θ · e3 − ω3)² dA with ω3 = ½ (e2 · U_,1 − e1 · U_,2)
 /// the mid-surface's in-plane rotation, γ = 1e-3 G a (small: it only holds the rotation about
 /// the director, which the shell theory leaves without stiffness; zero for rigid motions).

@@ -1431,6 +1431,9 @@ impl ShellModel {
                     .flat_map(|c| [c[at], c[at + 1], c[at + 2]])
                     .collect()
             };
+            let stresses = self.surface_stresses();
+            let top: Vec<f64> = stresses.iter().map(|s| shell::von_mises(&s[0])).collect();
+            let bottom: Vec<f64> = stresses.iter().map(|s| shell::von_mises(&s[1])).collect();
             let conn: Vec<u32> = self.mesh.shells.quads.iter().flatten().copied().collect();
             let directors: Vec<f64> = self.directors.iter().flatten().copied().collect();
             output::write_cells(
@@ -1445,7 +1448,11 @@ impl ShellModel {
                     ("rotation", &pick(&self.st.u, 3)),
                     ("director", &directors),
                 ],
-                &[("thickness", &self.thickness)],
+                &[
+                    ("von_mises_top", &top),
+                    ("von_mises_bottom", &bottom),
+                    ("thickness", &self.thickness),
+                ],
             )
             .map_err(|e| io(e, &path))?;
             self.vtu_files.push((self.st.time, name));
@@ -1479,6 +1486,12 @@ impl ShellModel {
             .map(|n| norm(part(&self.st.u, n, 0)))
             .fold(0.0, f64::max);
         r.push(("max_displacement".to_string(), umax));
+        let vm = self
+            .surface_stresses()
+            .iter()
+            .flat_map(|s| s.iter().map(shell::von_mises))
+            .fold(0.0, f64::max);
+        r.push(("max_von_mises".to_string(), vm));
         if self.nonlinear && self.st.newton_solves > 0 {
             r.push((
                 "newton_iterations_per_solve".to_string(),
@@ -1486,6 +1499,22 @@ impl ShellModel {
             ));
         }
         r
+    }
+
+    /// Per shell, the stresses (σ11, σ22, σ12, τ13, τ23) [Pa] at its centre on the top and
+    /// bottom surfaces, in its local frame (e1 along its first edge's direction, e3 normal).
+    pub fn surface_stresses(&self) -> Vec<[[f64; 5]; 2]> {
+        (0..self.mesh.shells.len())
+            .into_par_iter()
+            .map(|e| {
+                shell::surface_stresses(
+                    &self.geometry(e),
+                    self.material,
+                    &self.element_dofs(e, &self.st.u),
+                    self.nonlinear,
+                )
+            })
+            .collect()
     }
 
     /// Displacement of a probe by name.

@@ -51,6 +51,25 @@ fn cantilever_strip_matches_beam_theory_and_files_give_the_same_answer() {
         100.0 * err
     );
     assert!(err.abs() < 5e-3, "cantilever: {:+.3} %", 100.0 * err);
+    // the bending stress at the root shell's centre: M c / I, tension on top, compression
+    // below (the load points down); the shells' local e1 runs along x
+    let stresses = m.surface_stresses();
+    let x_c = L / 48.0;
+    let sigma = -p * (L - x_c) * (T / 2.0) / i;
+    let [top, bottom] = stresses[0];
+    eprintln!(
+        "root bending stress: top {:.4e}, bottom {:.4e}, M c / I {sigma:.4e} Pa",
+        top[0], bottom[0]
+    );
+    assert!((top[0] / sigma - 1.0).abs() < 1e-2, "top {top:?}");
+    assert!((bottom[0] / -sigma - 1.0).abs() < 1e-2, "bottom {bottom:?}");
+    let vm = m
+        .results()
+        .into_iter()
+        .find(|(k, _)| k == "max_von_mises")
+        .unwrap()
+        .1;
+    assert!((vm / sigma - 1.0).abs() < 2e-2, "max von Mises {vm}");
 
     // the same strip from an Abaqus deck (S4R with its *SHELL SECTION) and a Gmsh file
     let dir = tempfile::tempdir().unwrap();
@@ -377,6 +396,7 @@ fn snapshot_restore_continues_bitwise_and_outputs_are_written() {
     );
     let vtu = std::fs::read_to_string(dir.path().join("fem_000003.vtu")).unwrap();
     assert!(vtu.contains("NumberOfCells=\"48\"") && vtu.contains("Name=\"rotation\""));
+    assert!(vtu.contains("Name=\"von_mises_top\"") && vtu.contains("Name=\"von_mises_bottom\""));
     let csv = std::fs::read_to_string(dir.path().join("fem_probes.csv")).unwrap();
     assert_eq!(csv.lines().count(), 4, "{csv}");
     let limits = a.limits().unwrap();
@@ -539,6 +559,15 @@ fn large_deflection_cantilever_follows_the_elastica() {
             m.last_newton_residuals().len()
         );
         assert!((w / w_ref - 1.0).abs() < 1e-2, "k = {k}: w/L {w}");
+        // the root's bending stress follows the lever arm the load has on the bent strip
+        // (L − u), not L
+        let sigma = -p * (L * (1.0 - u) - L / 48.0) * (T / 2.0) / i;
+        let top = m.surface_stresses()[0][0][0];
+        eprintln!("k = {k}: root stress {top:.4e} Pa, |P| (L − u − x) c / I {sigma:.4e} Pa");
+        assert!(
+            (top / sigma - 1.0).abs() < 1e-2,
+            "k = {k}: root stress {top}"
+        );
         assert!((u / u_ref - 1.0).abs() < 2e-2, "k = {k}: u/L {u}");
     }
 }
