@@ -828,6 +828,15 @@ impl ShellModel {
         }
     }
 
+    /// α_B, γ = ½ − α_B, β = (1 − α_B)²/4 and the Rayleigh a, b of a dynamic analysis.
+    fn bossak_constants(&self) -> (f64, f64, f64, f64, f64) {
+        let Analysis::Dynamic { alpha_b, .. } = self.analysis else {
+            unreachable!("dynamic analyses only")
+        };
+        let (ra, rb) = self.rayleigh();
+        (alpha_b, 0.5 - alpha_b, 0.25 * (1.0 - alpha_b).powi(2), ra, rb)
+    }
+
     /// M a₀ = F(t₀) − f(u₀) − C v₀ at the start of dynamic stepping: f = K u, or the
     /// nonlinear shells' f_int(u); C = a M + b K.
     fn initial_acceleration(&mut self) -> Result<(), FemError> {
@@ -864,12 +873,7 @@ impl ShellModel {
     /// One Wood–Bossak–Zienkiewicz step, as the volume model's (REFERENCE A6; (2.85)–(2.87)):
     /// M[(1−α_B) a_{n+1} + α_B a_n] + C v_{n+1} + K u_{n+1} = F_{n+1}, C = a M + b K.
     fn bossak_step(&mut self, dt: f64) -> Result<(), FemError> {
-        let Analysis::Dynamic { alpha_b, .. } = self.analysis else {
-            unreachable!("dynamic analyses only")
-        };
-        let (ra, rb) = self.rayleigh();
-        let gamma = 0.5 - alpha_b;
-        let beta = 0.25 * (1.0 - alpha_b).powi(2);
+        let (alpha_b, gamma, beta, ra, rb) = self.bossak_constants();
         let n = self.dofs.n_eq;
         let u = self.dofs.gather(&self.st.u);
         let v = self.dofs.gather(&self.st.v);
@@ -1173,12 +1177,7 @@ impl ShellModel {
     /// M[(1−α_B) a_{n+1} + α_B a_n] + C v_{n+1} + f_int(u_{n+1}) = F_{n+1}, C = a M + b K₀,
     /// Jacobian (1−α_B)/(βΔt²) M + γ/(βΔt) C + K_T (the step's one, scaled).
     fn bossak_nonlinear(&mut self, dt: f64) -> Result<(), FemError> {
-        let Analysis::Dynamic { alpha_b, .. } = self.analysis else {
-            unreachable!("dynamic analyses only")
-        };
-        let (ra, rb) = self.rayleigh();
-        let gamma = 0.5 - alpha_b;
-        let beta = 0.25 * (1.0 - alpha_b).powi(2);
+        let (alpha_b, gamma, beta, ra, rb) = self.bossak_constants();
         let n = self.dofs.n_eq;
         if !self.st.accel_ready {
             self.initial_acceleration()?;
