@@ -834,7 +834,13 @@ impl ShellModel {
             unreachable!("dynamic analyses only")
         };
         let (ra, rb) = self.rayleigh();
-        (alpha_b, 0.5 - alpha_b, 0.25 * (1.0 - alpha_b).powi(2), ra, rb)
+        (
+            alpha_b,
+            0.5 - alpha_b,
+            0.25 * (1.0 - alpha_b).powi(2),
+            ra,
+            rb,
+        )
     }
 
     /// M a₀ = F(t₀) − f(u₀) − C v₀ at the start of dynamic stepping: f = K u, or the
