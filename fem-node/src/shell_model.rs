@@ -86,7 +86,8 @@ pub struct ShellModel {
     /// The tangent kept between nonlinear Bossak steps (taken at `State::tangent_at`).
     kept: Option<Tangent>,
     k_factor: Option<Factor>,
-    eff_factor: Option<(u64, Factor)>,
+    /// The factor of ck K + cm M for the (ck, cm) bits it was made with.
+    eff_factor: Option<((u64, u64), Factor)>,
     m_factor: Option<Factor>,
     loads: Vec<(Option<String>, Vec<f64>)>,
     histories: BTreeMap<String, History>,
@@ -766,14 +767,8 @@ impl ShellModel {
         if self.nonlinear {
             return self.newton_static();
         }
-        if self.k_factor.is_none() {
-            self.k_factor = Some(Factor::new(&self.pattern, &self.k, &mut self.symbolic)?);
-        }
         let mut rhs = self.dofs.gather(&self.external_forces(self.st.time));
-        self.k_factor
-            .as_ref()
-            .expect("set")
-            .solve_in_place(&mut rhs);
+        self.initial_factor(1.0, 0.0)?.solve_in_place(&mut rhs);
         check_finite(&rhs, "static displacement")?;
         self.dofs.scatter(&rhs, &mut self.st.u);
         self.st.v.fill(0.0);
@@ -890,19 +885,6 @@ impl ShellModel {
         let a = self.dofs.gather(&self.st.a);
         let cm = (1.0 - alpha_b) + gamma * dt * ra;
         let ck = gamma * dt * rb + beta * dt * dt;
-        if self.eff_factor.as_ref().map(|(bits, _)| *bits) != Some(dt.to_bits()) {
-            let vals: Vec<f64> = self
-                .k
-                .iter()
-                .zip(&self.m)
-                .map(|(k, m)| ck * k + cm * m)
-                .collect();
-            self.eff_factor = None;
-            self.eff_factor = Some((
-                dt.to_bits(),
-                Factor::new(&self.pattern, &vals, &mut self.symbolic)?,
-            ));
-        }
         let ut: Vec<f64> = (0..n)
             .map(|i| u[i] + dt * v[i] + dt * dt * (0.5 - beta) * a[i])
             .collect();
@@ -917,11 +899,7 @@ impl ShellModel {
         for i in 0..n {
             rhs[i] -= tmp[i] + kw[i];
         }
-        self.eff_factor
-            .as_ref()
-            .expect("set")
-            .1
-            .solve_in_place(&mut rhs);
+        self.initial_factor(ck, cm)?.solve_in_place(&mut rhs);
         check_finite(&rhs, "Bossak acceleration")?;
         let a1 = rhs;
         let u1: Vec<f64> = (0..n).map(|i| ut[i] + beta * dt * dt * a1[i]).collect();
@@ -1156,7 +1134,8 @@ impl ShellModel {
         Ok(())
     }
 
-    /// The cached factor of ck K₀ + cm M (K for statics, the Bossak matrix for a step size).
+    /// The cached factor of ck K₀ + cm M: K for statics (kept apart), the Bossak matrix of a
+    /// step size (linear steps, and the nonlinear steps' start).
     fn initial_factor(&mut self, ck: f64, cm: f64) -> Result<&Factor, FemError> {
         if cm == 0.0 && ck == 1.0 {
             if self.k_factor.is_none() {
@@ -1164,7 +1143,7 @@ impl ShellModel {
             }
             return Ok(self.k_factor.as_ref().expect("set"));
         }
-        let key = ck.to_bits() ^ cm.to_bits().rotate_left(17);
+        let key = (ck.to_bits(), cm.to_bits());
         if self.eff_factor.as_ref().map(|(bits, _)| *bits) != Some(key) {
             let vals: Vec<f64> = self
                 .k
