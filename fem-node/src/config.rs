@@ -59,6 +59,25 @@ pub struct FemConfig {
     /// `[fem.shell]`: the section of shell meshes (MITC4; FEM.md "Thin structures").
     #[serde(default)]
     pub shell: Option<ShellSection>,
+    /// `[fem.membrane]`: the structure is a finite-strain Ogden membrane (FEM.md "Membranes").
+    #[serde(default)]
+    pub membrane: Option<MembraneSection>,
+}
+
+/// `[fem.membrane]`: thickness, density and incompressible Ogden law of a membrane
+/// structure (Wellmann ch. 4.3.4: the confining rubber of the triaxial test; the membrane of
+/// `crate::membrane`).
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct MembraneSection {
+    /// Reference thickness t₀ [m].
+    pub thickness: f64,
+    /// Density ρ [kg/m³].
+    #[serde(alias = "rho")]
+    pub density: f64,
+    /// Ogden terms `[[μ₁, α₁], ...]` (μ_p in Pa; 1 to 3 terms, each μ_p α_p > 0); a
+    /// neo-Hookean membrane of shear modulus G is `[[G, 2.0]]`.
+    pub ogden: Vec<[f64; 2]>,
 }
 
 /// `[fem.shell]`: the section of the shells of a shell mesh.
@@ -142,6 +161,17 @@ pub enum MeshSpec {
         element_size: Option<f64>,
         divisions: Option<[usize; 3]>,
     },
+    /// Structured cylindrical membrane about the z axis (`element = "m3d4"` quadrilaterals or
+    /// `"m3d3"` triangles, two per quadrilateral): `radius`, `height` [m], bottom centre
+    /// `origin`, `divisions = [around, along]`. Normals point outwards; node sets `bottom`,
+    /// `top`, `all`.
+    Cylinder {
+        radius: f64,
+        height: f64,
+        origin: [f64; 3],
+        divisions: [usize; 2],
+        triangles: bool,
+    },
 }
 
 #[derive(Deserialize)]
@@ -153,9 +183,13 @@ struct MeshTable {
     size: Option<[f64; 3]>,
     origin: Option<[f64; 3]>,
     element_size: Option<f64>,
-    divisions: Option<[usize; 3]>,
-    /// A volume element kind, or "mitc4" for a plate of shells.
+    /// Three counts for a box or plate, [around, along] for a membrane cylinder.
+    divisions: Option<Vec<usize>>,
+    /// A volume element kind, "mitc4" for a plate of shells, "m3d4"/"m3d3" for a cylinder of
+    /// membranes.
     element: Option<String>,
+    radius: Option<f64>,
+    height: Option<f64>,
 }
 
 #[derive(Deserialize, Clone, Copy, PartialEq, Eq)]
@@ -200,9 +234,53 @@ impl<'de> Deserialize<'de> for MeshSpec {
                         hex8_bbar: t.hex8 == Some(Hex8Formulation::Bbar),
                     });
                 }
+                if let Some(kind @ ("m3d4" | "m3d3")) = t.element.as_deref() {
+                    let (Some(radius), Some(height)) = (t.radius, t.height) else {
+                        return Err(de::Error::custom(format!(
+                            "mesh: a generated membrane (element = \"{kind}\") is a cylinder: \
+                             give radius, height, divisions = [around, along] (and origin, its \
+                             bottom centre)"
+                        )));
+                    };
+                    if t.size.is_some() || t.element_size.is_some() || t.hex8.is_some() {
+                        return Err(de::Error::custom(
+                            "mesh: a membrane cylinder takes radius, height, divisions and origin \
+                             (not size, element_size or hex8)",
+                        ));
+                    }
+                    let d = match t.divisions.as_deref() {
+                        Some(&[around, along]) => [around, along],
+                        _ => {
+                            return Err(de::Error::custom(
+                                "mesh.divisions: a membrane cylinder needs divisions = [around, along]",
+                            ))
+                        }
+                    };
+                    return Ok(MeshSpec::Cylinder {
+                        radius,
+                        height,
+                        origin: t.origin.unwrap_or([0.0; 3]),
+                        divisions: d,
+                        triangles: kind == "m3d3",
+                    });
+                }
+                if t.radius.is_some() || t.height.is_some() {
+                    return Err(de::Error::custom(
+                        "mesh: radius and height describe a membrane cylinder (element = \"m3d4\" or \"m3d3\")",
+                    ));
+                }
                 let size = t
                     .size
                     .ok_or_else(|| de::Error::custom("mesh: missing `file` or box `size`"))?;
+                let divisions = match t.divisions.as_deref() {
+                    None => None,
+                    Some(&[a, b, c]) => Some([a, b, c]),
+                    Some(d) => {
+                        return Err(de::Error::custom(format!(
+                            "mesh.divisions: a box or plate takes three counts [x, y, z], got {d:?}"
+                        )))
+                    }
+                };
                 if t.hex8.is_some() {
                     return Err(de::Error::custom(
                         "mesh.hex8 applies to mesh files; for a box use element = \"hex8i\" or \"hex8b\"",
@@ -216,7 +294,7 @@ impl<'de> Deserialize<'de> for MeshSpec {
                             size,
                             origin,
                             element_size: t.element_size,
-                            divisions: t.divisions,
+                            divisions,
                         })
                     }
                     Some(name) => ElementKind::deserialize(de::value::StrDeserializer::<
@@ -225,7 +303,8 @@ impl<'de> Deserialize<'de> for MeshSpec {
                     .map_err(|_| {
                         de::Error::custom(format!(
                             "mesh.element: unknown element \"{name}\", expected one of tet4, \
-                             tet10, hex8, hex8i, hex8b, hex20 (volumes) or mitc4 (shells)"
+                             tet10, hex8, hex8i, hex8b, hex20 (volumes), mitc4 (shells) or \
+                             m3d4, m3d3 (membrane cylinders)"
                         ))
                     })?,
                 };
@@ -233,7 +312,7 @@ impl<'de> Deserialize<'de> for MeshSpec {
                     size,
                     origin,
                     element_size: t.element_size,
-                    divisions: t.divisions,
+                    divisions,
                     element,
                 })
             }
@@ -738,6 +817,34 @@ pub fn parse_scene_table(text: &str, table: &str) -> Result<Option<FemConfig>, S
     Ok(Some(cfg))
 }
 
+fn check_membrane(m: &MembraneSection) -> Result<(), (String, String)> {
+    if !(m.thickness.is_finite() && m.thickness > 0.0) {
+        return Err((
+            "fem.membrane.thickness".into(),
+            format!("must be > 0 m, got {}", m.thickness),
+        ));
+    }
+    check_density("fem.membrane", m.density)?;
+    if m.ogden.is_empty() || m.ogden.len() > 3 {
+        return Err((
+            "fem.membrane.ogden".into(),
+            format!("give 1 to 3 terms [μ_p (Pa), α_p], got {}", m.ogden.len()),
+        ));
+    }
+    for (p, [mu, alpha]) in m.ogden.iter().enumerate() {
+        if !(mu.is_finite() && alpha.is_finite() && *alpha != 0.0 && mu * alpha > 0.0) {
+            return Err((
+                format!("fem.membrane.ogden[{p}]"),
+                format!(
+                    "each term needs μ_p α_p > 0 (Ogden's stability condition; α_p ≠ 0), got \
+                     μ = {mu}, α = {alpha}"
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
 fn check_elastic(base: &str, e: f64, nu: f64) -> Result<(), (String, String)> {
     if !(e.is_finite() && e > 0.0) {
         return Err((
@@ -912,7 +1019,26 @@ impl FemConfig {
                 }
             }
         }
-        if self.material.is_none() && self.sections.is_empty() {
+        if let Some(m) = &self.membrane {
+            check_membrane(m)?;
+            if self.material.is_some() || !self.materials.is_empty() || !self.sections.is_empty()
+            {
+                return Err((
+                    "fem.membrane".into(),
+                    "a membrane's material is its [fem.membrane] ogden terms and density; \
+                     remove [fem.material] / [fem.materials] / [[fem.sections]]"
+                        .into(),
+                ));
+            }
+        } else if matches!(self.mesh, MeshSpec::Cylinder { .. }) {
+            return Err((
+                "fem.membrane".into(),
+                "a generated cylinder (element = \"m3d4\" / \"m3d3\") is a membrane: give \
+                 [fem.membrane] thickness, density and ogden terms"
+                    .into(),
+            ));
+        }
+        if self.material.is_none() && self.sections.is_empty() && self.membrane.is_none() {
             return Err((
                 "fem.material".into(),
                 "missing: give [fem.material] (linear elastic, every element) or \
@@ -955,6 +1081,36 @@ impl FemConfig {
             MeshSpec::File { path, .. } => {
                 if path.trim().is_empty() {
                     return Err(("fem.mesh".into(), "empty mesh file path".into()));
+                }
+            }
+            MeshSpec::Cylinder {
+                radius,
+                height,
+                origin,
+                divisions,
+                ..
+            } => {
+                for (field, v) in [("radius", radius), ("height", height)] {
+                    if !(v.is_finite() && *v > 0.0) {
+                        return Err((format!("fem.mesh.{field}"), format!("must be > 0 m, got {v}")));
+                    }
+                }
+                if origin.iter().any(|o| !o.is_finite()) {
+                    return Err(("fem.mesh.origin".into(), "must be finite".into()));
+                }
+                if divisions[0] < 3 || divisions[1] < 1 {
+                    return Err((
+                        "fem.mesh.divisions".into(),
+                        format!(
+                            "[around, along] must be at least [3, 1], got {divisions:?}"
+                        ),
+                    ));
+                }
+                if divisions[0] as u64 * divisions[1] as u64 > 10_000_000 {
+                    return Err((
+                        "fem.mesh.divisions".into(),
+                        format!("{divisions:?} makes more than 1e7 membranes"),
+                    ));
                 }
             }
             MeshSpec::Plate { size, origin, .. } => {

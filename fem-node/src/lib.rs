@@ -26,6 +26,7 @@ pub mod element;
 pub mod history;
 pub mod material;
 pub mod membrane;
+mod membrane_model;
 pub mod mesh;
 mod model;
 pub mod nonlinear;
@@ -38,14 +39,16 @@ pub mod surface;
 pub use config::{parse_scene_section, parse_scene_table};
 pub use element::ElementKind;
 pub use mesh::Mesh;
+pub use membrane_model::MembraneModel;
 pub use model::Model;
 pub use shell_model::ShellModel;
 
 use std::collections::BTreeMap;
 use std::path::Path;
 
-/// What the `fem-node` adapter asks of a structure, volume ([`Model`]) or shells
-/// ([`ShellModel`]); [`build`] picks the kind from the scene's mesh.
+/// What the `fem-node` adapter asks of a structure, volume ([`Model`]), shells
+/// ([`ShellModel`]) or membranes ([`MembraneModel`]); [`build`] picks the kind from the
+/// scene's mesh and `[fem.membrane]`.
 pub trait Structure: Send {
     fn time(&self) -> f64;
     /// The coupled surface in the reference configuration.
@@ -156,11 +159,15 @@ macro_rules! structure_by_delegation {
 }
 structure_by_delegation!(Model);
 structure_by_delegation!(ShellModel);
+structure_by_delegation!(MembraneModel);
 
-/// Builds the structure of a scene's `[fem]` table: shells for a generated plate or a mesh
-/// file without volume elements, a volume model otherwise. Relative mesh paths are resolved
+/// Builds the structure of a scene's `[fem]` table: membranes with `[fem.membrane]`, shells
+/// for a generated plate or a mesh file without volume elements, a volume model otherwise. Relative mesh paths are resolved
 /// against `base_dir`.
 pub fn build(cfg: &config::FemConfig, base_dir: &Path) -> Result<Box<dyn Structure>, FemError> {
+    if MembraneModel::is_membrane(cfg) {
+        return Ok(Box::new(MembraneModel::from_config(cfg, base_dir)?));
+    }
     if ShellModel::is_plate(cfg) {
         return Ok(Box::new(ShellModel::from_config(cfg)?));
     }

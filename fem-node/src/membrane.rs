@@ -178,3 +178,57 @@ pub fn tangent(
     }
     k
 }
+
+/// ∫ N_i dA₀ of each corner on the reference surface (the lumped mass per unit ρ t₀).
+pub fn corner_areas(x0: &[[f64; 3]]) -> Vec<f64> {
+    let mut out = vec![0.0; x0.len()];
+    for (w, n, d) in rule(x0.len()) {
+        let (gr, gs) = tangents(x0, &d);
+        let da = gr.cross(&gs).norm() * w;
+        for (o, ni) in out.iter_mut().zip(&n) {
+            *o += ni * da;
+        }
+    }
+    out
+}
+
+/// ½ ∫ (x − c)_⊥ · n dA over the current element, ⊥ the part normal to the z axis through
+/// `c`, n dA = g_r × g_s dr ds: summed over a surface closed by planes normal to z, the
+/// volume it encloses (divergence theorem; the end planes add nothing). Exact for these
+/// elements (the 2 × 2 rule integrates the bilinear quadrilateral's cubic integrand).
+pub fn lateral_volume(x: &[[f64; 3]], c: [f64; 3]) -> f64 {
+    let mut v = 0.0;
+    for (w, n, d) in rule(x.len()) {
+        let (gr, gs) = tangents(x, &d);
+        let a = gr.cross(&gs);
+        let mut p = [0.0; 2];
+        for (xi, ni) in x.iter().zip(&n) {
+            p[0] += ni * (xi[0] - c[0]);
+            p[1] += ni * (xi[1] - c[1]);
+        }
+        v += 0.5 * w * (p[0] * a[0] + p[1] * a[1]);
+    }
+    v
+}
+
+/// The speed of the fastest in-plane wave at stretches (λ_1, λ_2) of a membrane of density
+/// ρ: √(D_max/ρ), D_max the largest eigenvalue of the tangent dσ_a/d ln λ_b (by central
+/// differences) plus the larger positive stress (the geometric stiffness). At small strain
+/// D_max = 6 G (the equibiaxial mode), an upper bound of the P-wave's 4 G.
+pub fn wave_speed(law: &Ogden, l1: f64, l2: f64, density: f64) -> f64 {
+    let h: f64 = 1e-6;
+    let (e, f) = (h.exp(), (-h).exp());
+    let (a1, b1) = law.principal_stress(l1 * e, l2);
+    let (a0, b0) = law.principal_stress(l1 * f, l2);
+    let (c1, d1) = law.principal_stress(l1, l2 * e);
+    let (c0, d0) = law.principal_stress(l1, l2 * f);
+    let d11 = (a1 - a0) / (2.0 * h);
+    let d21 = (b1 - b0) / (2.0 * h);
+    let d12 = (c1 - c0) / (2.0 * h);
+    let d22 = (d1 - d0) / (2.0 * h);
+    let (m, q) = (0.5 * (d11 + d22), 0.5 * (d12 + d21));
+    let r = (0.25 * (d11 - d22).powi(2) + q * q).sqrt();
+    let (s1, s2) = law.principal_stress(l1, l2);
+    let dmax = (m + r).max(0.0) + s1.max(s2).max(0.0);
+    (dmax / density).sqrt()
+}

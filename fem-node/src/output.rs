@@ -61,7 +61,7 @@ pub fn write_cells(
 
 /// The `.vtu` writer behind both: cell c has nodes `conn[ends[c − 1]..ends[c]]` and type
 /// `types[c]`; `cell_arrays` are (name, components, flat values).
-fn write_grid(
+pub fn write_grid(
     path: &Path,
     points: &[[f64; 3]],
     conn: &[u32],

@@ -1624,7 +1624,7 @@ impl ShellInterface {
 }
 
 /// The shells whose four nodes are all selected.
-fn selected_shells(
+pub(crate) fn selected_shells(
     mesh: &Mesh,
     sel: &crate::config::Selector,
     what: &str,

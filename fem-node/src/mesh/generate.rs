@@ -227,3 +227,50 @@ pub fn plate_mesh(origin: [f64; 3], size: [f64; 3], div: [usize; 2]) -> Mesh {
         .insert("all".into(), (0..mesh.shells.len() as u32).collect());
     mesh
 }
+
+/// A cylinder of 4-node surface elements about the z axis through `origin` (its bottom
+/// centre): `div` = [around, along]; corners counter-clockwise seen from outside, so the
+/// normals point outwards. Node sets `bottom`, `top` (the end rings) and `all`; element set
+/// `all`.
+pub fn cylinder_mesh(origin: [f64; 3], radius: f64, height: f64, div: [usize; 2]) -> Mesh {
+    let (na, nl) = (div[0], div[1]);
+    let mut mesh = Mesh {
+        source: "<generated membrane cylinder>".into(),
+        ..Default::default()
+    };
+    let id = |i: usize, j: usize| (j * na + i % na) as u32;
+    for j in 0..=nl {
+        for i in 0..na {
+            let theta = 2.0 * std::f64::consts::PI * i as f64 / na as f64;
+            let node = id(i, j);
+            mesh.nodes.push([
+                origin[0] + radius * theta.cos(),
+                origin[1] + radius * theta.sin(),
+                origin[2] + height * j as f64 / nl as f64,
+            ]);
+            mesh.node_ids.push(node as u64 + 1);
+            if j == 0 {
+                mesh.node_sets.entry("bottom".into()).or_default().push(node);
+            }
+            if j == nl {
+                mesh.node_sets.entry("top".into()).or_default().push(node);
+            }
+        }
+    }
+    mesh.node_sets
+        .insert("all".into(), (0..mesh.nodes.len() as u32).collect());
+    for j in 0..nl {
+        for i in 0..na {
+            let e = mesh.shells.len() as u64 + 1;
+            mesh.shells.push(
+                [id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)],
+                e,
+                0,
+            );
+        }
+    }
+    mesh.shells
+        .sets
+        .insert("all".into(), (0..mesh.shells.len() as u32).collect());
+    mesh
+}

@@ -5,7 +5,7 @@ mod abaqus;
 mod generate;
 mod gmsh;
 
-pub use generate::{box_mesh, plate_mesh};
+pub use generate::{box_mesh, cylinder_mesh, plate_mesh};
 
 use crate::element::{self, ElementKind};
 use crate::FemError;

@@ -122,10 +122,11 @@ impl Model {
             .map_err(|(field, message)| FemError::Config { field, message })?;
         let mesh = match &cfg.mesh {
             MeshSpec::File { path, .. } => Mesh::read(&base_dir.join(path))?,
-            MeshSpec::Plate { .. } => {
+            MeshSpec::Plate { .. } | MeshSpec::Cylinder { .. } => {
                 return Err(FemError::Config {
                     field: "fem.mesh.element".into(),
-                    message: "a plate of shells is a crate::ShellModel (fem::build picks it)"
+                    message: "a plate of shells or a cylinder of membranes is a \
+                              crate::ShellModel / crate::MembraneModel (fem::build picks it)"
                         .into(),
                 })
             }

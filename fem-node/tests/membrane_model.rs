@@ -1,0 +1,318 @@
+//! Membranes as a scene's structure (`fem::MembraneModel` through `fem::build`): a tube of
+//! Wellmann's rubber (three-term Ogden, Table 4.3) inflated by a follower pressure against
+//! the closed-form pressure–stretch curve, the enclosed volume, the coupling's forces and
+//! kinematics, moving supports, snapshots, and refusals.
+
+mod common;
+
+use common::config;
+use fem::MembraneModel;
+use std::path::Path;
+
+const R: f64 = 0.0355;
+const T0: f64 = 3e-4;
+/// Wellmann Table 4.3 with μ = 0.5 MPa.
+const OGDEN: [(f64, f64); 3] = [(745.5e3, 1.3), (1.5e3, 5.0), (-11.85e3, -2.0)];
+
+fn section() -> String {
+    let terms: Vec<String> = OGDEN.iter().map(|(m, a)| format!("[{m}, {a}]")).collect();
+    format!(
+        "[fem.membrane]\nthickness = {T0}\ndensity = 5000.0\nogden = [{}]\n",
+        terms.join(", ")
+    )
+}
+
+/// A short tube, its end rings held axially only and two symmetry planes: under an internal
+/// pressure it inflates uniformly with λ_z = 1.
+fn tube(element: &str, extra: &str) -> String {
+    tube_of(element, 16, extra)
+}
+
+fn tube_of(element: &str, around: usize, extra: &str) -> String {
+    format!(
+        "[fem]\nmesh = {{ radius = {R}, height = 0.02, divisions = [{around}, 2], element = \"{element}\" }}\n\
+         analysis = {{ type = \"explicit\", safety = 0.5, rayleigh_a = 300.0 }}\n{}\
+         [[fem.supports]]\non = {{ set = \"bottom\" }}\nfix = [\"z\"]\n\
+         [[fem.supports]]\non = {{ set = \"top\" }}\nfix = [\"z\"]\n\
+         [[fem.supports]]\non = {{ plane = {{ axis = \"x\", value = 0.0, tol = 1e-9 }} }}\nfix = [\"x\"]\n\
+         [[fem.supports]]\non = {{ plane = {{ axis = \"y\", value = 0.0, tol = 1e-9 }} }}\nfix = [\"y\"]\n\
+         [fem.interface]\non = {{ set = \"all\" }}\nfaces = \"bottom\"\n\
+         [[fem.probes]]\nname = \"side\"\npoint = [{R}, 0.0, 0.01]\n{extra}",
+        section()
+    )
+}
+
+fn membrane(text: &str) -> MembraneModel {
+    MembraneModel::from_config(&config(text), Path::new("."))
+        .unwrap_or_else(|e| panic!("membrane model: {e}"))
+}
+
+fn refusal(text: &str) -> String {
+    match fem::parse_scene_section(text) {
+        Err(e) => e.to_string(),
+        Ok(Some(cfg)) => match MembraneModel::from_config(&cfg, Path::new(".")) {
+            Err(e) => e.to_string(),
+            Ok(_) => panic!("accepted:\n{text}"),
+        },
+        Ok(None) => panic!("no [fem]"),
+    }
+}
+
+/// The inflation pressure of a thin incompressible tube at hoop stretch λ with λ_z = 1:
+/// hoop stress σ = Σ μ_p (λ^α_p − λ^−α_p) (λ_3 = 1/λ), thickness t₀/λ, radius λ R, so
+/// p = σ t₀ / (λ² R). A tube of n flat facets carries the pressure on facets a distance
+/// λ R cos(π/n) from the axis, so its exact discrete relation has R cos(π/n) in place of R
+/// (n → ∞: the tube).
+fn tube_pressure(l: f64, facets: f64) -> f64 {
+    let s: f64 = OGDEN
+        .iter()
+        .map(|(m, a)| m * (l.powf(*a) - l.powf(-a)))
+        .sum();
+    s * T0 / (l * l * R * (std::f64::consts::PI / facets).cos())
+}
+
+fn stretch_at(p: f64, facets: f64) -> f64 {
+    let (mut lo, mut hi) = (1.0, 1.5);
+    for _ in 0..100 {
+        let mid = 0.5 * (lo + hi);
+        if tube_pressure(mid, facets) < p {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+#[test]
+fn tube_inflation_follows_the_closed_form_pressure_stretch_curve() {
+    let p = 2000.0;
+    // a staircase of pressure, each step held until the damped breathing mode has settled
+    let load = format!(
+        "[[fem.loads]]\ntype = \"pressure\"\non = {{ set = \"all\" }}\nvalue = {}\nhistory = \"steps\"\n\
+         [fem.histories.steps]\ntype = \"table\"\npoints = [[0.0, 0.0], [0.1, 0.5], [0.3, 0.5], [0.4, 1.0], [0.6, 1.0]]\n",
+        -p // negative: along the outward normal, i.e. an internal pressure
+    );
+    for (element, around) in [("m3d4", 16), ("m3d3", 16), ("m3d4", 64)] {
+        let n = around as f64;
+        let mut m = membrane(&tube_of(element, around, &load));
+        let window = 1e-3;
+        let (mut worst_facets, mut worst_tube): (f64, f64) = (0.0, 0.0);
+        for (steps, level) in [(300, 0.5), (300, 1.0)] {
+            for _ in 0..steps {
+                m.advance(window).unwrap();
+            }
+            let l = 1.0 + m.probe_displacement("side").unwrap()[0] / R;
+            let (facets, tube) = (stretch_at(level * p, n), stretch_at(level * p, f64::INFINITY));
+            let err = |exact: f64| (l - exact) / (exact - 1.0);
+            eprintln!(
+                "{element} × {around}: p = {:.0} Pa: hoop stretch {l:.6}; {around} facets \
+                 {facets:.6} ({:+.4} % of the strain), the tube {tube:.6} ({:+.3} %)",
+                level * p,
+                100.0 * err(facets),
+                100.0 * err(tube)
+            );
+            worst_facets = worst_facets.max(err(facets).abs());
+            worst_tube = worst_tube.max(err(tube).abs());
+            // the tube stays round and straight: every node at the same radius
+            let r: Vec<f64> = m
+                .mesh()
+                .nodes
+                .iter()
+                .enumerate()
+                .map(|(k, x)| {
+                    let u = &m.displacements()[3 * k..3 * k + 3];
+                    ((x[0] + u[0]).powi(2) + (x[1] + u[1]).powi(2)).sqrt()
+                })
+                .collect();
+            let spread =
+                r.iter().copied().fold(0.0, f64::max) - r.iter().copied().fold(1.0, f64::min);
+            // quadrilaterals: exactly; triangles: their diagonals load the two nodes of a
+            // facet unequally, a slight twist the symmetry supports resist
+            let tol = if element == "m3d4" { 1e-6 } else { 1e-3 };
+            eprintln!("  radii spread {:.2e} R", spread / R);
+            assert!(spread < tol * R, "{element}: radii spread by {spread:e} m");
+            // the enclosed volume is the polygon prism's
+            let rr = l * R;
+            let prism = 0.5 * n * rr * rr * (2.0 * std::f64::consts::PI / n).sin() * 0.02;
+            let v = m.enclosed_volume().unwrap();
+            assert!(
+                ((v - prism) / prism).abs() < tol,
+                "{element}: volume {v:e} vs {prism:e}"
+            );
+        }
+        assert!(
+            worst_facets < 1e-3,
+            "{element} × {around}: stretch off the facets' relation by {:.3} % of the strain",
+            100.0 * worst_facets
+        );
+        // the tube's own curve: the facets' error cos(π/n) − 1 (−1.9 % at 16, −0.12 % at 64)
+        let bound = 2.0 * (1.0 - (std::f64::consts::PI / n).cos()) + 1e-3;
+        assert!(worst_tube < bound, "{element} × {around}: {worst_tube} vs the tube");
+    }
+}
+
+#[test]
+fn interface_forces_accelerate_the_nodes_and_faces_orient_the_triangles() {
+    let mut m = membrane(&tube("m3d4", ""));
+    let iface = m.interface_mesh();
+    assert_eq!(iface.node_ids.len(), 16 * 3);
+    assert_eq!(iface.triangles.len(), 3 * 2 * 32);
+    // "bottom": the triangles face the axis (where the grains of a triaxial cell are)
+    let p = |k: u32| -> [f64; 3] {
+        let k = 3 * k as usize;
+        [iface.positions[k], iface.positions[k + 1], iface.positions[k + 2]]
+    };
+    for t in iface.triangles.chunks_exact(3) {
+        let [a, b, c] = [p(t[0]), p(t[1]), p(t[2])];
+        let e1 = [b[0] - a[0], b[1] - a[1]];
+        let e2 = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
+        let e1z = b[2] - a[2];
+        let n = [e1[1] * e2[2] - e1z * e2[1], e1z * e2[0] - e1[0] * e2[2]];
+        let centre = [(a[0] + b[0] + c[0]) / 3.0, (a[1] + b[1] + c[1]) / 3.0];
+        assert!(n[0] * centre[0] + n[1] * centre[1] < 0.0, "a triangle faces outwards");
+    }
+    let text_top = tube("m3d4", "").replace("faces = \"bottom\"", "faces = \"top\"");
+    let top = membrane(&text_top).interface_mesh();
+    let ids = |m: &fem::InterfaceMesh, k: usize| m.node_ids[m.triangles[k] as usize];
+    assert_eq!(
+        [ids(&top, 0), ids(&top, 1), ids(&top, 2)],
+        [ids(&iface, 0), ids(&iface, 2), ids(&iface, 1)]
+    );
+    // a radial force on one mid-height node: over a short step it moves as F/m says
+    let k = iface
+        .positions
+        .chunks_exact(3)
+        .position(|x| (x[0] - R).abs() < 1e-12 && (x[2] - 0.01).abs() < 1e-12)
+        .unwrap();
+    let mut f = vec![0.0; iface.positions.len()];
+    f[3 * k] = -0.01;
+    m.set_interface_forces(&f).unwrap();
+    assert_eq!(m.held_interface_forces(), &f[..]);
+    let dt = 1e-5;
+    m.advance(dt).unwrap();
+    let (_, v, a) = m.interface_kinematics();
+    // lumped mass of an interior node: ρ t₀ × one element's area (four quarter elements)
+    let side = 2.0 * R * (std::f64::consts::PI / 16.0).sin();
+    let mass = 5000.0 * T0 * side * 0.01;
+    let expected = -0.01 / mass;
+    assert!(
+        ((v[3 * k] / dt - expected) / expected).abs() < 0.02,
+        "velocity {} vs {}",
+        v[3 * k],
+        expected * dt
+    );
+    assert!(a[3 * k] < 0.0);
+    // a force of the wrong size or not finite is refused, naming the node
+    assert!(m.set_interface_forces(&f[3..]).is_err());
+    f[3 * k + 1] = f64::NAN;
+    let e = m.set_interface_forces(&f).unwrap_err().to_string();
+    assert!(e.contains(&format!("node {}", iface.node_ids[k])), "{e}");
+}
+
+#[test]
+fn a_moving_ring_pulls_the_tube_and_snapshots_resume_bitwise() {
+    // the top ring moves down 2 mm over 0.1 s (a triaxial cell's top platen), the rest free
+    let text = tube(
+        "m3d4",
+        "[fem.histories.down]\ntype = \"table\"\npoints = [[0.0, 0.0], [0.1, 1.0]]\n",
+    )
+    .replace(
+        "[[fem.supports]]\non = { set = \"top\" }\nfix = [\"z\"]\n",
+        "[[fem.supports]]\non = { set = \"top\" }\nfix = [\"x\", \"y\", \"z\"]\ndisplacement = [0.0, 0.0, -0.002]\nhistory = \"down\"\n",
+    );
+    let mut a = membrane(&text);
+    for _ in 0..50 {
+        a.advance(1e-3).unwrap();
+    }
+    let top = a
+        .mesh()
+        .node_sets
+        .get("top")
+        .unwrap()
+        .iter()
+        .map(|&n| a.displacements()[3 * n as usize + 2])
+        .fold(0.0, f64::min);
+    assert!((top + 0.001).abs() < 1e-12, "top ring at {top}");
+    let snap = a.snapshot();
+    for _ in 0..30 {
+        a.advance(1e-3).unwrap();
+    }
+    let mut b = membrane(&text);
+    b.restore(&snap).unwrap();
+    for _ in 0..30 {
+        b.advance(1e-3).unwrap();
+    }
+    assert_eq!(a.displacements(), b.displacements());
+    assert_eq!(a.time().to_bits(), b.time().to_bits());
+    // a snapshot of another model is refused
+    let other = membrane(&tube("m3d3", "")).snapshot();
+    let mut c = membrane(&tube("m3d4", "").replace("[16, 2]", "[12, 2]"));
+    assert!(c.restore(&other).is_err());
+}
+
+#[test]
+fn membrane_scenes_are_built_through_fem_build_and_write_their_outputs() {
+    let dir = std::env::temp_dir().join(format!("membrane-out-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let text = format!("{}[fem.output]\nvtu_every = 2\n", tube("m3d3", ""));
+    let cfg = config(&text);
+    let mut s = fem::build(&cfg, Path::new(".")).unwrap();
+    let limits = s.limits().unwrap();
+    assert_eq!(limits["explicit"], 1.0);
+    let crit = limits["critical_time_step"];
+    // small strain: L / (c √2), c = √(6 G / ρ), L the shortest edge (the triangles' 10 mm side)
+    let g = 0.5 * OGDEN.iter().map(|(m, a)| m * a).sum::<f64>();
+    let c = (6.0 * g / 5000.0).sqrt();
+    let side = 2.0 * R * (std::f64::consts::PI / 16.0).sin();
+    let expected = side.min(0.01) / (c * std::f64::consts::SQRT_2);
+    assert!(((crit - expected) / expected).abs() < 1e-3, "{crit} vs {expected}");
+    for _ in 0..4 {
+        s.advance(1e-3).unwrap();
+        s.write_outputs(&dir).unwrap();
+    }
+    let csv = std::fs::read_to_string(dir.join("fem_probes.csv")).unwrap();
+    assert!(csv.starts_with("time,volume,probe.side.ux"), "{csv}");
+    assert_eq!(csv.lines().count(), 5);
+    let vtu = std::fs::read_to_string(dir.join("fem_000004.vtu")).unwrap();
+    for name in ["stretch_1", "stress_2", "thickness", "displacement"] {
+        assert!(vtu.contains(&format!("Name=\"{name}\"")), "{name} missing");
+    }
+    assert!(std::fs::read_to_string(dir.join("fem.pvd")).unwrap().contains("fem_000002.vtu"));
+    let r = s.results();
+    assert!(r.iter().any(|(k, _)| k == "volume"));
+    assert!(s.solve_static().is_err());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn bad_membrane_scenes_are_refused_with_the_field_named() {
+    let base = tube("m3d4", "");
+    for (from, to, needle) in [
+        (
+            "analysis = { type = \"explicit\", safety = 0.5, rayleigh_a = 300.0 }\n",
+            "",
+            "fem.analysis",
+        ),
+        ("faces = \"bottom\"", "faces = \"both\"", "fem.interface.faces"),
+        ("[-11850, -2]", "[-11850, 2]", "fem.membrane.ogden[2]"),
+        ("thickness = 0.0003", "thickness = -1.0", "fem.membrane.thickness"),
+        ("divisions = [16, 2]", "divisions = [2, 2]", "fem.mesh.divisions"),
+        ("divisions = [16, 2]", "divisions = [16, 2, 1]", "divisions"),
+        ("fix = [\"z\"]", "fix = [\"z\"]\nrotations = [\"x\"]", "rotations"),
+        (
+            "safety = 0.5, rayleigh_a = 300.0",
+            "safety = 0.5, rayleigh_b = 1e-4",
+            "rayleigh_b",
+        ),
+    ] {
+        assert!(base.contains(from), "{from}");
+        let e = refusal(&base.replacen(from, to, 1));
+        assert!(e.contains(needle), "expected {needle}: {e}");
+    }
+    // a generated cylinder without a membrane section
+    let start = base.find("[fem.membrane]").unwrap();
+    let end = base.find("[[fem.supports]]").unwrap();
+    let e = refusal(&format!("{}{}", &base[..start], &base[end..]));
+    assert!(e.contains("fem.membrane"), "{e}");
+}
