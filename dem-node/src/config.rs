@@ -320,11 +320,15 @@ pub enum ParticleSource {
         shape: ShapeConfig,
     },
     /// Random non-overlapping spheres inside the box [min, max] (whole spheres inside), until
-    /// `count` particles or `mass` kg are placed (exactly one of them).
+    /// `count` particles or `mass` kg are placed (exactly one of them). With `radius`, inside
+    /// the cylinder of that radius about the vertical axis through the box's centre (and
+    /// between the box's z bounds): a triaxial sample's mould.
     Fill {
         material: String,
         min: [f64; 3],
         max: [f64; 3],
+        #[serde(default)]
+        radius: Option<f64>,
         #[serde(default)]
         count: Option<usize>,
         #[serde(default)]
@@ -415,6 +419,23 @@ pub enum WallConfig {
         #[serde(default)]
         remove_at: Option<f64>,
     },
+    /// A cylindrical wall about the z axis (e.g. the mould of a triaxial sample): bottom
+    /// centre `centre`, `radius`, `height`, as `segments` flat facets (default 64) whose
+    /// corners lie on the radius, facing the axis (particles live inside). No end caps.
+    Cylinder {
+        material: String,
+        centre: [f64; 3],
+        radius: f64,
+        height: f64,
+        #[serde(default = "default_segments")]
+        segments: u32,
+        #[serde(default)]
+        motion: Option<WallMotion>,
+        #[serde(default)]
+        load: Option<WallLoad>,
+        #[serde(default)]
+        remove_at: Option<f64>,
+    },
     /// Triangle mesh from an ASCII or binary STL file; `path` is relative to the scene file.
     /// Vertices are transformed as `scale · x + offset`.
     Stl {
@@ -450,6 +471,12 @@ impl WallConfig {
                 ..
             }
             | WallConfig::Stl {
+                motion,
+                load,
+                remove_at,
+                ..
+            }
+            | WallConfig::Cylinder {
                 motion,
                 load,
                 remove_at,
@@ -523,6 +550,25 @@ pub struct WallLoad {
     /// once).
     #[serde(default)]
     pub release: f64,
+    /// Strain control from a time on (default: none, force control throughout).
+    #[serde(default)]
+    pub drive: Option<WallDrive>,
+}
+
+fn default_segments() -> u32 {
+    64
+}
+
+/// Strain control after stress control (`[[dem.walls]] load.drive`): from `start` on the
+/// wall moves at `velocity` along the load's axis whatever the forces on it (a triaxial
+/// test's platen: consolidated under a load, then sheared at a constant rate).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct WallDrive {
+    /// Velocity in m/s along +axis.
+    pub velocity: f64,
+    /// Time in s (≥ the load's start).
+    pub start: f64,
 }
 
 fn default_axis_z() -> Axis {
@@ -1136,12 +1182,16 @@ impl DemConfig {
                     distribution,
                     velocity,
                     shape,
+                    radius,
                     ..
                 } => {
                     c.material(f("material"), material, self);
                     c.shape(&pi(&["dem", "particles"], k, &[]), shape);
                     c.finite3(f("min"), min);
                     c.finite3(f("max"), max);
+                    if let Some(r) = radius {
+                        c.positive(f("radius"), *r);
+                    }
                     c.finite3(f("velocity"), velocity);
                     c.box_max(f("max"), min, max);
                     match (count, mass) {
@@ -1235,6 +1285,25 @@ impl DemConfig {
                     c.positive(f("scale"), *scale);
                     c.finite3(f("offset"), offset);
                 }
+                WallConfig::Cylinder {
+                    material,
+                    centre,
+                    radius,
+                    height,
+                    segments,
+                    ..
+                } => {
+                    c.material(f("material"), material, self);
+                    c.finite3(f("centre"), centre);
+                    c.positive(f("radius"), *radius);
+                    c.positive(f("height"), *height);
+                    if !(8..=100_000).contains(segments) {
+                        c.fail(
+                            f("segments"),
+                            format!("must lie in [8, 100000], got {segments}"),
+                        );
+                    }
+                }
             }
             let (motion, load, remove_at) = w.kinematics();
             if let Some(l) = load {
@@ -1255,6 +1324,21 @@ impl DemConfig {
                 c.frequency(g("frequency"), l.frequency, l.amplitude != 0.0, &amplitude);
                 c.non_negative(g("start"), l.start);
                 c.non_negative(g("release"), l.release);
+                if let Some(d) = &l.drive {
+                    let h = |field: &str| pi(&["dem", "walls"], k, &["load", "drive", field]);
+                    if !d.velocity.is_finite() {
+                        c.fail(h("velocity"), format!("must be finite (m/s), got {}", d.velocity));
+                    }
+                    if !(d.start.is_finite() && d.start >= l.start) {
+                        c.fail(
+                            h("start"),
+                            format!(
+                                "must be ≥ the load's start ({} s), got {}",
+                                l.start, d.start
+                            ),
+                        );
+                    }
+                }
                 if let Some(end) = l.end {
                     if !(end.is_finite() && end > l.start) {
                         c.fail(

@@ -85,10 +85,12 @@ pub fn lattice(first: V3, spacing: f64, count: [usize; 3]) -> Vec<V3> {
 pub fn fill_box(
     min: V3,
     max: V3,
+    cylinder: Option<f64>,
     radii: &mut [f64],
     seed: u64,
     existing: &[(V3, f64)],
 ) -> Result<Vec<(V3, f64)>, String> {
+    let axis = 0.5 * (min + max);
     radii.sort_by(|a, b| b.total_cmp(a));
     let r_max = radii
         .first()
@@ -128,6 +130,12 @@ pub fn fill_box(
                 lo.y + (hi.y - lo.y) * rng.uniform(),
                 lo.z + (hi.z - lo.z) * rng.uniform(),
             );
+            if let Some(rc) = cylinder {
+                let d = ((x.x - axis.x).powi(2) + (x.y - axis.y).powi(2)).sqrt();
+                if d > rc - r {
+                    continue;
+                }
+            }
             let c = key(&x);
             let mut free = true;
             'search: for dz in -1..=1 {

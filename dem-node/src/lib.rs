@@ -317,6 +317,23 @@ impl Engine {
                         tris,
                     ));
                 }
+                WallConfig::Cylinder {
+                    material,
+                    centre,
+                    radius,
+                    height,
+                    segments,
+                    ..
+                } => {
+                    let (pos, tris) = walls::cylinder_mesh(v3(centre), *radius, *height, *segments);
+                    meshes.push(Mesh::new(
+                        &format!("cylinder{k}"),
+                        mat(material, field)?,
+                        false,
+                        pos,
+                        tris,
+                    ));
+                }
                 WallConfig::Stl {
                     material,
                     path,
@@ -367,6 +384,7 @@ impl Engine {
                         release: l.release,
                         remove_at,
                         base,
+                        drive: l.drive.as_ref().map(|d| (d.velocity, d.start)),
                     });
                 } else {
                     wall_motions.push(PrescribedMotion {
@@ -471,6 +489,7 @@ impl Engine {
                     material,
                     min,
                     max,
+                    radius,
                     count,
                     mass,
                     distribution,
@@ -542,7 +561,7 @@ impl Engine {
                         });
                         radii = bodies.iter().map(|b| b.0.bounding_radius()).collect();
                     }
-                    let placed = generate::fill_box(v3(min), v3(max), &mut radii, *seed, &existing)
+                    let placed = generate::fill_box(v3(min), v3(max), *radius, &mut radii, *seed, &existing)
                         .map_err(|message| DemError::Generation {
                             source_index: k,
                             message,
@@ -1280,7 +1299,10 @@ impl Engine {
     fn loaded_walls_kick_drift(&mut self, h: f64) {
         let t = self.state.time;
         for (w, st) in self.loaded_walls.iter().zip(&mut self.state.loaded_walls) {
-            st.v += 0.5 * h * w.acceleration(t, st.contact_force, &self.gravity);
+            match w.driven_velocity(t) {
+                Some(v) => st.v = v,
+                None => st.v += 0.5 * h * w.acceleration(t, st.contact_force, &self.gravity),
+            }
             st.u += h * st.v;
         }
     }
@@ -1290,7 +1312,10 @@ impl Engine {
         let t = self.state.time;
         let mut finite = true;
         for (w, st) in self.loaded_walls.iter().zip(&mut self.state.loaded_walls) {
-            st.v += 0.5 * h * w.acceleration(t, st.contact_force, &self.gravity);
+            match w.driven_velocity(t) {
+                Some(v) => st.v = v,
+                None => st.v += 0.5 * h * w.acceleration(t, st.contact_force, &self.gravity),
+            }
             finite &= st.u.is_finite() && st.v.is_finite();
         }
         finite
@@ -1342,7 +1367,9 @@ impl Engine {
         }
         let t = s.time;
         for (lw, st) in self.loaded_walls.iter().zip(&mut s.loaded_walls) {
-            if !lw.free(t) {
+            if let Some(v) = lw.driven_velocity(t) {
+                st.v = v;
+            } else if !lw.free(t) {
                 st.v = 0.0;
             }
         }

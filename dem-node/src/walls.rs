@@ -136,6 +136,8 @@ pub struct LoadedWall {
     pub remove_at: f64,
     /// Plane point or mesh node positions at rest before `start`.
     pub base: Vec<V3>,
+    /// Strain control (velocity along the axis, from time) after force control.
+    pub drive: Option<(f64, f64)>,
 }
 
 /// Dynamic state of a loaded wall (part of snapshots): displacement u and velocity v along
@@ -175,9 +177,20 @@ impl LoadedWall {
         f * scale
     }
 
-    /// Whether the wall moves freely at time t (released and present).
+    /// Whether the wall moves freely at time t (released, present, not driven).
     pub fn free(&self, t: f64) -> bool {
-        t >= self.start && t < self.remove_at
+        t >= self.start && t < self.remove_at && !self.driven(t)
+    }
+
+    /// The velocity of a wall under strain control at time t (`drive`), if it is.
+    pub fn driven_velocity(&self, t: f64) -> Option<f64> {
+        self.drive
+            .filter(|&(_, start)| t >= start && t < self.remove_at)
+            .map(|(v, _)| v)
+    }
+
+    pub fn driven(&self, t: f64) -> bool {
+        self.driven_velocity(t).is_some()
     }
 
     /// Acceleration along the axis at time t with contact force `contact` (0 while held).
@@ -432,6 +445,28 @@ pub fn box_mesh(min: V3, max: V3, open: &[String]) -> (Vec<V3>, Vec<[u32; 3]>) {
         }
         tris.push([a, b, c]);
         tris.push([a, c, d]);
+    }
+    (positions, tris)
+}
+
+/// A cylinder about the z axis from `centre` (bottom) up by `height`: `segments` flat facets
+/// with corners on `radius`, two triangles each, normals towards the axis.
+pub fn cylinder_mesh(centre: V3, radius: f64, height: f64, segments: u32) -> (Vec<V3>, Vec<[u32; 3]>) {
+    let n = segments;
+    let mut positions = Vec::with_capacity(2 * n as usize);
+    for level in [0.0, height] {
+        for i in 0..n {
+            let a = 2.0 * std::f64::consts::PI * i as f64 / n as f64;
+            positions.push(centre + V3::new(radius * a.cos(), radius * a.sin(), level));
+        }
+    }
+    let mut tris = Vec::with_capacity(2 * n as usize);
+    for i in 0..n {
+        let (a, b) = (i, (i + 1) % n);
+        let (c, d) = (n + b, n + a);
+        // (a, b, c, d) runs counter-clockwise seen from outside: reversed, it faces the axis
+        tris.push([a, d, c]);
+        tris.push([a, c, b]);
     }
     (positions, tris)
 }

@@ -673,6 +673,19 @@ pub struct Support {
     /// rotations for a support of rotations only, e.g. a symmetry plane).
     #[serde(default)]
     pub rotations: Option<Vec<Axis>>,
+    /// Membranes: the `fix`ed components are free until `start`, then move at `velocity`
+    /// [m/s] from wherever they are (a ring clamped to a triaxial cell's platen, which
+    /// settles under a load and is then driven at a constant rate).
+    #[serde(default)]
+    pub drive: Option<SupportDrive>,
+}
+
+/// `[[fem.supports]] drive = { velocity = [..], start = .. }` (membranes).
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SupportDrive {
+    pub velocity: [f64; 3],
+    pub start: f64,
 }
 
 fn all_axes() -> Vec<Axis> {
@@ -1241,6 +1254,32 @@ impl FemConfig {
                             format!("moves {name} by {}, but {name} is not in fix", d[c]),
                         ));
                     }
+                }
+            }
+            if let Some(d) = &s.drive {
+                let field = format!("fem.supports[{i}].drive");
+                if s.displacement.is_some() || s.history.is_some() {
+                    return Err((
+                        field,
+                        "a support is either driven or displaced by a history, not both".into(),
+                    ));
+                }
+                if !(d.start.is_finite() && d.start >= 0.0) {
+                    return Err((format!("{field}.start"), format!("must be ≥ 0 s, got {}", d.start)));
+                }
+                for (c, name) in ["x", "y", "z"].iter().enumerate() {
+                    if !d.velocity[c].is_finite() {
+                        return Err((format!("{field}.velocity"), "must be finite".into()));
+                    }
+                    if d.velocity[c] != 0.0 && !s.fix.iter().any(|a| a.index() == c) {
+                        return Err((
+                            format!("{field}.velocity"),
+                            format!("moves {name}, but {name} is not in fix"),
+                        ));
+                    }
+                }
+                if self.membrane.is_none() {
+                    return Err((field, "driven supports are offered for membranes only".into()));
                 }
             }
             if let Some(h) = &s.history {

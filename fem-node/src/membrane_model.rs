@@ -55,6 +55,13 @@ struct Prescribed {
     history: Option<String>,
 }
 
+/// A driven support component: dof, velocity [m/s], start time [s].
+#[derive(Clone, Debug)]
+struct Drive {
+    velocity: f64,
+    start: f64,
+}
+
 /// A model of membranes ready to be stepped.
 pub struct MembraneModel {
     mesh: Mesh,
@@ -70,6 +77,8 @@ pub struct MembraneModel {
     /// Per dof: held (fixed or prescribed).
     held: Vec<bool>,
     prescribed: Vec<Prescribed>,
+    /// Per dof: its drive (free before the start, then moving at the velocity).
+    drives: Vec<Option<Drive>>,
     /// Follower pressures: elements, value [Pa], history.
     pressures: Vec<(Vec<usize>, f64, Option<String>)>,
     /// Dead loads (forces, gravity) as full vectors scaled by their histories.
@@ -250,6 +259,7 @@ impl MembraneModel {
             }
         }
         let mut prescribed = Vec::new();
+        let mut drives: Vec<Option<Drive>> = vec![None; 3 * nn];
         for (i, s) in cfg.supports.iter().enumerate() {
             if s.rotations.is_some() {
                 return Err(config(
@@ -261,6 +271,13 @@ impl MembraneModel {
             for n in nodes {
                 for ax in &s.fix {
                     let c = ax.index();
+                    if let Some(d) = &s.drive {
+                        drives[3 * n as usize + c] = Some(Drive {
+                            velocity: d.velocity[c],
+                            start: d.start,
+                        });
+                        continue;
+                    }
                     held[3 * n as usize + c] = true;
                     if let Some(d) = s.displacement.filter(|d| d[c] != 0.0) {
                         prescribed.push(Prescribed {
@@ -442,6 +459,7 @@ impl MembraneModel {
             node_mass,
             held,
             prescribed,
+            drives,
             pressures,
             loads,
             histories: cfg.histories.clone(),
@@ -682,9 +700,19 @@ impl MembraneModel {
         let h = dt / n as f64;
         let t0 = self.st.time;
         for i in 0..n {
+            let ts = t0 + dt * i as f64 / n as f64;
             let t = t0 + dt * (i + 1) as f64 / n as f64;
+            // a driven component over this substep: from its start on (by the substep's start)
+            let driven = |d: &Option<Drive>| d.as_ref().filter(|d| ts >= d.start).map(|d| d.velocity);
             for k in 0..self.st.u.len() {
-                if !self.held[k] {
+                if self.held[k] {
+                    continue;
+                }
+                if let Some(vel) = driven(&self.drives[k]) {
+                    self.st.v[k] = vel;
+                    self.st.a[k] = 0.0;
+                    self.st.u[k] += h * vel;
+                } else {
                     self.st.v[k] += 0.5 * h * self.st.a[k];
                     self.st.u[k] += h * self.st.v[k];
                 }
@@ -693,7 +721,7 @@ impl MembraneModel {
             let f = self.net_forces(t, &self.st.u);
             let damp = 1.0 / (1.0 + 0.5 * h * self.damping);
             for k in 0..f.len() {
-                if self.held[k] {
+                if self.held[k] || driven(&self.drives[k]).is_some() {
                     continue;
                 }
                 let af = f[k] / self.node_mass[k / 3];

@@ -316,3 +316,39 @@ fn bad_membrane_scenes_are_refused_with_the_field_named() {
     let e = refusal(&format!("{}{}", &base[..start], &base[end..]));
     assert!(e.contains("fem.membrane"), "{e}");
 }
+
+#[test]
+fn a_driven_ring_is_free_until_its_start_then_moves_at_its_velocity() {
+    // the top ring: x, y held; z free until 0.03 s, then driven down at 10 mm/s from where
+    // it is; an internal pressure pulls it along the axis meanwhile (the tube's ends are
+    // open, so only the membrane's shear moves it: it stays near z = H)
+    let text = tube(
+        "m3d4",
+        "[[fem.loads]]\ntype = \"pressure\"\non = { set = \"all\" }\nvalue = -500.0\n",
+    )
+    .replace(
+        "[[fem.supports]]\non = { set = \"top\" }\nfix = [\"z\"]\n",
+        "[[fem.supports]]\non = { set = \"top\" }\nfix = [\"x\", \"y\"]\n\
+         [[fem.supports]]\non = { set = \"top\" }\nfix = [\"z\"]\ndrive = { velocity = [0.0, 0.0, -0.01], start = 0.03 }\n",
+    );
+    let mut m = membrane(&text);
+    let top: Vec<usize> = m.mesh().node_sets["top"].iter().map(|&n| 3 * n as usize + 2).collect();
+    for _ in 0..30 {
+        m.advance(1e-3).unwrap();
+    }
+    let at_start: Vec<f64> = top.iter().map(|&k| m.displacements()[k]).collect();
+    assert!(at_start.iter().any(|u| u.abs() > 1e-9), "the ring did not float: {at_start:?}");
+    for _ in 0..20 {
+        m.advance(1e-3).unwrap();
+    }
+    for (&k, u0) in top.iter().zip(&at_start) {
+        let moved = m.displacements()[k] - u0;
+        assert!((moved + 2e-4).abs() < 1e-12, "moved {moved}");
+    }
+    let (_, v, a) = m.interface_kinematics();
+    assert!(v.iter().skip(2).step_by(3).any(|&vz| vz == -0.01));
+    assert!(a.iter().all(|x| x.is_finite()));
+    // refused: a drive on a volume model, a drive moving a free component
+    let e = refusal(&text.replace("fix = [\"z\"]\ndrive", "fix = [\"x\"]\ndrive"));
+    assert!(e.contains("drive.velocity"), "{e}");
+}
