@@ -266,3 +266,81 @@ fn bad_loads_name_the_field() {
     assert!(err.message.contains("dem.walls[0].load"), "{err}");
     assert!(err.message.contains("not both"), "{err}");
 }
+
+#[test]
+fn a_driven_plate_leaves_force_control_and_moves_at_its_velocity_from_where_it_is() {
+    // falls freely under its weight until 0.05 s, then is driven up at 0.2 m/s whatever the
+    // forces: u(t) = u(0.05) + 0.2 (t − 0.05)
+    let load = "name = \"plate\", mass = 2.0, drive = { velocity = 0.2, start = 0.05 }";
+    let mut e = engine(&plate_scene(-9.81, 1.0, load, ""));
+    e.advance(500).unwrap(); // t = 0.05
+    let u0 = result(&e, "plate.displacement");
+    assert!(u0 < -0.01, "fell: {u0}");
+    e.advance(1000).unwrap(); // t = 0.15
+    let u = result(&e, "plate.displacement");
+    assert!((u - u0 - 0.2 * 0.1).abs() < 1e-12, "u = {u}, from {u0}");
+    assert_eq!(result(&e, "plate.velocity"), 0.2);
+    // refused: a drive before the load's start
+    let bad = plate_scene(
+        -9.81,
+        1.0,
+        "mass = 2.0, start = 0.1, drive = { velocity = 0.2, start = 0.05 }",
+        "",
+    );
+    let err = config_error(&bad);
+    assert!(err.contains("load.drive.start"), "{err}");
+}
+
+#[test]
+fn a_cylinder_wall_holds_a_fill_inside_its_radius() {
+    // spheres filled into a cylinder of radius 20 mm, settling on a floor; the mould's
+    // facets face the axis, so every sphere stays inside
+    let scene = format!(
+        r#"
+[dem]
+time_step = 2e-5
+gravity = [0.0, 0.0, -9.81]
+{GRAIN}{STEEL}
+[[dem.walls]]
+kind = "plane"
+material = "steel"
+point = [0.0, 0.0, 0.0]
+normal = [0.0, 0.0, 1.0]
+[[dem.walls]]
+kind = "cylinder"
+material = "steel"
+centre = [0.0, 0.0, 0.0]
+radius = 0.02
+height = 0.1
+segments = 32
+[[dem.particles]]
+kind = "fill"
+material = "grain"
+min = [-0.02, -0.02, 0.0]
+max = [0.02, 0.02, 0.08]
+radius = 0.02
+count = 60
+distribution = {{ kind = "uniform", min = 0.003, max = 0.004 }}
+"#
+    );
+    let mut e = engine(&scene);
+    let p = e.particles();
+    assert_eq!(p.position.len(), 60);
+    for (x, r) in p.position.iter().zip(&p.radius) {
+        assert!((x.x * x.x + x.y * x.y).sqrt() <= 0.02 - r + 1e-12, "{x:?} outside");
+    }
+    e.advance(10_000).unwrap(); // 0.2 s: settled
+    let apothem = 0.02 * (std::f64::consts::PI / 32.0).cos();
+    let p = e.particles();
+    for (x, r) in p.position.iter().zip(&p.radius) {
+        let d = (x.x * x.x + x.y * x.y).sqrt();
+        assert!(d + r < apothem + 0.05 * r, "a sphere at {d} m left the mould");
+        assert!(x.z > 0.0);
+    }
+    let bad = scene.replace("segments = 32", "segments = 3");
+    assert!(config_error(&bad).contains("segments"));
+}
+
+fn config_error(text: &str) -> String {
+    dem::parse_scene_section(text).unwrap_err().to_string()
+}
