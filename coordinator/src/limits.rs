@@ -9,7 +9,7 @@
 //! | 2-D discs: critical step (Madan 2.14–2.16) | `dem.critical_time_step`, `dem.discs` | refused above Δt_cr = 2/ν_max (Lanczos on the initial contacts) |
 //! | DDEM convergence (Madan 3.13–3.14) | `dem.ddem_spectral_radius`, `dem.ddem_kn_over_ep`, `dem.ddem_poisson_ratio` | refused at ρ(B) ≥ 1 of the initial packing, naming k_n/E_p, ν_p and the limit |
 //! | FEM explicit critical step | `fem.critical_time_step`, `fem.explicit` | reported: the node sub-steps each window below it |
-//! | coupling window (two-way) | `dem.contact_stiffness_typical` (else `_max`), `fem.interface_node_mass_min` | Δt^C ≤ C_schedule · T_c, T_c = 2π √(M_node / k_c) |
+//! | coupling window (two-way) | `dem.interface_contact_stiffness_typical` (else `contact_stiffness_typical`, else `_max`), `fem.interface_node_mass_min` | Δt^C ≤ C_schedule · T_c, T_c = 2π √(M_node / k_c) |
 //!
 //! The coupling window limit: the interface forces reach the structure one window late (JIT:
 //! computed with extrapolated mesh motion; predictive: the forces of the previous window), so
@@ -124,10 +124,15 @@ impl From<&Scene> for SceneFacts {
 }
 
 /// The contact stiffness k_c of the window limit (N/m) and which DEM number it is: the
-/// stiffness at the mean particle radius when the DEM reports it, else the stiffest contact.
+/// particle–interface stiffness at the mean particle radius when the DEM reports it, else
+/// the typical stiffness of any contact, else the stiffest contact.
 pub fn contact_stiffness(dem: &BTreeMap<String, f64>) -> Option<(f64, &'static str)> {
-    dem.get("contact_stiffness_typical")
-        .map(|&k| (k, "typical contact (mean radius)"))
+    dem.get("interface_contact_stiffness_typical")
+        .map(|&k| (k, "typical particle–interface contact (mean radius)"))
+        .or_else(|| {
+            dem.get("contact_stiffness_typical")
+                .map(|&k| (k, "typical contact (mean radius)"))
+        })
         .or_else(|| {
             dem.get("contact_stiffness_max")
                 .map(|&k| (k, "stiffest contact"))
@@ -271,7 +276,12 @@ pub fn assess(
             Level::Info,
             "FEM explicit critical step",
             format!(
-                "Δt_crit = {crit:.3e} s (Lanczos); the FEM node sub-steps each window of {w:.3e} s ({} substeps or more)",
+                "Δt_crit = {crit:.3e} s ({}); the FEM node sub-steps each window of {w:.3e} s ({} substeps or more)",
+                if f.contains_key("membrane") {
+                    "its membranes' shortest edge over the fastest wave, now"
+                } else {
+                    "Lanczos"
+                },
                 (w / crit).ceil()
             ),
         );

@@ -550,6 +550,10 @@ pub struct WallLoad {
     /// once).
     #[serde(default)]
     pub release: f64,
+    /// Duration (s) over which the applied force rises linearly from 0 after `start`,
+    /// default 0 (at once); the weight acts in full from `start`.
+    #[serde(default)]
+    pub ramp: f64,
     /// Strain control from a time on (default: none, force control throughout).
     #[serde(default)]
     pub drive: Option<WallDrive>,
@@ -1324,6 +1328,7 @@ impl DemConfig {
                 c.frequency(g("frequency"), l.frequency, l.amplitude != 0.0, &amplitude);
                 c.non_negative(g("start"), l.start);
                 c.non_negative(g("release"), l.release);
+                c.non_negative(g("ramp"), l.ramp);
                 if let Some(d) = &l.drive {
                     let h = |field: &str| pi(&["dem", "walls"], k, &["load", "drive", field]);
                     if !d.velocity.is_finite() {

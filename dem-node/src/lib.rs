@@ -385,6 +385,7 @@ impl Engine {
                         remove_at,
                         base,
                         drive: l.drive.as_ref().map(|d| (d.velocity, d.start)),
+                        ramp: l.ramp,
                     });
                 } else {
                     wall_motions.push(PrescribedMotion {

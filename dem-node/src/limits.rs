@@ -13,6 +13,10 @@
 //!   on the sleeper's CI variant (one stone size) carry over to the polydisperse full-size
 //!   bed with the mean radius (JIT stable at 0.034 T_c, diverging at 0.068 T_c on both), not
 //!   with the largest stone, which is one of thousands (docs/speed-accuracy.md).
+//! - `interface_contact_stiffness_typical` (with an `interface_material`): the same over the
+//!   particle–interface pairs only: what the coupling window's limit needs (the interface
+//!   nodes touch particles, not particles touching particles; a soft membrane's contacts
+//!   are thousands of times softer than the glass beads' among themselves).
 //! - `contact_duration_min`: the shortest Hertz contact duration at a 1 m/s impact,
 //!   t_c = 2.87 (m*²/(R* E*² v))^{1/5}, over the same pairs with the smallest radii (and
 //!   masses) of each material; m* = m for a wall.
@@ -112,6 +116,7 @@ pub fn contact_limits(
     let mut k_max = 0.0f64;
     let mut k_typical = 0.0f64;
     let mut t_min = f64::INFINITY;
+    let mut k_interface = 0.0f64;
     // k_n of a particle pair with radii ra, rb at the reference overlap
     let pair_k = |e_star: f64, ra: f64, rb: f64| {
         hertz_stiffness(
@@ -144,6 +149,7 @@ pub fn contact_limits(
             let e_star = materials.pair(a, w).e_star;
             k_max = k_max.max(wall_k(e_star, ea.r_max));
             k_typical = k_typical.max(wall_k(e_star, ea.r_mean()));
+            k_interface = k_interface.max(wall_k(e_star, ea.r_mean()));
             t_min = t_min.min(hertz_contact_duration(
                 ea.m_of_r_min,
                 ea.r_min,
@@ -161,6 +167,9 @@ pub fn contact_limits(
         ("contact_stiffness_typical".into(), k_typical),
         ("contact_duration_min".into(), t_min),
     ];
+    if interface_material.is_some() {
+        out.push(("interface_contact_stiffness_typical".into(), k_interface));
+    }
     // the dilated-polyhedron validity limit
     let (mut v_max, mut f_max) = (f64::INFINITY, f64::INFINITY);
     let mut limit = |e_star: f64, r_eff: f64, reach: f64, m_eff: f64| {

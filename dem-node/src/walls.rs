@@ -138,6 +138,8 @@ pub struct LoadedWall {
     pub base: Vec<V3>,
     /// Strain control (velocity along the axis, from time) after force control.
     pub drive: Option<(f64, f64)>,
+    /// Rise time of the applied force after `start` (0: at once).
+    pub ramp: f64,
 }
 
 /// Dynamic state of a loaded wall (part of snapshots): displacement u and velocity v along
@@ -173,6 +175,9 @@ impl LoadedWall {
         let mut f = self.force;
         if self.omega > 0.0 {
             f += self.amplitude * (self.omega * (t - self.start)).sin();
+        }
+        if self.ramp > 0.0 {
+            f *= ((t - self.start) / self.ramp).min(1.0);
         }
         f * scale
     }

@@ -763,6 +763,30 @@ impl MembraneModel {
         )
     }
 
+    /// For a generated cylinder: the interface forces' sum along each node's outward radial
+    /// direction [N] (grains inside pushing out: positive; a confined sample carries the
+    /// confining pressure times the membrane's area this way).
+    pub fn outward_force(&self) -> Option<f64> {
+        let c = self.cylinder_centre?;
+        Some(
+            self.iface_nodes
+                .iter()
+                .enumerate()
+                .map(|(k, &n)| {
+                    let x = self.current(n as usize);
+                    let (dx, dy) = (x[0] - c[0], x[1] - c[1]);
+                    let r = (dx * dx + dy * dy).sqrt();
+                    let f = &self.st.interface_forces[3 * k..3 * k + 2];
+                    if r > 0.0 {
+                        (f[0] * dx + f[1] * dy) / r
+                    } else {
+                        0.0
+                    }
+                })
+                .sum(),
+        )
+    }
+
     /// Per element, the mean over its points of (λ_1, λ_2, σ_1, σ_2) (largest stretch first).
     pub fn element_states(&self) -> Vec<[f64; 4]> {
         (0..self.elems.len())
@@ -796,6 +820,7 @@ impl MembraneModel {
             ("structure_mass".to_string(), self.total_mass()),
             ("interface_nodes".to_string(), self.iface_nodes.len() as f64),
             ("explicit".to_string(), 1.0),
+            ("membrane".to_string(), 1.0),
             ("critical_time_step".to_string(), self.critical_time_step()),
         ]);
         let masses: Vec<f64> = self
@@ -845,8 +870,8 @@ impl MembraneModel {
         Ok(())
     }
 
-    /// After each window: a row of `fem_probes.csv` (time, the enclosed volume of a
-    /// cylinder, probe displacements) and `fem_<window>.vtu` every `output.vtu_every`
+    /// After each window: a row of `fem_probes.csv` (time; for a cylinder its enclosed
+    /// volume and outward interface force; probe displacements) and `fem_<window>.vtu` every `output.vtu_every`
     /// windows.
     pub fn write_outputs(&mut self, out_dir: &Path) -> Result<(), FemError> {
         let io = |e: std::io::Error, p: &Path| FemError::Io {
@@ -862,7 +887,7 @@ impl MembraneModel {
             if !self.st.csv_started {
                 text.push_str("time");
                 if volume.is_some() {
-                    text.push_str(",volume");
+                    text.push_str(",volume,outward_force");
                 }
                 for (name, _) in &self.probes {
                     for c in ["ux", "uy", "uz"] {
@@ -873,7 +898,8 @@ impl MembraneModel {
             }
             text.push_str(&format!("{:.9e}", self.st.time));
             if let Some(v) = volume {
-                text.push_str(&format!(",{v:.9e}"));
+                let f = self.outward_force().unwrap_or(0.0);
+                text.push_str(&format!(",{v:.9e},{f:.9e}"));
             }
             for &(_, n) in &self.probes {
                 for c in 0..3 {
@@ -941,6 +967,9 @@ impl MembraneModel {
         ];
         if let Some(v) = self.enclosed_volume() {
             r.push(("volume".to_string(), v));
+        }
+        if let Some(f) = self.outward_force() {
+            r.push(("interface_force.outward".to_string(), f));
         }
         for (name, n) in &self.probes {
             for (c, ax) in ["ux", "uy", "uz"].iter().enumerate() {

@@ -272,7 +272,7 @@ fn membrane_scenes_are_built_through_fem_build_and_write_their_outputs() {
         s.write_outputs(&dir).unwrap();
     }
     let csv = std::fs::read_to_string(dir.join("fem_probes.csv")).unwrap();
-    assert!(csv.starts_with("time,volume,probe.side.ux"), "{csv}");
+    assert!(csv.starts_with("time,volume,outward_force,probe.side.ux"), "{csv}");
     assert_eq!(csv.lines().count(), 5);
     let vtu = std::fs::read_to_string(dir.join("fem_000004.vtu")).unwrap();
     for name in ["stretch_1", "stress_2", "thickness", "displacement"] {

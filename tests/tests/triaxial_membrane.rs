@@ -1,0 +1,124 @@
+//! Wellmann's triaxial test of glass beads in an Ogden membrane (ch. 4.3.4) at CI size, over
+//! zenoh with real processes: scenes/triaxial-membrane-prep-ci.toml pours the beads into a
+//! rigid mould and presses them with 1 kPa; scenes/triaxial-membrane-ci.toml cuts the sample,
+//! confines it in the membrane under a 100 kPa cell pressure and shears it by the top platen.
+//! `TRIAXIAL_DIR=<dir>` keeps the outputs.
+
+use cosim_tests::*;
+
+fn column(text: &str, name: &str) -> Vec<f64> {
+    csv_column(text, name)
+        .iter()
+        .map(|v| v.parse().unwrap())
+        .collect()
+}
+
+/// Means over consecutive blocks of `n` values.
+fn means(v: &[f64], n: usize) -> Vec<f64> {
+    v.chunks(n).map(|c| c.iter().sum::<f64>() / c.len() as f64).collect()
+}
+
+#[test]
+fn glass_beads_in_a_membrane_carry_the_cell_pressure_and_gain_strength_when_sheared() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = std::env::var("TRIAXIAL_DIR").map_or(tmp.path().to_path_buf(), Into::into);
+    std::fs::create_dir_all(&dir).unwrap();
+    let scenes = root().join("scenes");
+
+    // 1. the sample in the mould at 1 kPa
+    let prep = std::fs::read_to_string(scenes.join("triaxial-membrane-prep-ci.toml")).unwrap();
+    let s = run_scene(&dir, "prep.toml", &prep);
+    assert_eq!(s["status"], "completed", "{s}");
+    let prep_out = dir.join("out-prep.toml/dem");
+    let series = std::fs::read_to_string(prep_out.join("dem_timeseries.csv")).unwrap();
+    let force = *column(&series, "platen.contact_force").last().unwrap();
+    let ke = *column(&series, "kinetic_energy").last().unwrap();
+    eprintln!("prepared: platen force {force:.4} N (1 kPa: 0.452 N), kinetic energy {ke:e} J");
+    assert!((force - 0.452).abs() < 0.1 * 0.452, "platen force {force} N");
+    assert!(ke < 1e-5, "not settled: {ke} J");
+
+    // 2. cut, confined, sheared
+    let beads = prep_out.join("particles_final.csv");
+    let text = std::fs::read_to_string(scenes.join("triaxial-membrane-ci.toml"))
+        .unwrap()
+        .replace(
+            "../out/triaxial-membrane-prep-ci/dem/particles_final.csv",
+            beads.to_str().unwrap(),
+        );
+    let s = run_scene(&dir, "triaxial.toml", &text);
+    assert_eq!(s["status"], "completed", "{s}");
+    let out = dir.join("out-triaxial.toml");
+    let dem = std::fs::read_to_string(out.join("dem/dem_timeseries.csv")).unwrap();
+    let fem = std::fs::read_to_string(out.join("fem/fem_probes.csv")).unwrap();
+    let (t, u, f) = (
+        column(&dem, "time"),
+        column(&dem, "platen.displacement"),
+        column(&dem, "platen.contact_force"),
+    );
+    let (volume, outward, bulge) = (
+        column(&fem, "volume"),
+        column(&fem, "outward_force"),
+        column(&fem, "probe.middle.ux"),
+    );
+    assert_eq!(t.len(), volume.len(), "one row per window on both sides");
+    // 2 ms means (100 windows): the platen's force rattles with the few beads under it
+    let n = 100;
+    let (t, u, f, volume, outward, bulge) = (
+        means(&t, n),
+        means(&u, n),
+        means(&f, n),
+        means(&volume, n),
+        means(&outward, n),
+        means(&bulge, n),
+    );
+    let p = 100e3;
+    let start = t.iter().position(|&x| x > 0.03).unwrap(); // the first block of shearing
+    let h0 = 0.045 + u[start - 1];
+    let mut peak: f64 = 0.0;
+    for k in 0..t.len() {
+        let h = 0.045 + u[k];
+        let area = volume[k] / h; // the mean cross-section
+        let ratio = f[k] / (area * p);
+        let lateral = outward[k] / (p * 2.0 * (std::f64::consts::PI * area).sqrt() * h);
+        let strain = (h0 - h) / h0;
+        eprintln!(
+            "t = {:.4} s  axial strain {:+.4}  σ₁/σ₃ = {ratio:.3}  volume {:.0} mm³  grains' \
+             outward force / (p × lateral area) = {lateral:.3}  bulge {:.3e} m",
+            t[k],
+            strain,
+            volume[k] * 1e9,
+            bulge[k]
+        );
+        if k >= start {
+            peak = peak.max(ratio);
+            // the grains hold the membrane out against the cell pressure (the clamped rings
+            // take the rest)
+            assert!(
+                (0.8..=1.0).contains(&lateral),
+                "t = {}: the grains carry {lateral} of the cell pressure",
+                t[k]
+            );
+        }
+        if k == start - 1 {
+            // consolidated isotropically: σ₁ ≈ σ₃
+            assert!((0.85..=1.25).contains(&ratio), "consolidated at σ₁/σ₃ = {ratio}");
+        }
+    }
+    let last = t.len() - 1;
+    let strain = (h0 - 0.045 - u[last]) / h0;
+    eprintln!("sheared to {strain:.4}; peak σ₁/σ₃ {peak:.3}");
+    assert!(strain > 0.055, "sheared to {strain}");
+    assert!(
+        (1.25..3.5).contains(&peak),
+        "σ₁/σ₃ peaks at {peak} (W: ≈ 2.5 at full size)"
+    );
+    // the membrane bulges out at mid-height as the sample shortens
+    assert!(
+        bulge[last] > bulge[start - 1] + 1e-5,
+        "mid-height radius {:e} → {:e}",
+        bulge[start - 1],
+        bulge[last]
+    );
+    let results = &s["nodes"]["fem"]["results"];
+    assert!(results["volume"].as_f64().unwrap() > 0.0, "{results}");
+}
