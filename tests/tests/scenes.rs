@@ -1,7 +1,8 @@
 //! Every shipped scene passes `cosim check` (real nodes read their tables, build their models
 //! and report their limits), except the sleeper's later steps, which must name the bed file
 //! the step before writes when it has not been run yet (sleeper-compact.toml reads
-//! sleeper-bed's, sleeper.toml sleeper-compact's; the same for the -poly chain). (plate-python.toml needs the Python node's
+//! sleeper-bed's, sleeper.toml sleeper-compact's; the same for the -poly chain and the
+//! triaxial cells' membrane steps). (plate-python.toml needs the Python node's
 //! packages and is run by python_node.rs.)
 
 use cosim_tests::{cosim, root, run};
@@ -40,6 +41,14 @@ fn every_shipped_scene_checks() {
         | "ddem-uniaxial-dem.toml"
         | "ddem-biaxial.toml"
         | "ddem-shear.toml" => Some(("out/ddem-pack/dem/discs_final.csv", "dem.discs[0].path")),
+        "triaxial-membrane-ci.toml" => Some((
+            "out/triaxial-membrane-prep-ci/dem/particles_final.csv",
+            "dem.particles[0].path",
+        )),
+        "triaxial-membrane.toml" => Some((
+            "out/triaxial-membrane-prep/dem/particles_final.csv",
+            "dem.particles[0].path",
+        )),
         "ddem-wave.toml" | "ddem-shear-wave.toml" => Some((
             "out/ddem-wave-pack/dem/discs_final.csv",
             "dem.discs[0].path",
