@@ -1332,7 +1332,10 @@ impl DemConfig {
                 if let Some(d) = &l.drive {
                     let h = |field: &str| pi(&["dem", "walls"], k, &["load", "drive", field]);
                     if !d.velocity.is_finite() {
-                        c.fail(h("velocity"), format!("must be finite (m/s), got {}", d.velocity));
+                        c.fail(
+                            h("velocity"),
+                            format!("must be finite (m/s), got {}", d.velocity),
+                        );
                     }
                     if !(d.start.is_finite() && d.start >= l.start) {
                         c.fail(

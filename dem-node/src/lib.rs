@@ -562,11 +562,12 @@ impl Engine {
                         });
                         radii = bodies.iter().map(|b| b.0.bounding_radius()).collect();
                     }
-                    let placed = generate::fill_box(v3(min), v3(max), *radius, &mut radii, *seed, &existing)
-                        .map_err(|message| DemError::Generation {
-                            source_index: k,
-                            message,
-                        })?;
+                    let placed =
+                        generate::fill_box(v3(min), v3(max), *radius, &mut radii, *seed, &existing)
+                            .map_err(|message| DemError::Generation {
+                                source_index: k,
+                                message,
+                            })?;
                     if bodies.is_empty() {
                         for (x, r) in placed {
                             particles.push(x, v3(velocity), V3::zeros(), r, rho, m);

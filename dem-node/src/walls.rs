@@ -456,7 +456,12 @@ pub fn box_mesh(min: V3, max: V3, open: &[String]) -> (Vec<V3>, Vec<[u32; 3]>) {
 
 /// A cylinder about the z axis from `centre` (bottom) up by `height`: `segments` flat facets
 /// with corners on `radius`, two triangles each, normals towards the axis.
-pub fn cylinder_mesh(centre: V3, radius: f64, height: f64, segments: u32) -> (Vec<V3>, Vec<[u32; 3]>) {
+pub fn cylinder_mesh(
+    centre: V3,
+    radius: f64,
+    height: f64,
+    segments: u32,
+) -> (Vec<V3>, Vec<[u32; 3]>) {
     let n = segments;
     let mut positions = Vec::with_capacity(2 * n as usize);
     for level in [0.0, height] {

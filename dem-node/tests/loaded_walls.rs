@@ -327,14 +327,20 @@ distribution = {{ kind = "uniform", min = 0.003, max = 0.004 }}
     let p = e.particles();
     assert_eq!(p.position.len(), 60);
     for (x, r) in p.position.iter().zip(&p.radius) {
-        assert!((x.x * x.x + x.y * x.y).sqrt() <= 0.02 - r + 1e-12, "{x:?} outside");
+        assert!(
+            (x.x * x.x + x.y * x.y).sqrt() <= 0.02 - r + 1e-12,
+            "{x:?} outside"
+        );
     }
     e.advance(10_000).unwrap(); // 0.2 s: settled
     let apothem = 0.02 * (std::f64::consts::PI / 32.0).cos();
     let p = e.particles();
     for (x, r) in p.position.iter().zip(&p.radius) {
         let d = (x.x * x.x + x.y * x.y).sqrt();
-        assert!(d + r < apothem + 0.05 * r, "a sphere at {d} m left the mould");
+        assert!(
+            d + r < apothem + 0.05 * r,
+            "a sphere at {d} m left the mould"
+        );
         assert!(x.z > 0.0);
     }
     let bad = scene.replace("segments = 32", "segments = 3");

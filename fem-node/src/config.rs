@@ -250,11 +250,9 @@ impl<'de> Deserialize<'de> for MeshSpec {
                     }
                     let d = match t.divisions.as_deref() {
                         Some(&[around, along]) => [around, along],
-                        _ => {
-                            return Err(de::Error::custom(
-                                "mesh.divisions: a membrane cylinder needs divisions = [around, along]",
-                            ))
-                        }
+                        _ => return Err(de::Error::custom(
+                            "mesh.divisions: a membrane cylinder needs divisions = [around, along]",
+                        )),
                     };
                     return Ok(MeshSpec::Cylinder {
                         radius,
@@ -1034,8 +1032,7 @@ impl FemConfig {
         }
         if let Some(m) = &self.membrane {
             check_membrane(m)?;
-            if self.material.is_some() || !self.materials.is_empty() || !self.sections.is_empty()
-            {
+            if self.material.is_some() || !self.materials.is_empty() || !self.sections.is_empty() {
                 return Err((
                     "fem.membrane".into(),
                     "a membrane's material is its [fem.membrane] ogden terms and density; \
@@ -1105,7 +1102,10 @@ impl FemConfig {
             } => {
                 for (field, v) in [("radius", radius), ("height", height)] {
                     if !(v.is_finite() && *v > 0.0) {
-                        return Err((format!("fem.mesh.{field}"), format!("must be > 0 m, got {v}")));
+                        return Err((
+                            format!("fem.mesh.{field}"),
+                            format!("must be > 0 m, got {v}"),
+                        ));
                     }
                 }
                 if origin.iter().any(|o| !o.is_finite()) {
@@ -1114,9 +1114,7 @@ impl FemConfig {
                 if divisions[0] < 3 || divisions[1] < 1 {
                     return Err((
                         "fem.mesh.divisions".into(),
-                        format!(
-                            "[around, along] must be at least [3, 1], got {divisions:?}"
-                        ),
+                        format!("[around, along] must be at least [3, 1], got {divisions:?}"),
                     ));
                 }
                 if divisions[0] as u64 * divisions[1] as u64 > 10_000_000 {
@@ -1265,7 +1263,10 @@ impl FemConfig {
                     ));
                 }
                 if !(d.start.is_finite() && d.start >= 0.0) {
-                    return Err((format!("{field}.start"), format!("must be ≥ 0 s, got {}", d.start)));
+                    return Err((
+                        format!("{field}.start"),
+                        format!("must be ≥ 0 s, got {}", d.start),
+                    ));
                 }
                 for (c, name) in ["x", "y", "z"].iter().enumerate() {
                     if !d.velocity[c].is_finite() {
@@ -1279,7 +1280,10 @@ impl FemConfig {
                     }
                 }
                 if self.membrane.is_none() {
-                    return Err((field, "driven supports are offered for membranes only".into()));
+                    return Err((
+                        field,
+                        "driven supports are offered for membranes only".into(),
+                    ));
                 }
             }
             if let Some(h) = &s.history {

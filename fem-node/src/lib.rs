@@ -38,8 +38,8 @@ pub mod surface;
 
 pub use config::{parse_scene_section, parse_scene_table};
 pub use element::ElementKind;
-pub use mesh::Mesh;
 pub use membrane_model::MembraneModel;
+pub use mesh::Mesh;
 pub use model::Model;
 pub use shell_model::ShellModel;
 

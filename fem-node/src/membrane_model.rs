@@ -208,10 +208,16 @@ impl MembraneModel {
                 cfg.newton != crate::config::NewtonConfig::default(),
                 "fem.newton",
             ),
-            (cfg.solver != crate::config::LinearSolver::Auto, "fem.solver"),
+            (
+                cfg.solver != crate::config::LinearSolver::Auto,
+                "fem.solver",
+            ),
         ] {
             if given {
-                return Err(config(field, "does not apply to a membrane (explicit, no solver)"));
+                return Err(config(
+                    field,
+                    "does not apply to a membrane (explicit, no solver)",
+                ));
             }
         }
         // elements, refusing degenerate ones
@@ -397,9 +403,7 @@ impl MembraneModel {
         // probes
         let longest = elems
             .iter()
-            .flat_map(|p| {
-                (0..p.len()).map(|k| (p[k] as usize, p[(k + 1) % p.len()] as usize))
-            })
+            .flat_map(|p| (0..p.len()).map(|k| (p[k] as usize, p[(k + 1) % p.len()] as usize)))
             .map(|(a, b)| norm(sub(mesh.nodes[a], mesh.nodes[b])))
             .fold(0.0, f64::max);
         let mut probes = Vec::new();
@@ -566,7 +570,13 @@ impl MembraneModel {
         let pick = |v: &[f64]| -> Vec<f64> {
             self.iface_nodes
                 .iter()
-                .flat_map(|&n| [v[3 * n as usize], v[3 * n as usize + 1], v[3 * n as usize + 2]])
+                .flat_map(|&n| {
+                    [
+                        v[3 * n as usize],
+                        v[3 * n as usize + 1],
+                        v[3 * n as usize + 2],
+                    ]
+                })
                 .collect()
         };
         let p = self
@@ -587,8 +597,12 @@ impl MembraneModel {
                 let lmin = (0..x.len())
                     .map(|k| norm(sub(x[(k + 1) % x.len()], x[k])))
                     .fold(f64::INFINITY, f64::min);
-                let (_, states) =
-                    membrane::internal_forces(&self.corners(e, false), &x, self.thickness, &self.law);
+                let (_, states) = membrane::internal_forces(
+                    &self.corners(e, false),
+                    &x,
+                    self.thickness,
+                    &self.law,
+                );
                 let c = states
                     .iter()
                     .map(|s| membrane::wave_speed(&self.law, s.0, s.1, self.density))
@@ -703,7 +717,8 @@ impl MembraneModel {
             let ts = t0 + dt * i as f64 / n as f64;
             let t = t0 + dt * (i + 1) as f64 / n as f64;
             // a driven component over this substep: from its start on (by the substep's start)
-            let driven = |d: &Option<Drive>| d.as_ref().filter(|d| ts >= d.start).map(|d| d.velocity);
+            let driven =
+                |d: &Option<Drive>| d.as_ref().filter(|d| ts >= d.start).map(|d| d.velocity);
             for k in 0..self.st.u.len() {
                 if self.held[k] {
                     continue;
@@ -734,7 +749,8 @@ impl MembraneModel {
         if let Some(k) = self.st.u.iter().position(|x| !x.is_finite()) {
             return Err(FemError::NonFinite(format!(
                 "membrane displacement of node {} at t = {} s",
-                self.mesh.node_ids[k / 3], self.st.time
+                self.mesh.node_ids[k / 3],
+                self.st.time
             )));
         }
         Ok(())
@@ -931,7 +947,13 @@ impl MembraneModel {
             let types: Vec<u8> = self
                 .elems
                 .iter()
-                .map(|p| if p.len() == 4 { output::VTK_QUAD } else { VTK_TRIANGLE })
+                .map(|p| {
+                    if p.len() == 4 {
+                        output::VTK_QUAD
+                    } else {
+                        VTK_TRIANGLE
+                    }
+                })
                 .collect();
             let (l1, l2, s1, s2) = (col(0), col(1), col(2), col(3));
             output::write_grid(
@@ -997,7 +1019,10 @@ impl MembraneModel {
         ));
         r.push((
             "max_stress".to_string(),
-            states.iter().map(|s| s[2]).fold(f64::NEG_INFINITY, f64::max),
+            states
+                .iter()
+                .map(|s| s[2])
+                .fold(f64::NEG_INFINITY, f64::max),
         ));
         r
     }

@@ -103,7 +103,10 @@ fn tube_inflation_follows_the_closed_form_pressure_stretch_curve() {
                 m.advance(window).unwrap();
             }
             let l = 1.0 + m.probe_displacement("side").unwrap()[0] / R;
-            let (facets, tube) = (stretch_at(level * p, n), stretch_at(level * p, f64::INFINITY));
+            let (facets, tube) = (
+                stretch_at(level * p, n),
+                stretch_at(level * p, f64::INFINITY),
+            );
             let err = |exact: f64| (l - exact) / (exact - 1.0);
             eprintln!(
                 "{element} × {around}: p = {:.0} Pa: hoop stretch {l:.6}; {around} facets \
@@ -148,7 +151,10 @@ fn tube_inflation_follows_the_closed_form_pressure_stretch_curve() {
         );
         // the tube's own curve: the facets' error cos(π/n) − 1 (−1.9 % at 16, −0.12 % at 64)
         let bound = 2.0 * (1.0 - (std::f64::consts::PI / n).cos()) + 1e-3;
-        assert!(worst_tube < bound, "{element} × {around}: {worst_tube} vs the tube");
+        assert!(
+            worst_tube < bound,
+            "{element} × {around}: {worst_tube} vs the tube"
+        );
     }
 }
 
@@ -161,7 +167,11 @@ fn interface_forces_accelerate_the_nodes_and_faces_orient_the_triangles() {
     // "bottom": the triangles face the axis (where the grains of a triaxial cell are)
     let p = |k: u32| -> [f64; 3] {
         let k = 3 * k as usize;
-        [iface.positions[k], iface.positions[k + 1], iface.positions[k + 2]]
+        [
+            iface.positions[k],
+            iface.positions[k + 1],
+            iface.positions[k + 2],
+        ]
     };
     for t in iface.triangles.chunks_exact(3) {
         let [a, b, c] = [p(t[0]), p(t[1]), p(t[2])];
@@ -170,7 +180,10 @@ fn interface_forces_accelerate_the_nodes_and_faces_orient_the_triangles() {
         let e1z = b[2] - a[2];
         let n = [e1[1] * e2[2] - e1z * e2[1], e1z * e2[0] - e1[0] * e2[2]];
         let centre = [(a[0] + b[0] + c[0]) / 3.0, (a[1] + b[1] + c[1]) / 3.0];
-        assert!(n[0] * centre[0] + n[1] * centre[1] < 0.0, "a triangle faces outwards");
+        assert!(
+            n[0] * centre[0] + n[1] * centre[1] < 0.0,
+            "a triangle faces outwards"
+        );
     }
     let text_top = tube("m3d4", "").replace("faces = \"bottom\"", "faces = \"top\"");
     let top = membrane(&text_top).interface_mesh();
@@ -266,19 +279,27 @@ fn membrane_scenes_are_built_through_fem_build_and_write_their_outputs() {
     let c = (6.0 * g / 5000.0).sqrt();
     let side = 2.0 * R * (std::f64::consts::PI / 16.0).sin();
     let expected = side.min(0.01) / (c * std::f64::consts::SQRT_2);
-    assert!(((crit - expected) / expected).abs() < 1e-3, "{crit} vs {expected}");
+    assert!(
+        ((crit - expected) / expected).abs() < 1e-3,
+        "{crit} vs {expected}"
+    );
     for _ in 0..4 {
         s.advance(1e-3).unwrap();
         s.write_outputs(&dir).unwrap();
     }
     let csv = std::fs::read_to_string(dir.join("fem_probes.csv")).unwrap();
-    assert!(csv.starts_with("time,volume,outward_force,probe.side.ux"), "{csv}");
+    assert!(
+        csv.starts_with("time,volume,outward_force,probe.side.ux"),
+        "{csv}"
+    );
     assert_eq!(csv.lines().count(), 5);
     let vtu = std::fs::read_to_string(dir.join("fem_000004.vtu")).unwrap();
     for name in ["stretch_1", "stress_2", "thickness", "displacement"] {
         assert!(vtu.contains(&format!("Name=\"{name}\"")), "{name} missing");
     }
-    assert!(std::fs::read_to_string(dir.join("fem.pvd")).unwrap().contains("fem_000002.vtu"));
+    assert!(std::fs::read_to_string(dir.join("fem.pvd"))
+        .unwrap()
+        .contains("fem_000002.vtu"));
     let r = s.results();
     assert!(r.iter().any(|(k, _)| k == "volume"));
     assert!(s.solve_static().is_err());
@@ -294,12 +315,28 @@ fn bad_membrane_scenes_are_refused_with_the_field_named() {
             "",
             "fem.analysis",
         ),
-        ("faces = \"bottom\"", "faces = \"both\"", "fem.interface.faces"),
+        (
+            "faces = \"bottom\"",
+            "faces = \"both\"",
+            "fem.interface.faces",
+        ),
         ("[-11850, -2]", "[-11850, 2]", "fem.membrane.ogden[2]"),
-        ("thickness = 0.0003", "thickness = -1.0", "fem.membrane.thickness"),
-        ("divisions = [16, 2]", "divisions = [2, 2]", "fem.mesh.divisions"),
+        (
+            "thickness = 0.0003",
+            "thickness = -1.0",
+            "fem.membrane.thickness",
+        ),
+        (
+            "divisions = [16, 2]",
+            "divisions = [2, 2]",
+            "fem.mesh.divisions",
+        ),
         ("divisions = [16, 2]", "divisions = [16, 2, 1]", "divisions"),
-        ("fix = [\"z\"]", "fix = [\"z\"]\nrotations = [\"x\"]", "rotations"),
+        (
+            "fix = [\"z\"]",
+            "fix = [\"z\"]\nrotations = [\"x\"]",
+            "rotations",
+        ),
         (
             "safety = 0.5, rayleigh_a = 300.0",
             "safety = 0.5, rayleigh_b = 1e-4",
@@ -332,12 +369,18 @@ fn a_driven_ring_is_free_until_its_start_then_moves_at_its_velocity() {
          [[fem.supports]]\non = { set = \"top\" }\nfix = [\"z\"]\ndrive = { velocity = [0.0, 0.0, -0.01], start = 0.03 }\n",
     );
     let mut m = membrane(&text);
-    let top: Vec<usize> = m.mesh().node_sets["top"].iter().map(|&n| 3 * n as usize + 2).collect();
+    let top: Vec<usize> = m.mesh().node_sets["top"]
+        .iter()
+        .map(|&n| 3 * n as usize + 2)
+        .collect();
     for _ in 0..30 {
         m.advance(1e-3).unwrap();
     }
     let at_start: Vec<f64> = top.iter().map(|&k| m.displacements()[k]).collect();
-    assert!(at_start.iter().any(|u| u.abs() > 1e-9), "the ring did not float: {at_start:?}");
+    assert!(
+        at_start.iter().any(|u| u.abs() > 1e-9),
+        "the ring did not float: {at_start:?}"
+    );
     for _ in 0..20 {
         m.advance(1e-3).unwrap();
     }

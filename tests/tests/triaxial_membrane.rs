@@ -15,7 +15,9 @@ fn column(text: &str, name: &str) -> Vec<f64> {
 
 /// Means over consecutive blocks of `n` values.
 fn means(v: &[f64], n: usize) -> Vec<f64> {
-    v.chunks(n).map(|c| c.iter().sum::<f64>() / c.len() as f64).collect()
+    v.chunks(n)
+        .map(|c| c.iter().sum::<f64>() / c.len() as f64)
+        .collect()
 }
 
 #[test]
@@ -34,7 +36,10 @@ fn glass_beads_in_a_membrane_carry_the_cell_pressure_and_gain_strength_when_shea
     let force = *column(&series, "platen.contact_force").last().unwrap();
     let ke = *column(&series, "kinetic_energy").last().unwrap();
     eprintln!("prepared: platen force {force:.4} N (1 kPa: 0.452 N), kinetic energy {ke:e} J");
-    assert!((force - 0.452).abs() < 0.1 * 0.452, "platen force {force} N");
+    assert!(
+        (force - 0.452).abs() < 0.1 * 0.452,
+        "platen force {force} N"
+    );
     assert!(ke < 1e-5, "not settled: {ke} J");
 
     // 2. cut, confined, sheared
@@ -101,7 +106,10 @@ fn glass_beads_in_a_membrane_carry_the_cell_pressure_and_gain_strength_when_shea
         }
         if k == start - 1 {
             // consolidated isotropically: σ₁ ≈ σ₃
-            assert!((0.85..=1.25).contains(&ratio), "consolidated at σ₁/σ₃ = {ratio}");
+            assert!(
+                (0.85..=1.25).contains(&ratio),
+                "consolidated at σ₁/σ₃ = {ratio}"
+            );
         }
     }
     let last = t.len() - 1;

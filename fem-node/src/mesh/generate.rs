@@ -250,7 +250,10 @@ pub fn cylinder_mesh(origin: [f64; 3], radius: f64, height: f64, div: [usize; 2]
             ]);
             mesh.node_ids.push(node as u64 + 1);
             if j == 0 {
-                mesh.node_sets.entry("bottom".into()).or_default().push(node);
+                mesh.node_sets
+                    .entry("bottom".into())
+                    .or_default()
+                    .push(node);
             }
             if j == nl {
                 mesh.node_sets.entry("top".into()).or_default().push(node);
