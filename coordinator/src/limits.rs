@@ -15,7 +15,8 @@
 //! computed with extrapolated mesh motion; predictive: the forces of the previous window), so
 //! the contact spring k_c acting on an interface node of mass M is integrated explicitly with
 //! step Δt^C. Its period T_c = 2π √(M/k_c) sets the scale, with k_c the Hertz stiffness of a
-//! particle of the mean radius (the DEM's `contact_stiffness_typical`; a DEM node that reports
+//! particle of the mean radius (the DEM's `interface_contact_stiffness_typical`, else its
+//! `contact_stiffness_typical`; a DEM node that reports
 //! only `contact_stiffness_max` gets the stiffest contact instead, more conservative). The
 //! mean radius makes the JIT limit carry over from the sleeper's one-size CI bed to the
 //! polydisperse full-size bed (stable at 0.034 T_c, diverging at 0.068 T_c on both), the
@@ -268,6 +269,16 @@ pub fn assess(
         } else {
             push(Level::Info, "dilated polyhedra", what);
         }
+    }
+    // a structure without a static solve cannot take the one-way schedule's static step
+    if scene.schedule == ScheduleKind::OneWay && f.get("static_solve") == Some(&0.0) {
+        push(
+            Level::Refuse,
+            "one-way schedule",
+            "the structure has no static solve (a membrane steps explicitly); use the \
+             predictive, JIT or implicit schedule"
+                .to_string(),
+        );
     }
     // FEM explicit: the node sub-steps each window at a safety fraction of Δt_crit itself
     if let (Some(&crit), Some(&1.0)) = (f.get("critical_time_step"), f.get("explicit")) {

@@ -123,6 +123,13 @@ pub fn fill_box(
                 "a sphere of radius {r} m does not fit into the region"
             ));
         }
+        if let Some(rc) = cylinder {
+            if r >= rc {
+                return Err(format!(
+                    "a sphere of radius {r} m does not fit into the cylinder of radius {rc} m"
+                ));
+            }
+        }
         let mut placed = false;
         for _ in 0..ATTEMPTS {
             let x = V3::new(

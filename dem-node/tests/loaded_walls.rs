@@ -343,6 +343,15 @@ distribution = {{ kind = "uniform", min = 0.003, max = 0.004 }}
         );
         assert!(x.z > 0.0);
     }
+    // the facets face the axis (the DEM's patch test reads the orientation)
+    let (pos, tris) = dem::walls::cylinder_mesh(nalgebra::Vector3::zeros(), 0.02, 0.1, 32);
+    for t in &tris {
+        let [a, b, c] = t.map(|k| pos[k as usize]);
+        let n = (b - a).cross(&(c - a));
+        let centre = (a + b + c) / 3.0;
+        assert!(n.x * centre.x + n.y * centre.y < 0.0, "a facet faces outwards");
+        assert!(n.z.abs() < 1e-12 * n.norm());
+    }
     let bad = scene.replace("segments = 32", "segments = 3");
     assert!(config_error(&bad).contains("segments"));
 }

@@ -225,6 +225,8 @@ impl<'de> Deserialize<'de> for MeshSpec {
                         || t.divisions.is_some()
                         || t.element.is_some()
                         || t.origin.is_some()
+                        || t.radius.is_some()
+                        || t.height.is_some()
                     {
                         return Err(de::Error::custom("mesh: give either `file` or a generated box (`size`, `element_size`, `element`), not both"));
                     }

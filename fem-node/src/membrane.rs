@@ -232,3 +232,15 @@ pub fn wave_speed(law: &Ogden, l1: f64, l2: f64, density: f64) -> f64 {
     let dmax = (m + r).max(0.0) + s1.max(s2).max(0.0);
     (dmax / density).sqrt()
 }
+
+/// The normal g_r × g_s at each integration point of an element with corners `x`.
+pub fn point_normals(x: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    rule(x.len())
+        .into_iter()
+        .map(|(_, _, d)| {
+            let (gr, gs) = tangents(x, &d);
+            let n = gr.cross(&gs);
+            [n[0], n[1], n[2]]
+        })
+        .collect()
+}

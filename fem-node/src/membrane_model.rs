@@ -109,6 +109,10 @@ fn norm(a: [f64; 3]) -> f64 {
     (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt()
 }
 
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
 fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
@@ -142,7 +146,7 @@ impl MembraneModel {
                         file: mesh.source.clone(),
                         line: 0,
                         message: "has volume elements; a membrane mesh has only 4-node surface \
-                                  elements (Gmsh quadrangles, Abaqus M3D4/S4)"
+                                  elements (Gmsh quadrangles, Abaqus S4/S4R)"
                             .into(),
                     });
                 }
@@ -248,6 +252,49 @@ impl MembraneModel {
             }
         }
         let nn = mesh.num_nodes();
+        // orientation: every integration point's normal on its element's side, and every
+        // element facing the same side as its neighbours at a shared node (a bow-tie or an
+        // element numbered the other way round would take pressure and grains on the wrong
+        // side)
+        let mut node_normal = vec![[0.0; 3]; nn];
+        let mut elem_normal = Vec::with_capacity(elems.len());
+        for (e, p) in elems.iter().enumerate() {
+            let x: Vec<[f64; 3]> = p.iter().map(|&n| mesh.nodes[n as usize]).collect();
+            let normals = membrane::point_normals(&x);
+            let mean = normals.iter().fold([0.0; 3], |a, n| {
+                [a[0] + n[0], a[1] + n[1], a[2] + n[2]]
+            });
+            if normals.iter().any(|n| dot(*n, mean) <= 0.0) {
+                return Err(mesh_err(
+                    lines[e],
+                    format!(
+                        "element {} is folded over itself (its corners cross)",
+                        ids[e]
+                    ),
+                ));
+            }
+            for &n in p {
+                for c in 0..3 {
+                    node_normal[n as usize][c] += mean[c];
+                }
+            }
+            elem_normal.push(mean);
+        }
+        for (e, p) in elems.iter().enumerate() {
+            for &n in p {
+                if dot(elem_normal[e], node_normal[n as usize]) < 0.0 {
+                    return Err(mesh_err(
+                        lines[e],
+                        format!(
+                            "element {} faces the other way from its neighbours at node {}: \
+                             number the corners of every element counter-clockwise about the \
+                             same side",
+                            ids[e], mesh.node_ids[n as usize]
+                        ),
+                    ));
+                }
+            }
+        }
         let mut node_mass = vec![0.0; nn];
         let mut used = vec![false; nn];
         for p in &elems {
@@ -295,6 +342,26 @@ impl MembraneModel {
                     }
                 }
             }
+        }
+        if let Some(k) = (0..3 * nn).find(|&k| drives[k].is_some() && held[k]) {
+            return Err(config(
+                "fem.supports",
+                format!(
+                    "node {} component {} is both driven and held by another support",
+                    mesh.node_ids[k / 3],
+                    ["x", "y", "z"][k % 3]
+                ),
+            ));
+        }
+        if let Some(p) = prescribed.iter().find(|p| drives[3 * p.node as usize + p.comp].is_some()) {
+            return Err(config(
+                "fem.supports",
+                format!(
+                    "node {} component {} is both driven and displaced by a history",
+                    mesh.node_ids[p.node as usize],
+                    ["x", "y", "z"][p.comp]
+                ),
+            ));
         }
         // loads
         let as_quads = |list: Vec<usize>| -> Vec<usize> {
@@ -436,7 +503,6 @@ impl MembraneModel {
             };
             probes.push((p.name.clone(), node));
         }
-        let _ = (lines, ids);
         let n_iface = iface_nodes.len();
         Ok(MembraneModel {
             st: State {
@@ -559,6 +625,8 @@ impl MembraneModel {
             )));
         }
         self.st.interface_forces.copy_from_slice(forces);
+        // the window's first half kick takes the forces held over it
+        self.st.accel_ready = false;
         Ok(())
     }
 
@@ -669,7 +737,11 @@ impl MembraneModel {
     fn accelerations(&self, f: &[f64], v: &[f64]) -> Vec<f64> {
         (0..f.len())
             .map(|k| {
-                if self.held[k] {
+                if self.held[k]
+                    || self.drives[k]
+                        .as_ref()
+                        .is_some_and(|d| self.st.time >= d.start)
+                {
                     0.0
                 } else {
                     f[k] / self.node_mass[k / 3] - self.damping * v[k]
@@ -699,6 +771,13 @@ impl MembraneModel {
             return Err(FemError::TimeStep(dt));
         }
         if !self.st.accel_ready {
+            if self.st.substeps == 0 {
+                // the prescribed supports where their histories put them at the start
+                for p in &self.prescribed {
+                    let k = 3 * p.node as usize + p.comp;
+                    self.st.u[k] = p.amplitude * self.history(&p.history, self.st.time);
+                }
+            }
             let f = self.net_forces(self.st.time, &self.st.u);
             self.st.a = self.accelerations(&f, &self.st.v);
             self.st.accel_ready = true;
@@ -803,6 +882,14 @@ impl MembraneModel {
         )
     }
 
+    /// For a generated cylinder: the mean current height of its top ring [m] (the plane that
+    /// closes [`Self::enclosed_volume`] there).
+    pub fn top_ring_height(&self) -> Option<f64> {
+        self.cylinder_centre?;
+        let ring = self.mesh.node_sets.get("top")?;
+        Some(ring.iter().map(|&n| self.current(n as usize)[2]).sum::<f64>() / ring.len() as f64)
+    }
+
     /// Per element, the mean over its points of (λ_1, λ_2, σ_1, σ_2) (largest stretch first).
     pub fn element_states(&self) -> Vec<[f64; 4]> {
         (0..self.elems.len())
@@ -839,9 +926,11 @@ impl MembraneModel {
             ("membrane".to_string(), 1.0),
             ("critical_time_step".to_string(), self.critical_time_step()),
         ]);
+        // the nodes that can move (a clamped ring's do not ring against the grains)
         let masses: Vec<f64> = self
             .iface_nodes
             .iter()
+            .filter(|&&n| (0..3).any(|c| !self.held[3 * n as usize + c]))
             .map(|&n| self.node_mass[n as usize])
             .collect();
         if !masses.is_empty() {
@@ -850,6 +939,7 @@ impl MembraneModel {
             l.insert("interface_node_mass_min".to_string(), min);
             l.insert("interface_node_mass_mean".to_string(), mean);
         }
+        l.insert("static_solve".to_string(), 0.0);
         Ok(l)
     }
 
@@ -903,7 +993,7 @@ impl MembraneModel {
             if !self.st.csv_started {
                 text.push_str("time");
                 if volume.is_some() {
-                    text.push_str(",volume,outward_force");
+                    text.push_str(",volume,outward_force,top_ring_z");
                 }
                 for (name, _) in &self.probes {
                     for c in ["ux", "uy", "uz"] {
@@ -915,7 +1005,8 @@ impl MembraneModel {
             text.push_str(&format!("{:.9e}", self.st.time));
             if let Some(v) = volume {
                 let f = self.outward_force().unwrap_or(0.0);
-                text.push_str(&format!(",{v:.9e},{f:.9e}"));
+                let z = self.top_ring_height().unwrap_or(f64::NAN);
+                text.push_str(&format!(",{v:.9e},{f:.9e},{z:.9e}"));
             }
             for &(_, n) in &self.probes {
                 for c in 0..3 {
@@ -992,6 +1083,9 @@ impl MembraneModel {
         }
         if let Some(f) = self.outward_force() {
             r.push(("interface_force.outward".to_string(), f));
+        }
+        if let Some(z) = self.top_ring_height() {
+            r.push(("top_ring_z".to_string(), z));
         }
         for (name, n) in &self.probes {
             for (c, ax) in ["ux", "uy", "uz"].iter().enumerate() {

@@ -289,7 +289,7 @@ fn membrane_scenes_are_built_through_fem_build_and_write_their_outputs() {
     }
     let csv = std::fs::read_to_string(dir.join("fem_probes.csv")).unwrap();
     assert!(
-        csv.starts_with("time,volume,outward_force,probe.side.ux"),
+        csv.starts_with("time,volume,outward_force,top_ring_z,probe.side.ux"),
         "{csv}"
     );
     assert_eq!(csv.lines().count(), 5);
@@ -347,6 +347,16 @@ fn bad_membrane_scenes_are_refused_with_the_field_named() {
         let e = refusal(&base.replacen(from, to, 1));
         assert!(e.contains(needle), "expected {needle}: {e}");
     }
+    // a membrane with a volume material, a driven component also held
+    let e = refusal(&base.replace(
+        "[fem.membrane]",
+        "material = { youngs_modulus = 1e6, poisson_ratio = 0.3, density = 1000.0 }\n[fem.membrane]",
+    ));
+    assert!(e.contains("fem.membrane"), "{e}");
+    let e = refusal(&format!(
+        "{base}[[fem.supports]]\non = {{ set = \"top\" }}\nfix = [\"z\"]\ndrive = {{ velocity = [0.0, 0.0, -0.01], start = 0.1 }}\n"
+    ));
+    assert!(e.contains("both driven and held"), "{e}");
     // a generated cylinder without a membrane section
     let start = base.find("[fem.membrane]").unwrap();
     let end = base.find("[[fem.supports]]").unwrap();
