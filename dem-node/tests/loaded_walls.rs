@@ -349,7 +349,10 @@ distribution = {{ kind = "uniform", min = 0.003, max = 0.004 }}
         let [a, b, c] = t.map(|k| pos[k as usize]);
         let n = (b - a).cross(&(c - a));
         let centre = (a + b + c) / 3.0;
-        assert!(n.x * centre.x + n.y * centre.y < 0.0, "a facet faces outwards");
+        assert!(
+            n.x * centre.x + n.y * centre.y < 0.0,
+            "a facet faces outwards"
+        );
         assert!(n.z.abs() < 1e-12 * n.norm());
     }
     let bad = scene.replace("segments = 32", "segments = 3");

@@ -73,6 +73,34 @@ pub trait Structure: Send {
     fn pressure_surface(&self) -> (f64, [f64; 3]);
 }
 
+/// `interface_node_mass_min` / `_mean` of the interface nodes' `masses` (none: nothing).
+pub(crate) fn insert_mass_limits(l: &mut BTreeMap<String, f64>, masses: &[f64]) {
+    if !masses.is_empty() {
+        let min = masses.iter().copied().fold(f64::INFINITY, f64::min);
+        let mean = masses.iter().sum::<f64>() / masses.len() as f64;
+        l.insert("interface_node_mass_min".to_string(), min);
+        l.insert("interface_node_mass_mean".to_string(), mean);
+    }
+}
+
+/// A model's snapshot state decoded from MessagePack, refused unless its `format` is
+/// `expected`.
+pub(crate) fn decode_state<T: serde::de::DeserializeOwned>(
+    bytes: &[u8],
+    format: impl Fn(&T) -> u32,
+    expected: u32,
+) -> Result<T, FemError> {
+    let st: T = rmp_serde::from_slice(bytes)
+        .map_err(|e| FemError::Snapshot(format!("cannot decode: {e}")))?;
+    if format(&st) != expected {
+        return Err(FemError::Snapshot(format!(
+            "format {} (expected {expected})",
+            format(&st)
+        )));
+    }
+    Ok(st)
+}
+
 /// The total area and the area-weighted normal (½ Σ (b − a) × (c − a)) of triangles indexing
 /// `points`.
 pub fn area_and_normal(points: &[[f64; 3]], triangles: &[u32]) -> (f64, [f64; 3]) {

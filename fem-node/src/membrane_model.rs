@@ -261,9 +261,9 @@ impl MembraneModel {
         for (e, p) in elems.iter().enumerate() {
             let x: Vec<[f64; 3]> = p.iter().map(|&n| mesh.nodes[n as usize]).collect();
             let normals = membrane::point_normals(&x);
-            let mean = normals.iter().fold([0.0; 3], |a, n| {
-                [a[0] + n[0], a[1] + n[1], a[2] + n[2]]
-            });
+            let mean = normals
+                .iter()
+                .fold([0.0; 3], |a, n| [a[0] + n[0], a[1] + n[1], a[2] + n[2]]);
             if normals.iter().any(|n| dot(*n, mean) <= 0.0) {
                 return Err(mesh_err(
                     lines[e],
@@ -353,7 +353,10 @@ impl MembraneModel {
                 ),
             ));
         }
-        if let Some(p) = prescribed.iter().find(|p| drives[3 * p.node as usize + p.comp].is_some()) {
+        if let Some(p) = prescribed
+            .iter()
+            .find(|p| drives[3 * p.node as usize + p.comp].is_some())
+        {
             return Err(config(
                 "fem.supports",
                 format!(
@@ -887,7 +890,12 @@ impl MembraneModel {
     pub fn top_ring_height(&self) -> Option<f64> {
         self.cylinder_centre?;
         let ring = self.mesh.node_sets.get("top")?;
-        Some(ring.iter().map(|&n| self.current(n as usize)[2]).sum::<f64>() / ring.len() as f64)
+        Some(
+            ring.iter()
+                .map(|&n| self.current(n as usize)[2])
+                .sum::<f64>()
+                / ring.len() as f64,
+        )
     }
 
     /// Per element, the mean over its points of (λ_1, λ_2, σ_1, σ_2) (largest stretch first).
@@ -933,12 +941,7 @@ impl MembraneModel {
             .filter(|&&n| (0..3).any(|c| !self.held[3 * n as usize + c]))
             .map(|&n| self.node_mass[n as usize])
             .collect();
-        if !masses.is_empty() {
-            let min = masses.iter().copied().fold(f64::INFINITY, f64::min);
-            let mean = masses.iter().sum::<f64>() / masses.len() as f64;
-            l.insert("interface_node_mass_min".to_string(), min);
-            l.insert("interface_node_mass_mean".to_string(), mean);
-        }
+        crate::insert_mass_limits(&mut l, &masses);
         l.insert("static_solve".to_string(), 0.0);
         Ok(l)
     }
@@ -953,14 +956,7 @@ impl MembraneModel {
 
     /// Restores a `snapshot` of a model built from the same scene; continuation is bitwise.
     pub fn restore(&mut self, bytes: &[u8]) -> Result<(), FemError> {
-        let st: State = rmp_serde::from_slice(bytes)
-            .map_err(|e| FemError::Snapshot(format!("cannot decode: {e}")))?;
-        if st.format != SNAPSHOT_FORMAT {
-            return Err(FemError::Snapshot(format!(
-                "format {} (expected {SNAPSHOT_FORMAT})",
-                st.format
-            )));
-        }
+        let st: State = crate::decode_state(bytes, |s: &State| s.format, SNAPSHOT_FORMAT)?;
         let nd = self.num_dofs();
         if [st.u.len(), st.v.len(), st.a.len()] != [nd; 3]
             || st.interface_forces.len() != self.st.interface_forces.len()

@@ -1320,12 +1320,7 @@ impl ShellModel {
             .iter()
             .map(|&n| self.node_mass[n as usize])
             .collect();
-        if !masses.is_empty() {
-            let min = masses.iter().copied().fold(f64::INFINITY, f64::min);
-            let mean = masses.iter().sum::<f64>() / masses.len() as f64;
-            l.insert("interface_node_mass_min".to_string(), min);
-            l.insert("interface_node_mass_mean".to_string(), mean);
-        }
+        crate::insert_mass_limits(&mut l, &masses);
         if matches!(self.analysis, Analysis::Dynamic { .. }) {
             if let Some(f) = self.highest_frequency_hz()? {
                 l.insert("highest_frequency_hz".to_string(), f);
@@ -1348,14 +1343,7 @@ impl ShellModel {
 
     /// Restores a `snapshot` of a model built from the same scene; continuation is bitwise.
     pub fn restore(&mut self, bytes: &[u8]) -> Result<(), FemError> {
-        let st: State = rmp_serde::from_slice(bytes)
-            .map_err(|e| FemError::Snapshot(format!("cannot decode: {e}")))?;
-        if st.format != SNAPSHOT_FORMAT {
-            return Err(FemError::Snapshot(format!(
-                "format {} (expected {SNAPSHOT_FORMAT})",
-                st.format
-            )));
-        }
+        let st: State = crate::decode_state(bytes, |s: &State| s.format, SNAPSHOT_FORMAT)?;
         let nd = self.num_dofs();
         if [st.u.len(), st.v.len(), st.a.len()] != [nd; 3]
             || st.interface_forces.len() != self.st.interface_forces.len()

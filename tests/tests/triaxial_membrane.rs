@@ -134,5 +134,8 @@ fn glass_beads_in_a_membrane_carry_the_cell_pressure_and_gain_strength_when_shea
     );
     let results = &s["nodes"]["fem"]["results"];
     let v = results["volume"].as_f64().unwrap();
-    assert!((v - last_volume).abs() < 1e-8 * v, "{v} vs the CSV's {last_volume}");
+    assert!(
+        (v - last_volume).abs() < 1e-8 * v,
+        "{v} vs the CSV's {last_volume}"
+    );
 }

@@ -650,12 +650,7 @@ impl Model {
         let explicit = matches!(self.analysis, Analysis::Explicit { .. });
         l.insert("explicit".to_string(), if explicit { 1.0 } else { 0.0 });
         let masses = self.interface_node_masses();
-        if !masses.is_empty() {
-            let min = masses.iter().copied().fold(f64::INFINITY, f64::min);
-            let mean = masses.iter().sum::<f64>() / masses.len() as f64;
-            l.insert("interface_node_mass_min".to_string(), min);
-            l.insert("interface_node_mass_mean".to_string(), mean);
-        }
+        crate::insert_mass_limits(&mut l, &masses);
         if !matches!(self.analysis, Analysis::Static) {
             if let Some(f) = self.highest_frequency_hz()? {
                 l.insert("highest_frequency_hz".to_string(), f);
@@ -789,14 +784,7 @@ impl Model {
 
     /// Restores a `snapshot` of a model built from the same scene; continuation is bitwise.
     pub fn restore(&mut self, bytes: &[u8]) -> Result<(), FemError> {
-        let st: State = rmp_serde::from_slice(bytes)
-            .map_err(|e| FemError::Snapshot(format!("cannot decode: {e}")))?;
-        if st.format != SNAPSHOT_FORMAT {
-            return Err(FemError::Snapshot(format!(
-                "format {} (expected {SNAPSHOT_FORMAT})",
-                st.format
-            )));
-        }
+        let st: State = crate::decode_state(bytes, |s: &State| s.format, SNAPSHOT_FORMAT)?;
         let nd = self.num_dofs();
         if st.n_dofs != nd
             || st.u.len() != nd
