@@ -70,8 +70,9 @@ pub struct FemConfig {
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct MembraneSection {
-    /// Reference thickness t₀ [m].
-    pub thickness: f64,
+    /// Reference thickness t₀ [m] of every element the mesh file gives none (an Abaqus
+    /// *MEMBRANE SECTION or *SHELL SECTION gives its own, which wins).
+    pub thickness: Option<f64>,
     /// Density ρ [kg/m³].
     #[serde(alias = "rho")]
     pub density: f64,
@@ -831,10 +832,10 @@ pub fn parse_scene_table(text: &str, table: &str) -> Result<Option<FemConfig>, S
 }
 
 fn check_membrane(m: &MembraneSection) -> Result<(), (String, String)> {
-    if !(m.thickness.is_finite() && m.thickness > 0.0) {
+    if let Some(t) = m.thickness.filter(|t| !(t.is_finite() && *t > 0.0)) {
         return Err((
             "fem.membrane.thickness".into(),
-            format!("must be > 0 m, got {}", m.thickness),
+            format!("must be > 0 m, got {t}"),
         ));
     }
     check_density("fem.membrane", m.density)?;

@@ -67,7 +67,8 @@ pub struct MembraneModel {
     mesh: Mesh,
     /// Corners of each element (3 or 4 node indices).
     elems: Vec<Vec<u32>>,
-    thickness: f64,
+    /// Reference thickness of each element [m] (the mesh file's section, else the scene's).
+    thickness: Vec<f64>,
     density: f64,
     law: Ogden,
     safety: f64,
@@ -180,7 +181,10 @@ impl MembraneModel {
             return Err(mesh_err(line, format!("element {id} is {what}")));
         }
         if mesh.shells.is_empty() {
-            return Err(mesh_err(0, "no 4-node surface elements".into()));
+            return Err(mesh_err(
+                0,
+                "no surface elements (quadrilaterals or triangles)".into(),
+            ));
         }
         let (safety, damping) = match cfg.analysis {
             Analysis::Explicit {
@@ -228,12 +232,31 @@ impl MembraneModel {
         let mut elems = Vec::new();
         let mut lines = Vec::new();
         let mut ids = Vec::new();
-        for (e, q) in mesh.shells.quads.iter().enumerate() {
-            let parts: Vec<Vec<u32>> = if triangles {
+        let mut thickness = Vec::new();
+        // the membranes made from each mesh element
+        let mut parts_of = Vec::with_capacity(mesh.shells.len());
+        for e in 0..mesh.shells.len() {
+            let q = mesh.shells.corners(e);
+            let parts: Vec<Vec<u32>> = if triangles && q.len() == 4 {
                 vec![vec![q[0], q[1], q[2]], vec![q[0], q[2], q[3]]]
             } else {
                 vec![q.to_vec()]
             };
+            let t = match (mesh.shells.thickness[e], sec.thickness) {
+                (t, _) if t.is_finite() => t,
+                (_, Some(t)) => t,
+                _ => {
+                    return Err(config(
+                        "fem.membrane.thickness",
+                        format!(
+                            "element {} of {} has no thickness: give [fem.membrane] thickness \
+                             (m) or a *MEMBRANE SECTION in the deck",
+                            mesh.shells.ids[e], mesh.source
+                        ),
+                    ))
+                }
+            };
+            let first = elems.len();
             for p in parts {
                 let x: Vec<[f64; 3]> = p.iter().map(|&n| mesh.nodes[n as usize]).collect();
                 let area: f64 = membrane::corner_areas(&x).iter().sum();
@@ -249,7 +272,9 @@ impl MembraneModel {
                 elems.push(p);
                 lines.push(mesh.shells.lines[e]);
                 ids.push(mesh.shells.ids[e]);
+                thickness.push(t);
             }
+            parts_of.push(first..elems.len());
         }
         let nn = mesh.num_nodes();
         // orientation: every integration point's normal on its element's side, and every
@@ -297,10 +322,10 @@ impl MembraneModel {
         }
         let mut node_mass = vec![0.0; nn];
         let mut used = vec![false; nn];
-        for p in &elems {
+        for (p, t) in elems.iter().zip(&thickness) {
             let x: Vec<[f64; 3]> = p.iter().map(|&n| mesh.nodes[n as usize]).collect();
             for (&n, a) in p.iter().zip(membrane::corner_areas(&x)) {
-                node_mass[n as usize] += sec.density * sec.thickness * a;
+                node_mass[n as usize] += sec.density * t * a;
                 used[n as usize] = true;
             }
         }
@@ -368,11 +393,8 @@ impl MembraneModel {
         }
         // loads
         let as_quads = |list: Vec<usize>| -> Vec<usize> {
-            // element indices of the (possibly split) membranes made from these quadrilaterals
-            let per = if triangles { 2 } else { 1 };
-            list.iter()
-                .flat_map(|&q| (0..per).map(move |k| per * q + k))
-                .collect()
+            // element indices of the (possibly split) membranes made from these mesh elements
+            list.iter().flat_map(|&q| parts_of[q].clone()).collect()
         };
         let mut pressures = Vec::new();
         let mut loads = Vec::new();
@@ -522,7 +544,7 @@ impl MembraneModel {
             },
             mesh,
             elems,
-            thickness: sec.thickness,
+            thickness,
             density: sec.density,
             law: Ogden {
                 terms: sec.ogden.iter().map(|t| (t[0], t[1])).collect(),
@@ -671,7 +693,7 @@ impl MembraneModel {
                 let (_, states) = membrane::internal_forces(
                     &self.corners(e, false),
                     &x,
-                    self.thickness,
+                    self.thickness[e],
                     &self.law,
                 );
                 let c = states
@@ -725,8 +747,12 @@ impl MembraneModel {
         }
         for (e, p) in self.elems.iter().enumerate() {
             let x: Vec<[f64; 3]> = p.iter().map(|&n| at(n)).collect();
-            let (fe, _) =
-                membrane::internal_forces(&self.corners(e, false), &x, self.thickness, &self.law);
+            let (fe, _) = membrane::internal_forces(
+                &self.corners(e, false),
+                &x,
+                self.thickness[e],
+                &self.law,
+            );
             for (a, &n) in p.iter().enumerate() {
                 for c in 0..3 {
                     f[3 * n as usize + c] -= fe[3 * a + c];
@@ -905,7 +931,7 @@ impl MembraneModel {
                 let (_, states) = membrane::internal_forces(
                     &self.corners(e, false),
                     &self.corners(e, true),
-                    self.thickness,
+                    self.thickness[e],
                     &self.law,
                 );
                 let mut m = [0.0; 4];
@@ -1020,7 +1046,8 @@ impl MembraneModel {
             let col = |i: usize| -> Vec<f64> { states.iter().map(|s| s[i]).collect() };
             let thickness: Vec<f64> = states
                 .iter()
-                .map(|s| self.thickness / (s[0] * s[1]))
+                .zip(&self.thickness)
+                .map(|(s, t)| t / (s[0] * s[1]))
                 .collect();
             let conn: Vec<u32> = self.elems.iter().flatten().copied().collect();
             let ends: Vec<usize> = self

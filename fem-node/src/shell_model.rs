@@ -162,6 +162,15 @@ impl ShellModel {
         if let Some(&(id, line, what)) = mesh.shells.unsupported.first() {
             return Err(mesh_err(line, format!("element {id} is {what}")));
         }
+        if let Some((id, line)) = mesh.shells.first_triangle() {
+            return Err(mesh_err(
+                line,
+                format!(
+                    "element {id} is a triangle (a shell model takes 4-node S4 or S4R shells \
+                     only; a membrane takes triangles)"
+                ),
+            ));
+        }
         if !mesh.is_shell_mesh() {
             return Err(mesh_err(
                 0,
@@ -1611,7 +1620,7 @@ impl ShellInterface {
     }
 }
 
-/// The shells whose four nodes are all selected.
+/// The surface elements (shells or membranes) whose corners are all selected.
 pub(crate) fn selected_shells(
     mesh: &Mesh,
     sel: &crate::config::Selector,
@@ -1626,11 +1635,11 @@ pub(crate) fn selected_shells(
         mark[n as usize] = true;
     }
     let out: Vec<usize> = (0..mesh.shells.len())
-        .filter(|&e| mesh.shells.quads[e].iter().all(|&n| mark[n as usize]))
+        .filter(|&e| mesh.shells.corners(e).iter().all(|&n| mark[n as usize]))
         .collect();
     if out.is_empty() {
         return Err(FemError::Selection(format!(
-            "{what}: selects no whole shell of {} (all four corners must be selected)",
+            "{what}: selects no whole element of {} (all its corners must be selected)",
             mesh.source
         )));
     }

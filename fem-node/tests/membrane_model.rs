@@ -405,3 +405,181 @@ fn a_driven_ring_is_free_until_its_start_then_moves_at_its_velocity() {
     let e = refusal(&text.replace("fix = [\"z\"]\ndrive", "fix = [\"x\"]\ndrive"));
     assert!(e.contains("drive.velocity"), "{e}");
 }
+
+/// The generated 16 × 2 tube written as an Abaqus deck: M3D4 quadrilaterals, or M3D3
+/// triangles split as the generator splits them, under a *MEMBRANE SECTION of `thickness`.
+fn tube_deck(triangles: bool, thickness: f64) -> String {
+    let mesh = fem::mesh::cylinder_mesh([0.0; 3], R, 0.02, [16, 2]);
+    let mut deck = String::from("*HEADING\ntube\n*NODE\n");
+    for (k, x) in mesh.nodes.iter().enumerate() {
+        deck += &format!("{}, {:.17e}, {:.17e}, {:.17e}\n", k + 1, x[0], x[1], x[2]);
+    }
+    let ty = if triangles { "M3D3" } else { "M3D4" };
+    deck += &format!("*ELEMENT, TYPE={ty}, ELSET=RUBBER\n");
+    let mut id = 1;
+    for q in &mesh.shells.quads {
+        let parts: Vec<Vec<u32>> = if triangles {
+            vec![vec![q[0], q[1], q[2]], vec![q[0], q[2], q[3]]]
+        } else {
+            vec![q.to_vec()]
+        };
+        for p in parts {
+            let nodes: Vec<String> = p.iter().map(|n| (n + 1).to_string()).collect();
+            deck += &format!("{id}, {}\n", nodes.join(", "));
+            id += 1;
+        }
+    }
+    for (name, nodes) in &mesh.node_sets {
+        deck += &format!("*NSET, NSET={name}\n");
+        for chunk in nodes.chunks(8) {
+            let ids: Vec<String> = chunk.iter().map(|n| (n + 1).to_string()).collect();
+            deck += &format!("{}\n", ids.join(", "));
+        }
+    }
+    deck += &format!("*MEMBRANE SECTION, ELSET=RUBBER, MATERIAL=OGDEN\n{thickness}\n");
+    deck
+}
+
+#[test]
+fn abaqus_m3d4_m3d3_decks_and_gmsh_triangles_inflate_as_the_generated_tube() {
+    let dir = tempfile::tempdir().unwrap();
+    let load = "[[fem.loads]]\ntype = \"pressure\"\non = { set = \"all\" }\nvalue = -2000.0\nhistory = \"ramp\"\n\
+                [fem.histories.ramp]\ntype = \"table\"\npoints = [[0.0, 0.0], [0.05, 1.0]]\n";
+    for (element, triangles) in [("m3d4", false), ("m3d3", true)] {
+        let generated = tube(element, load);
+        let mut a = membrane(&generated);
+        // the deck carries the thickness: the scene gives none
+        let path = dir.path().join(format!("tube-{element}.inp"));
+        std::fs::write(&path, tube_deck(triangles, T0)).unwrap();
+        let from_file = generated
+            .replace(
+                &format!(
+                    "mesh = {{ radius = {R}, height = 0.02, divisions = [16, 2], element = \"{element}\" }}"
+                ),
+                &format!("mesh = \"{}\"", path.file_name().unwrap().to_str().unwrap()),
+            )
+            .replace(&format!("thickness = {T0}\n"), "");
+        assert!(!from_file.contains("radius = "), "{from_file}");
+        let mut b = MembraneModel::from_config(&config(&from_file), dir.path())
+            .unwrap_or_else(|e| panic!("{element} deck: {e}"));
+        assert_eq!(a.num_dofs(), b.num_dofs());
+        assert_eq!(a.total_mass().to_bits(), b.total_mass().to_bits());
+        for _ in 0..100 {
+            a.advance(1e-3).unwrap();
+            b.advance(1e-3).unwrap();
+        }
+        let (pa, pb) = (
+            a.probe_displacement("side").unwrap(),
+            b.probe_displacement("side").unwrap(),
+        );
+        eprintln!("{element}: generated ux {:e} m, deck {:e} m", pa[0], pb[0]);
+        assert!(pa[0] > 1e-4, "{element}: not inflated ({:e} m)", pa[0]);
+        for (x, y) in a.displacements().iter().zip(b.displacements()) {
+            assert!((x - y).abs() <= 1e-12 * pa[0], "{element}: {x} vs {y}");
+        }
+        // a thinner section in the deck wins over the scene's thickness: half the mass
+        std::fs::write(&path, tube_deck(triangles, T0 / 2.0)).unwrap();
+        let thin = MembraneModel::from_config(
+            &config(&from_file.replace("[fem.membrane]\n", "[fem.membrane]\nthickness = 1.0\n")),
+            dir.path(),
+        )
+        .unwrap();
+        assert!((thin.total_mass() / a.total_mass() - 0.5).abs() < 1e-12);
+    }
+    // Gmsh 4.1: the triangles as type-2 elements, selected by planes and a box (no groups)
+    let mesh = fem::mesh::cylinder_mesh([0.0; 3], R, 0.02, [16, 2]);
+    let n = mesh.nodes.len();
+    let mut msh = format!(
+        "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 {n} 1 {n}\n2 1 0 {n}\n{}\n",
+        (1..=n)
+            .map(|k| k.to_string())
+            .collect::<Vec<_>>()
+            .join("\n")
+    );
+    for x in &mesh.nodes {
+        msh += &format!("{:.17e} {:.17e} {:.17e}\n", x[0], x[1], x[2]);
+    }
+    let ne = 2 * mesh.shells.len();
+    msh += &format!("$EndNodes\n$Elements\n1 {ne} 1 {ne}\n2 1 2 {ne}\n");
+    for (k, q) in mesh.shells.quads.iter().enumerate() {
+        for (j, t) in [[q[0], q[1], q[2]], [q[0], q[2], q[3]]].iter().enumerate() {
+            msh += &format!("{} {} {} {}\n", 2 * k + j + 1, t[0] + 1, t[1] + 1, t[2] + 1);
+        }
+    }
+    msh += "$EndElements\n";
+    std::fs::write(dir.path().join("tube.msh"), msh).unwrap();
+    let generated = tube("m3d3", load);
+    let by_place = generated
+        .replace(
+            &format!(
+                "mesh = {{ radius = {R}, height = 0.02, divisions = [16, 2], element = \"m3d3\" }}"
+            ),
+            "mesh = \"tube.msh\"",
+        )
+        .replace(
+            "{ set = \"bottom\" }",
+            "{ plane = { axis = \"z\", value = 0.0 } }",
+        )
+        .replace(
+            "{ set = \"top\" }",
+            "{ plane = { axis = \"z\", value = 0.02 } }",
+        )
+        .replace(
+            "{ set = \"all\" }",
+            "{ box = { min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }",
+        );
+    assert!(!by_place.contains("set = "), "{by_place}");
+    let mut a = membrane(&generated);
+    let mut b = MembraneModel::from_config(&config(&by_place), dir.path())
+        .unwrap_or_else(|e| panic!("Gmsh triangles: {e}"));
+    for _ in 0..100 {
+        a.advance(1e-3).unwrap();
+        b.advance(1e-3).unwrap();
+    }
+    let ux = a.probe_displacement("side").unwrap()[0];
+    for (x, y) in a.displacements().iter().zip(b.displacements()) {
+        assert!((x - y).abs() <= 1e-12 * ux, "Gmsh triangles: {x} vs {y}");
+    }
+
+    // a deck without a section and a scene without a thickness: refused, the field named
+    let path = dir.path().join("bare.inp");
+    let deck = tube_deck(false, T0);
+    std::fs::write(&path, &deck[..deck.find("*MEMBRANE SECTION").unwrap()]).unwrap();
+    let text = tube("m3d4", "")
+        .replace(
+            &format!(
+                "mesh = {{ radius = {R}, height = 0.02, divisions = [16, 2], element = \"m3d4\" }}"
+            ),
+            "mesh = \"bare.inp\"",
+        )
+        .replace(&format!("thickness = {T0}\n"), "");
+    let e = MembraneModel::from_config(&config(&text), dir.path())
+        .err()
+        .expect("accepted without a thickness")
+        .to_string();
+    assert!(
+        e.contains("fem.membrane.thickness") && e.contains("element 1"),
+        "{e}"
+    );
+    // triangles are membranes, not shells: a shell model names the first one and its line
+    let shell = concat!(
+        "[fem]\nmesh = \"tri.inp\"\nanalysis = \"static\"\n",
+        "material = { youngs_modulus = 2e11, poisson_ratio = 0.3, density = 7850.0 }\n",
+        "[fem.shell]\nthickness = 0.001\n[[fem.supports]]\non = { set = \"bottom\" }\nfix = [\"x\", \"y\", \"z\"]\n"
+    );
+    std::fs::write(dir.path().join("tri.inp"), tube_deck(true, T0)).unwrap();
+    let mesh = fem::Mesh::read(&dir.path().join("tri.inp")).unwrap();
+    let e = match fem::ShellModel::from_mesh(&config(shell), mesh) {
+        Err(e) => e.to_string(),
+        Ok(_) => panic!("a shell model of triangles"),
+    };
+    let line = tube_deck(true, T0)
+        .lines()
+        .position(|l| l.starts_with("*ELEMENT"))
+        .unwrap()
+        + 2;
+    assert!(
+        e.contains("element 1 is a triangle") && e.contains(&format!(":{line}")),
+        "{e}"
+    );
+}

@@ -1,6 +1,7 @@
 //! Abaqus / CalculiX `.inp` reader: *NODE, *ELEMENT (C3D4, C3D10, C3D8, C3D8I, C3D20),
 //! *NSET / *ELSET (with GENERATE and nested set names); in a deck without volume elements,
-//! S4 / S4R shells and their *SHELL SECTION thicknesses. Other keywords are skipped.
+//! surface elements (S4 / S4R / M3D4 / M3D4R quadrilaterals, S3 / S3R / M3D3 / STRI3 triangles)
+//! and their *SHELL SECTION / *MEMBRANE SECTION thicknesses. Other keywords are skipped.
 
 use super::{sort_dedup, Mesh};
 use crate::element::ElementKind;
@@ -21,9 +22,11 @@ enum Block {
         /// The element type (S4 / S4R: a shell if the deck has no volume elements).
         ty: String,
     },
-    /// *SHELL SECTION, ELSET=...: the next data line starts with the thickness; `refused`
-    /// says why a shell model cannot use it (COMPOSITE, OFFSET, NODAL THICKNESS).
+    /// *SHELL SECTION or *MEMBRANE SECTION, ELSET=...: the next data line starts with the
+    /// thickness; `refused` says why a model here cannot use it (COMPOSITE, OFFSET, NODAL
+    /// THICKNESS).
     ShellSection {
+        keyword: &'static str,
         elset: String,
         line: usize,
         done: bool,
@@ -40,15 +43,24 @@ enum Block {
     Skip,
 }
 
-/// Why a lower-dimensional element cannot be a shell of a shell model.
+/// Why a lower-dimensional element is neither a shell nor a membrane here.
 fn unsupported_type(ty: &str) -> &'static str {
     if ["T3D", "B31", "B32"].iter().any(|p| ty.starts_with(p)) {
-        "a truss or beam (a shell model takes 4-node S4 or S4R shells only)"
-    } else if ty.starts_with("S3") || ty.starts_with("STRI") || ty.starts_with("M3D3") {
-        "a triangle (a shell model takes 4-node S4 or S4R shells only)"
+        "a truss or beam (a shell model takes 4-node S4 or S4R shells, a membrane M3D4/M3D3)"
     } else {
-        "a surface element other than S4/S4R (a shell model takes 4-node S4 or S4R shells only)"
+        "a surface element other than S4/S4R/M3D4/M3D4R or S3/S3R/M3D3/STRI3 (a shell model \
+         takes 4-node S4 or S4R shells, a membrane M3D4/M3D3)"
     }
+}
+
+/// Four-node surface elements: shells (S4, S4R) and membranes (M3D4, M3D4R).
+fn is_quad_type(ty: &str) -> bool {
+    matches!(ty, "S4" | "S4R" | "M3D4" | "M3D4R")
+}
+
+/// Three-node surface elements (a membrane takes them; a shell model refuses them).
+fn is_triangle_type(ty: &str) -> bool {
+    matches!(ty, "S3" | "S3R" | "M3D3" | "STRI3")
 }
 
 /// Lower-dimensional element families that may appear in a deck next to the solid mesh.
@@ -93,7 +105,7 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
     let mut aux_sets: std::collections::BTreeMap<String, Vec<u32>> = Default::default();
     let mut shell_index: HashMap<u64, u32> = HashMap::new();
     // *SHELL SECTION: (element set, line, thickness)
-    let mut sections: Vec<(String, usize, Result<f64, String>)> = Vec::new();
+    let mut sections: Vec<(&'static str, String, usize, Result<f64, String>)> = Vec::new();
     // Element data may continue over several lines (trailing comma).
     let mut pending: Vec<u64> = Vec::new();
     let mut pending_line = 0usize;
@@ -158,7 +170,12 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
                         .ok_or_else(|| err(ln, "*ELSET without ELSET=".into()))?,
                     generate: params.contains_key("GENERATE"),
                 },
-                "SHELL SECTION" => Block::ShellSection {
+                "SHELL SECTION" | "MEMBRANE SECTION" => Block::ShellSection {
+                    keyword: if name == "SHELL SECTION" {
+                        "*SHELL SECTION"
+                    } else {
+                        "*MEMBRANE SECTION"
+                    },
                     elset: params.get("ELSET").cloned().unwrap_or_default(),
                     line: ln,
                     done: false,
@@ -271,6 +288,7 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
                 }
             }
             Block::ShellSection {
+                keyword,
                 elset,
                 line: kw_line,
                 done,
@@ -294,9 +312,15 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
                     }
                 };
                 if !*done || parsed.is_err() {
-                    sections.push((elset.clone(), if *done { ln } else { *kw_line }, parsed));
+                    sections.push((
+                        *keyword,
+                        elset.clone(),
+                        if *done { ln } else { *kw_line },
+                        parsed,
+                    ));
                 }
                 block = Block::ShellSection {
+                    keyword,
                     elset: elset.clone(),
                     line: *kw_line,
                     done: true,
@@ -331,21 +355,30 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
                             .or_default()
                             .extend_from_slice(&nodes);
                     }
-                    if ty == "S4" || ty == "S4R" {
-                        if nodes.len() != 4 {
+                    if is_quad_type(ty) || is_triangle_type(ty) {
+                        let want = if is_quad_type(ty) { 4 } else { 3 };
+                        if nodes.len() != want {
                             return Err(err(
                                 pending_line,
                                 format!(
-                                    "element {id}: {} nodes given, {ty} expects 4",
+                                    "element {id}: {} nodes given, {ty} expects {want}",
                                     nodes.len()
                                 ),
                             ));
                         }
-                        let s = mesh.shells.push(
-                            [nodes[0], nodes[1], nodes[2], nodes[3]],
-                            id,
-                            pending_line,
-                        );
+                        let s = if want == 4 {
+                            mesh.shells.push(
+                                [nodes[0], nodes[1], nodes[2], nodes[3]],
+                                id,
+                                pending_line,
+                            )
+                        } else {
+                            mesh.shells.push_triangle(
+                                [nodes[0], nodes[1], nodes[2]],
+                                id,
+                                pending_line,
+                            )
+                        };
                         shell_index.insert(id, s);
                         if let Some(set) = elset {
                             mesh.shells.sets.entry(set.clone()).or_default().push(s);
@@ -517,12 +550,12 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
         *v = sort_dedup(std::mem::take(v));
     }
     // shell sections matter only to a shell model (no volume elements)
-    for (set, ln, t) in sections.into_iter().filter(|_| mesh.kinds.is_empty()) {
-        let t = t.map_err(|why| err(ln, format!("*SHELL SECTION: {why}")))?;
+    for (keyword, set, ln, t) in sections.into_iter().filter(|_| mesh.kinds.is_empty()) {
+        let t = t.map_err(|why| err(ln, format!("{keyword}: {why}")))?;
         let members = mesh.shells.set(&set).cloned().ok_or_else(|| {
             err(
                 ln,
-                format!("*SHELL SECTION: unknown shell element set '{set}'"),
+                format!("{keyword}: unknown surface element set '{set}'"),
             )
         })?;
         for s in members {

@@ -1,7 +1,7 @@
 //! Gmsh `.msh` version 4.1 ASCII reader. Physical groups become named node sets (all nodes of
 //! the group's elements, any dimension) and, for 3-D groups, element sets. A mesh without
-//! volume elements is a shell mesh: its 4-node quadrangles are the shells, its 2-D groups
-//! their sets.
+//! volume elements is a surface mesh: its 4-node quadrangles are shells or membranes, its
+//! 3-node triangles membranes, its 2-D groups their sets.
 
 use super::{sort_dedup, Mesh};
 use crate::element::ElementKind;
@@ -278,12 +278,20 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
                         if tdim == 2 {
                             // surface elements: shells if the mesh turns out to have no
                             // volume elements (`settle_shells`), otherwise only faces
-                            if nn == 4 {
-                                let s = mesh.shells.push(
-                                    [local[0], local[1], local[2], local[3]],
-                                    v[0],
-                                    el,
-                                );
+                            if nn == 4 || nn == 3 {
+                                let s = if nn == 4 {
+                                    mesh.shells.push(
+                                        [local[0], local[1], local[2], local[3]],
+                                        v[0],
+                                        el,
+                                    )
+                                } else {
+                                    mesh.shells.push_triangle(
+                                        [local[0], local[1], local[2]],
+                                        v[0],
+                                        el,
+                                    )
+                                };
                                 for &p in &phys {
                                     mesh.shells
                                         .sets
@@ -292,7 +300,7 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
                                         .push(s);
                                 }
                             } else {
-                                mesh.shells.unsupported.push((v[0], el, "a Gmsh element of type 2/9/10/16 (only 4-node quadrangles, type 3, make shells)"));
+                                mesh.shells.unsupported.push((v[0], el, "a Gmsh element of type 9/10/16 (4-node quadrangles, type 3, make shells and membranes; 3-node triangles, type 2, membranes)"));
                             }
                         }
                         if let Some(kind) = kind {

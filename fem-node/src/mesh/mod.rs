@@ -33,14 +33,17 @@ pub struct Mesh {
     pub elem_sets: BTreeMap<String, Vec<u32>>,
     /// Where the mesh came from, for error messages.
     pub source: String,
-    /// Four-node shell elements of a mesh without volume elements (Gmsh quadrangles, Abaqus
-    /// S4/S4R); empty when the mesh has volume elements (its quadrangles are then faces).
+    /// Surface elements of a mesh without volume elements (Gmsh quadrangles and triangles,
+    /// Abaqus S4/S4R/M3D4/M3D4R and S3/S3R/M3D3/STRI3); empty when the mesh has volume
+    /// elements (its surface elements are then faces).
     pub shells: Shells,
 }
 
-/// Quadrilateral shell elements: corners counter-clockwise about the shell's normal.
+/// Surface elements (shells or membranes): corners counter-clockwise about the element's
+/// normal. A shell model takes quadrilaterals only; a membrane model takes both.
 #[derive(Clone, Debug, Default)]
 pub struct Shells {
+    /// Corners; a triangle's fourth is [`Shells::NO_CORNER`].
     pub quads: Vec<[u32; 4]>,
     /// The file's element ids.
     pub ids: Vec<u64>,
@@ -51,17 +54,38 @@ pub struct Shells {
     pub thickness: Vec<f64>,
     /// Named element sets of shells (Gmsh 2-D physical groups, Abaqus ELSET=).
     pub sets: BTreeMap<String, Vec<u32>>,
-    /// Surface elements a shell model cannot use (triangles), by (id, line): reported when a
-    /// shell model is built from the mesh.
+    /// Surface elements no model here uses (beams, trusses, higher-order surfaces), by
+    /// (id, line, what it is): reported when a shell or membrane model is built from the mesh.
     pub unsupported: Vec<(u64, usize, &'static str)>,
 }
 
 impl Shells {
+    /// The fourth corner of a triangle.
+    pub const NO_CORNER: u32 = u32::MAX;
+    /// The corners of element `s` (three or four).
+    pub fn corners(&self, s: usize) -> &[u32] {
+        let q = &self.quads[s];
+        if q[3] == Self::NO_CORNER {
+            &q[..3]
+        } else {
+            q
+        }
+    }
+    /// The first triangle (its id and line), which a shell model refuses.
+    pub fn first_triangle(&self) -> Option<(u64, usize)> {
+        self.quads
+            .iter()
+            .position(|q| q[3] == Self::NO_CORNER)
+            .map(|s| (self.ids[s], self.lines[s]))
+    }
     pub fn len(&self) -> usize {
         self.quads.len()
     }
     pub fn is_empty(&self) -> bool {
         self.quads.is_empty()
+    }
+    pub(crate) fn push_triangle(&mut self, tri: [u32; 3], id: u64, line: usize) -> u32 {
+        self.push([tri[0], tri[1], tri[2], Self::NO_CORNER], id, line)
     }
     pub(crate) fn push(&mut self, quad: [u32; 4], id: u64, line: usize) -> u32 {
         self.quads.push(quad);
@@ -182,7 +206,8 @@ impl Mesh {
                 file: self.source.clone(),
                 line: 0,
                 message: "mesh has no volume elements (tet4, tet10, hex8, hex20) and no \
-                          four-node shells (Gmsh quadrangles, Abaqus S4/S4R)"
+                          surface elements (Gmsh quadrangles or triangles, Abaqus \
+                          S4/S4R/M3D4/M3D4R, S3/S3R/M3D3/STRI3)"
                     .into(),
             });
         }
@@ -266,8 +291,11 @@ impl Mesh {
     /// Marks which nodes are referenced by at least one element.
     pub fn used_nodes(&self) -> Vec<bool> {
         let mut used = vec![false; self.num_nodes()];
-        for &n in self.conn.iter().chain(self.shells.quads.iter().flatten()) {
-            used[n as usize] = true;
+        let corners = self.shells.quads.iter().flatten();
+        for &n in self.conn.iter().chain(corners) {
+            if n != Shells::NO_CORNER {
+                used[n as usize] = true;
+            }
         }
         used
     }
