@@ -85,7 +85,10 @@ enum Command {
     /// writes study.csv and error_vs_wall / stability plots (PNG and SVG); a half-done sweep resumes.
     Study {
         scene: PathBuf,
-        /// `key=value1,value2,…` (dotted scene key; repeatable).
+        /// `key=value1,value2,…` (dotted scene key, a number picks an entry of a list such as
+        /// `dem.walls.1.load.force`; repeatable: every combination runs). Keys that move
+        /// together: `key1+key2=a1:b1,a2:b2` (e.g. a cell pressure and the platen force it
+        /// needs).
         #[arg(long, required = true)]
         vary: Vec<String>,
         /// Result compared between runs (default: the first FEM probe's uz).

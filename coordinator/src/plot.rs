@@ -631,7 +631,7 @@ fn stability_png(path: &Path, outcomes: &[Outcome], vars: &[Variation]) -> anyho
         o.variant
             .settings
             .iter()
-            .skip(1)
+            .skip(vars.first().map_or(1, |v| 1 + v.linked.len()))
             .map(|(k, v)| format!("{k}={}", value_text(v)))
             .collect::<Vec<_>>()
             .join(" ")

@@ -13,52 +13,137 @@ use anyhow::{anyhow, bail, Context};
 use crate::run::{run_scene, RunOptions};
 use crate::scene::Scene;
 
-/// One `--vary key=v1,v2,…`.
+/// One `--vary key=v1,v2,…`, or keys that vary together: `a+b=a1:b1,a2:b2` (the cell
+/// pressure and the platen's force of a triaxial cell, say).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Variation {
-    /// Dotted path in the scene file, e.g. `coupling.window` or `dem.time_step`.
+    /// Dotted path in the scene file, e.g. `coupling.window`, `dem.time_step` or
+    /// `dem.walls.2.load.force` (a number picks an entry of a list of tables such as
+    /// `[[dem.walls]]`, counting from 0).
     pub key: String,
     pub values: Vec<toml::Value>,
+    /// Keys set together with `key`: each with one value per value of `key`.
+    pub linked: Vec<(String, Vec<toml::Value>)>,
 }
 
-/// Parses `key=v1,v2,…`; values are TOML values (numbers, booleans, strings) or bare words.
+impl Variation {
+    /// Every key this variation sets, `key` first (the order of a variant's settings).
+    pub fn keys(&self) -> impl Iterator<Item = &str> {
+        std::iter::once(self.key.as_str()).chain(self.linked.iter().map(|(k, _)| k.as_str()))
+    }
+}
+
+fn parse_value(v: &str) -> toml::Value {
+    let v = v.trim();
+    toml::from_str::<toml::Table>(&format!("x = {v}"))
+        .ok()
+        .and_then(|t| t.get("x").cloned())
+        .unwrap_or_else(|| toml::Value::String(v.to_string()))
+}
+
+/// Parses `key=v1,v2,…` or `key1+key2=v1:w1,v2:w2,…`; values are TOML values (numbers,
+/// booleans, strings) or bare words.
 pub fn parse_variation(text: &str) -> anyhow::Result<Variation> {
-    let (key, values) = text.split_once('=').ok_or_else(|| {
+    let (keys, values) = text.split_once('=').ok_or_else(|| {
         anyhow!("--vary `{text}`: expected key=value1,value2,… (e.g. coupling.window=1e-4,5e-5)")
     })?;
-    let key = key.trim().to_string();
-    if key.is_empty() || key.split('.').any(str::is_empty) {
-        bail!("--vary `{text}`: `{key}` is not a dotted key such as coupling.window");
+    let keys: Vec<String> = keys.split('+').map(|k| k.trim().to_string()).collect();
+    for key in &keys {
+        if key.is_empty() || key.split('.').any(str::is_empty) {
+            bail!("--vary `{text}`: `{key}` is not a dotted key such as coupling.window");
+        }
     }
-    let values = values
-        .split(',')
-        .map(|v| {
-            let v = v.trim();
-            toml::from_str::<toml::Table>(&format!("x = {v}"))
-                .ok()
-                .and_then(|t| t.get("x").cloned())
-                .unwrap_or_else(|| toml::Value::String(v.to_string()))
-        })
-        .collect::<Vec<_>>();
-    if values.is_empty() {
+    if values.trim().is_empty() {
         bail!("--vary `{text}`: no values");
     }
-    Ok(Variation { key, values })
+    let mut columns: Vec<Vec<toml::Value>> = vec![Vec::new(); keys.len()];
+    for tuple in values.split(',') {
+        let parts: Vec<&str> = if keys.len() == 1 {
+            vec![tuple]
+        } else {
+            tuple.split(':').collect()
+        };
+        if parts.len() != keys.len() {
+            bail!(
+                "--vary `{text}`: `{}` gives {} value(s) for the {} keys {} (join one value per \
+                 key with `:`)",
+                tuple.trim(),
+                parts.len(),
+                keys.len(),
+                keys.join("+")
+            );
+        }
+        for (c, v) in columns.iter_mut().zip(parts) {
+            c.push(parse_value(v));
+        }
+    }
+    let mut columns = columns.into_iter();
+    let mut keys = keys.into_iter();
+    let (key, values) = (
+        keys.next().unwrap_or_default(),
+        columns.next().unwrap_or_default(),
+    );
+    Ok(Variation {
+        key,
+        values,
+        linked: keys.zip(columns).collect(),
+    })
 }
 
-/// Sets `key` (dotted) in a TOML table, creating tables on the way.
+/// Sets `key` (dotted) in a TOML table, creating tables on the way; a number picks an entry
+/// of a list (`dem.walls.2.load.force`: the third `[[dem.walls]]`).
 fn set_path(table: &mut toml::Table, key: &str, value: toml::Value) -> anyhow::Result<()> {
     let parts: Vec<&str> = key.split('.').collect();
-    let mut t = table;
-    for p in &parts[..parts.len() - 1] {
-        t = t
-            .entry(p.to_string())
-            .or_insert_with(|| toml::Value::Table(Default::default()))
-            .as_table_mut()
-            .ok_or_else(|| anyhow!("`{key}`: `{p}` is not a table in the scene"))?;
+    let Some((last, path)) = parts.split_last() else {
+        bail!("an empty key");
+    };
+    let Some((first, rest)) = path.split_first() else {
+        table.insert(last.to_string(), value);
+        return Ok(());
+    };
+    let mut cur = table
+        .entry(first.to_string())
+        .or_insert_with(|| toml::Value::Table(Default::default()));
+    for (i, p) in rest.iter().enumerate() {
+        cur = match cur {
+            toml::Value::Table(t) => t
+                .entry(p.to_string())
+                .or_insert_with(|| toml::Value::Table(Default::default())),
+            toml::Value::Array(a) => list_entry(a, p, &parts[..=i].join("."), key)?,
+            _ => bail!(
+                "`{key}`: `{}` is not a table in the scene",
+                parts[..=i].join(".")
+            ),
+        };
     }
-    t.insert(parts[parts.len() - 1].to_string(), value);
+    let here = path.join(".");
+    match cur {
+        toml::Value::Table(t) => {
+            t.insert(last.to_string(), value);
+        }
+        toml::Value::Array(a) => *list_entry(a, last, &here, key)? = value,
+        _ => bail!("`{key}`: `{here}` is not a table in the scene"),
+    }
     Ok(())
+}
+
+/// Entry `index` of the list `here` (part of `key`), or why there is none.
+fn list_entry<'a>(
+    list: &'a mut [toml::Value],
+    index: &str,
+    here: &str,
+    key: &str,
+) -> anyhow::Result<&'a mut toml::Value> {
+    let n = list.len();
+    let last = n.saturating_sub(1);
+    let k: usize = index.parse().map_err(|_| {
+        anyhow!(
+            "`{key}`: `{here}` is a list of {n} entries; pick one by its index (`{here}.0` to \
+             `{here}.{last}`)"
+        )
+    })?;
+    list.get_mut(k)
+        .ok_or_else(|| anyhow!("`{key}`: `{here}` has {n} entries (indices 0 to {last})"))
 }
 
 pub(crate) fn value_text(v: &toml::Value) -> String {
@@ -88,9 +173,12 @@ pub fn variants(base_text: &str, vars: &[Variation]) -> anyhow::Result<Vec<Varia
         combos = combos
             .into_iter()
             .flat_map(|c| {
-                v.values.iter().map(move |val| {
+                v.values.iter().enumerate().map(move |(i, val)| {
                     let mut c = c.clone();
                     c.push((v.key.clone(), val.clone()));
+                    for (k, vals) in &v.linked {
+                        c.push((k.clone(), vals[i].clone()));
+                    }
                     c
                 })
             })
@@ -647,8 +735,8 @@ fn write_csv(
     reference: Option<usize>,
 ) -> anyhow::Result<()> {
     let mut s = String::from("run");
-    for v in vars {
-        write!(s, ",{}", v.key)?;
+    for k in vars.iter().flat_map(Variation::keys) {
+        write!(s, ",{k}")?;
     }
     writeln!(s, ",status,wall_s,dem_compute_s,fem_compute_s,coupling_overhead_s,{metric},relative_error,reference")?;
     for (i, o) in outcomes.iter().enumerate() {
@@ -787,7 +875,7 @@ fn stability_svg(outcomes: &[Outcome], vars: &[Variation]) -> String {
     let mut s = format!(
         r#"<svg xmlns="http://www.w3.org/2000/svg" width="760" height="{h}" font-family="sans-serif" font-size="12"><rect width="100%" height="100%" fill="white"/>"#
     );
-    let header: Vec<&str> = vars.iter().map(|v| v.key.as_str()).collect();
+    let header: Vec<&str> = vars.iter().flat_map(Variation::keys).collect();
     let _ = write!(
         s,
         r#"<text x="10" y="20" font-weight="bold">{}  →  status</text>"#,
@@ -898,6 +986,62 @@ mod tests {
         assert_eq!(t["coupling"]["window"].as_float(), Some(5e-5));
         assert_eq!(t["coupling"]["schedule"].as_str(), Some("predictive"));
         assert_eq!(t["dem"]["time_step"].as_float(), Some(1e-6));
+    }
+
+    #[test]
+    fn linked_keys_vary_together_and_numbers_pick_list_entries() {
+        let base = "[scene]\nend_time = 1.0\n[fem]\nx = 1\n[[fem.loads]]\nvalue = 100e3\n\
+                    [[dem.walls]]\nkind = \"plane\"\n[[dem.walls]]\nkind = \"plane\"\n\
+                    load = { force = -383.87 }\n";
+        let vars = vec![
+            parse_variation("fem.loads.0.value+dem.walls.1.load.force=25e3:-95.23, 400e3:-1538.4")
+                .unwrap(),
+            parse_variation("dem.time_step=1e-6,5e-7").unwrap(),
+        ];
+        assert_eq!(
+            vars[0].keys().collect::<Vec<_>>(),
+            ["fem.loads.0.value", "dem.walls.1.load.force"]
+        );
+        let v = variants(base, &vars).unwrap();
+        // zipped, then multiplied by the other key: 2 × 2 runs, not 2 × 2 × 2
+        assert_eq!(v.len(), 4);
+        let t: toml::Table = toml::from_str(&v[2].text).unwrap();
+        assert_eq!(t["fem"]["loads"][0]["value"].as_float(), Some(400e3));
+        assert_eq!(
+            t["dem"]["walls"][1]["load"]["force"].as_float(),
+            Some(-1538.4)
+        );
+        assert_eq!(t["dem"]["walls"][0].get("load"), None);
+        assert_eq!(t["dem"]["time_step"].as_float(), Some(1e-6));
+        assert_eq!(
+            v[2].label(),
+            "fem.loads.0.value=400000.0 dem.walls.1.load.force=-1538.4 dem.time_step=1e-6"
+        );
+        // a whole entry can be replaced, an index past the end or a word in a list is named
+        let mut t: toml::Table = toml::from_str(base).unwrap();
+        set_path(
+            &mut t,
+            "fem.loads.0",
+            toml::Value::Table(Default::default()),
+        )
+        .unwrap();
+        assert!(t["fem"]["loads"][0].as_table().unwrap().is_empty());
+        let e = set_path(&mut t, "dem.walls.2.kind", toml::Value::Integer(1)).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("`dem.walls` has 2 entries (indices 0 to 1)"),
+            "{e}"
+        );
+        let e = set_path(&mut t, "dem.walls.top.kind", toml::Value::Integer(1)).unwrap_err();
+        assert!(e.to_string().contains("pick one by its index"), "{e}");
+        let e = set_path(&mut t, "fem.x.y", toml::Value::Integer(1)).unwrap_err();
+        assert!(e.to_string().contains("`fem.x` is not a table"), "{e}");
+        // a tuple of the wrong length is named
+        let e = parse_variation("a.b+c.d=1:2,3").unwrap_err().to_string();
+        assert!(
+            e.contains("`3` gives 1 value(s) for the 2 keys a.b+c.d"),
+            "{e}"
+        );
     }
 
     #[test]

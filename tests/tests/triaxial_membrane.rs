@@ -138,4 +138,63 @@ fn glass_beads_in_a_membrane_carry_the_cell_pressure_and_gain_strength_when_shea
         (v - last_volume).abs() < 1e-8 * v,
         "{v} vs the CSV's {last_volume}"
     );
+
+    // 3. `cosim study` over the cell pressure: the membrane's pressure and the platen's force
+    // vary together (linked keys), here through consolidation only, at 25 and 250 kPa
+    let consolidate = text.replace("end_time = \"0.052 s\"", "end_time = \"0.03 s\"");
+    assert_ne!(consolidate, text);
+    let scene = write_scene(&dir, "consolidate.toml", &consolidate);
+    let area = std::f64::consts::PI * 0.012f64.powi(2);
+    let weight = 0.02 * 9.81;
+    let force = |p: f64| -(p * area - weight);
+    let study = dir.join("study");
+    let mut c = cosim();
+    c.arg("study")
+        .arg(&scene)
+        .args([
+            "--vary",
+            &format!(
+                "fem.loads.0.value+dem.walls.1.load.force=25e3:{},250e3:{}",
+                force(25e3),
+                force(250e3)
+            ),
+            "--metric",
+            "fem.interface_force.outward",
+            "--jobs",
+            "1",
+            "--out",
+        ])
+        .arg(&study);
+    let o = run(c);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let table = std::fs::read_to_string(study.join("study.csv")).unwrap();
+    assert!(
+        table.starts_with("run,fem.loads.0.value,dem.walls.1.load.force,status"),
+        "{table}"
+    );
+    for (k, p) in [(0, 25e3), (1, 250e3)] {
+        let run_dir = study.join(format!("run{k:03}"));
+        let dem = std::fs::read_to_string(run_dir.join("dem/dem_timeseries.csv")).unwrap();
+        let fem = std::fs::read_to_string(run_dir.join("fem/fem_probes.csv")).unwrap();
+        let tail = |v: Vec<f64>| {
+            let n = v.len();
+            v[n - 100..].iter().sum::<f64>() / 100.0
+        };
+        let f = tail(column(&dem, "platen.contact_force"));
+        let volume = tail(column(&fem, "volume"));
+        let ring = tail(column(&fem, "top_ring_z"));
+        let outward = tail(column(&fem, "outward_force"));
+        let area = volume / ring;
+        let ratio = f / (area * p);
+        let lateral = outward / (p * 2.0 * (std::f64::consts::PI * area).sqrt() * ring);
+        eprintln!("p = {p} Pa consolidated: σ₁/σ₃ = {ratio:.3}, lateral share {lateral:.3}");
+        // near 1 for both (had only one key changed, σ₁/σ₃ would be 0.25 or 2.5); the higher
+        // the pressure, the deeper the membrane presses into the surface voids and the
+        // smaller the cross-section under the platen's p π R² (1.02 at 25 kPa, 1.23 at 250)
+        assert!((0.9..=1.35).contains(&ratio), "p = {p}: σ₁/σ₃ = {ratio}");
+        assert!(
+            (0.75..=1.0).contains(&lateral),
+            "p = {p}: lateral share {lateral}"
+        );
+    }
 }
