@@ -622,16 +622,40 @@ fn status_colour(status: &str) -> RGBColor {
 
 fn stability_png(path: &Path, outcomes: &[Outcome], vars: &[Variation]) -> anyhow::Result<()> {
     // grid: columns = values of the first key, rows = combinations of the others
-    let key0 = vars.first().map(|v| v.key.clone()).unwrap_or_default();
+    let key0 = vars
+        .first()
+        .map(|v| v.keys().collect::<Vec<_>>().join(" / "))
+        .unwrap_or_default();
+    // a column per value of the first variation (with its linked keys' values: `25e3 / -95`)
+    let width = vars.first().map_or(1, |v| 1 + v.linked.len());
     let cols: Vec<String> = vars
         .first()
-        .map(|v| v.values.iter().map(value_text).collect())
+        .map(|v| {
+            (0..v.values.len())
+                .map(|i| {
+                    std::iter::once(&v.values[i])
+                        .chain(v.linked.iter().map(|(_, vals)| &vals[i]))
+                        .map(value_text)
+                        .collect::<Vec<_>>()
+                        .join(" / ")
+                })
+                .collect()
+        })
         .unwrap_or_default();
+    let col_of = |o: &Outcome| -> String {
+        o.variant
+            .settings
+            .iter()
+            .take(width)
+            .map(|(_, v)| value_text(v))
+            .collect::<Vec<_>>()
+            .join(" / ")
+    };
     let row_of = |o: &Outcome| -> String {
         o.variant
             .settings
             .iter()
-            .skip(vars.first().map_or(1, |v| 1 + v.linked.len()))
+            .skip(width)
             .map(|(k, v)| format!("{k}={}", value_text(v)))
             .collect::<Vec<_>>()
             .join(" ")
@@ -673,12 +697,7 @@ fn stability_png(path: &Path, outcomes: &[Outcome], vars: &[Variation]) -> anyho
         ))
         .map_err(err)?;
         for o in outcomes.iter().filter(|o| &row_of(o) == r) {
-            let j = o
-                .variant
-                .settings
-                .first()
-                .and_then(|(_, v)| cols.iter().position(|c| *c == value_text(v)))
-                .unwrap_or(0) as i32;
+            let j = cols.iter().position(|c| *c == col_of(o)).unwrap_or(0) as i32;
             let x = left + cw * j;
             root.draw(&Rectangle::new(
                 [(x + 2, y + 2), (x + cw - 2, y + rh - 2)],

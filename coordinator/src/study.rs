@@ -105,7 +105,12 @@ fn set_path(table: &mut toml::Table, key: &str, value: toml::Value) -> anyhow::R
         .entry(first.to_string())
         .or_insert_with(|| toml::Value::Table(Default::default()));
     for (i, p) in rest.iter().enumerate() {
+        let next_is_index = rest.get(i + 1).unwrap_or(last).parse::<usize>().is_ok();
         cur = match cur {
+            toml::Value::Table(t) if next_is_index && !t.contains_key(*p) => bail!(
+                "`{key}`: `{}` is not in the scene (a number picks an entry of an existing list)",
+                parts[..=i + 1].join(".")
+            ),
             toml::Value::Table(t) => t
                 .entry(p.to_string())
                 .or_insert_with(|| toml::Value::Table(Default::default())),
@@ -168,6 +173,19 @@ pub struct Variant {
 /// Every combination of the variations (the Cartesian product), as scene texts.
 pub fn variants(base_text: &str, vars: &[Variation]) -> anyhow::Result<Vec<Variant>> {
     let base: toml::Table = toml::from_str(base_text).context("the scene is not valid TOML")?;
+    let mut seen = std::collections::BTreeSet::new();
+    for v in vars {
+        if let Some(k) = v.keys().find(|k| !seen.insert(*k)) {
+            bail!("--vary: `{k}` is varied twice; give each key once");
+        }
+        if let Some((k, _)) = v
+            .linked
+            .iter()
+            .find(|(_, vals)| vals.len() != v.values.len())
+        {
+            bail!("--vary: `{k}` has not one value per value of `{}`", v.key);
+        }
+    }
     let mut combos: Vec<Vec<(String, toml::Value)>> = vec![Vec::new()];
     for v in vars {
         combos = combos
@@ -488,7 +506,11 @@ pub async fn run_study(
     out_dir: &Path,
 ) -> anyhow::Result<(String, Vec<Outcome>)> {
     let mut variants = variants(&scene.text, vars)?;
-    if !vars.iter().any(|v| v.key == "coupling.allow_beyond_limits") {
+    if !vars
+        .iter()
+        .flat_map(Variation::keys)
+        .any(|k| k == "coupling.allow_beyond_limits")
+    {
         for v in &mut variants {
             let mut t: toml::Table = toml::from_str(&v.text)?;
             set_path(
@@ -1036,6 +1058,18 @@ mod tests {
         assert!(e.to_string().contains("pick one by its index"), "{e}");
         let e = set_path(&mut t, "fem.x.y", toml::Value::Integer(1)).unwrap_err();
         assert!(e.to_string().contains("`fem.x` is not a table"), "{e}");
+        // a list that is not in the scene, a key varied twice
+        let e = set_path(&mut t, "fem.sections.0.x", toml::Value::Integer(1)).unwrap_err();
+        assert!(
+            e.to_string().contains("`fem.sections` is not in the scene"),
+            "{e}"
+        );
+        let twice = [
+            parse_variation("a.b+c.d=1:2").unwrap(),
+            parse_variation("c.d=3").unwrap(),
+        ];
+        let e = variants(base, &twice).unwrap_err().to_string();
+        assert!(e.contains("`c.d` is varied twice"), "{e}");
         // a tuple of the wrong length is named
         let e = parse_variation("a.b+c.d=1:2,3").unwrap_err().to_string();
         assert!(

@@ -1035,6 +1035,13 @@ impl FemConfig {
         }
         if let Some(m) = &self.membrane {
             check_membrane(m)?;
+            if m.thickness.is_none() && matches!(self.mesh, MeshSpec::Cylinder { .. }) {
+                return Err((
+                    "fem.membrane.thickness".into(),
+                    "missing: a generated cylinder has no section to take it from (give t₀ in m)"
+                        .into(),
+                ));
+            }
             if self.material.is_some() || !self.materials.is_empty() || !self.sections.is_empty() {
                 return Err((
                     "fem.membrane".into(),

@@ -146,8 +146,9 @@ impl MembraneModel {
                     return Err(FemError::Mesh {
                         file: mesh.source.clone(),
                         line: 0,
-                        message: "has volume elements; a membrane mesh has only 4-node surface \
-                                  elements (Gmsh quadrangles, Abaqus S4/S4R)"
+                        message: "has volume elements; a membrane mesh has only surface \
+                                  elements (Gmsh quadrangles and triangles, Abaqus M3D4/M3D3, \
+                                  S4/S3)"
                             .into(),
                     });
                 }
@@ -156,12 +157,13 @@ impl MembraneModel {
             _ => Err(config(
                 "fem.mesh",
                 "a membrane is a generated cylinder (element = \"m3d4\" / \"m3d3\") or a mesh \
-                 file of quadrilaterals",
+                 file of quadrilaterals and triangles",
             )),
         }
     }
 
-    /// Builds the model on a mesh of quadrilaterals (`triangles`: each split in two).
+    /// Builds the model on a mesh of quadrilaterals and triangles (`triangles`: each
+    /// quadrilateral split in two).
     pub fn from_mesh(
         cfg: &FemConfig,
         mesh: Mesh,

@@ -326,6 +326,8 @@ fn bad_membrane_scenes_are_refused_with_the_field_named() {
             "thickness = -1.0",
             "fem.membrane.thickness",
         ),
+        // a generated cylinder has no section to take a thickness from
+        ("thickness = 0.0003\n", "", "fem.membrane.thickness"),
         (
             "divisions = [16, 2]",
             "divisions = [2, 2]",
