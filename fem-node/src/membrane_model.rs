@@ -234,6 +234,12 @@ impl MembraneModel {
         let mut elems = Vec::new();
         let mut lines = Vec::new();
         let mut ids = Vec::new();
+        let section_thickness = mesh.shells.thicknesses(
+            sec.thickness,
+            "fem.membrane.thickness",
+            "*MEMBRANE SECTION",
+            &mesh.source,
+        )?;
         let mut thickness = Vec::new();
         // the membranes made from each mesh element
         let mut parts_of = Vec::with_capacity(mesh.shells.len());
@@ -244,20 +250,7 @@ impl MembraneModel {
             } else {
                 vec![q.to_vec()]
             };
-            let t = match (mesh.shells.thickness[e], sec.thickness) {
-                (t, _) if t.is_finite() => t,
-                (_, Some(t)) => t,
-                _ => {
-                    return Err(config(
-                        "fem.membrane.thickness",
-                        format!(
-                            "element {} of {} has no thickness: give [fem.membrane] thickness \
-                             (m) or a *MEMBRANE SECTION in the deck",
-                            mesh.shells.ids[e], mesh.source
-                        ),
-                    ))
-                }
-            };
+            let t = section_thickness[e];
             let first = elems.len();
             for p in parts {
                 let x: Vec<[f64; 3]> = p.iter().map(|&n| mesh.nodes[n as usize]).collect();

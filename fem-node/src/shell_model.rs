@@ -274,24 +274,12 @@ impl ShellModel {
             ));
         }
         let ns = mesh.shells.len();
-        let mut thickness = Vec::with_capacity(ns);
-        for e in 0..ns {
-            let t = mesh.shells.thickness[e];
-            thickness.push(if t.is_nan() {
-                default_t.ok_or_else(|| {
-                    config(
-                        "fem.shell.thickness",
-                        format!(
-                            "shell {} of {} has no thickness: give [fem.shell] thickness (m) \
-                             or a *SHELL SECTION",
-                            mesh.shells.ids[e], mesh.source
-                        ),
-                    )
-                })?
-            } else {
-                t
-            });
-        }
+        let thickness = mesh.shells.thicknesses(
+            default_t,
+            "fem.shell.thickness",
+            "*SHELL SECTION",
+            &mesh.source,
+        )?;
 
         // directors: mean corner normals; a degenerate quad or a fold is refused
         let nn = mesh.num_nodes();

@@ -13,6 +13,16 @@ fn column(text: &str, name: &str) -> Vec<f64> {
         .collect()
 }
 
+/// σ₁/σ₃ and the share of the cell pressure p the grains carry on the membrane, from the
+/// platen's contact force, the volume inside the membrane, the height of its top ring and the
+/// grains' outward force on it over a lateral surface of `height`: the cross-section is the
+/// volume over the ring's height.
+fn cell_state(force: f64, volume: f64, ring: f64, outward: f64, height: f64, p: f64) -> (f64, f64) {
+    let area = volume / ring;
+    let lateral = outward / (p * 2.0 * (std::f64::consts::PI * area).sqrt() * height);
+    (force / (area * p), lateral)
+}
+
 /// Means over consecutive blocks of `n` values.
 fn means(v: &[f64], n: usize) -> Vec<f64> {
     v.chunks(n)
@@ -87,9 +97,7 @@ fn glass_beads_in_a_membrane_carry_the_cell_pressure_and_gain_strength_when_shea
         let h = 0.045 + u[k];
         // the mean cross-section: the volume is closed by the plane of the membrane's top
         // ring, which floats while the platen settles and then moves with it
-        let area = volume[k] / ring[k];
-        let ratio = f[k] / (area * p);
-        let lateral = outward[k] / (p * 2.0 * (std::f64::consts::PI * area).sqrt() * h);
+        let (ratio, lateral) = cell_state(f[k], volume[k], ring[k], outward[k], h, p);
         let strain = (h0 - h) / h0;
         eprintln!(
             "t = {:.4} s  axial strain {:+.4}  σ₁/σ₃ = {ratio:.3}  volume {:.0} mm³  grains' \
@@ -176,17 +184,17 @@ fn glass_beads_in_a_membrane_carry_the_cell_pressure_and_gain_strength_when_shea
         let run_dir = study.join(format!("run{k:03}"));
         let dem = std::fs::read_to_string(run_dir.join("dem/dem_timeseries.csv")).unwrap();
         let fem = std::fs::read_to_string(run_dir.join("fem/fem_probes.csv")).unwrap();
-        let tail = |v: Vec<f64>| {
-            let n = v.len();
-            v[n - 100..].iter().sum::<f64>() / 100.0
-        };
-        let f = tail(column(&dem, "platen.contact_force"));
-        let volume = tail(column(&fem, "volume"));
+        // the last 2 ms
+        let tail = |v: Vec<f64>| means(&v[v.len() - 100..], 100)[0];
         let ring = tail(column(&fem, "top_ring_z"));
-        let outward = tail(column(&fem, "outward_force"));
-        let area = volume / ring;
-        let ratio = f / (area * p);
-        let lateral = outward / (p * 2.0 * (std::f64::consts::PI * area).sqrt() * ring);
+        let (ratio, lateral) = cell_state(
+            tail(column(&dem, "platen.contact_force")),
+            tail(column(&fem, "volume")),
+            ring,
+            tail(column(&fem, "outward_force")),
+            ring,
+            p,
+        );
         eprintln!("p = {p} Pa consolidated: σ₁/σ₃ = {ratio:.3}, lateral share {lateral:.3}");
         // near 1 for both (had only one key changed, σ₁/σ₃ would be 0.25 or 2.5); the higher
         // the pressure, the deeper the membrane presses into the surface voids and the

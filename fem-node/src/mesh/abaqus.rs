@@ -104,7 +104,7 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Mesh, FemError> {
     let mut aux_elems: HashMap<u64, Vec<u32>> = HashMap::new();
     let mut aux_sets: std::collections::BTreeMap<String, Vec<u32>> = Default::default();
     let mut shell_index: HashMap<u64, u32> = HashMap::new();
-    // *SHELL SECTION: (element set, line, thickness)
+    // *SHELL SECTION / *MEMBRANE SECTION: (keyword, element set, line, thickness)
     let mut sections: Vec<(&'static str, String, usize, Result<f64, String>)> = Vec::new();
     // Element data may continue over several lines (trailing comma).
     let mut pending: Vec<u64> = Vec::new();

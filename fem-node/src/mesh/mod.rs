@@ -71,6 +71,31 @@ impl Shells {
             q
         }
     }
+    /// Each element's thickness: the file's section, else `default`; an element with neither
+    /// is refused, named, with `field` (the scene's key) and `section` (the deck's keyword)
+    /// as the remedies.
+    pub fn thicknesses(
+        &self,
+        default: Option<f64>,
+        field: &str,
+        section: &str,
+        source: &str,
+    ) -> Result<Vec<f64>, FemError> {
+        (0..self.len())
+            .map(|e| match self.thickness[e] {
+                t if t.is_finite() => Ok(t),
+                _ => default.ok_or_else(|| FemError::Config {
+                    field: field.to_string(),
+                    message: format!(
+                        "element {} of {source} has no thickness: give {field} (m) or a \
+                         {section} in the deck",
+                        self.ids[e]
+                    ),
+                }),
+            })
+            .collect()
+    }
+
     /// The first triangle (its id and line), which a shell model refuses.
     pub fn first_triangle(&self) -> Option<(u64, usize)> {
         self.quads
