@@ -193,6 +193,62 @@ pub struct NeighbourLists {
     /// Derived from the shaped lists (not part of snapshots).
     #[serde(skip)]
     pub shaped_incidence: ShapedIncidence,
+    /// Periodic cell (Wellmann §5.1.1): per shaped pair, the image of its second body, whose
+    /// centre is at x_j + s∘L (zero for a pair inside the cell; empty without a cell).
+    #[serde(default)]
+    pub shaped_pair_image: Vec<[i8; 3]>,
+    /// Periodic cell: the sphere pairs that touch across the cell's faces, by pair.
+    #[serde(default)]
+    pub periodic_pairs: Vec<PeriodicPair>,
+    /// The cell's edge lengths at the last build (`None`: no periodic cell).
+    #[serde(default)]
+    pub cell_at_build: Option<V3>,
+}
+
+/// A sphere pair of a periodic cell across its faces: the image of `pair[1]` shifted by
+/// d = s∘L (`image` s ∈ {−1, 0, 1}³, W 5.2) meets `pair[0]`; its tangential history ξ, and
+/// the force on `pair[0]` of the last evaluation with its overlap (negative when apart), which
+/// the cell's average stress (W 5.5) reads.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
+pub struct PeriodicPair {
+    pub pair: [u32; 2],
+    pub image: [i8; 3],
+    pub shear: V3,
+    pub force: V3,
+    pub overlap: f64,
+}
+
+/// The 13 shifts N⁺ of Wellmann §5.1.1 (one of each pair ±n): a ghost of particle j is made
+/// for these only, so each contact across the faces is found once.
+pub const HALF_SHIFTS: [[i8; 3]; 13] = [
+    [1, 0, 0],
+    [0, 1, 0],
+    [0, 0, 1],
+    [1, 1, 0],
+    [1, 0, 1],
+    [0, 1, 1],
+    [1, 1, 1],
+    [1, -1, 0],
+    [1, 0, -1],
+    [0, 1, -1],
+    [1, 1, -1],
+    [1, -1, 1],
+    [-1, 1, 1],
+];
+
+/// The extra reach of a pair across the faces of a periodic cell, as a fraction of the skin:
+/// the lists stay valid until the cell's edges changed by this much since the build (its
+/// images moved), besides every particle's d_V/2.
+pub const CELL_MARGIN: f64 = 0.5;
+
+/// The shift d = s∘L of image `s` in a cell of edges `size`.
+#[inline]
+pub fn image_shift(size: &V3, s: [i8; 3]) -> V3 {
+    V3::new(
+        s[0] as f64 * size.x,
+        s[1] as f64 * size.y,
+        s[2] as f64 * size.z,
+    )
 }
 
 /// Cross-block pairs: the force block of i writes the reaction on j into `force` (numbered by
@@ -370,6 +426,12 @@ impl NeighbourLists {
             && self.shaped_mesh_contacts.len() == self.shaped_mesh.len()
             && self.shaped_mesh.windows(2).all(|w| w[0] <= w[1])
             && self.shaped_mesh.iter().all(|&(b, _)| (b as usize) < n)
+            && (self.shaped_pair_image.is_empty()
+                || self.shaped_pair_image.len() == self.shaped_pairs.len())
+            && self
+                .periodic_pairs
+                .iter()
+                .all(|p| p.pair[0] < p.pair[1] && (p.pair[1] as usize) < n)
     }
 }
 
@@ -455,12 +517,23 @@ fn spread_bits(x: u64) -> u64 {
 /// True when the lists must be rebuilt: invalid, another particle count, or a coupled-mesh
 /// node moved more than d_V/2 since the last build (4.10). Particle displacements are checked
 /// by the drift (`integrate::kick_drift`), see [`particles_moved`] otherwise.
-pub fn needs_rebuild(lists: &NeighbourLists, particles: &Particles, meshes: &[Mesh]) -> bool {
+/// With a periodic cell of edges `cell`, also when they changed by [`CELL_MARGIN`] d_V since.
+pub fn needs_rebuild(
+    lists: &NeighbourLists,
+    particles: &Particles,
+    meshes: &[Mesh],
+    cell: Option<V3>,
+) -> bool {
     !lists.valid
         || lists.position_at_build.len() != particles.len()
         || meshes
             .iter()
             .any(|m| m.coupled && m.max_displacement_since_build() > 0.5 * lists.skin)
+        || match (cell, lists.cell_at_build) {
+            (None, None) => false,
+            (Some(l), Some(l0)) => (l - l0).norm() > CELL_MARGIN * lists.skin,
+            _ => true,
+        }
 }
 
 /// True when some particle moved more than d_V/2 since the last build (Wellmann, B4).
@@ -480,13 +553,31 @@ pub fn particles_moved(lists: &NeighbourLists, particles: &Particles) -> bool {
 /// Rebuilds the lists. Sorts the particles along the Morton curve of their cells first
 /// (`particles` are permuted: new index k holds old particle `perm[k]`); tangential histories of
 /// pairs and wall contacts are carried over.
+///
+/// With a periodic cell of edges `cell` (Wellmann §5.1.1), the centres that left [0, L) are
+/// put back on the opposite side first, and the pairs across the faces are found from the
+/// ghosts of the 13 shifts N⁺ ([`HALF_SHIFTS`]); the cell must be at least twice the reach of
+/// a pair in every direction (one image per pair, checked by the engine).
 pub fn rebuild(
     lists: &mut NeighbourLists,
     particles: &mut Particles,
     planes: &[Plane],
     meshes: &mut [Mesh],
     sinks: &[CentreBox],
+    cell: Option<V3>,
 ) -> Removed {
+    if let Some(l) = cell {
+        for x in &mut particles.position {
+            for a in 0..3 {
+                if !(0.0..l[a]).contains(&x[a]) {
+                    x[a] -= (x[a] / l[a]).floor() * l[a];
+                    if x[a] >= l[a] {
+                        x[a] = 0.0; // round-off of a centre just below 0
+                    }
+                }
+            }
+        }
+    }
     let r_max = particles.radius.iter().cloned().fold(0.0, f64::max);
     let cutoff = 2.0 * r_max + lists.skin;
     let grid = Grid::new(&particles.position, cutoff);
@@ -591,6 +682,20 @@ pub fn rebuild(
             }
         }
     }
+    for pp in &lists.periodic_pairs {
+        let (i, j) = (pp.pair[0] as usize, pp.pair[1] as usize);
+        if pp.shear == V3::zeros() || i >= inverse.len() || j >= inverse.len() {
+            continue;
+        }
+        let (a, b) = (inverse[i], inverse[j]);
+        if a != u32::MAX && b != u32::MAX {
+            old_pairs.push(if a < b {
+                (a, b, pp.shear)
+            } else {
+                (b, a, -pp.shear)
+            });
+        }
+    }
     old_pairs.sort_unstable_by_key(|&(a, b, _)| (a, b));
     let mut old_walls: Vec<(u32, u32, u32, V3)> = Vec::new();
     if lists.wall_start.len() >= 2 {
@@ -691,11 +796,38 @@ pub fn rebuild(
         })
         .collect();
     let total: usize = chunks.iter().map(|c| c.1.len()).sum();
+    // pairs across the faces of a periodic cell: (a < b, image of b), spheres and shaped
+    let (periodic, shaped_periodic) = match cell {
+        Some(l) => ghost_pairs(&grid, &cell_start, &cell_end, particles, skin, l),
+        None => (Vec::new(), Vec::new()),
+    };
+    let mut shaped: Vec<([u32; 2], [i8; 3])> = chunks
+        .iter()
+        .flat_map(|c| c.2.iter().map(|&p| (p, [0i8; 3])))
+        .chain(shaped_periodic)
+        .collect();
+    shaped.sort_unstable();
     lists.shaped_pairs.clear();
-    for c in &chunks {
-        lists.shaped_pairs.extend_from_slice(&c.2);
+    lists.shaped_pairs.extend(shaped.iter().map(|e| e.0));
+    lists.shaped_pair_image.clear();
+    if cell.is_some() {
+        lists.shaped_pair_image.extend(shaped.iter().map(|e| e.1));
     }
-    lists.shaped_pairs.sort_unstable();
+    lists.periodic_pairs.clear();
+    lists
+        .periodic_pairs
+        .extend(periodic.into_iter().map(|(pair, image)| {
+            PeriodicPair {
+                pair,
+                image,
+                shear: old_pairs
+                    .binary_search_by_key(&(pair[0], pair[1]), |&(a, b, _)| (a, b))
+                    .map_or(V3::zeros(), |k| old_pairs[k].2),
+                force: V3::zeros(),
+                overlap: -1.0,
+            }
+        }));
+    lists.cell_at_build = cell;
     lists.shaped_pair_contacts.clear();
     lists
         .shaped_pair_contacts
@@ -905,6 +1037,70 @@ pub fn rebuild(
     lists.valid = true;
     lists.index_blocks();
     removed
+}
+
+/// The pairs across the faces of a periodic cell of edges `l`: for each particle j and shift
+/// n ∈ N⁺ whose ghost x_j + n∘L lies within a reach of the cell, the particles i near the
+/// ghost (W 5.2). Each is returned as (a < b, image of b): (i, j, n) or (j, i, −n). Spheres
+/// first, then pairs with a non-spherical body; both sorted.
+#[allow(clippy::type_complexity)] // two lists of (pair, image)
+fn ghost_pairs(
+    grid: &Grid,
+    cell_start: &[u32],
+    cell_end: &[u32],
+    particles: &Particles,
+    skin: f64,
+    l: V3,
+) -> (Vec<([u32; 2], [i8; 3])>, Vec<([u32; 2], [i8; 3])>) {
+    let (pos, rad, shape) = (&particles.position, &particles.radius, &particles.shape);
+    let r_max = rad.iter().cloned().fold(0.0, f64::max);
+    let margin = CELL_MARGIN * skin;
+    let reach_max = 2.0 * r_max + skin + margin;
+    let found: Vec<([u32; 2], [i8; 3])> = (0..pos.len())
+        .into_par_iter()
+        .with_min_len(BLOCK)
+        .flat_map_iter(|j| {
+            let mut out = Vec::new();
+            for n in HALF_SHIFTS {
+                let g = pos[j] + image_shift(&l, n);
+                if (0..3).any(|a| g[a] < -reach_max || g[a] > l[a] + reach_max) {
+                    continue;
+                }
+                // a ghost outside the grid maps to its edge cells (the clamped coordinate),
+                // which still hold every particle within one cell of it
+                let c = grid.coord(&g);
+                let range = |a: usize| c[a].saturating_sub(1)..=(c[a] + 1).min(grid.dims[a] - 1);
+                for z in range(2) {
+                    for y in range(1) {
+                        for x in range(0) {
+                            let ci = grid.index([x, y, z]);
+                            for i in cell_start[ci]..cell_end[ci] {
+                                let i = i as usize;
+                                if i == j {
+                                    continue;
+                                }
+                                let reach = rad[i] + rad[j] + skin + margin;
+                                if (pos[i] - g).norm_squared() < reach * reach {
+                                    out.push(if i < j {
+                                        ([i as u32, j as u32], n)
+                                    } else {
+                                        ([j as u32, i as u32], n.map(|v| -v))
+                                    });
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+            out
+        })
+        .collect();
+    let (mut spheres, mut shaped): (Vec<_>, Vec<_>) = found
+        .into_iter()
+        .partition(|(p, _)| shape[p[0] as usize] == SPHERE && shape[p[1] as usize] == SPHERE);
+    spheres.par_sort_unstable();
+    shaped.par_sort_unstable();
+    (spheres, shaped)
 }
 
 /// Particles a list build removed because their centre lay in a sink.

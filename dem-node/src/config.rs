@@ -82,6 +82,9 @@ pub struct DemConfig {
     /// bodies is evaluated: `every_step` (default, Wellmann) or `first_touch`.
     #[serde(default)]
     pub superquadric_stiffness: StiffnessUpdate,
+    /// `[dem.periodic]`: a periodic cell (Wellmann ch. 5's RVE) instead of walls.
+    #[serde(default)]
+    pub periodic: Option<crate::periodic::PeriodicConfig>,
 }
 
 /// When the elliptic Hertz stiffness γ of a superquadric contact is evaluated.
@@ -1460,7 +1463,129 @@ impl DemConfig {
                 }
             }
         }
+        if let Some(cell) = &self.periodic {
+            self.validate_periodic(cell, &mut c);
+        }
         c.errors
+    }
+
+    fn validate_periodic(&self, cell: &crate::periodic::PeriodicConfig, c: &mut Check) {
+        let f = |field: &str| p(&["dem", "periodic", field]);
+        for (a, l) in cell.size.iter().enumerate() {
+            c.positive(pi(&["dem", "periodic", "size"], a, &[]), *l);
+        }
+        c.positive(f("inertial_number"), cell.inertial_number);
+        if let Some(t) = cell.wall_thickness {
+            c.positive(f("wall_thickness"), t);
+        }
+        c.non_negative(f("servo_damping"), cell.servo_damping);
+        c.positive(f("servo_modulus"), cell.servo_modulus);
+        if !(cell.tolerance > 0.0 && cell.tolerance < 1.0) {
+            c.fail(
+                f("tolerance"),
+                format!("must satisfy 0 < tolerance < 1, got {}", cell.tolerance),
+            );
+        }
+        // the cell's faces are its only boundaries
+        let refuse = |c: &mut Check, what: &str, path: Vec<Seg>| {
+            c.fail(
+                path,
+                format!(
+                    "a periodic cell ([dem.periodic]) has no {what}: its faces are periodic; \
+                     remove it"
+                ),
+            )
+        };
+        if !self.walls.is_empty() {
+            refuse(c, "walls", p(&["dem", "walls"]));
+        }
+        if !self.sinks.is_empty() {
+            refuse(c, "sinks", p(&["dem", "sinks"]));
+        }
+        if self.interface_material.is_some() {
+            refuse(c, "coupled meshes", p(&["dem", "interface_material"]));
+        }
+        if self.gravity.iter().any(|g| *g != 0.0) {
+            c.fail(
+                p(&["dem", "gravity"]),
+                format!(
+                    "must be [0, 0, 0] in a periodic cell (every image would fall with its \
+                     body: nothing holds the packing), got {:?}",
+                    self.gravity
+                ),
+            );
+        }
+        for (k, src) in self.particles.iter().enumerate() {
+            if let ParticleSource::Fill {
+                min, max, radius, ..
+            } = src
+            {
+                if *min != [0.0; 3] || *max != cell.size || radius.is_some() {
+                    c.fail(
+                        pi(&["dem", "particles"], k, &["min"]),
+                        format!(
+                            "a fill of a periodic cell fills the whole cell: min = [0, 0, 0], \
+                             max = size = {:?}, no radius (got min {min:?}, max {max:?})",
+                            cell.size
+                        ),
+                    );
+                }
+            }
+        }
+        for (k, st) in cell.stages.iter().enumerate() {
+            let sf = |field: &str| pi(&["dem", "periodic", "stages"], k, &[field]);
+            for a in 0..3 {
+                let axis = ["x", "y", "z"][a];
+                match (st.stress.get(a), st.strain.get(a)) {
+                    (Some(_), Some(_)) => c.fail(
+                        pi(&["dem", "periodic", "stages"], k, &["strain", axis]),
+                        format!(
+                             "axis {axis} is stress-controlled in this stage already (stress.{axis}); \
+                             an axis has one control"
+                        ),
+                    ),
+                    (Some(t), None) if !(t.is_finite() && t < 0.0) => c.fail(
+                        pi(&["dem", "periodic", "stages"], k, &["stress", axis]),
+                        format!(
+                             "must be a finite compressive stress < 0 (Pa, tension positive: \
+                             -1e3 presses with 1 kPa), got {t}"
+                        ),
+                    ),
+                    (None, Some(e)) if !(e.is_finite() && e != 0.0 && e > -1.0) => c.fail(
+                        pi(&["dem", "periodic", "stages"], k, &["strain", axis]),
+                        format!("must be a finite strain > -1 and not 0, got {e}"),
+                    ),
+                    _ => {}
+                }
+            }
+            if (0..3).all(|a| st.stress.get(a).is_none() && st.strain.get(a).is_none()) {
+                c.fail(
+                    pi(&["dem", "periodic", "stages"], k, &[]),
+                    "drives no axis: give `stress = { x = .., .. }` and/or \
+                     `strain = { z = .. }` (a stage ends when their targets are met)"
+                        .into(),
+                );
+            }
+            if let Some(m) = st.friction {
+                c.non_negative(sf("friction"), m);
+            }
+            if let Some(r) = st.max_strain_rate {
+                c.positive(sf("max_strain_rate"), r);
+            }
+            if let Some(r) = st.strain_rate {
+                c.positive(sf("strain_rate"), r);
+                if (0..3).all(|a| st.strain.get(a).is_none()) {
+                    c.fail(
+                        sf("strain_rate"),
+                        "is the rate of strain-controlled axes; this stage has none (give                          `strain = { .. }`)"
+                            .into(),
+                    );
+                }
+            }
+            if let Some(name) = &st.name {
+                c.column_name(sf("name"), name);
+            }
+        }
     }
 }
 

@@ -12,7 +12,7 @@ use crate::walls::{Mesh, Plane};
 /// `particles_moved`: some particle moved more than half the skin since the last build (the
 /// drift checks this). `keep_records`: the force records are sized for the new lists (a
 /// coupled mesh or loaded wall needs them), else emptied. A build removes the particles in a
-/// sink. Returns what was removed if the lists were rebuilt (particles may have been
+/// sink. `cell`: the edges of a periodic cell (see [`rebuild`]). Returns what was removed if the lists were rebuilt (particles may have been
 /// reordered), `None` if they stayed.
 #[allow(clippy::too_many_arguments)]
 pub fn detect(
@@ -24,11 +24,12 @@ pub fn detect(
     records: &mut Vec<MeshForceRecord>,
     keep_records: bool,
     sinks: &[CentreBox],
+    cell: Option<crate::hertz_mindlin::V3>,
 ) -> Option<Removed> {
-    if !particles_moved && !needs_rebuild(lists, particles, meshes) {
+    if !particles_moved && !needs_rebuild(lists, particles, meshes, cell) {
         return None;
     }
-    let removed = rebuild(lists, particles, planes, meshes, sinks);
+    let removed = rebuild(lists, particles, planes, meshes, sinks, cell);
     records.clear();
     if keep_records {
         records.resize(lists.walls.len(), MeshForceRecord::default());

@@ -82,6 +82,10 @@ pub fn lattice(first: V3, spacing: f64, count: [usize; 3]) -> Vec<V3> {
 
 /// Random sequential addition of non-overlapping spheres inside [min, max] (whole spheres),
 /// largest first, avoiding `existing` spheres too. Returns (centre, radius) or a message.
+///
+/// With a `period` (the edges of a periodic cell [0, L], W §5.1.1) the centres lie anywhere
+/// in the cell and spheres must not overlap any image of another.
+#[allow(clippy::too_many_arguments)]
 pub fn fill_box(
     min: V3,
     max: V3,
@@ -89,6 +93,7 @@ pub fn fill_box(
     radii: &mut [f64],
     seed: u64,
     existing: &[(V3, f64)],
+    period: Option<V3>,
 ) -> Result<Vec<(V3, f64)>, String> {
     let axis = 0.5 * (min + max);
     radii.sort_by(|a, b| b.total_cmp(a));
@@ -109,15 +114,37 @@ pub fn fill_box(
         )
     };
     let mut grid: HashMap<(i64, i64, i64), Vec<(V3, f64)>> = HashMap::new();
+    // a sphere and, in a periodic cell, its images within reach of the cell
+    let images = |x: V3| -> Vec<V3> {
+        let Some(l) = period else {
+            return vec![x];
+        };
+        let mut out = Vec::new();
+        for sx in -1..=1 {
+            for sy in -1..=1 {
+                for sz in -1..=1 {
+                    let y = x + V3::new(sx as f64 * l.x, sy as f64 * l.y, sz as f64 * l.z);
+                    if (0..3).all(|a| y[a] > -h && y[a] < l[a] + h) {
+                        out.push(y);
+                    }
+                }
+            }
+        }
+        out
+    };
     for e in existing {
-        grid.entry(key(&e.0)).or_default().push(*e);
+        for y in images(e.0) {
+            grid.entry(key(&y)).or_default().push((y, e.1));
+        }
     }
     let mut rng = SplitMix64::new(seed);
     let mut out = Vec::with_capacity(radii.len());
     const ATTEMPTS: usize = 20_000;
     for (k, &r) in radii.iter().enumerate() {
-        let lo = min + V3::repeat(r);
-        let hi = max - V3::repeat(r);
+        // a periodic cell: centres anywhere in it (a sphere may cross its faces)
+        let inset = if period.is_some() { 0.0 } else { r };
+        let lo = min + V3::repeat(inset);
+        let hi = max - V3::repeat(inset);
         if (0..3).any(|a| hi[a] < lo[a]) {
             return Err(format!(
                 "a sphere of radius {r} m does not fit into the region"
@@ -160,7 +187,9 @@ pub fn fill_box(
                 }
             }
             if free {
-                grid.entry(c).or_default().push((x, r));
+                for y in images(x) {
+                    grid.entry(key(&y)).or_default().push((y, r));
+                }
                 out.push((x, r));
                 placed = true;
                 break;

@@ -28,6 +28,7 @@ pub mod narrow;
 pub mod output;
 pub mod particle_file;
 pub mod particles;
+pub mod periodic;
 pub mod resolve_forces;
 pub mod resources;
 pub mod rotation;
@@ -120,6 +121,12 @@ pub enum DemError {
          displacement or velocity; give it more mass or reduce dem.time_step"
     )]
     UnstableWall { time: f64, step: u64, wall: String },
+    #[error("periodic cell at t = {time:e} s (step {step}): {message}")]
+    Cell {
+        time: f64,
+        step: u64,
+        message: String,
+    },
     #[error("snapshot: {0}")]
     Snapshot(String),
     #[error("output {path}: {message}")]
@@ -191,6 +198,10 @@ pub struct Engine {
     refined_steps: u64,
     /// Scratch: the positions the next unrefined step would reach.
     predicted: Vec<V3>,
+    /// The periodic cell's programme and servo constants (its state is `state.cell`).
+    servo: Option<periodic::Servo>,
+    /// The pair frictions of the scene, which a periodic stage's `friction` replaces.
+    scene_frictions: Vec<f64>,
 }
 
 /// The generator of a source's shapes and orientations: its own stream, so that drawing
@@ -562,12 +573,20 @@ impl Engine {
                         });
                         radii = bodies.iter().map(|b| b.0.bounding_radius()).collect();
                     }
-                    let placed =
-                        generate::fill_box(v3(min), v3(max), *radius, &mut radii, *seed, &existing)
-                            .map_err(|message| DemError::Generation {
-                                source_index: k,
-                                message,
-                            })?;
+                    let period = cfg.periodic.as_ref().map(|c| v3(&c.size));
+                    let placed = generate::fill_box(
+                        v3(min),
+                        v3(max),
+                        *radius,
+                        &mut radii,
+                        *seed,
+                        &existing,
+                        period,
+                    )
+                    .map_err(|message| DemError::Generation {
+                        source_index: k,
+                        message,
+                    })?;
                     if bodies.is_empty() {
                         for (x, r) in placed {
                             particles.push(x, v3(velocity), V3::zeros(), r, rho, m);
@@ -799,6 +818,7 @@ impl Engine {
                 loaded_walls: vec![LoadedWallState::default(); loaded_walls.len()],
                 removed_particles: 0,
                 removed_mass: 0.0,
+                cell: None,
             },
             pool,
             output: OutputState {
@@ -811,11 +831,165 @@ impl Engine {
             loaded_walls,
             refined_steps: 0,
             predicted: Vec::new(),
+            servo: None,
+            scene_frictions: Vec::new(),
         };
+        engine.scene_frictions = engine.materials.pairs.iter().map(|p| p.friction).collect();
+        if let Some(cell) = &cfg.periodic {
+            engine.start_cell(cell);
+        }
         engine.place_walls(false);
         engine.check_time_step()?;
+        engine.check_cell()?;
         engine.refresh_forces();
         Ok(engine)
+    }
+
+    /// Sets up the periodic cell: its state at the start, the servo's constants from the
+    /// particles (W §5.1.3: t_w = 0.01 r̄, ρ the particles' density; m̄, d̄ of (5.8) with d̄
+    /// the mean equal-volume diameter), the first stage's friction.
+    fn start_cell(&mut self, cfg: &periodic::PeriodicConfig) {
+        let p = &self.state.particles;
+        let n = p.len().max(1) as f64;
+        let volume: f64 = (0..p.len()).map(|k| p.volume(k)).sum();
+        let mass: f64 = p.mass.iter().sum();
+        let diameter: f64 = (0..p.len())
+            .map(|k| 2.0 * (3.0 * p.volume(k) / (4.0 * std::f64::consts::PI)).cbrt())
+            .sum::<f64>()
+            / n;
+        let density = if volume > 0.0 { mass / volume } else { 1.0 };
+        // departure: the thesis's t_w = 0.01 r̄ makes the wall ~200 times lighter than a layer
+        // of grains, and its explicit update oscillates from step to step at any Δt that
+        // suits the grains (measured: the test cell at Δt = 0.22 Δt_R); one mean diameter
+        // gives the wall a grain layer's mass
+        let thickness = cfg.wall_thickness.unwrap_or(diameter);
+        let size = v3(&cfg.size);
+        self.servo = Some(periodic::Servo {
+            stages: cfg.stages.clone(),
+            inertial_number: cfg.inertial_number,
+            wall_mass: density * thickness,
+            damping: cfg.servo_damping,
+            modulus: cfg.servo_modulus,
+            tolerance: cfg.tolerance,
+            mean_mass: (mass / n).max(f64::MIN_POSITIVE),
+            mean_diameter: diameter,
+        });
+        self.state.cell = Some(periodic::CellState {
+            size,
+            rate: V3::zeros(),
+            size0: size,
+            stage_size0: size,
+            applied: V3::zeros(),
+            stress: nalgebra::Matrix3::zeros(),
+            stage: 0,
+            stage_start: 0.0,
+        });
+        self.apply_stage_friction();
+    }
+
+    /// Puts the friction of the current periodic stage (or the scene's) into every pair.
+    fn apply_stage_friction(&mut self) {
+        let (Some(servo), Some(cell)) = (&self.servo, &self.state.cell) else {
+            return;
+        };
+        let mu = servo.friction_at(cell.stage);
+        for (pair, &scene) in self.materials.pairs.iter_mut().zip(&self.scene_frictions) {
+            pair.friction = mu.unwrap_or(scene);
+        }
+    }
+
+    /// The periodic cell's edges must stay finite and hold one image per pair: at least twice
+    /// the reach of a pair (2 r_max + d_V (1 + margin)) in every direction.
+    fn check_cell(&self) -> Result<(), DemError> {
+        let Some(cell) = &self.state.cell else {
+            return Ok(());
+        };
+        let p = &self.state.particles;
+        let r_max = p.radius.iter().cloned().fold(0.0, f64::max);
+        let skin = self.state.lists.skin;
+        let reach = 2.0 * r_max + skin * (1.0 + broad_phase::CELL_MARGIN);
+        for (a, axis) in ["x", "y", "z"].iter().enumerate() {
+            let l = cell.size[a];
+            if !(l.is_finite() && cell.rate[a].is_finite()) {
+                return Err(self.cell_error(format!(
+                    "the edge {axis} is no longer finite (L = {l:e} m, rate {:e} m/s): the \
+                     servo diverged; give it a thicker wall (dem.periodic.wall_thickness), more \
+                     damping, or a smaller dem.time_step",
+                    cell.rate[a]
+                )));
+            }
+            if l < 2.0 * reach {
+                return Err(self.cell_error(format!(
+                    "the edge {axis} is {l:e} m, less than twice the reach of a pair \
+                     (2 x (2 r_max + 1.5 d_V) = {:e} m): a particle would meet two images of \
+                     another; make dem.periodic.size larger",
+                    2.0 * reach
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    fn cell_error(&self, message: String) -> DemError {
+        DemError::Cell {
+            time: self.state.time,
+            step: self.state.steps,
+            message,
+        }
+    }
+
+    /// After a step's forces: the cell's average stress (5.5), then the next stage if the
+    /// current one's targets are met.
+    fn update_cell(&mut self) {
+        let Some(cell) = self.state.cell.as_mut() else {
+            return;
+        };
+        cell.stress = periodic::boundary_stress(&self.state.lists, &cell.size);
+        let Some(servo) = &self.servo else { return };
+        if !servo.stage_done(cell) {
+            return;
+        }
+        tracing::info!(
+            "periodic cell: stage `{}` done at t = {:.6e} s",
+            servo.stages[cell.stage].label(cell.stage),
+            self.state.time
+        );
+        cell.stage += 1;
+        cell.stage_start = self.state.time;
+        cell.stage_size0 = cell.size;
+        // an axis that becomes stress-controlled starts from the stress it carries
+        for a in 0..3 {
+            if let Some(next) = servo.stages.get(cell.stage) {
+                let was = servo.stages[cell.stage - 1].stress.get(a).is_some();
+                if next.stress.get(a).is_some() && !was {
+                    cell.applied[a] = cell.stress[(a, a)];
+                }
+            }
+        }
+        self.apply_stage_friction();
+    }
+
+    /// Whether the periodic cell's programme has run all its stages.
+    pub fn programme_finished(&self) -> bool {
+        match (&self.servo, &self.state.cell) {
+            (Some(s), Some(c)) => c.stage >= s.stages.len(),
+            _ => false,
+        }
+    }
+
+    /// The periodic cell's homogenised quantities now (`None` without a cell).
+    pub fn cell_averages(&self) -> Option<periodic::Averages> {
+        let cell = self.state.cell.as_ref()?;
+        let p = &self.state.particles;
+        let g = self.gravity;
+        Some(periodic::averages(&self.state.lists, p, &cell.size, |k| {
+            p.force[k] - g * p.mass[k]
+        }))
+    }
+
+    /// The periodic cell's state (`None` without one).
+    pub fn cell(&self) -> Option<&periodic::CellState> {
+        self.state.cell.as_ref()
     }
 
     fn check_time_step(&self) -> Result<(), DemError> {
@@ -922,6 +1096,7 @@ impl Engine {
     pub fn num_contacts(&self) -> usize {
         let l = &self.state.lists;
         self.pair_overlaps().filter(|&d| d > 0.0).count()
+            + l.periodic_pairs.iter().filter(|p| p.overlap > 0.0).count()
             + l.shaped_pair_contacts
                 .iter()
                 .filter(|c| c.overlap > 0.0)
@@ -1151,6 +1326,7 @@ impl Engine {
                 if !(finite && walls_finite) {
                     return Err(e.instability());
                 }
+                e.check_cell()?;
                 moved = e.drift_stage(dt, StepClock::Step, Some(m));
             }
             Ok(())
@@ -1187,6 +1363,9 @@ impl Engine {
     fn drift_stage(&mut self, h: f64, clock: StepClock, particles_moved: Option<bool>) -> bool {
         let moved = particles_moved.unwrap_or_else(|| self.particle_passes(h, Pass::KickDrift).1);
         self.loaded_walls_kick_drift(h);
+        if let (Some(servo), Some(cell)) = (&self.servo, self.state.cell.as_mut()) {
+            servo.advance(cell, h);
+        }
         match clock {
             StepClock::Step => self.advance_clock(),
             StepClock::Substep { t0, k, n } if k < n => {
@@ -1207,12 +1386,16 @@ impl Engine {
     fn force_stage(&mut self, moved: bool, h: f64, weight: f64, ends_step: bool) -> bool {
         self.detect_contacts(moved);
         self.resolve_forces(h, weight, ends_step);
+        if ends_step {
+            self.update_cell();
+        }
         self.loaded_walls_kick(h)
     }
 
     /// Stage "update particle states", second half: the particles' half kick over `h`.
     fn kick_stage(&mut self, h: f64, walls_finite: bool) -> Result<(), DemError> {
         let (finite, _) = self.particle_passes(h, Pass::Kick);
+        self.check_cell()?;
         if finite && walls_finite {
             Ok(())
         } else {
@@ -1457,6 +1640,7 @@ impl Engine {
             &mut s.records,
             keep_records,
             &self.cfg.sinks,
+            s.cell.as_ref().map(|c| c.size),
         );
         if let Some(removed) = rebuilt {
             s.removed_particles += removed.count;
@@ -1481,9 +1665,11 @@ impl Engine {
             gravity: self.gravity,
             hold_stiffness: self.cfg.superquadric_stiffness == config::StiffnessUpdate::FirstTouch,
             dt,
+            cell: s.cell.as_ref().map(|c| (c.size, c.rate)),
         };
         resolve_forces::contact_forces(&mut s.lists, &mut s.particles, &mut s.records, &ctx);
         shaped_forces::shaped_forces(&mut s.lists, &mut s.particles, &ctx);
+        periodic::periodic_forces(&mut s.lists, &mut s.particles, &ctx);
         if s.meshes.iter().any(|m| m.coupled) {
             resolve_forces::accumulate_nodal_forces(
                 &mut s.meshes,
@@ -1747,10 +1933,31 @@ impl Engine {
                 self.cfg.sensors.len()
             )));
         }
+        if s.cell.is_some() != self.servo.is_some() {
+            return Err(DemError::Snapshot(format!(
+                "snapshot {} a periodic cell, this scene {}",
+                if s.cell.is_some() { "has" } else { "has no" },
+                if self.servo.is_some() {
+                    "defines one ([dem.periodic])"
+                } else {
+                    "defines none"
+                }
+            )));
+        }
+        if let (Some(c), Some(servo)) = (&s.cell, &self.servo) {
+            if c.stage > servo.stages.len() {
+                return Err(DemError::Snapshot(format!(
+                    "snapshot's periodic cell is at stage {}, this scene has {} stages",
+                    c.stage,
+                    servo.stages.len()
+                )));
+            }
+        }
         self.state = s;
         if self.state.lists.valid {
             self.state.lists.index_blocks();
         }
+        self.apply_stage_friction();
         self.place_walls(false);
         // the row of the restored step was written before the snapshot; the rows after it were
         // cut (a resume or an implicit scheme's rollback), so the step an abandoned iteration
@@ -1775,6 +1982,17 @@ impl Engine {
             ];
             row.extend(self.engine_results());
             output::append_csv(&out_dir.join("dem_timeseries.csv"), &row)?;
+        }
+        if let (true, Some(cell), Some(servo), Some(avg)) = (
+            new_rows,
+            &self.state.cell,
+            &self.servo,
+            self.cell_averages(),
+        ) {
+            output::append_csv(
+                &out_dir.join("periodic.csv"),
+                &periodic::csv_row(self.time(), cell, servo, &avg),
+            )?;
         }
         if let Some(values) = new_rows.then(|| self.sample_sensors()).flatten() {
             let mut row = vec![("time".to_string(), self.time())];
@@ -1848,6 +2066,9 @@ impl Engine {
     /// Packing fraction inside the first box wall: particle volume over the box footprint
     /// times the bed height (floor to the highest particle top), when a box wall exists.
     pub fn packing_fraction(&self) -> Option<f64> {
+        if self.state.cell.is_some() {
+            return self.cell_averages().map(|a| a.solid_fraction);
+        }
         let (lo, hi) = self.box_region?;
         let p = &self.state.particles;
         if p.is_empty() {
@@ -1887,6 +2108,7 @@ impl Engine {
             gravity: self.gravity,
             hold_stiffness: self.cfg.superquadric_stiffness == config::StiffnessUpdate::FirstTouch,
             dt: 0.0,
+            cell: s.cell.as_ref().map(|c| (c.size, c.rate)),
         };
         s.sensors
             .sample(&self.cfg.sensors, s.time, &s.particles, &s.lists, &ctx)
@@ -1904,6 +2126,7 @@ impl Engine {
             gravity: self.gravity,
             hold_stiffness: self.cfg.superquadric_stiffness == config::StiffnessUpdate::FirstTouch,
             dt: 0.0,
+            cell: s.cell.as_ref().map(|c| (c.size, c.rate)),
         };
         r.extend(
             s.sensors
@@ -1988,6 +2211,11 @@ impl Engine {
                 self.state.removed_particles as f64,
             ));
             r.push(("removed_mass".to_string(), self.state.removed_mass));
+        }
+        if let (Some(cell), Some(servo), Some(avg)) =
+            (&self.state.cell, &self.servo, self.cell_averages())
+        {
+            r.extend(periodic::results(cell, servo, &avg));
         }
         for (w, st) in self.loaded_walls.iter().zip(&self.state.loaded_walls) {
             r.push((format!("{}.displacement", w.name), st.u));

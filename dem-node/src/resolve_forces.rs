@@ -38,6 +38,9 @@ pub struct ForceContext<'a> {
     pub hold_stiffness: bool,
     /// Tangential history increment time (Δt, or 0 for a pure evaluation).
     pub dt: f64,
+    /// A periodic cell: its edges L and their rates L̇ (an image s of a body is shifted by
+    /// s∘L and moves with s∘L̇ besides the body's own velocity).
+    pub cell: Option<(V3, V3)>,
 }
 
 /// The mutable data a run of consecutive blocks writes: its particles' forces, its pairs'
@@ -184,13 +187,16 @@ pub(crate) struct PairContact {
 
 /// Hertz–Mindlin force on i of the touching pair (i, j) with `d` = x_i − x_j,
 /// `dist2` = |d|² < `sum`² = (r_i + r_j)² (eqs. 2.6–2.19); `shear` is the pair's history.
+/// `vj` is j's velocity (of its image across a periodic cell's face: with the image's).
 #[inline(always)]
+#[allow(clippy::too_many_arguments)] // the hot loop's unbundled inputs
 pub(crate) fn pair_contact(
     k: &Kinematics,
     ctx: &ForceContext,
     (i, j): (usize, usize),
     d: V3,
     dist2: f64,
+    vj: V3,
     shear: &mut V3,
 ) -> PairContact {
     let (ri, rj) = (k.rad[i], k.rad[j]);
@@ -207,7 +213,7 @@ pub(crate) fn pair_contact(
     let (mi, mj) = (k.mass[i], k.mass[j]);
     let m_eff = mi * mj / (mi + mj); // (2.11)
     let (ai, aj) = (ri - 0.5 * delta, rj - 0.5 * delta);
-    let v_c = k.vel[i] - k.vel[j] - (k.omega[i] * ai + k.omega[j] * aj).cross(&nrm);
+    let v_c = k.vel[i] - vj - (k.omega[i] * ai + k.omega[j] * aj).cross(&nrm);
     let cf = contact_force(params, delta, r_eff, m_eff, &nrm, &v_c, shear, ctx.dt);
     PairContact {
         cf,
@@ -216,6 +222,45 @@ pub(crate) fn pair_contact(
         aj,
         r_eff,
     }
+}
+
+/// The force on i of the touching sphere pair (i, j) (see [`pair_contact`]) with the
+/// torques on i and j (tangential force and rolling resistance).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)] // the hot loop's unbundled inputs
+pub(crate) fn pair_force_torques(
+    k: &Kinematics,
+    ctx: &ForceContext,
+    (i, j): (usize, usize),
+    d: V3,
+    dist2: f64,
+    vj: V3,
+    shear: &mut V3,
+) -> (V3, V3, V3) {
+    let PairContact {
+        cf,
+        nrm,
+        ai,
+        aj,
+        r_eff,
+    } = pair_contact(k, ctx, (i, j), d, dist2, vj, shear);
+    let nxt = nrm.cross(&cf.tangential);
+    let params = ctx.materials.pair(k.mat[i], k.mat[j]);
+    let roll = if params.rolling_friction > 0.0 {
+        let (ii, ij) = (k.inertia[i], k.inertia[j]);
+        let i_eff = ii * ij / (ii + ij);
+        rolling_torque(
+            params.rolling_friction,
+            r_eff,
+            cf.normal,
+            &(k.omega[i] - k.omega[j]),
+            i_eff,
+            ctx.dt,
+        )
+    } else {
+        V3::zeros()
+    };
+    (cf.force, nxt * (-ai) + roll, nxt * (-aj) - roll)
 }
 
 impl<'a> BlockSlices<'a> {
@@ -419,7 +464,6 @@ fn block_forces_generic(
 ) {
     let n = k.pos.len();
     let (lo, hi) = (b * BLOCK, ((b + 1) * BLOCK).min(n));
-    let dt = ctx.dt;
     let BlockSlices {
         pair: pair0,
         cross: cross0,
@@ -440,7 +484,7 @@ fn block_forces_generic(
     debug_assert_eq!(cross0, v.block_start[b] as usize);
     for i in lo..hi {
         let xi = k.pos[i];
-        let (ri, ii, mat_i) = (k.rad[i], k.inertia[i], k.mat[i]);
+        let ri = k.rad[i];
         let mut fi = force[i - lo];
         let mut ti = torque[i - lo];
         for pk in v.first_pair[i] as usize..v.first_pair[i + 1] as usize {
@@ -461,37 +505,15 @@ fn block_forces_generic(
                 }
                 continue;
             }
-            let PairContact {
-                cf,
-                nrm,
-                ai,
-                aj,
-                r_eff,
-            } = pair_contact(k, ctx, (i, j), d, dist2, &mut shear[pk - pair0]);
-            let nxt = nrm.cross(&cf.tangential);
-            let params = ctx.materials.pair(mat_i, k.mat[j]);
-            let roll = if params.rolling_friction > 0.0 {
-                let ij = k.inertia[j];
-                let i_eff = ii * ij / (ii + ij);
-                rolling_torque(
-                    params.rolling_friction,
-                    r_eff,
-                    cf.normal,
-                    &(k.omega[i] - k.omega[j]),
-                    i_eff,
-                    dt,
-                )
-            } else {
-                V3::zeros()
-            };
-            fi += cf.force;
-            ti += nxt * (-ai) + roll;
-            let tj = nxt * (-aj) - roll;
+            let (f, t, tj) =
+                pair_force_torques(k, ctx, (i, j), d, dist2, k.vel[j], &mut shear[pk - pair0]);
+            fi += f;
+            ti += t;
             if local {
-                force[j - lo] -= cf.force;
+                force[j - lo] -= f;
                 torque[j - lo] += tj;
             } else {
-                cross_force[cross] = [-cf.force, tj];
+                cross_force[cross] = [-f, tj];
                 cross += 1;
             }
         }

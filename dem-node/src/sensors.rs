@@ -330,7 +330,7 @@ pub fn pressure(
                 continue;
             }
             let mut shear = lists.shear[pk];
-            let c = pair_contact(&k, ctx, (i, j), d, dist2, &mut shear);
+            let c = pair_contact(&k, ctx, (i, j), d, dist2, p.velocity[j], &mut shear);
             // force on the body on the +axis side
             force += if xi[a] > value {
                 c.cf.force[a]

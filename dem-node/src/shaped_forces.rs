@@ -191,15 +191,17 @@ fn still_separated(p: &Particles, i: usize, j: usize, x21: &V3, old: &ShapedCont
     bound > 1e-12 * (p.radius[i] + p.radius[j])
 }
 
-/// Evaluates one shaped pair.
+/// Evaluates one shaped pair; the second body is seen at its image across a periodic cell's
+/// faces shifted by `image` = (d, ḋ) (zero inside the cell).
 fn pair_contact(
     p: &Particles,
     ctx: &ForceContext,
     [i, j]: [u32; 2],
+    image: (V3, V3),
     old: &ShapedContact,
 ) -> ShapedContact {
     let (i, j) = (i as usize, j as usize);
-    let x21 = p.position[j] - p.position[i];
+    let x21 = p.position[j] + image.0 - p.position[i];
     // bounding spheres apart: no contact, and nothing to evaluate (the last normal stays
     // the warm start)
     let reach = p.radius[i] + p.radius[j];
@@ -213,9 +215,11 @@ fn pair_contact(
         return *old;
     }
     if p.polyhedron(i).is_some() || p.polyhedron(j).is_some() {
-        return poly_pair_contact(p, ctx, [i, j], &x21, old);
+        return poly_pair_contact(p, ctx, [i, j], image, &x21, old);
     }
-    let (a, b) = (body(p, i), body(p, j));
+    let (a, mut b) = (body(p, i), body(p, j));
+    b.position += image.0;
+    b.velocity += image.1;
     let (ba, bb) = (
         SqBody {
             shape: &a.shape,
@@ -502,10 +506,12 @@ fn poly_pair_contact(
     p: &Particles,
     ctx: &ForceContext,
     [i, j]: [usize; 2],
+    image: (V3, V3),
     x21: &V3,
     old: &ShapedContact,
 ) -> ShapedContact {
-    let (a, b) = (poly_view(p, i), poly_view(p, j));
+    let (a, mut b) = (poly_view(p, i), poly_view(p, j));
+    b.position += image.0;
     let warm = (old.normal != V3::zeros()).then_some(old.normal);
     let (found, simplex) = detect_pair_warm(&a, &b, warm, &old.simplex);
     let mut c = match found {
@@ -532,7 +538,8 @@ fn poly_pair_contact(
                 ra.max(rb)
             };
             let m_eff = p.mass[i] * p.mass[j] / (p.mass[i] + p.mass[j]);
-            let d_dot = point_velocity(p, j, &point) - point_velocity(p, i, &point);
+            let d_dot =
+                point_velocity(p, j, &(point - image.0)) + image.1 - point_velocity(p, i, &point);
             let params = ctx.materials.pair(p.material[i], p.material[j]);
             dilated_law(
                 params, overlap, r_eff, m_eff, normal, &d_dot, point, old, ctx.dt,
@@ -650,6 +657,18 @@ fn poly_mesh_contact(
 
 /// Evaluates every shaped contact and adds the forces and torques to the bodies (after the
 /// sphere stage has set gravity and the sphere contacts).
+/// The shift d = s∘L and its rate of shaped pair k's second body (zero inside the cell).
+#[inline]
+fn image_of(ctx: &ForceContext, images: &[[i8; 3]], k: usize) -> (V3, V3) {
+    match (ctx.cell, images.get(k)) {
+        (Some((size, rate)), Some(&s)) if s != [0; 3] => (
+            crate::broad_phase::image_shift(&size, s),
+            crate::broad_phase::image_shift(&rate, s),
+        ),
+        _ => (V3::zeros(), V3::zeros()),
+    }
+}
+
 pub fn shaped_forces(lists: &mut NeighbourLists, p: &mut Particles, ctx: &ForceContext) {
     if lists.shaped_pairs.is_empty()
         && lists.shaped_walls.is_empty()
@@ -659,12 +678,17 @@ pub fn shaped_forces(lists: &mut NeighbourLists, p: &mut Particles, ctx: &ForceC
     }
     {
         let pv: &Particles = p;
+        let images = &lists.shaped_pair_image;
         lists
             .shaped_pair_contacts
             .par_iter_mut()
             .with_min_len(CHUNK)
             .zip(lists.shaped_pairs.par_iter())
-            .for_each(|(c, &pair)| *c = pair_contact(pv, ctx, pair, c));
+            .enumerate()
+            .for_each(|(k, (c, &pair))| {
+                let image = image_of(ctx, images, k);
+                *c = pair_contact(pv, ctx, pair, image, c)
+            });
         lists
             .shaped_wall_contacts
             .par_iter_mut()
@@ -692,6 +716,7 @@ pub fn shaped_forces(lists: &mut NeighbourLists, p: &mut Particles, ctx: &ForceC
         }
     }
     let inc = &lists.shaped_incidence;
+    let images = &lists.shaped_pair_image;
     let pairs = &lists.shaped_pair_contacts;
     let walls = &lists.shaped_wall_contacts;
     let meshes = &lists.shaped_mesh_contacts;
@@ -709,9 +734,14 @@ pub fn shaped_forces(lists: &mut NeighbourLists, p: &mut Particles, ctx: &ForceC
                 {
                     let c = &pairs[(e >> 1) as usize];
                     if c.touching() {
-                        let fk = if e & 1 == 0 { c.force } else { -c.force };
+                        let (fk, at) = if e & 1 == 0 {
+                            (c.force, x)
+                        } else {
+                            // the second body acts at its image
+                            (-c.force, x + image_of(ctx, images, (e >> 1) as usize).0)
+                        };
                         *f += fk;
-                        *t += (c.point - x).cross(&fk);
+                        *t += (c.point - at).cross(&fk);
                     }
                 }
             }

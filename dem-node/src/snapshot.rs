@@ -15,8 +15,9 @@ use serde::{Deserialize, Serialize};
 /// each wall's acceleration as a fourth number, which reading skips), particles removed by
 /// sinks (a version 4 snapshot reads as one without loaded walls and removals). 6: bodies
 /// with orientation and shape id, shape templates, shaped contacts (an older snapshot reads
-/// as one of spheres).
-pub const SNAPSHOT_VERSION: u32 = 6;
+/// as one of spheres). 7: a periodic cell's state, pairs across its faces, images of shaped
+/// pairs (an older snapshot reads as one without a cell).
+pub const SNAPSHOT_VERSION: u32 = 7;
 /// The oldest version [`decode`] reads.
 pub const OLDEST_READABLE_VERSION: u32 = 4;
 
@@ -40,6 +41,9 @@ pub struct EngineState {
     pub removed_particles: u64,
     #[serde(default)]
     pub removed_mass: f64,
+    /// The periodic cell (`[dem.periodic]`): edges, rates, stresses, stage.
+    #[serde(default)]
+    pub cell: Option<crate::periodic::CellState>,
 }
 
 /// Loaded walls' states as written (`[u, v, contact_force]`), or as the first version 5

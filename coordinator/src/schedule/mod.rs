@@ -328,6 +328,10 @@ pub struct Scheduler {
     window_kinetic_energy: Option<f64>,
     /// Why the run finishes after the final step.
     final_reason: String,
+    /// The DEM reported that its programme (a periodic cell's stages) is finished: the run
+    /// ends after the current window.
+    #[serde(default)]
+    programme_finished: bool,
 }
 
 impl Scheduler {
@@ -438,6 +442,7 @@ impl Scheduler {
             pending: BTreeSet::new(),
             window_kinetic_energy: None,
             final_reason: String::new(),
+            programme_finished: false,
         })
     }
 
@@ -483,6 +488,9 @@ impl Scheduler {
         dem: bool,
         values: &std::collections::BTreeMap<String, f64>,
     ) {
+        if dem && values.get("programme_finished").is_some_and(|v| *v >= 1.0) {
+            self.programme_finished = true;
+        }
         if let Some(c) = self.windows.adaptive.as_mut() {
             c.observation.record(node, dem, values);
         }
@@ -671,6 +679,15 @@ impl Scheduler {
                 self.phase = Phase::Done;
                 Ok(vec![Action::Finish {
                     reason: format!("end time reached after {} windows", window + 1),
+                }])
+            }
+            Next::Continue if self.programme_finished => {
+                self.phase = Phase::Done;
+                Ok(vec![Action::Finish {
+                    reason: format!(
+                        "the DEM's programme finished after {} windows (before end_time)",
+                        window + 1
+                    ),
                 }])
             }
             Next::Continue => {

@@ -287,6 +287,10 @@ impl Solver for DemNode {
             .map_err(|e| NodeError::new(ErrorCode::Io, e.to_string()))?;
         let t_end = engine.time();
         let mut monitor = BTreeMap::from([("kinetic_energy".to_string(), engine.kinetic_energy())]);
+        if engine.programme_finished() {
+            // a periodic cell ran its last stage: the coordinator ends the run here
+            monitor.insert("programme_finished".to_string(), 1.0);
+        }
         // the interface energy audit: the work of this window's contact forces on each
         // coupled mesh as it moved in the DEM, Σ_steps Δt Σ_nodes f·v
         for c in &self.coupled {
