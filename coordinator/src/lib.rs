@@ -5,6 +5,7 @@
 //! messages, so an external node takes part in checks like a built-in one.
 
 pub mod checkpoint;
+pub mod fit;
 pub mod interrupt;
 pub mod launch;
 pub mod limits;

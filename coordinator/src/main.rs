@@ -129,6 +129,33 @@ enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// Fit a non-associated Mohr–Coulomb material (E, ν, φ, ψ, c; Wellmann §5.4) to the
+    /// triaxial curves of periodic-cell runs (their folders or dem/periodic.csv files); writes
+    /// the `[fem.materials]` table and plots of the fit over the curves.
+    Fit {
+        #[arg(required = true)]
+        runs: Vec<PathBuf>,
+        /// Material name of the table.
+        #[arg(long, default_value = "sand")]
+        name: String,
+        /// Cohesion c (Pa) with one curve (several at different pressures fit it; this is
+        /// then its floor). Default 15 Pa, the thesis's.
+        #[arg(long, default_value_t = 15.0)]
+        cohesion: f64,
+        /// Axial-strain window of the dilation rate, `from,to` (default 0.10,0.15).
+        #[arg(long, value_delimiter = ',', num_args = 2, default_values_t = [0.10, 0.15])]
+        window: Vec<f64>,
+        /// The stage to fit (default: the last that strains an axis).
+        #[arg(long)]
+        stage: Option<usize>,
+        /// Continuum density (kg/m³); default Φ × the grains' density from the run's scene.
+        #[arg(long)]
+        density: Option<f64>,
+        /// Output TOML (default: mohr_coulomb.toml in the first run's folder); the plots go
+        /// beside it.
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
 }
 
 fn report(scene: &Scene, s: &coordinator::run::Summary, out_dir: &std::path::Path) {
@@ -358,6 +385,44 @@ fn main() -> ExitCode {
                 };
                 coordinator::plot::series_png(&out, &title, &xlabel, &ylabel, &series)?;
                 println!("wrote {}", out.display());
+                Ok(())
+            }
+            Command::Fit {
+                runs,
+                name,
+                cohesion,
+                window,
+                stage,
+                density,
+                out,
+            } => {
+                let curves = runs
+                    .iter()
+                    .map(|r| coordinator::fit::read_curve(r, stage))
+                    .collect::<anyhow::Result<Vec<_>>>()?;
+                let f = coordinator::fit::fit(&curves, (window[0], window[1]), cohesion, density)?;
+                let out = out.unwrap_or_else(|| {
+                    let first = &runs[0];
+                    let dir = if first.is_dir() {
+                        first.clone()
+                    } else {
+                        first.parent().map(PathBuf::from).unwrap_or_default()
+                    };
+                    dir.join("mohr_coulomb.toml")
+                });
+                let toml = coordinator::fit::material_toml(&f, &name, &runs);
+                std::fs::write(&out, &toml)
+                    .with_context(|| format!("writing {}", out.display()))?;
+                print!("{toml}");
+                println!("wrote {}", out.display());
+                match coordinator::fit::plots(&f, &curves, &out) {
+                    Ok(paths) => {
+                        for p in paths {
+                            println!("wrote {}", p.display());
+                        }
+                    }
+                    Err(e) => eprintln!("no plots: {e:#}"),
+                }
                 Ok(())
             }
             Command::Check { scene, out } => {

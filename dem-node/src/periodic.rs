@@ -460,6 +460,15 @@ pub fn csv_row(time: f64, cell: &CellState, servo: &Servo, avg: &Averages) -> Ve
     let v0 = cell.size0.x * cell.size0.y * cell.size0.z;
     let v = cell.size.x * cell.size.y * cell.size.z;
     row.push(("volumetric_strain".into(), (v - v0) / v0));
+    // the same from the start of the current stage (a triaxial curve starts at its shear)
+    for (a, n) in axes.iter().enumerate() {
+        row.push((
+            format!("stage_strain_{n}"),
+            (cell.size[a] - cell.stage_size0[a]) / cell.stage_size0[a],
+        ));
+    }
+    let vs = cell.stage_size0.x * cell.stage_size0.y * cell.stage_size0.z;
+    row.push(("stage_volumetric_strain".into(), (v - vs) / vs));
     for (name, (r, c)) in [
         ("xx", (0, 0)),
         ("yy", (1, 1)),
