@@ -38,11 +38,17 @@ pub struct Curve {
 /// What the fit found for one curve.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CurveFit {
+    /// E and ν of the initial slopes (NaN when fewer than 3 rows precede a quarter of the
+    /// peak deviator: the rows are too far apart to see them).
     pub youngs_modulus: f64,
     pub poisson_ratio: f64,
+    /// Rows (the stage's starting state included) up to a quarter of the peak deviator.
+    pub initial_rows: usize,
     /// (s, t) at the maximum axial stress.
     pub peak: (f64, f64),
     pub peak_ratio: f64,
+    /// The lateral stress at the peak (the curve's confining pressure).
+    pub lateral: f64,
     pub dilation_rate: f64,
     pub dilation_angle: f64,
     /// The axial-strain window of the dilation rate.
@@ -160,6 +166,8 @@ pub fn read_curve(path: &Path, stage: Option<usize>) -> anyhow::Result<Curve> {
         .iter()
         .filter(|r| r[stage_col] == chosen as f64)
         .collect();
+    // the state the stage starts from: the last row before it (its strains are zero then)
+    let before = rows.iter().rev().find(|r| r[stage_col] < chosen as f64);
     if shear.len() < 3 {
         bail!(
             "{}: stage {chosen} has {} rows; a fit needs 3 or more",
@@ -181,6 +189,12 @@ pub fn read_curve(path: &Path, stage: Option<usize>) -> anyhow::Result<Curve> {
         grain_density: run_dir.as_deref().and_then(grain_density),
         ..Default::default()
     };
+    if let Some(r) = before {
+        c.axial.push(0.0);
+        c.volumetric.push(0.0);
+        c.sigma_axial.push(-r[stress[axis]]);
+        c.sigma_lateral.push(-0.5 * (r[stress[l1]] + r[stress[l2]]));
+    }
     for r in shear {
         c.axial.push(-r[strain[axis]]);
         c.volumetric.push(-r[vol]);
@@ -242,17 +256,13 @@ pub fn fit_curve(c: &Curve, window: (f64, f64)) -> anyhow::Result<CurveFit> {
     // the initial part: up to a quarter of the way to the peak deviator
     let limit = q[0] + 0.25 * (q[peak] - q[0]);
     let initial = (0..=peak).take_while(|&k| q[k] <= limit).count().max(1);
-    if initial < 3 {
-        bail!(
-            "{}: only {initial} row(s) before the deviator reaches a quarter of its peak: the \
-             initial slopes (E, ν) need 3 or more; write rows more often (a smaller \
-             coupling.window) or shear more slowly",
-            c.name
-        );
-    }
-    let e = slope_from_first(&c.axial[..initial], &q[..initial]);
-    let s = slope_from_first(&c.axial[..initial], &c.volumetric[..initial]);
-    let nu = 0.5 * (1.0 - s);
+    let (e, nu) = if initial >= 3 {
+        let e = slope_from_first(&c.axial[..initial], &q[..initial]);
+        let s = slope_from_first(&c.axial[..initial], &c.volumetric[..initial]);
+        (e, 0.5 * (1.0 - s))
+    } else {
+        (f64::NAN, f64::NAN)
+    };
     // dilation rate over the window, or the last third of a shorter curve
     let end = c.axial[n - 1];
     let window = if end >= window.1 {
@@ -280,29 +290,61 @@ pub fn fit_curve(c: &Curve, window: (f64, f64)) -> anyhow::Result<CurveFit> {
     Ok(CurveFit {
         youngs_modulus: e,
         poisson_ratio: nu,
+        initial_rows: initial,
         peak: (0.5 * (sa + sl), 0.5 * (sa - sl)),
         peak_ratio: sa / sl,
+        lateral: sl,
         dilation_rate: r,
         dilation_angle: sin_psi.asin().to_degrees(),
         window,
     })
 }
 
+/// Given values that replace fitted ones.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Given {
+    pub youngs_modulus: Option<f64>,
+    pub poisson_ratio: Option<f64>,
+    pub density: Option<f64>,
+}
+
 /// Fits the Mohr–Coulomb parameters to `curves`. `cohesion` is used with one curve (and as
-/// the floor of a fitted one); `density` overrides Φ × ρ_grain.
+/// the floor of a fitted one); `given` values replace the fitted ones (E and ν must be given
+/// when a curve's rows are too far apart to show its initial slopes).
 pub fn fit(
     curves: &[Curve],
     window: (f64, f64),
     cohesion: f64,
-    density: Option<f64>,
+    given: Given,
 ) -> anyhow::Result<Fit> {
     if curves.is_empty() {
         bail!("no curves to fit");
     }
-    let fits: Vec<CurveFit> = curves
+    let mut fits: Vec<CurveFit> = curves
         .iter()
         .map(|c| fit_curve(c, window))
         .collect::<anyhow::Result<_>>()?;
+    if let Some(coarse) = fits.iter().position(|f| f.initial_rows < 3) {
+        if given.youngs_modulus.is_none() || given.poisson_ratio.is_none() {
+            bail!(
+                "{}: only {} row(s) (the stage's start included) before the deviator reaches a \
+                 quarter of its peak: the initial slopes (E, ν) need 3 or more; write rows more \
+                 often (a smaller coupling.window), shear more slowly, or give \
+                 --youngs-modulus and --poisson-ratio",
+                curves[coarse].name,
+                fits[coarse].initial_rows
+            );
+        }
+    }
+    for f in &mut fits {
+        if let Some(e) = given.youngs_modulus {
+            f.youngs_modulus = e;
+        }
+        if let Some(nu) = given.poisson_ratio {
+            f.poisson_ratio = nu;
+        }
+    }
+    let density = given.density;
     let (friction_angle, cohesion) = mohr_envelope(&fits, cohesion);
     let mean_sd = |f: &dyn Fn(&CurveFit) -> f64| {
         let n = fits.len() as f64;
@@ -332,13 +374,16 @@ pub fn fit(
     })
 }
 
-/// φ (degrees) and c of the Mohr–Coulomb envelope t = s sin φ + c cos φ: through one circle's
-/// top with the given c, or the least-squares line through several (c not below `floor`).
+/// φ (degrees) and c of the Mohr–Coulomb envelope t = s sin φ + c cos φ: through the mean
+/// circle top of curves at one confining pressure (an ensemble) with the given c, or the
+/// least-squares line through the circles of curves at confining pressures more than 10 %
+/// apart (c not below `floor`).
 fn mohr_envelope(fits: &[CurveFit], floor: f64) -> (f64, f64) {
     let pts: Vec<(f64, f64)> = fits.iter().map(|f| f.peak).collect();
-    let distinct = pts
-        .iter()
-        .any(|p| (p.0 - pts[0].0).abs() > 1e-3 * pts[0].0.abs());
+    let (lo, hi) = fits.iter().fold((f64::INFINITY, 0.0f64), |(a, b), f| {
+        (a.min(f.lateral), b.max(f.lateral))
+    });
+    let distinct = hi > 1.1 * lo;
     if distinct {
         let xs: Vec<f64> = pts.iter().map(|p| p.0).collect();
         let ys: Vec<f64> = pts.iter().map(|p| p.1).collect();
@@ -401,6 +446,13 @@ pub fn material_toml(f: &Fit, name: &str, sources: &[PathBuf]) -> String {
             .join(", ")
     );
     for (k, c) in f.curves.iter().enumerate() {
+        if c.initial_rows < 3 {
+            out.push_str(&format!(
+                "# curve {k}: E and ν given (its rows are too far apart to show the initial \
+                 slopes: {} row(s) up to a quarter of the peak deviator)\n",
+                c.initial_rows
+            ));
+        }
         out.push_str(&format!(
             "# curve {k}: E {:.4e} Pa, ν {:.4}, peak σa/σl {:.4} at s = {:.4e} Pa, dilation rate \
              {:.4} over axial strain {:.3}–{:.3} (ψ {:.2}°)\n",
@@ -434,6 +486,8 @@ pub fn plots(f: &Fit, curves: &[Curve], out: &Path) -> anyhow::Result<Vec<PathBu
     let stem = out.with_extension("");
     let mut ratio = Vec::new();
     let mut volume = Vec::new();
+    // one model line per confining pressure (curves within 10 % share it)
+    let mut drawn: Vec<f64> = Vec::new();
     for c in curves {
         let n = c.axial.len();
         let sl = c.sigma_lateral.iter().sum::<f64>() / n as f64;
@@ -447,6 +501,10 @@ pub fn plots(f: &Fit, curves: &[Curve], out: &Path) -> anyhow::Result<Vec<PathBu
             c.name.clone(),
             (0..n).map(|k| (c.axial[k], -c.volumetric[k])).collect(),
         ));
+        if drawn.iter().any(|d| (d - sl).abs() <= 0.1 * d.abs()) {
+            continue;
+        }
+        drawn.push(sl);
         let end = c.axial[n - 1];
         let model: Vec<(f64, f64, f64)> = (0..=400)
             .map(|k| {
@@ -523,7 +581,7 @@ mod tests {
     fn fitting_the_thesis_elements_curves_returns_its_parameters() {
         let truth = thesis();
         let one = synthetic(&truth, 25e3, 20001, 0.2);
-        let f = fit(&[one], (0.10, 0.15), 15.0, None).unwrap();
+        let f = fit(&[one], (0.10, 0.15), 15.0, Given::default()).unwrap();
         println!("{f:?}");
         assert!((f.youngs_modulus / 60e6 - 1.0).abs() < 1e-9);
         assert!((f.poisson_ratio - 0.145).abs() < 1e-9);
@@ -539,7 +597,7 @@ mod tests {
             .iter()
             .map(|&p| synthetic(&truth, p, 20001, 0.2))
             .collect();
-        let f = fit(&curves, (0.10, 0.15), 0.0, None).unwrap();
+        let f = fit(&curves, (0.10, 0.15), 0.0, Given::default()).unwrap();
         assert!(
             (f.friction_angle - 23.15).abs() < 1e-6,
             "{}",
@@ -549,11 +607,24 @@ mod tests {
         assert!(f.spread[0] / f.youngs_modulus < 1e-9);
     }
 
-    /// A curve too coarse to show its initial slope is refused with what to change.
+    /// A curve too coarse to show its initial slope is refused with what to change, and
+    /// fitted with E and ν given.
     #[test]
-    fn a_coarse_curve_is_refused_with_the_remedy() {
+    fn a_coarse_curve_needs_its_elastic_constants_given() {
         let c = synthetic(&thesis(), 25e3, 21, 0.2);
-        let e = fit(&[c], (0.10, 0.15), 15.0, None).unwrap_err().to_string();
-        assert!(e.contains("coupling.window"), "{e}");
+        let e = fit(&[c.clone()], (0.10, 0.15), 15.0, Given::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("coupling.window") && e.contains("--youngs-modulus"), "{e}");
+        let given = Given {
+            youngs_modulus: Some(60e6),
+            poisson_ratio: Some(0.145),
+            density: Some(1600.0),
+        };
+        let f = fit(&[c], (0.10, 0.15), 15.0, given).unwrap();
+        assert_eq!((f.youngs_modulus, f.poisson_ratio), (60e6, 0.145));
+        assert!((f.friction_angle - 23.15).abs() < 1e-6);
+        assert!((f.dilation_angle - 5.17).abs() < 1e-9);
+        assert!(material_toml(&f, "sand", &[]).contains("E and ν given"));
     }
 }

@@ -151,6 +151,13 @@ enum Command {
         /// Continuum density (kg/m³); default Φ × the grains' density from the run's scene.
         #[arg(long)]
         density: Option<f64>,
+        /// E (Pa) instead of the initial slope (needed when the rows are too far apart to
+        /// show it).
+        #[arg(long)]
+        youngs_modulus: Option<f64>,
+        /// ν instead of the initial slope.
+        #[arg(long)]
+        poisson_ratio: Option<f64>,
         /// Output TOML (default: mohr_coulomb.toml in the first run's folder); the plots go
         /// beside it.
         #[arg(long)]
@@ -394,13 +401,20 @@ fn main() -> ExitCode {
                 window,
                 stage,
                 density,
+                youngs_modulus,
+                poisson_ratio,
                 out,
             } => {
                 let curves = runs
                     .iter()
                     .map(|r| coordinator::fit::read_curve(r, stage))
                     .collect::<anyhow::Result<Vec<_>>>()?;
-                let f = coordinator::fit::fit(&curves, (window[0], window[1]), cohesion, density)?;
+                let given = coordinator::fit::Given {
+                    youngs_modulus,
+                    poisson_ratio,
+                    density,
+                };
+                let f = coordinator::fit::fit(&curves, (window[0], window[1]), cohesion, given)?;
                 let out = out.unwrap_or_else(|| {
                     let first = &runs[0];
                     let dir = if first.is_dir() {
