@@ -612,10 +612,18 @@ mod tests {
     #[test]
     fn a_coarse_curve_needs_its_elastic_constants_given() {
         let c = synthetic(&thesis(), 25e3, 21, 0.2);
-        let e = fit(&[c.clone()], (0.10, 0.15), 15.0, Given::default())
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("coupling.window") && e.contains("--youngs-modulus"), "{e}");
+        let e = fit(
+            std::slice::from_ref(&c),
+            (0.10, 0.15),
+            15.0,
+            Given::default(),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("coupling.window") && e.contains("--youngs-modulus"),
+            "{e}"
+        );
         let given = Given {
             youngs_modulus: Some(60e6),
             poisson_ratio: Some(0.145),
