@@ -215,10 +215,8 @@ fn grain_density(run_dir: &Path) -> Option<f64> {
         .first()?
         .get("material")?
         .as_str()?;
-    dem.get("materials")?
-        .get(material)?
-        .get("density")?
-        .as_float()
+    let d = dem.get("materials")?.get(material)?.get("density")?;
+    d.as_float().or_else(|| d.as_integer().map(|i| i as f64))
 }
 
 /// Least-squares slope of y over x through their first point.

@@ -579,7 +579,16 @@ pub fn rebuild(
         }
     }
     let r_max = particles.radius.iter().cloned().fold(0.0, f64::max);
-    let cutoff = 2.0 * r_max + lists.skin;
+    // a pair across a periodic cell's faces is listed within a longer reach (the edges may
+    // change by CELL_MARGIN d_V before the next build): the cells hold that reach, so that
+    // the ghosts' search over the neighbouring cells misses none
+    let cutoff = 2.0 * r_max
+        + lists.skin
+            * if cell.is_some() {
+                1.0 + CELL_MARGIN
+            } else {
+                1.0
+            };
     let grid = Grid::new(&particles.position, cutoff);
 
     // Morton order of the cells; ties (same cell) keep their current order

@@ -1502,6 +1502,27 @@ impl DemConfig {
         if !self.sinks.is_empty() {
             refuse(c, "sinks", p(&["dem", "sinks"]));
         }
+        if !self.sensors.is_empty() {
+            refuse(c, "sensors", p(&["dem", "sensors"]));
+        }
+        if self.impact_substeps > 1 {
+            c.fail(
+                p(&["dem", "impact_substeps"]),
+                format!(
+                    "must be 1 in a periodic cell (the impact refinement does not see the \
+                     contacts across its faces), got {}",
+                    self.impact_substeps
+                ),
+            );
+        }
+        if cell.stages.is_empty() {
+            c.fail(
+                p(&["dem", "periodic", "stages"]),
+                "a periodic cell needs at least one `[[dem.periodic.stages]]` (the run ends \
+                 when they are done)"
+                    .into(),
+            );
+        }
         if self.interface_material.is_some() {
             refuse(c, "coupled meshes", p(&["dem", "interface_material"]));
         }
@@ -1520,9 +1541,18 @@ impl DemConfig {
                 min, max, radius, ..
             } = src
             {
-                if *min != [0.0; 3] || *max != cell.size || radius.is_some() {
+                let field = if *min != [0.0; 3] {
+                    Some("min")
+                } else if *max != cell.size {
+                    Some("max")
+                } else if radius.is_some() {
+                    Some("radius")
+                } else {
+                    None
+                };
+                if let Some(field) = field {
                     c.fail(
-                        pi(&["dem", "particles"], k, &["min"]),
+                        pi(&["dem", "particles"], k, &[field]),
                         format!(
                             "a fill of a periodic cell fills the whole cell: min = [0, 0, 0], \
                              max = size = {:?}, no radius (got min {min:?}, max {max:?})",
@@ -1577,7 +1607,8 @@ impl DemConfig {
                 if (0..3).all(|a| st.strain.get(a).is_none()) {
                     c.fail(
                         sf("strain_rate"),
-                        "is the rate of strain-controlled axes; this stage has none (give                          `strain = { .. }`)"
+                        "is the rate of strain-controlled axes; this stage has none (give \
+                         `strain = { .. }`)"
                             .into(),
                     );
                 }

@@ -918,6 +918,13 @@ impl Engine {
                     cell.rate[a]
                 )));
             }
+            if let Some(stage) = self.servo.as_ref().and_then(|s| s.stalled_stage(cell)) {
+                return Err(self.cell_error(format!(
+                    "stage `{stage}` strains its axes at the rate of the inertial number at the \
+                     measured pressure, which is 0 (no contact carries stress yet): give the \
+                     stage a `strain_rate` (1/s)"
+                )));
+            }
             if l < 2.0 * reach {
                 return Err(self.cell_error(format!(
                     "the edge {axis} is {l:e} m, less than twice the reach of a pair \
@@ -1116,7 +1123,10 @@ impl Engine {
     /// Largest overlap of any contact (pair or wall), m.
     pub fn max_overlap(&self) -> f64 {
         let l = &self.state.lists;
-        let a = self.pair_overlaps().fold(0.0, f64::max);
+        let a = self
+            .pair_overlaps()
+            .chain(l.periodic_pairs.iter().map(|p| p.overlap))
+            .fold(0.0, f64::max);
         let b = l
             .wall_contacts
             .iter()
@@ -1162,6 +1172,8 @@ impl Engine {
             + b(&l.cross.incoming)
             + b(&l.cross.force)
             + b(&self.state.records)
+            + b(&l.periodic_pairs)
+            + b(&l.shaped_pair_image)
     }
 
     /// Number of neighbour-list builds so far.

@@ -199,6 +199,16 @@ impl Servo {
         }
     }
 
+    /// The name of the current stage if it drives strain axes at a zero rate (no
+    /// `strain_rate`, no stress target, and no pressure to take the rate of I from): it
+    /// would never end.
+    pub fn stalled_stage(&self, cell: &CellState) -> Option<String> {
+        let s = self.stages.get(cell.stage)?;
+        let strains = (0..3).any(|a| matches!(self.control(cell.stage, a), Control::Strain(_)));
+        (strains && s.strain_rate.is_none() && self.strain_rate(self.stage_pressure(cell)) == 0.0)
+            .then(|| s.label(cell.stage))
+    }
+
     /// The friction in force at `stage`: the last stage up to it that set one.
     pub fn friction_at(&self, stage: usize) -> Option<f64> {
         self.stages

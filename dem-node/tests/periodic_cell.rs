@@ -157,6 +157,8 @@ material = "sand"
 path = "lattice.csv"
 [dem.periodic]
 size = [{}, {}, {}]
+[[dem.periodic.stages]]
+stress = {{ x = -1e3 }}
 "#,
         size[0], size[1], size[2]
     );
@@ -449,5 +451,65 @@ strain = {{ z = -0.08 }}
         println!("{col}: mean {mean:.0} Pa over the shear, farthest {worst:.0} Pa from -10 kPa");
         assert!((mean + 10e3).abs() < 0.06 * 10e3, "{col} mean {mean}");
         assert!(worst < 0.25 * 10e3, "{col} off by {worst}");
+    }
+}
+
+/// What a periodic cell cannot have is refused naming the field, and a strain stage that
+/// could never move stops the run naming the stage.
+#[test]
+fn bad_periodic_scenes_are_refused_by_name() {
+    let base = compression_scene(10e3, 5.0, 1);
+    let build = |text: &str| match dem::parse_scene_section(text) {
+        Err(e) => e.to_string(),
+        Ok(cfg) => dem::Engine::from_config(&cfg.unwrap(), std::path::Path::new("."))
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default(),
+    };
+    let cases = [
+        (
+            base.replace("gravity = [0.0, 0.0, 0.0]", "gravity = [0.0, 0.0, -9.81]"),
+            "dem.gravity",
+        ),
+        (
+            base.replace("max = [0.008, 0.008, 0.008]", "max = [0.008, 0.008, 0.007]"),
+            "dem.particles[0].max",
+        ),
+        (
+            base.replace(
+                "[[dem.periodic.stages]]\nname = \"press\"",
+                "[[dem.sensors]]\nkind = \"pressure\"\nname = \"p\"\naxis = \"z\"\nvalue = 0.004\n\
+                 min = [0.0, 0.0]\nmax = [0.008, 0.008]\n[[dem.periodic.stages]]\nname = \"press\"",
+            ),
+            "dem.sensors",
+        ),
+        (
+            format!("{base}\n").replace("threads = 1", "threads = 1\nimpact_substeps = 4"),
+            "dem.impact_substeps",
+        ),
+        (
+            base.replace(
+                "stress = { x = -10000, y = -10000, z = -10000 }",
+                "strain = { z = -0.1 }",
+            )
+            .replace("max_strain_rate = 5", "max_strain_rate = 5"),
+            "stage `press` strains its axes",
+        ),
+        (
+            base.split("[[dem.periodic.stages]]")
+                .next()
+                .unwrap()
+                .to_string(),
+            "dem.periodic.stages",
+        ),
+        (
+            base.replace("stress = { x = -10000,", "stress = { x = 10000,"),
+            "dem.periodic.stages[0].stress.x",
+        ),
+    ];
+    for (text, needle) in cases {
+        let e = build(&text);
+        println!("{needle}: {e}");
+        assert!(e.contains(needle), "expected `{needle}` in `{e}`");
     }
 }

@@ -79,7 +79,7 @@ fn an_rve_of_superquadric_sand_consolidates_shears_and_fits_a_mohr_coulomb_mater
     assert_eq!(m["model"].as_str(), Some("mohr_coulomb"));
     let phi_fit = get("friction_angle");
     // (1 + sin φ)/(1 − sin φ) is the peak ratio (c = 15 Pa is negligible at 10 kPa; the fit
-    // takes the row of the largest axial stress and the mean lateral one)
+    // takes the row of the largest axial stress and the lateral stress of that row)
     let sin = phi_fit.to_radians().sin();
     assert!(
         ((1.0 + sin) / (1.0 - sin) / ratio[peak] - 1.0).abs() < 0.05,
