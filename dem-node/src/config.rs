@@ -1602,6 +1602,14 @@ impl DemConfig {
             if let Some(r) = st.max_strain_rate {
                 c.positive(sf("max_strain_rate"), r);
             }
+            if let Some(r) = st.ramp {
+                if !(r.is_finite() && r > 0.0 && r < 1.0) {
+                    c.fail(
+                        sf("ramp"),
+                        format!("must be a strain in (0, 1), e.g. 0.005, got {r}"),
+                    );
+                }
+            }
             if let Some(r) = st.strain_rate {
                 c.positive(sf("strain_rate"), r);
                 if (0..3).all(|a| st.strain.get(a).is_none()) {

@@ -26,6 +26,9 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
+/// The fraction of the full strain rate a ramped strain stage starts with.
+const RAMP_FLOOR: f64 = 0.02;
+
 /// `[dem.periodic]`: a periodic cell instead of walls.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -109,6 +112,12 @@ pub struct StageConfig {
     /// rate from.
     #[serde(default)]
     pub strain_rate: Option<f64>,
+    /// The strain over which the strain-controlled axes accelerate to their rate (rate ∝
+    /// √(strain/ramp), as for a rate rising linearly in time), instead of starting at full
+    /// speed: a start at full speed sends a stress wave through the cell that hides the
+    /// initial (elastic) slope. *Not in thesis.* Default 0 (full speed at once).
+    #[serde(default)]
+    pub ramp: Option<f64>,
     /// Sets the friction coefficient of every particle pair from this stage on (W §5.3: the
     /// generation friction μ_gen while compressing, then the material's).
     #[serde(default)]
@@ -228,12 +237,19 @@ impl Servo {
             .and_then(|s| s.strain_rate)
             .unwrap_or_else(|| self.strain_rate(self.stage_pressure(cell)));
         let cap = self.stages.get(cell.stage).and_then(|s| s.max_strain_rate);
+        let ramp = self.stages.get(cell.stage).and_then(|s| s.ramp);
         for a in 0..3 {
             let l = cell.size[a];
             match self.control(cell.stage, a) {
                 Control::Held => cell.rate[a] = 0.0,
                 Control::Strain(target) => {
-                    cell.rate[a] = target.signum() * stage_rate * cell.stage_size0[a];
+                    let l0 = cell.stage_size0[a];
+                    // a rate rising linearly in time reaches strain e at √(e/ramp) of its
+                    // full value; the floor starts the motion
+                    let factor = ramp.map_or(1.0, |r| {
+                        (((l - l0) / l0).abs() / r).sqrt().clamp(RAMP_FLOOR, 1.0)
+                    });
+                    cell.rate[a] = target.signum() * stage_rate * factor * l0;
                 }
                 Control::Stress(target) => {
                     // (5.8)–(5.9): the applied stress moves towards its target at E ε̇, ε̇

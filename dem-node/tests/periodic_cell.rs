@@ -512,3 +512,41 @@ fn bad_periodic_scenes_are_refused_by_name() {
         assert!(e.contains(needle), "expected `{needle}` in `{e}`");
     }
 }
+
+/// A strain stage with a `ramp` starts slowly and reaches its full rate at the ramp's strain,
+/// the rate growing as √(strain/ramp) (a rate rising linearly in time).
+#[test]
+fn a_ramped_strain_stage_accelerates_to_its_rate() {
+    let scene = compression_scene(10e3, 5.0, 1).replace(
+        "stress = { x = -10000, y = -10000, z = -10000 }\nmax_strain_rate = 5",
+        "strain = { z = -0.02 }\nstrain_rate = 10.0\nramp = 0.005",
+    );
+    let mut e = engine(&scene);
+    let l0 = e.cell().unwrap().size.z;
+    let full = -10.0 * l0;
+    e.advance(1).unwrap();
+    let first = e.cell().unwrap().rate.z / full;
+    assert!(
+        (first - 0.02).abs() < 1e-12,
+        "first step at {first} of the rate"
+    );
+    let mut seen_half = false;
+    loop {
+        e.advance(10).unwrap();
+        let c = e.cell().unwrap();
+        let strain = (l0 - c.size.z) / l0;
+        let factor = c.rate.z / full;
+        if strain < 0.005 {
+            // the rate of the last step, from the strain before it
+            assert!(
+                factor <= (strain / 0.005).sqrt() + 1e-9,
+                "{factor} at {strain}"
+            );
+            seen_half |= factor > 0.45 && factor < 0.55;
+        } else {
+            assert!(factor > 0.99, "{factor} at {strain}");
+            break;
+        }
+    }
+    assert!(seen_half);
+}
