@@ -464,6 +464,24 @@ pub fn material_toml(f: &Fit, name: &str, sources: &[PathBuf]) -> String {
             c.dilation_angle
         ));
     }
+    if f.curves.len() > 1 {
+        // an ensemble: mean ± standard deviation over its curves
+        let ms = |v: &dyn Fn(&CurveFit) -> f64| {
+            let n = f.curves.len() as f64;
+            let m = f.curves.iter().map(v).sum::<f64>() / n;
+            let sd = (f.curves.iter().map(|c| (v(c) - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+            format!("{m:.4} ± {sd:.4}")
+        };
+        out.push_str(&format!(
+            "# over {} curves (mean ± s.d.): peak σa/σl {}, dilation rate {}, ψ {}°, E {} MPa, ν {}\n",
+            f.curves.len(),
+            ms(&|c| c.peak_ratio),
+            ms(&|c| c.dilation_rate),
+            ms(&|c| c.dilation_angle),
+            ms(&|c| c.youngs_modulus * 1e-6),
+            ms(&|c| c.poisson_ratio),
+        ));
+    }
     out.push_str(&format!(
         "[fem.materials.{name}]\nmodel = \"mohr_coulomb\"\nyoungs_modulus = {:.6e}\n\
          poisson_ratio = {:.6}\nfriction_angle = {:.4}\ndilation_angle = {:.4}\n\
@@ -603,6 +621,12 @@ mod tests {
         );
         assert!((f.cohesion - 15.0).abs() < 1e-3, "{}", f.cohesion);
         assert!(f.spread[0] / f.youngs_modulus < 1e-9);
+        let table = material_toml(&f, "sand", &[]);
+        assert!(
+            table.contains("# over 3 curves (mean ± s.d.): peak σa/σl"),
+            "{table}"
+        );
+        assert!(table.contains("E 60.0000 ± 0.0000 MPa"), "{table}");
     }
 
     /// A curve too coarse to show its initial slope is refused with what to change, and
