@@ -216,6 +216,10 @@ pub struct PeriodicPair {
     pub shear: V3,
     pub force: V3,
     pub overlap: f64,
+    /// The torques on `pair[0]` and `pair[1]` of the last evaluation (rewritten by every
+    /// evaluation, not part of snapshots).
+    #[serde(skip)]
+    pub torques: [V3; 2],
 }
 
 /// The 13 shifts N⁺ of Wellmann §5.1.1 (one of each pair ±n): a ghost of particle j is made
@@ -834,6 +838,7 @@ pub fn rebuild(
                     .map_or(V3::zeros(), |k| old_pairs[k].2),
                 force: V3::zeros(),
                 overlap: -1.0,
+                torques: [V3::zeros(); 2],
             }
         }));
     lists.cell_at_build = cell;

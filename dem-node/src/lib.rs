@@ -2078,8 +2078,10 @@ impl Engine {
     /// Packing fraction inside the first box wall: particle volume over the box footprint
     /// times the bed height (floor to the highest particle top), when a box wall exists.
     pub fn packing_fraction(&self) -> Option<f64> {
-        if self.state.cell.is_some() {
-            return self.cell_averages().map(|a| a.solid_fraction);
+        if let Some(cell) = &self.state.cell {
+            let p = &self.state.particles;
+            let solid: f64 = (0..p.len()).map(|k| p.volume(k)).sum();
+            return Some(solid / (cell.size.x * cell.size.y * cell.size.z));
         }
         let (lo, hi) = self.box_region?;
         let p = &self.state.particles;

@@ -321,11 +321,11 @@ pub fn periodic_forces(lists: &mut NeighbourLists, p: &mut Particles, ctx: &Forc
         return;
     }
     let k = Kinematics::of(p);
-    let torques: Vec<(V3, V3)> = lists
+    lists
         .periodic_pairs
         .par_iter_mut()
         .with_min_len(256)
-        .map(|pp| {
+        .for_each(|pp| {
             let (i, j) = (pp.pair[0] as usize, pp.pair[1] as usize);
             let d = p.position[i] - (p.position[j] + image_shift(&size, pp.image));
             let dist2 = d.norm_squared();
@@ -334,24 +334,24 @@ pub fn periodic_forces(lists: &mut NeighbourLists, p: &mut Particles, ctx: &Forc
                 pp.shear = V3::zeros();
                 pp.force = V3::zeros();
                 pp.overlap = sum - dist2.sqrt();
-                return (V3::zeros(), V3::zeros());
+                pp.torques = [V3::zeros(); 2];
+                return;
             }
             let vj = p.velocity[j] + image_shift(&rate, pp.image);
             let (f, ti, tj) = pair_force_torques(&k, ctx, (i, j), d, dist2, vj, &mut pp.shear);
             pp.force = f;
             pp.overlap = sum - dist2.sqrt();
-            (ti, tj)
-        })
-        .collect();
-    for (pp, (ti, tj)) in lists.periodic_pairs.iter().zip(torques) {
+            pp.torques = [ti, tj];
+        });
+    for pp in &lists.periodic_pairs {
         if pp.overlap < 0.0 {
             continue;
         }
         let (i, j) = (pp.pair[0] as usize, pp.pair[1] as usize);
         p.force[i] += pp.force;
         p.force[j] -= pp.force;
-        p.torque[i] += ti;
-        p.torque[j] += tj;
+        p.torque[i] += pp.torques[0];
+        p.torque[j] += pp.torques[1];
     }
 }
 
