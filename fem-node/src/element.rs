@@ -5,6 +5,10 @@
 //! (C3D4, C3D10, C3D8, C3D20), which coincide with VTK's for these types.
 
 use nalgebra::{Matrix3, SMatrix, Vector3};
+use numeric::iso::{
+    gauss_1d, hex_rule, shape, tet_collapsed_rule, tet_rule_1, tet_rule_4, IsoShape as ShapeKind,
+    HEX_NODES, TET_NODES,
+};
 use serde::{Deserialize, Serialize};
 use std::sync::LazyLock;
 
@@ -120,137 +124,6 @@ static HEX20_FACES: [&[usize]; 6] = [
     &[3, 0, 4, 7, 11, 16, 15, 19],
 ];
 
-static TET_NODES: [[f64; 3]; 10] = [
-    [0.0, 0.0, 0.0],
-    [1.0, 0.0, 0.0],
-    [0.0, 1.0, 0.0],
-    [0.0, 0.0, 1.0],
-    [0.5, 0.0, 0.0],
-    [0.5, 0.5, 0.0],
-    [0.0, 0.5, 0.0],
-    [0.0, 0.0, 0.5],
-    [0.5, 0.0, 0.5],
-    [0.0, 0.5, 0.5],
-];
-static HEX_NODES: [[f64; 3]; 20] = [
-    [-1.0, -1.0, -1.0],
-    [1.0, -1.0, -1.0],
-    [1.0, 1.0, -1.0],
-    [-1.0, 1.0, -1.0],
-    [-1.0, -1.0, 1.0],
-    [1.0, -1.0, 1.0],
-    [1.0, 1.0, 1.0],
-    [-1.0, 1.0, 1.0],
-    [0.0, -1.0, -1.0],
-    [1.0, 0.0, -1.0],
-    [0.0, 1.0, -1.0],
-    [-1.0, 0.0, -1.0],
-    [0.0, -1.0, 1.0],
-    [1.0, 0.0, 1.0],
-    [0.0, 1.0, 1.0],
-    [-1.0, 0.0, 1.0],
-    [-1.0, -1.0, 0.0],
-    [1.0, -1.0, 0.0],
-    [1.0, 1.0, 0.0],
-    [-1.0, 1.0, 0.0],
-];
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum ShapeKind {
-    Tet4,
-    Tet10,
-    Hex8,
-    Hex20,
-}
-
-/// Shape functions N and their reference derivatives dN/dξ at `xi`.
-fn shape(kind: ShapeKind, xi: [f64; 3], n: &mut [f64], dn: &mut [[f64; 3]]) {
-    let [r, s, t] = xi;
-    match kind {
-        ShapeKind::Tet4 => {
-            n[..4].copy_from_slice(&[1.0 - r - s - t, r, s, t]);
-            dn[0] = [-1.0, -1.0, -1.0];
-            dn[1] = [1.0, 0.0, 0.0];
-            dn[2] = [0.0, 1.0, 0.0];
-            dn[3] = [0.0, 0.0, 1.0];
-        }
-        ShapeKind::Tet10 => {
-            // Barycentric L_1..L_4 and their gradients in (r, s, t).
-            let l = [1.0 - r - s - t, r, s, t];
-            let dl = [
-                [-1.0, -1.0, -1.0],
-                [1.0, 0.0, 0.0],
-                [0.0, 1.0, 0.0],
-                [0.0, 0.0, 1.0],
-            ];
-            for a in 0..4 {
-                n[a] = l[a] * (2.0 * l[a] - 1.0);
-                for k in 0..3 {
-                    dn[a][k] = (4.0 * l[a] - 1.0) * dl[a][k];
-                }
-            }
-            const EDGES: [(usize, usize); 6] = [(0, 1), (1, 2), (2, 0), (0, 3), (1, 3), (2, 3)];
-            for (m, &(i, j)) in EDGES.iter().enumerate() {
-                n[4 + m] = 4.0 * l[i] * l[j];
-                for k in 0..3 {
-                    dn[4 + m][k] = 4.0 * (dl[i][k] * l[j] + l[i] * dl[j][k]);
-                }
-            }
-        }
-        ShapeKind::Hex8 => {
-            for a in 0..8 {
-                let [ra, sa, ta] = HEX_NODES[a];
-                let (fr, fs, ft) = (1.0 + ra * r, 1.0 + sa * s, 1.0 + ta * t);
-                n[a] = 0.125 * fr * fs * ft;
-                dn[a] = [
-                    0.125 * ra * fs * ft,
-                    0.125 * sa * fr * ft,
-                    0.125 * ta * fr * fs,
-                ];
-            }
-        }
-        ShapeKind::Hex20 => {
-            for a in 0..20 {
-                let [ra, sa, ta] = HEX_NODES[a];
-                if a < 8 {
-                    let (fr, fs, ft) = (1.0 + ra * r, 1.0 + sa * s, 1.0 + ta * t);
-                    let g = ra * r + sa * s + ta * t - 2.0;
-                    n[a] = 0.125 * fr * fs * ft * g;
-                    dn[a] = [
-                        0.125 * ra * fs * ft * (g + fr),
-                        0.125 * sa * fr * ft * (g + fs),
-                        0.125 * ta * fr * fs * (g + ft),
-                    ];
-                } else if ra == 0.0 {
-                    let (fs, ft) = (1.0 + sa * s, 1.0 + ta * t);
-                    n[a] = 0.25 * (1.0 - r * r) * fs * ft;
-                    dn[a] = [
-                        -0.5 * r * fs * ft,
-                        0.25 * (1.0 - r * r) * sa * ft,
-                        0.25 * (1.0 - r * r) * fs * ta,
-                    ];
-                } else if sa == 0.0 {
-                    let (fr, ft) = (1.0 + ra * r, 1.0 + ta * t);
-                    n[a] = 0.25 * (1.0 - s * s) * fr * ft;
-                    dn[a] = [
-                        0.25 * (1.0 - s * s) * ra * ft,
-                        -0.5 * s * fr * ft,
-                        0.25 * (1.0 - s * s) * fr * ta,
-                    ];
-                } else {
-                    let (fr, fs) = (1.0 + ra * r, 1.0 + sa * s);
-                    n[a] = 0.25 * (1.0 - t * t) * fr * fs;
-                    dn[a] = [
-                        0.25 * (1.0 - t * t) * ra * fs,
-                        0.25 * (1.0 - t * t) * fr * sa,
-                        -0.5 * t * fr * fs,
-                    ];
-                }
-            }
-        }
-    }
-}
-
 /// Shape values and reference derivatives tabulated at the points of a quadrature rule.
 pub(crate) struct Tabulated {
     pub nn: usize,
@@ -281,76 +154,6 @@ fn tabulate(kind: ShapeKind, nn: usize, rule: Vec<([f64; 3], f64)>) -> Tabulated
         t.points.push(p);
     }
     t
-}
-
-fn gauss_1d(n: usize) -> Vec<(f64, f64)> {
-    match n {
-        1 => vec![(0.0, 2.0)],
-        2 => {
-            let a = 1.0 / 3f64.sqrt();
-            vec![(-a, 1.0), (a, 1.0)]
-        }
-        3 => {
-            let a = (0.6f64).sqrt();
-            vec![(-a, 5.0 / 9.0), (0.0, 8.0 / 9.0), (a, 5.0 / 9.0)]
-        }
-        4 => {
-            let a = ((3.0 - 2.0 * (1.2f64).sqrt()) / 7.0).sqrt();
-            let b = ((3.0 + 2.0 * (1.2f64).sqrt()) / 7.0).sqrt();
-            let wa = (18.0 + 30f64.sqrt()) / 36.0;
-            let wb = (18.0 - 30f64.sqrt()) / 36.0;
-            vec![(-b, wb), (-a, wa), (a, wa), (b, wb)]
-        }
-        _ => unreachable!("gauss rule of order {n} not tabulated"),
-    }
-}
-
-fn hex_rule(n: usize) -> Vec<([f64; 3], f64)> {
-    let g = gauss_1d(n);
-    let mut out = Vec::new();
-    for &(z, wz) in &g {
-        for &(y, wy) in &g {
-            for &(x, wx) in &g {
-                out.push(([x, y, z], wx * wy * wz));
-            }
-        }
-    }
-    out
-}
-
-/// Collapsed-cube (Duffy) Gauss rule on the unit tetrahedron, exact for degree 2n−3.
-fn tet_collapsed_rule(n: usize) -> Vec<([f64; 3], f64)> {
-    let g: Vec<(f64, f64)> = gauss_1d(n)
-        .into_iter()
-        .map(|(x, w)| (0.5 * (x + 1.0), 0.5 * w))
-        .collect();
-    let mut out = Vec::new();
-    for &(u, wu) in &g {
-        for &(v, wv) in &g {
-            for &(w, ww) in &g {
-                let x = u;
-                let y = v * (1.0 - u);
-                let z = w * (1.0 - u) * (1.0 - v);
-                out.push(([x, y, z], wu * wv * ww * (1.0 - u) * (1.0 - u) * (1.0 - v)));
-            }
-        }
-    }
-    out
-}
-
-fn tet_rule_1() -> Vec<([f64; 3], f64)> {
-    vec![([0.25, 0.25, 0.25], 1.0 / 6.0)]
-}
-
-fn tet_rule_4() -> Vec<([f64; 3], f64)> {
-    let a = 0.585_410_196_624_968_5;
-    let b = 0.138_196_601_125_010_5;
-    vec![
-        ([b, b, b], 1.0 / 24.0),
-        ([a, b, b], 1.0 / 24.0),
-        ([b, a, b], 1.0 / 24.0),
-        ([b, b, a], 1.0 / 24.0),
-    ]
 }
 
 static TET4_K: LazyLock<Tabulated> = LazyLock::new(|| tabulate(ShapeKind::Tet4, 4, tet_rule_1()));

@@ -1,6 +1,9 @@
 //! Small numerical kernels shared by the engines: the largest eigenvalue of a symmetric
 //! operator by Lanczos (the FEM's explicit critical step and highest frequency, the 2-D disc
-//! engine's critical step and DDEM iteration matrix).
+//! engine's critical step and DDEM iteration matrix); isoparametric solid shapes and the
+//! location of a point in an element ([`iso`]).
+
+pub mod iso;
 
 /// The dot product.
 pub fn dot(a: &[f64], b: &[f64]) -> f64 {
