@@ -38,6 +38,7 @@ pub mod shaped_forces;
 pub mod snapshot;
 pub mod stl;
 pub mod triangle_contact;
+pub mod volume_coupling;
 pub mod walls;
 
 use config::{DemConfig, ParticleSource, WallConfig};

@@ -292,8 +292,8 @@ pub fn locate(kind: IsoShape, x: &[[f64; 3]], p: [f64; 3], tol: f64) -> Option<L
         if !d.iter().all(|c| c.is_finite()) {
             return None;
         }
-        for k in 0..3 {
-            xi[k] -= d[k];
+        for (c, dc) in xi.iter_mut().zip(d.iter()) {
+            *c -= dc;
         }
         let r2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
         if d.norm() < 1e-13 || r2 <= 1e-28 * size2 {
@@ -394,9 +394,9 @@ mod tests {
                 values(kind, xi, &mut n);
                 let sum: f64 = n.iter().sum();
                 assert!((sum - 1.0).abs() < 1e-14);
-                for k in 0..3 {
+                for (k, xk) in xi.iter().enumerate() {
                     let v: f64 = (0..nn).map(|a| n[a] * kind.reference_nodes()[a][k]).sum();
-                    assert!((v - xi[k]).abs() < 1e-14, "{kind:?}");
+                    assert!((v - xk).abs() < 1e-14, "{kind:?}");
                 }
             }
         }
