@@ -130,6 +130,8 @@ pub enum DemError {
     },
     #[error("snapshot: {0}")]
     Snapshot(String),
+    #[error("volume interface `{interface}`: {message}")]
+    Volume { interface: String, message: String },
     #[error("output {path}: {message}")]
     Output { path: String, message: String },
 }
@@ -203,6 +205,10 @@ pub struct Engine {
     servo: Option<periodic::Servo>,
     /// The pair frictions of the scene, which a periodic stage's `friction` replaces.
     scene_frictions: Vec<f64>,
+    /// Volume interfaces' operators and scratch (their state is `state.volumes`).
+    volumes: Vec<volume_coupling::VolumeInterface>,
+    /// The bodies' Arlequin weights by slot, while a volume interface exists.
+    volume_weights: Option<volume_coupling::SlotWeights>,
 }
 
 /// The generator of a source's shapes and orientations: its own stream, so that drawing
@@ -820,6 +826,7 @@ impl Engine {
                 removed_particles: 0,
                 removed_mass: 0.0,
                 cell: None,
+                volumes: Vec::new(),
             },
             pool,
             output: OutputState {
@@ -834,6 +841,8 @@ impl Engine {
             predicted: Vec::new(),
             servo: None,
             scene_frictions: Vec::new(),
+            volumes: Vec::new(),
+            volume_weights: None,
         };
         engine.scene_frictions = engine.materials.pairs.iter().map(|p| p.friction).collect();
         if let Some(cell) = &cfg.periodic {
@@ -1242,6 +1251,319 @@ impl Engine {
         Ok(self.state.meshes.len() - 1)
     }
 
+    /// Adds a volume (Arlequin) interface: the overlap's elements, nodes (ids, reference
+    /// positions) and nodal weights w_I as the FE side declares them. The particles whose
+    /// centres lie in the overlap now are its coupled particles, their displacements measured
+    /// from here (Wellmann §6.3: the coupling terms are built once in this reference
+    /// configuration). Refused with a periodic cell or particle sinks, without a particle in
+    /// the overlap, with a node no particle supports, and when the penalty's explicit step
+    /// limit, 2 √(w m / k̂_α) with w floored at `min_weight`, is below the DEM step (naming
+    /// the particle). Returns the interface's index.
+    pub fn add_volume_interface(
+        &mut self,
+        name: &str,
+        mesh: volume_coupling::OverlapMesh,
+        settings: volume_coupling::VolumeSettings,
+    ) -> Result<usize, DemError> {
+        let verr = |message: String| DemError::Volume {
+            interface: name.to_string(),
+            message,
+        };
+        if self.state.cell.is_some() {
+            return Err(verr(
+                "a periodic cell cannot be coupled to a continuum".into(),
+            ));
+        }
+        if !self.cfg.sinks.is_empty() {
+            return Err(verr(
+                "particle sinks would remove coupled particles; remove dem.sinks".into(),
+            ));
+        }
+        if !(settings.min_weight > 0.0 && settings.min_weight <= 1.0) {
+            return Err(verr(format!(
+                "min_weight {} is not in (0, 1]",
+                settings.min_weight
+            )));
+        }
+        if settings.max_drift.is_nan() || settings.max_drift < 0.0 {
+            return Err(verr(format!(
+                "max_drift {} is negative",
+                settings.max_drift
+            )));
+        }
+        if self.state.volumes.iter().any(|v| v.name == name) {
+            return Err(verr("a volume interface of this name exists".into()));
+        }
+        let p = &self.state.particles;
+        let cands: Vec<volume_coupling::Candidate> = (0..p.len())
+            .map(|k| volume_coupling::Candidate {
+                id: p.id[k],
+                centre: p.position[k],
+                volume: p.volume(k),
+            })
+            .collect();
+        let coupling = volume_coupling::VolumeCoupling::new(
+            mesh.clone(),
+            &cands,
+            settings.projection,
+            settings.penalty,
+        )
+        .map_err(|e| verr(e.to_string()))?;
+        if coupling.is_empty() {
+            return Err(verr(
+                "no particle centre lies in the overlap's elements".into(),
+            ));
+        }
+        // the penalty's explicit step limit per coupled particle (§4.3's caution)
+        let by_id: std::collections::HashMap<u32, usize> =
+            (0..p.len()).map(|k| (p.id[k], k)).collect();
+        let stiffness = coupling.particle_stiffness();
+        let mut worst: Option<(f64, u32)> = None;
+        for (k, &kk) in stiffness.iter().enumerate() {
+            let id = coupling.ids()[k];
+            let m = p.mass[by_id[&id]] * coupling.weight(k).max(settings.min_weight);
+            let limit = 2.0 * (m / kk).sqrt();
+            if worst.is_none_or(|(l, _)| limit < l) {
+                worst = Some((limit, id));
+            }
+        }
+        if let Some((limit, id)) = worst {
+            if self.dt > limit {
+                return Err(verr(format!(
+                    "the penalty makes the explicit step limit 2 √(w m / k) = {limit:e} s \
+                     (particle {id}) smaller than dem.time_step {:e} s; lower the penalty, \
+                     raise min_weight or reduce the time step",
+                    self.dt
+                )));
+            }
+        }
+        let particles = (0..coupling.len())
+            .map(|k| {
+                (
+                    coupling.ids()[k],
+                    coupling.reference(k),
+                    cands[by_id[&coupling.ids()[k]]].volume,
+                )
+            })
+            .collect();
+        let n = mesh.nodes.len();
+        let state = volume_coupling::VolumeInterfaceState {
+            name: name.to_string(),
+            shape: volume_coupling::shape_name(mesh.shape).to_string(),
+            node_ids: mesh.node_ids,
+            nodes: mesh.nodes.clone(),
+            elements: mesh.elements,
+            weights: mesh.weights,
+            settings,
+            particles,
+            window_p: mesh.nodes,
+            window_v: vec![V3::zeros(); n],
+            window_a: vec![V3::zeros(); n],
+            rule: MotionRule::Quadratic,
+            window_steps: 0,
+            force_sum: vec![V3::zeros(); n],
+            window_substeps: 0,
+            energy: 0.0,
+        };
+        let iface = volume_coupling::VolumeInterface::from_state(&state)
+            .map_err(|e| verr(e.to_string()))?;
+        self.state.volumes.push(state);
+        self.volumes.push(iface);
+        self.refresh_volume_slots();
+        // the stored forces become the weighted ones
+        self.refresh_forces();
+        Ok(self.volumes.len() - 1)
+    }
+
+    /// The slots of the coupled particles and the bodies' weights by slot, after the
+    /// particles were sorted (or restored). False if a coupled particle is missing.
+    fn refresh_volume_slots(&mut self) -> bool {
+        let p = &self.state.particles;
+        let n = p.len();
+        let by_id: std::collections::HashMap<u32, u32> =
+            (0..n).map(|k| (p.id[k], k as u32)).collect();
+        let mut w = volume_coupling::SlotWeights {
+            weight: vec![1.0; n],
+            gradient: vec![V3::zeros(); n],
+        };
+        let mut complete = true;
+        for v in &mut self.volumes {
+            for (k, id) in v.coupling.ids().iter().enumerate() {
+                match by_id.get(id) {
+                    Some(&slot) => {
+                        v.slot[k] = slot;
+                        w.weight[slot as usize] = v.coupling.weight(k);
+                        w.gradient[slot as usize] = v.coupling.weight_gradient(k);
+                    }
+                    None => {
+                        v.slot[k] = u32::MAX;
+                        complete = false;
+                    }
+                }
+            }
+        }
+        self.volume_weights = Some(w);
+        complete
+    }
+
+    /// Index of the volume interface `name`.
+    pub fn volume_interface(&self, name: &str) -> Option<usize> {
+        self.state.volumes.iter().position(|v| v.name == name)
+    }
+
+    /// Sets the window kinematics P, V, A of a volume interface's nodes (flat node-major xyz,
+    /// the FE side's current positions, velocities, accelerations) and the motion rule;
+    /// resets the window clock and the force accumulator. Stops with an error naming the
+    /// particle when a coupled particle has left its element by more than `max_drift`.
+    pub fn set_volume_kinematics(
+        &mut self,
+        iface: usize,
+        positions: &[f64],
+        velocities: &[f64],
+        accelerations: &[f64],
+        rule: MotionRule,
+    ) -> Result<(), DemError> {
+        let Some(st) = self.state.volumes.get_mut(iface) else {
+            return Err(DemError::Volume {
+                interface: format!("#{iface}"),
+                message: "no such volume interface".into(),
+            });
+        };
+        let verr = |message: String| DemError::Volume {
+            interface: st.name.clone(),
+            message,
+        };
+        let n3 = 3 * st.nodes.len();
+        for (what, a) in [
+            ("positions", positions),
+            ("velocities", velocities),
+            ("accelerations", accelerations),
+        ] {
+            if a.len() != n3 {
+                return Err(verr(format!(
+                    "{what} has {} values, expected {n3} (3 per node)",
+                    a.len()
+                )));
+            }
+            if let Some(k) = a.iter().position(|x| !x.is_finite()) {
+                return Err(verr(format!(
+                    "non-finite {what}[{k}] (node {})",
+                    st.node_ids[k / 3]
+                )));
+            }
+        }
+        let to_v = |a: &[f64]| {
+            a.chunks(3)
+                .map(|c| V3::new(c[0], c[1], c[2]))
+                .collect::<Vec<V3>>()
+        };
+        st.window_p = to_v(positions);
+        st.window_v = to_v(velocities);
+        st.window_a = to_v(accelerations);
+        st.rule = rule;
+        st.window_steps = 0;
+        st.force_sum.iter_mut().for_each(|f| *f = V3::zeros());
+        st.window_substeps = 0;
+        let v = &self.volumes[iface];
+        let pos = &self.state.particles.position;
+        for k in 0..v.coupling.len() {
+            let d = v.coupling.drift(k, pos[v.slot[k] as usize]);
+            if d > st.settings.max_drift {
+                return Err(verr(format!(
+                    "particle {} left its overlap element by {d:.3} element sizes (max_drift \
+                     {}): the coupling terms built in the reference configuration no longer \
+                     hold (Wellmann §6.3)",
+                    v.coupling.ids()[k],
+                    st.settings.max_drift
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// The penalty forces on the FE nodes of a volume interface (flat xyz): of the last
+    /// evaluation, or with `averaged` the mean over the window's substeps. Empty for an
+    /// unknown index.
+    pub fn volume_forces(&self, iface: usize, averaged: bool) -> Vec<f64> {
+        let (Some(st), Some(v)) = (self.state.volumes.get(iface), self.volumes.get(iface)) else {
+            return Vec::new();
+        };
+        let flat = |f: &[V3], scale: f64| {
+            f.iter()
+                .flat_map(|v| [v.x * scale, v.y * scale, v.z * scale])
+                .collect()
+        };
+        if averaged {
+            if st.window_substeps == 0 {
+                return vec![0.0; 3 * st.nodes.len()];
+            }
+            flat(&st.force_sum, 1.0 / st.window_substeps as f64)
+        } else {
+            flat(&v.on_nodes, 1.0)
+        }
+    }
+
+    /// The penalty energy C (6.23) of the last evaluation of a volume interface (0 for an
+    /// unknown index).
+    pub fn volume_energy(&self, iface: usize) -> f64 {
+        self.state.volumes.get(iface).map_or(0.0, |v| v.energy)
+    }
+
+    /// The projected particle displacements u^DE (6.16) at the nodes of a volume interface
+    /// (flat xyz) of the last evaluation.
+    pub fn volume_projected_displacements(&self, iface: usize) -> Vec<f64> {
+        self.volumes.get(iface).map_or_else(Vec::new, |v| {
+            v.u_de.iter().flat_map(|u| [u.x, u.y, u.z]).collect()
+        })
+    }
+
+    /// The volume interfaces after the contact forces: the penalty forces (6.25)–(6.26) from
+    /// the particles' displacements and the FE nodes' at window time τ, and the weighted
+    /// equations of motion (6.10)–(6.11) of the coupled particles — their contact forces and
+    /// torques were weighted at the contact points by the kernels; here they are divided by
+    /// the floored weight of mass and inertia, gravity stays m g, the penalty force is added.
+    /// The nodal forces enter the window sum with `weight`; `count_step` counts a substep.
+    fn volume_stage(&mut self, weight: f64, count_step: bool) {
+        let dt = self.dt;
+        let g = self.gravity;
+        let s = &mut self.state;
+        for (st, v) in s.volumes.iter_mut().zip(&mut self.volumes) {
+            let tau = st.window_steps as f64 * dt;
+            for (k, u) in v.u_d.iter_mut().enumerate() {
+                *u = s.particles.position[v.slot[k] as usize] - st.particles[k].1;
+            }
+            v.coupling.project(&v.u_d, &mut v.u_de);
+            for (i, u) in v.u_fe.iter_mut().enumerate() {
+                let x = match st.rule {
+                    MotionRule::Quadratic => {
+                        st.window_p[i] + st.window_v[i] * tau + st.window_a[i] * (0.5 * tau * tau)
+                    }
+                    MotionRule::Linear => st.window_p[i] + st.window_v[i] * tau,
+                };
+                *u = x - st.nodes[i];
+            }
+            st.energy =
+                v.coupling
+                    .penalty_forces(&v.u_de, &v.u_fe, &mut v.on_nodes, &mut v.on_particles);
+            if weight > 0.0 {
+                for (sum, f) in st.force_sum.iter_mut().zip(&v.on_nodes) {
+                    *sum += f * weight;
+                }
+            }
+            if count_step {
+                st.window_substeps += 1;
+            }
+            let p = &mut s.particles;
+            for k in 0..v.coupling.len() {
+                let slot = v.slot[k] as usize;
+                let w = v.coupling.weight(k).max(st.settings.min_weight);
+                let mg = g * p.mass[slot];
+                p.force[slot] = mg + (p.force[slot] - mg + v.on_particles[k]) / w;
+                p.torque[slot] /= w;
+            }
+        }
+    }
+
     fn coupled_mesh(&self, mesh: usize) -> Option<&Mesh> {
         self.state.meshes.get(mesh).filter(|m| m.coupled)
     }
@@ -1583,6 +1905,9 @@ impl Engine {
             m.tau = m.window_steps as f64 * dt;
             m.move_to(m.tau);
         }
+        for v in &mut s.volumes {
+            v.window_steps += 1;
+        }
         self.place_walls(true);
     }
 
@@ -1656,6 +1981,11 @@ impl Engine {
             s.cell.as_ref().map(|c| c.size),
         );
         if let Some(removed) = rebuilt {
+            if !self.volumes.is_empty() {
+                // the build sorted the particles: the coupled ones have new slots
+                self.refresh_volume_slots();
+            }
+            let s = &mut self.state;
             s.removed_particles += removed.count;
             s.removed_mass += removed.mass;
             // refill the list's own buffer (no allocation per build)
@@ -1679,10 +2009,15 @@ impl Engine {
             hold_stiffness: self.cfg.superquadric_stiffness == config::StiffnessUpdate::FirstTouch,
             dt,
             cell: s.cell.as_ref().map(|c| (c.size, c.rate)),
+            weights: self.volume_weights.as_ref(),
         };
         resolve_forces::contact_forces(&mut s.lists, &mut s.particles, &mut s.records, &ctx);
         shaped_forces::shaped_forces(&mut s.lists, &mut s.particles, &ctx);
         periodic::periodic_forces(&mut s.lists, &mut s.particles, &ctx);
+        if !self.volumes.is_empty() {
+            self.volume_stage(if dt > 0.0 { weight } else { 0.0 }, dt > 0.0 && ends_step);
+        }
+        let s = &mut self.state;
         if s.meshes.iter().any(|m| m.coupled) {
             resolve_forces::accumulate_nodal_forces(
                 &mut s.meshes,
@@ -1966,7 +2301,24 @@ impl Engine {
                 )));
             }
         }
+        let volumes = s
+            .volumes
+            .iter()
+            .map(|v| {
+                volume_coupling::VolumeInterface::from_state(v)
+                    .map_err(|e| DemError::Snapshot(format!("volume interface `{}`: {e}", v.name)))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
         self.state = s;
+        self.volumes = volumes;
+        if !self.volumes.is_empty() && !self.refresh_volume_slots() {
+            return Err(DemError::Snapshot(
+                "a coupled particle of a volume interface is missing from the snapshot".into(),
+            ));
+        }
+        if self.volumes.is_empty() {
+            self.volume_weights = None;
+        }
         if self.state.lists.valid {
             self.state.lists.index_blocks();
         }
@@ -2124,6 +2476,7 @@ impl Engine {
             hold_stiffness: self.cfg.superquadric_stiffness == config::StiffnessUpdate::FirstTouch,
             dt: 0.0,
             cell: s.cell.as_ref().map(|c| (c.size, c.rate)),
+            weights: None,
         };
         s.sensors
             .sample(&self.cfg.sensors, s.time, &s.particles, &s.lists, &ctx)
@@ -2142,6 +2495,7 @@ impl Engine {
             hold_stiffness: self.cfg.superquadric_stiffness == config::StiffnessUpdate::FirstTouch,
             dt: 0.0,
             cell: s.cell.as_ref().map(|c| (c.size, c.rate)),
+            weights: None,
         };
         r.extend(
             s.sensors

@@ -41,6 +41,9 @@ pub struct ForceContext<'a> {
     /// A periodic cell: its edges L and their rates L̇ (an image s of a body is shifted by
     /// s∘L and moves with s∘L̇ besides the body's own velocity).
     pub cell: Option<(V3, V3)>,
+    /// Arlequin weights of the bodies (an overlap with a continuum, [`crate::volume_coupling`]):
+    /// each contact force and torque is weighted at its contact point (6.29).
+    pub weights: Option<&'a crate::volume_coupling::SlotWeights>,
 }
 
 /// The mutable data a run of consecutive blocks writes: its particles' forces, its pairs'
@@ -435,27 +438,39 @@ fn block_forces(b: usize, s: BlockSlices, v: &ListsView, k: &Kinematics, ctx: &F
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
         // SAFETY: the CPU supports AVX2 and FMA (checked above)
-        return unsafe { block_forces_avx2(b, s, v, k, ctx) };
+        return unsafe {
+            if ctx.weights.is_some() {
+                block_forces_avx2::<true>(b, s, v, k, ctx)
+            } else {
+                block_forces_avx2::<false>(b, s, v, k, ctx)
+            }
+        };
     }
-    block_forces_generic(b, s, v, k, ctx)
+    if ctx.weights.is_some() {
+        block_forces_generic::<true>(b, s, v, k, ctx)
+    } else {
+        block_forces_generic::<false>(b, s, v, k, ctx)
+    }
 }
 
 /// [`block_forces`] compiled for AVX2 (no FMA contraction happens without explicit
 /// `mul_add`, so the results are bitwise those of the baseline build).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn block_forces_avx2(
+unsafe fn block_forces_avx2<const WEIGHTED: bool>(
     b: usize,
     s: BlockSlices,
     v: &ListsView,
     k: &Kinematics,
     ctx: &ForceContext,
 ) {
-    block_forces_generic(b, s, v, k, ctx)
+    block_forces_generic::<WEIGHTED>(b, s, v, k, ctx)
 }
 
+/// One force block; `WEIGHTED`: scale each pair's force and torques by its Arlequin
+/// contact-point weight (6.29) (compiled out of unweighted runs).
 #[inline(always)]
-fn block_forces_generic(
+fn block_forces_generic<const WEIGHTED: bool>(
     b: usize,
     s: BlockSlices,
     v: &ListsView,
@@ -505,8 +520,22 @@ fn block_forces_generic(
                 }
                 continue;
             }
-            let (f, t, tj) =
+            let (mut f, mut t, mut tj) =
                 pair_force_torques(k, ctx, (i, j), d, dist2, k.vel[j], &mut shear[pk - pair0]);
+            if WEIGHTED {
+                if let Some(ws) = ctx.weights {
+                    let (wi, wj) = (ws.weight[i], ws.weight[j]);
+                    if wi != 1.0 || wj != 1.0 {
+                        // (6.29) at the contact point on the line of centres, r_i − δ/2 from c_i
+                        let dist = dist2.sqrt();
+                        let at = ((dist + ri - rj) / (2.0 * dist)).clamp(0.0, 1.0);
+                        let w = wi + at * (wj - wi);
+                        f *= w;
+                        t *= w;
+                        tj *= w;
+                    }
+                }
+            }
             fi += f;
             ti += t;
             if local {
@@ -572,10 +601,10 @@ fn wall_forces(
         let cf = wall_contact(k, ctx, i, &geo, &mut shear);
         let params = ctx.materials.pair(k.mat[i], geo.material);
         let w = k.omega[i];
-        f += cf.force;
-        t += geo.n.cross(&cf.tangential) * (-geo.lever);
+        let mut fc = cf.force;
+        let mut tc = geo.n.cross(&cf.tangential) * (-geo.lever);
         if params.rolling_friction > 0.0 {
-            t += rolling_torque(
+            tc += rolling_torque(
                 params.rolling_friction,
                 r,
                 cf.normal,
@@ -584,6 +613,13 @@ fn wall_forces(
                 ctx.dt,
             );
         }
+        if let Some(ws) = ctx.weights {
+            let s = ws.at(i, x, geo.point);
+            fc *= s;
+            tc *= s;
+        }
+        f += fc;
+        t += tc;
         *slot = WallContact {
             shear,
             overlap: geo.delta,
@@ -593,7 +629,7 @@ fn wall_forces(
             rec[first] = MeshForceRecord {
                 triangle: tri,
                 bary,
-                force: -cf.force,
+                force: -fc,
             };
         }
     }

@@ -717,6 +717,7 @@ pub fn shaped_forces(lists: &mut NeighbourLists, p: &mut Particles, ctx: &ForceC
     }
     let inc = &lists.shaped_incidence;
     let images = &lists.shaped_pair_image;
+    let pair_bodies = &lists.shaped_pairs;
     let pairs = &lists.shaped_pair_contacts;
     let walls = &lists.shaped_wall_contacts;
     let meshes = &lists.shaped_mesh_contacts;
@@ -734,12 +735,23 @@ pub fn shaped_forces(lists: &mut NeighbourLists, p: &mut Particles, ctx: &ForceC
                 {
                     let c = &pairs[(e >> 1) as usize];
                     if c.touching() {
-                        let (fk, at) = if e & 1 == 0 {
+                        let (mut fk, at) = if e & 1 == 0 {
                             (c.force, x)
                         } else {
                             // the second body acts at its image
                             (-c.force, x + image_of(ctx, images, (e >> 1) as usize).0)
                         };
+                        if let Some(ws) = ctx.weights {
+                            // (6.29), the same for both bodies of the pair
+                            let [a, b] = pair_bodies[(e >> 1) as usize].map(|i| i as usize);
+                            fk *= crate::volume_coupling::contact_weight(
+                                ws.weight[a],
+                                ws.weight[b],
+                                pos[a],
+                                pos[b],
+                                c.point,
+                            );
+                        }
                         *f += fk;
                         *t += (c.point - at).cross(&fk);
                     }
@@ -748,8 +760,11 @@ pub fn shaped_forces(lists: &mut NeighbourLists, p: &mut Particles, ctx: &ForceC
             if !inc.wall_start.is_empty() {
                 for c in &walls[inc.wall_start[k] as usize..inc.wall_start[k + 1] as usize] {
                     if c.touching() {
-                        *f += c.force;
-                        *t += (c.point - x).cross(&c.force);
+                        let fc = ctx
+                            .weights
+                            .map_or(c.force, |ws| c.force * ws.at(k, x, c.point));
+                        *f += fc;
+                        *t += (c.point - x).cross(&fc);
                     }
                 }
             }
@@ -758,8 +773,11 @@ pub fn shaped_forces(lists: &mut NeighbourLists, p: &mut Particles, ctx: &ForceC
                 for g in groups {
                     let c = &meshes[inc.mesh_groups[g] as usize];
                     if c.touching() {
-                        *f += c.force;
-                        *t += (c.point - x).cross(&c.force);
+                        let fc = ctx
+                            .weights
+                            .map_or(c.force, |ws| c.force * ws.at(k, x, c.point));
+                        *f += fc;
+                        *t += (c.point - x).cross(&fc);
                     }
                 }
             }

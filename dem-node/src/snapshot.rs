@@ -16,8 +16,9 @@ use serde::{Deserialize, Serialize};
 /// sinks (a version 4 snapshot reads as one without loaded walls and removals). 6: bodies
 /// with orientation and shape id, shape templates, shaped contacts (an older snapshot reads
 /// as one of spheres). 7: a periodic cell's state, pairs across its faces, images of shaped
-/// pairs (an older snapshot reads as one without a cell).
-pub const SNAPSHOT_VERSION: u32 = 7;
+/// pairs (an older snapshot reads as one without a cell). 8: volume (Arlequin) interfaces
+/// (an older snapshot reads as one without).
+pub const SNAPSHOT_VERSION: u32 = 8;
 /// The oldest version [`decode`] reads.
 pub const OLDEST_READABLE_VERSION: u32 = 4;
 
@@ -44,6 +45,9 @@ pub struct EngineState {
     /// The periodic cell (`[dem.periodic]`): edges, rates, stresses, stage.
     #[serde(default)]
     pub cell: Option<crate::periodic::CellState>,
+    /// Volume (Arlequin) interfaces: overlap, coupled particles, window state.
+    #[serde(default)]
+    pub volumes: Vec<crate::volume_coupling::VolumeInterfaceState>,
 }
 
 /// Loaded walls' states as written (`[u, v, contact_force]`), or as the first version 5

@@ -563,26 +563,39 @@ impl VolumeCoupling {
         energy
     }
 
-    /// The penalty stiffness each coupled particle feels from its own displacement,
-    /// k_α = ε Σ_IJ Π_Iα V_IJ Π_Jα with the lumped Π (an estimate for the consistent one):
-    /// with the weighted mass w_α m_α it bounds the explicit step, Δt < 2 √(w_α m_α / k_α).
+    /// A bound of the penalty stiffness each coupled particle feels, the Gershgorin row sum
+    /// k̂_α = ε Σ_I |Π_Iα| Σ_J |V_IJ| Σ_β |Π_Jβ| of K = ε Πᵀ V Π with the lumped Π (for
+    /// linear elements Σ_β Π_Jβ = 1 and k̂_α = ε Σ_I Π_Iα ∫N_I dv ≈ ε V_α / Φ). With the
+    /// weighted masses, Δt < 2 min_α √(w_α m_α / k̂_α) keeps the explicit integration of the
+    /// penalty stable; for a fill of solid fraction Φ and density ρ that is
+    /// Δt < 2 √(Φ w ρ / ε), independent of the particle size.
     pub fn particle_stiffness(&self) -> Vec<f64> {
         let nn = self.nn;
+        let mut pi_sum = vec![0.0; self.mesh.nodes.len()];
+        for k in 0..self.ids.len() {
+            let nk = &self.values[k * nn..(k + 1) * nn];
+            for (a, &i) in self.connectivity(k).iter().enumerate() {
+                pi_sum[i as usize] += (nk[a] * self.volume[k] / self.lumped[i as usize]).abs();
+            }
+        }
+        let row: Vec<f64> = (0..self.mesh.nodes.len())
+            .map(|i| {
+                (self.v_start[i] as usize..self.v_start[i + 1] as usize)
+                    .map(|p| self.v_val[p].abs() * pi_sum[self.v_col[p] as usize])
+                    .sum()
+            })
+            .collect();
         (0..self.ids.len())
             .map(|k| {
-                let conn = self.connectivity(k);
                 let nk = &self.values[k * nn..(k + 1) * nn];
-                let pi = |a: usize| nk[a] * self.volume[k] / self.lumped[conn[a] as usize];
-                let mut s = 0.0;
-                for (a, &i) in conn.iter().enumerate() {
-                    for (b, &j) in conn.iter().enumerate() {
-                        let row = self.v_start[i as usize] as usize
-                            ..self.v_start[i as usize + 1] as usize;
-                        if let Ok(p) = self.v_col[row.clone()].binary_search(&j) {
-                            s += pi(a) * self.v_val[row.start + p] * pi(b);
-                        }
-                    }
-                }
+                let s: f64 = self
+                    .connectivity(k)
+                    .iter()
+                    .enumerate()
+                    .map(|(a, &i)| {
+                        (nk[a] * self.volume[k] / self.lumped[i as usize]).abs() * row[i as usize]
+                    })
+                    .sum();
                 self.penalty * s
             })
             .collect()
@@ -611,6 +624,174 @@ impl VolumeCoupling {
                 }
             },
         }
+    }
+}
+
+/// The weights of the bodies by slot, read by the force kernels: w(c) and ∇w (1 and 0 for a
+/// body outside every overlap).
+#[derive(Debug, Default, Clone)]
+pub struct SlotWeights {
+    pub weight: Vec<f64>,
+    pub gradient: Vec<V3>,
+}
+
+impl SlotWeights {
+    /// The weight of a wall contact of body `i` (centre `x`) at `point`: w linearised about
+    /// the centre (6.9), clamped to [0, 1].
+    #[inline(always)]
+    pub fn at(&self, i: usize, x: V3, point: V3) -> f64 {
+        let w = self.weight[i];
+        let g = self.gradient[i];
+        if g == V3::zeros() {
+            return w;
+        }
+        (w + g.dot(&(point - x))).clamp(0.0, 1.0)
+    }
+}
+
+/// The settings of a volume coupling.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VolumeSettings {
+    /// The projection of the particle displacements (6.20)/(6.22).
+    #[serde(default)]
+    pub projection: Projection,
+    /// ε of (6.23) in Pa/m² (N/m⁴); Wellmann's converged value is 1e8 Pa/mm² = 1e14.
+    #[serde(default = "default_penalty")]
+    pub penalty: f64,
+    /// Floor of the weight of a particle's mass and inertia (w_c m → 0 at the FE side makes
+    /// the unweighted penalty force's explicit step vanish, §4.3's caution); contact forces
+    /// keep their unfloored weights.
+    #[serde(default = "default_min_weight")]
+    pub min_weight: f64,
+    /// How far (in element sizes, ξ/2) a coupled particle may leave the element it was
+    /// located in before the reference-configuration terms are no longer trusted and the run
+    /// stops naming it.
+    #[serde(default = "default_max_drift")]
+    pub max_drift: f64,
+}
+
+fn default_penalty() -> f64 {
+    1e14
+}
+
+fn default_min_weight() -> f64 {
+    0.05
+}
+
+fn default_max_drift() -> f64 {
+    0.25
+}
+
+impl Default for VolumeSettings {
+    fn default() -> Self {
+        VolumeSettings {
+            projection: Projection::default(),
+            penalty: default_penalty(),
+            min_weight: default_min_weight(),
+            max_drift: default_max_drift(),
+        }
+    }
+}
+
+/// Everything of a volume interface that a snapshot keeps: the overlap and its coupled
+/// particles as located at set-up (the coupling operators are rebuilt from them, bitwise the
+/// same), the window's FE kinematics and the force accumulator.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct VolumeInterfaceState {
+    pub name: String,
+    /// "tet4", "tet10", "hex8" or "hex20".
+    pub shape: String,
+    pub node_ids: Vec<u64>,
+    pub nodes: Vec<V3>,
+    pub elements: Vec<u32>,
+    pub weights: Vec<f64>,
+    pub settings: VolumeSettings,
+    /// Coupled particles: id, reference centre, volume.
+    pub particles: Vec<(u32, V3, f64)>,
+    pub window_p: Vec<V3>,
+    pub window_v: Vec<V3>,
+    pub window_a: Vec<V3>,
+    pub rule: crate::walls::MotionRule,
+    pub window_steps: u64,
+    /// Σ weight × f_I^C over the window's steps, and their count.
+    pub force_sum: Vec<V3>,
+    pub window_substeps: u64,
+    /// The penalty energy C (6.23) of the last evaluation.
+    pub energy: f64,
+}
+
+/// The name of an isoparametric shape in scenes and messages.
+pub fn shape_name(shape: IsoShape) -> &'static str {
+    match shape {
+        IsoShape::Tet4 => "tet4",
+        IsoShape::Tet10 => "tet10",
+        IsoShape::Hex8 => "hex8",
+        IsoShape::Hex20 => "hex20",
+    }
+}
+
+/// The shape of a name of [`shape_name`].
+pub fn shape_of(name: &str) -> Option<IsoShape> {
+    Some(match name {
+        "tet4" => IsoShape::Tet4,
+        "tet10" => IsoShape::Tet10,
+        "hex8" => IsoShape::Hex8,
+        "hex20" => IsoShape::Hex20,
+        _ => return None,
+    })
+}
+
+/// A volume interface while the engine runs: its state, its operators and scratch.
+#[derive(Debug)]
+pub struct VolumeInterface {
+    pub coupling: VolumeCoupling,
+    /// Slot of each coupled particle in the engine's particle arrays.
+    pub slot: Vec<u32>,
+    pub u_d: Vec<V3>,
+    pub u_de: Vec<V3>,
+    pub u_fe: Vec<V3>,
+    pub on_nodes: Vec<V3>,
+    pub on_particles: Vec<V3>,
+}
+
+impl VolumeInterface {
+    /// The operators of a stored interface state (its particles are exactly the coupled
+    /// ones, so the location finds each again in the same element).
+    pub fn from_state(st: &VolumeInterfaceState) -> Result<VolumeInterface, VolumeError> {
+        let shape = shape_of(&st.shape)
+            .ok_or_else(|| VolumeError::Mesh(format!("unknown element shape `{}`", st.shape)))?;
+        let mesh = OverlapMesh {
+            shape,
+            node_ids: st.node_ids.clone(),
+            nodes: st.nodes.clone(),
+            elements: st.elements.clone(),
+            weights: st.weights.clone(),
+        };
+        let cands: Vec<Candidate> = st
+            .particles
+            .iter()
+            .map(|&(id, centre, volume)| Candidate { id, centre, volume })
+            .collect();
+        let coupling =
+            VolumeCoupling::new(mesh, &cands, st.settings.projection, st.settings.penalty)?;
+        if coupling.len() != cands.len() {
+            return Err(VolumeError::Mesh(format!(
+                "{} of the {} stored coupled particles were located again",
+                coupling.len(),
+                cands.len()
+            )));
+        }
+        let (n, p) = (coupling.num_nodes(), coupling.len());
+        Ok(VolumeInterface {
+            coupling,
+            slot: vec![u32::MAX; p],
+            u_d: vec![V3::zeros(); p],
+            u_de: vec![V3::zeros(); n],
+            u_fe: vec![V3::zeros(); n],
+            on_nodes: vec![V3::zeros(); n],
+            on_particles: vec![V3::zeros(); p],
+        })
     }
 }
 
