@@ -298,7 +298,26 @@ pub fn assess(
         );
     }
     // two-way coupling window
-    if scene.has_dem && scene.has_fem {
+    if scene.has_dem && scene.has_fem && f.get("volume_interface") == Some(&1.0) {
+        // an Arlequin overlap: the FE side holds the penalty ε V in its operator, the
+        // particles feel it explicitly at every DEM step (refused at set-up beyond the limit)
+        push(
+            Level::Info,
+            "coupling window",
+            format!(
+                "volume interface (ε = {:.3e} N/m⁴): the penalty acts implicitly on the FE side \
+                 and explicitly on the particles within the DEM step{}; no window limit from a \
+                 contact period",
+                f.get("volume_penalty").copied().unwrap_or(f64::NAN),
+                d.get("volume_penalty_step_limit")
+                    .map(|l| format!(
+                        " (its limit 2√(w m / k̂) = {l:.3e} s, Δt^D = {:.3} of it)",
+                        d.get("time_step").copied().unwrap_or(f64::NAN) / l
+                    ))
+                    .unwrap_or_default()
+            ),
+        );
+    } else if scene.has_dem && scene.has_fem {
         if let (Some(tc), Some((k, which))) = (contact_period(d, f), contact_stiffness(d)) {
             let m = f["interface_node_mass_min"];
             let name = crate::run::schedule_name(scene.schedule);

@@ -67,7 +67,8 @@ pub struct InterfaceTable {
     pub name: String,
     /// The FEM node that owns the surface (default: the only FEM node).
     pub provider: Option<String>,
-    /// `surface` (default); `volume` is reserved for volume coupling.
+    /// `surface` (default), or `volume`: an Arlequin overlap of the provider's mesh with the
+    /// particles (`[fem.overlap]`, Wellmann ch. 6).
     #[serde(default)]
     pub kind: InterfaceKind,
 }
@@ -814,13 +815,6 @@ fn declare_interfaces(
                 )))
             }
         };
-        if kind != InterfaceKind::Surface {
-            return Err((
-                at,
-                F.to_string(),
-                format!("interface `{name}`: only `surface` interfaces exist so far"),
-            ));
-        }
         if let Some(other) = out.iter().find(|i| i.provider == provider) {
             return Err((at, F.to_string(), format!(
                 "interfaces `{}` and `{name}` are both provided by node `{provider}`; a FEM node provides one surface (give each structure its own node)",

@@ -85,6 +85,10 @@ pub struct DemConfig {
     /// `[dem.periodic]`: a periodic cell (Wellmann ch. 5's RVE) instead of walls.
     #[serde(default)]
     pub periodic: Option<crate::periodic::PeriodicConfig>,
+    /// `[dem.volume_coupling]`: the settings of volume (Arlequin) interfaces with a continuum
+    /// (projection, weight floor, drift limit; Wellmann ch. 6; the penalty is the provider's).
+    #[serde(default)]
+    pub volume_coupling: crate::volume_coupling::VolumeSettings,
 }
 
 /// When the elliptic Hertz stiffness γ of a superquadric contact is evaluated.
@@ -997,6 +1001,19 @@ impl DemConfig {
                     "must be in 1..={MAX_IMPACT_SUBSTEPS}, got {}",
                     self.impact_substeps
                 ),
+            );
+        }
+        let vc = &self.volume_coupling;
+        if !(vc.min_weight > 0.0 && vc.min_weight <= 1.0) {
+            c.fail(
+                p(&["dem", "volume_coupling", "min_weight"]),
+                format!("must be in (0, 1], got {}", vc.min_weight),
+            );
+        }
+        if vc.max_drift.is_nan() || vc.max_drift < 0.0 {
+            c.fail(
+                p(&["dem", "volume_coupling", "max_drift"]),
+                format!("must be >= 0, got {}", vc.max_drift),
             );
         }
         match self.threads {

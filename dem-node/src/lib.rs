@@ -211,6 +211,27 @@ pub struct Engine {
     volume_weights: Option<volume_coupling::SlotWeights>,
 }
 
+/// The penalty's explicit step limit of a volume coupling, 2 min_α √(w_α m_α / k̂_α) with the
+/// Gershgorin bound k̂_α ([`volume_coupling::VolumeCoupling::particle_stiffness`]) and w floored
+/// at `min_weight`, and the particle that sets it. `by_id` maps ids to slots of `mass`.
+fn penalty_step_limit(
+    coupling: &volume_coupling::VolumeCoupling,
+    mass: &[f64],
+    by_id: &std::collections::HashMap<u32, usize>,
+    min_weight: f64,
+) -> (f64, u32) {
+    let mut worst = (f64::INFINITY, u32::MAX);
+    for (k, &kk) in coupling.particle_stiffness().iter().enumerate() {
+        let id = coupling.ids()[k];
+        let m = mass[by_id[&id]] * coupling.weight(k).max(min_weight);
+        let limit = 2.0 * (m / kk).sqrt();
+        if limit < worst.0 {
+            worst = (limit, id);
+        }
+    }
+    worst
+}
+
 /// The generator of a source's shapes and orientations: its own stream, so that drawing
 /// shapes leaves the positions of sphere sources as they were.
 /// The stones of a polyhedral source (its `library` of STL files, or its random stones),
@@ -1317,25 +1338,14 @@ impl Engine {
         // the penalty's explicit step limit per coupled particle (§4.3's caution)
         let by_id: std::collections::HashMap<u32, usize> =
             (0..p.len()).map(|k| (p.id[k], k)).collect();
-        let stiffness = coupling.particle_stiffness();
-        let mut worst: Option<(f64, u32)> = None;
-        for (k, &kk) in stiffness.iter().enumerate() {
-            let id = coupling.ids()[k];
-            let m = p.mass[by_id[&id]] * coupling.weight(k).max(settings.min_weight);
-            let limit = 2.0 * (m / kk).sqrt();
-            if worst.is_none_or(|(l, _)| limit < l) {
-                worst = Some((limit, id));
-            }
-        }
-        if let Some((limit, id)) = worst {
-            if self.dt > limit {
-                return Err(verr(format!(
-                    "the penalty makes the explicit step limit 2 √(w m / k) = {limit:e} s \
-                     (particle {id}) smaller than dem.time_step {:e} s; lower the penalty, \
-                     raise min_weight or reduce the time step",
-                    self.dt
-                )));
-            }
+        let (limit, id) = penalty_step_limit(&coupling, &p.mass, &by_id, settings.min_weight);
+        if self.dt > limit {
+            return Err(verr(format!(
+                "the penalty makes the explicit step limit 2 √(w m / k) = {limit:e} s \
+                 (particle {id}) smaller than dem.time_step {:e} s; lower the penalty, \
+                 raise min_weight or reduce the time step",
+                self.dt
+            )));
         }
         let particles = (0..coupling.len())
             .map(|k| {
@@ -1364,6 +1374,7 @@ impl Engine {
             force_sum: vec![V3::zeros(); n],
             window_substeps: 0,
             energy: 0.0,
+            window_work: 0.0,
         };
         let iface = volume_coupling::VolumeInterface::from_state(&state)
             .map_err(|e| verr(e.to_string()))?;
@@ -1464,6 +1475,7 @@ impl Engine {
         st.window_steps = 0;
         st.force_sum.iter_mut().for_each(|f| *f = V3::zeros());
         st.window_substeps = 0;
+        st.window_work = 0.0;
         let v = &self.volumes[iface];
         let pos = &self.state.particles.position;
         for k in 0..v.coupling.len() {
@@ -1481,9 +1493,10 @@ impl Engine {
         Ok(())
     }
 
-    /// The penalty forces on the FE nodes of a volume interface (flat xyz): of the last
-    /// evaluation, or with `averaged` the mean over the window's substeps. Empty for an
-    /// unknown index.
+    /// What a volume interface's provider reads as its forces (flat xyz): the penalty pull
+    /// ε V u^DE on its nodes (it holds ε V in its operator, so that the penalty force
+    /// ε V (u^DE − u^FE) acts implicitly on its side), of the last step, or with `averaged`
+    /// the mean over the window's substeps. Empty for an unknown index.
     pub fn volume_forces(&self, iface: usize, averaged: bool) -> Vec<f64> {
         let (Some(st), Some(v)) = (self.state.volumes.get(iface), self.volumes.get(iface)) else {
             return Vec::new();
@@ -1499,8 +1512,37 @@ impl Engine {
             }
             flat(&st.force_sum, 1.0 / st.window_substeps as f64)
         } else {
-            flat(&v.on_nodes, 1.0)
+            flat(&v.pull, 1.0)
         }
+    }
+
+    /// The penalty forces (6.25) on the FE nodes of a volume interface at their window motion
+    /// (flat xyz) of the last evaluation; empty for an unknown index.
+    pub fn volume_penalty_forces(&self, iface: usize) -> Vec<f64> {
+        self.volumes.get(iface).map_or_else(Vec::new, |v| {
+            v.on_nodes.iter().flat_map(|f| [f.x, f.y, f.z]).collect()
+        })
+    }
+
+    /// The FE nodes' positions of a volume interface now (flat xyz; empty for an unknown
+    /// index).
+    pub fn volume_node_positions(&self, iface: usize) -> Vec<f64> {
+        let Some(st) = self.state.volumes.get(iface) else {
+            return Vec::new();
+        };
+        let tau = st.window_steps as f64 * self.dt;
+        (0..st.nodes.len())
+            .flat_map(|i| {
+                let x = st.node_motion(i, tau).0;
+                [x.x, x.y, x.z]
+            })
+            .collect()
+    }
+
+    /// Work of the penalty forces on the FE nodes of a volume interface as they moved in the
+    /// DEM since its window kinematics were set [J] (0 for an unknown index).
+    pub fn volume_work(&self, iface: usize) -> f64 {
+        self.state.volumes.get(iface).map_or(0.0, |v| v.window_work)
     }
 
     /// The penalty energy C (6.23) of the last evaluation of a volume interface (0 for an
@@ -1534,21 +1576,20 @@ impl Engine {
             }
             v.coupling.project(&v.u_d, &mut v.u_de);
             for (i, u) in v.u_fe.iter_mut().enumerate() {
-                let x = match st.rule {
-                    MotionRule::Quadratic => {
-                        st.window_p[i] + st.window_v[i] * tau + st.window_a[i] * (0.5 * tau * tau)
-                    }
-                    MotionRule::Linear => st.window_p[i] + st.window_v[i] * tau,
-                };
-                *u = x - st.nodes[i];
+                *u = st.node_motion(i, tau).0 - st.nodes[i];
             }
             st.energy =
                 v.coupling
                     .penalty_forces(&v.u_de, &v.u_fe, &mut v.on_nodes, &mut v.on_particles);
             if weight > 0.0 {
-                for (sum, f) in st.force_sum.iter_mut().zip(&v.on_nodes) {
+                let power: f64 = (0..v.on_nodes.len())
+                    .map(|i| v.on_nodes[i].dot(&st.node_motion(i, tau).1))
+                    .sum();
+                v.coupling.pull(&v.u_de, &mut v.pull);
+                for (sum, f) in st.force_sum.iter_mut().zip(&v.pull) {
                     *sum += f * weight;
                 }
+                st.window_work += power * dt * weight;
             }
             if count_step {
                 st.window_substeps += 1;
@@ -2554,6 +2595,21 @@ impl Engine {
             &self.materials,
             interface,
         ));
+        if !self.volumes.is_empty() {
+            let p = &self.state.particles;
+            let by_id: std::collections::HashMap<u32, usize> =
+                (0..p.len()).map(|k| (p.id[k], k)).collect();
+            let limit = self
+                .volumes
+                .iter()
+                .zip(&self.state.volumes)
+                .map(|(v, st)| {
+                    penalty_step_limit(&v.coupling, &p.mass, &by_id, st.settings.min_weight).0
+                })
+                .fold(f64::INFINITY, f64::min);
+            l.push(("volume_interfaces".to_string(), self.volumes.len() as f64));
+            l.push(("volume_penalty_step_limit".to_string(), limit));
+        }
         l
     }
 
@@ -2590,6 +2646,35 @@ impl Engine {
             r.push((format!("{}.displacement", w.name), st.u));
             r.push((format!("{}.velocity", w.name), st.v));
             r.push((format!("{}.contact_force", w.name), st.contact_force));
+        }
+        // volume interfaces: the penalty forces on the FE nodes balance, at rest, the bodies'
+        // weighted weight Σ w m g (plus weighted wall forces): the load the continuum carries
+        if let Some(ws) = &self.volume_weights {
+            let p = &self.state.particles;
+            for (st, v) in self.state.volumes.iter().zip(&self.volumes) {
+                let floor = st.settings.min_weight;
+                let gravity: V3 = (0..p.len())
+                    .map(|k| {
+                        let w = if ws.weight[k] < 1.0 {
+                            ws.weight[k].max(floor)
+                        } else {
+                            1.0
+                        };
+                        self.gravity * (p.mass[k] * w)
+                    })
+                    .sum();
+                let force: V3 = v.on_nodes.iter().sum();
+                let n = &st.name;
+                r.push((
+                    format!("volume.{n}.coupled_particles"),
+                    v.coupling.len() as f64,
+                ));
+                r.push((format!("volume.{n}.penalty_energy"), st.energy));
+                for (c, ax) in ["x", "y", "z"].iter().enumerate() {
+                    r.push((format!("volume.{n}.penalty_force_{ax}"), force[c]));
+                    r.push((format!("volume.{n}.weighted_gravity_{ax}"), gravity[c]));
+                }
+            }
         }
         r
     }

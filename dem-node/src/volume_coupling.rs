@@ -563,6 +563,18 @@ impl VolumeCoupling {
         energy
     }
 
+    /// The penalty pull ε Σ_J V_IJ u_J^DE on the FE nodes (the force (6.25) at u^FE = 0), which
+    /// a provider with the implicit penalty ε V in its operator reads as its forces.
+    pub fn pull(&self, u_de: &[V3], out: &mut [V3]) {
+        for (i, o) in out.iter_mut().enumerate() {
+            let mut f = V3::zeros();
+            for p in self.v_start[i] as usize..self.v_start[i + 1] as usize {
+                f += u_de[self.v_col[p] as usize] * self.v_val[p];
+            }
+            *o = f * self.penalty;
+        }
+    }
+
     /// A bound of the penalty stiffness each coupled particle feels, the Gershgorin row sum
     /// k̂_α = ε Σ_I |Π_Iα| Σ_J |V_IJ| Σ_β |Π_Jβ| of K = ε Πᵀ V Π with the lumped Π (for
     /// linear elements Σ_β Π_Jβ = 1 and k̂_α = ε Σ_I Π_Iα ∫N_I dv ≈ ε V_α / Φ). With the
@@ -656,8 +668,9 @@ pub struct VolumeSettings {
     /// The projection of the particle displacements (6.20)/(6.22).
     #[serde(default)]
     pub projection: Projection,
-    /// ε of (6.23) in Pa/m² (N/m⁴); Wellmann's converged value is 1e8 Pa/mm² = 1e14.
-    #[serde(default = "default_penalty")]
+    /// ε of (6.23) in Pa/m² (N/m⁴); Wellmann's converged value is 1e8 Pa/mm² = 1e14. Not a
+    /// scene key: a coupled run takes the provider's (`[fem.overlap] penalty`).
+    #[serde(skip, default = "default_penalty")]
     pub penalty: f64,
     /// Floor of the weight of a particle's mass and inertia (w_c m → 0 at the FE side makes
     /// the unweighted penalty force's explicit step vanish, §4.3's caution); contact forces
@@ -714,11 +727,30 @@ pub struct VolumeInterfaceState {
     pub window_a: Vec<V3>,
     pub rule: crate::walls::MotionRule,
     pub window_steps: u64,
-    /// Σ weight × f_I^C over the window's steps, and their count.
+    /// Σ weight × ε V u^DE over the window's steps (the provider's forces), and their count.
     pub force_sum: Vec<V3>,
     pub window_substeps: u64,
     /// The penalty energy C (6.23) of the last evaluation.
     pub energy: f64,
+    /// Work of the penalty forces on the FE nodes as they moved in the DEM this window,
+    /// Σ_steps Δt Σ_I f_I·v_I [J] (the interface energy audit).
+    #[serde(default)]
+    pub window_work: f64,
+}
+
+impl VolumeInterfaceState {
+    /// The FE nodes' positions and velocities at window time τ by the window's rule.
+    pub fn node_motion(&self, i: usize, tau: f64) -> (V3, V3) {
+        match self.rule {
+            crate::walls::MotionRule::Quadratic => (
+                self.window_p[i] + self.window_v[i] * tau + self.window_a[i] * (0.5 * tau * tau),
+                self.window_v[i] + self.window_a[i] * tau,
+            ),
+            crate::walls::MotionRule::Linear => {
+                (self.window_p[i] + self.window_v[i] * tau, self.window_v[i])
+            }
+        }
+    }
 }
 
 /// The name of an isoparametric shape in scenes and messages.
@@ -753,6 +785,8 @@ pub struct VolumeInterface {
     pub u_fe: Vec<V3>,
     pub on_nodes: Vec<V3>,
     pub on_particles: Vec<V3>,
+    /// ε V u^DE of the last evaluation (what the provider reads).
+    pub pull: Vec<V3>,
 }
 
 impl VolumeInterface {
@@ -791,6 +825,7 @@ impl VolumeInterface {
             u_fe: vec![V3::zeros(); n],
             on_nodes: vec![V3::zeros(); n],
             on_particles: vec![V3::zeros(); p],
+            pull: vec![V3::zeros(); n],
         })
     }
 }

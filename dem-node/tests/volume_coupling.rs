@@ -212,7 +212,7 @@ fn weighted_forces_balance_with_the_penalty_reaction() {
             sum += f;
             scale += f.norm();
         }
-        let on_nodes = e.volume_forces(iface, false);
+        let on_nodes = e.volume_penalty_forces(iface);
         let nodes: V3 = on_nodes.chunks(3).map(|c| V3::new(c[0], c[1], c[2])).sum();
         eprintln!("round {round}: {} contacts", e.num_contacts());
         assert!(

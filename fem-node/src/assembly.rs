@@ -294,19 +294,22 @@ pub fn assemble(
             .par_chunks_mut(stride)
             .enumerate()
             .try_for_each_init(
-                || (Vec::new(), Vec::new()),
-                |(x, ke), (i, out)| {
+                || (Vec::new(), Vec::new(), Vec::new()),
+                |(x, ke, sc), (i, out)| {
                     let e = start + i;
                     mesh.element_coords(e, x);
                     let kind = mesh.kinds[e];
                     let nd = 3 * kind.num_nodes();
+                    let scale = mesh.element_scale(e, sc);
                     match op {
                         Operator::Stiffness => {
-                            element::stiffness(kind, x, props.lame(e), ke).map_err(|b| (e, b))?;
+                            element::stiffness(kind, x, props.lame(e), scale, ke)
+                                .map_err(|b| (e, b))?;
                             out[..nd * nd].copy_from_slice(ke);
                         }
                         Operator::Mass => {
-                            element::mass(kind, x, props.density(e), ke).map_err(|b| (e, b))?;
+                            element::mass(kind, x, props.density(e), scale, ke)
+                                .map_err(|b| (e, b))?;
                             let nn = kind.num_nodes();
                             out[..nd * nd].fill(0.0);
                             for a in 0..nn {
@@ -421,7 +424,9 @@ pub fn lumped_mass(mesh: &Mesh, props: ElementProps<'_>) -> Result<Vec<f64>, Fem
             mesh.element_coords(e, &mut x);
             let kind: ElementKind = mesh.kinds[e];
             let mut m = vec![0.0; kind.num_nodes()];
-            element::lumped_mass(kind, &x, props.density(e), &mut m).map_err(|b| {
+            let mut sc = Vec::new();
+            let scale = mesh.element_scale(e, &mut sc);
+            element::lumped_mass(kind, &x, props.density(e), scale, &mut m).map_err(|b| {
                 FemError::Mesh {
                     file: mesh.source.clone(),
                     line: mesh.elem_lines[e],

@@ -45,6 +45,10 @@ pub struct FemConfig {
     /// Coupled part of the exterior surface (default: all of it).
     #[serde(default)]
     pub interface: Option<InterfaceSpec>,
+    /// `[fem.overlap]`: the model's interface is a volume overlap with particles (Arlequin,
+    /// Wellmann ch. 6) instead of a surface.
+    #[serde(default)]
+    pub overlap: Option<OverlapSpec>,
     /// Points whose displacement is reported (CSV, summary).
     #[serde(default)]
     pub probes: Vec<Probe>,
@@ -745,6 +749,26 @@ pub struct InterfaceSpec {
     /// Shell meshes: the reference surfaces the DEM sees (default both).
     #[serde(default)]
     pub faces: Option<ShellFaces>,
+}
+
+/// `[fem.overlap]`: the overlap Ω^C of the mesh with a particle region (Wellmann ch. 6). The
+/// particles alone fill `de_region` (Ω^DE \ Ω^FE, which the mesh must not cover); the weight
+/// of the particles is w = 1 − d / width at a node at distance d from that box (1 on the box,
+/// 0 from `width` on), interpolated in the elements (6.27); the elements with a node of w > 0
+/// form the overlap, every FE integral is weighted by 1 − w (6.3).
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct OverlapSpec {
+    pub de_region: BoxSelector,
+    /// Thickness of the overlap [m] (Wellmann: one or two element layers).
+    pub width: f64,
+    /// The penalty ε of (6.23) [Pa/m² = N/m⁴] (default Wellmann's converged 1e8 Pa/mm²).
+    #[serde(default = "default_overlap_penalty")]
+    pub penalty: f64,
+}
+
+fn default_overlap_penalty() -> f64 {
+    1e14
 }
 
 /// `[[fem.probes]]`: a named node (by file id) or the node nearest to a point.

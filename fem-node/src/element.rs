@@ -275,6 +275,21 @@ pub(crate) fn gradients(
     Ok(())
 }
 
+/// Multiplies the integration weights `wdet` of the points of `tab` by the Arlequin factor
+/// 1 − w interpolated from its nodal values `scale` (Wellmann (6.3), (6.27)); no-op for `None`.
+pub(crate) fn scale_weights(tab: &Tabulated, scale: Option<&[f64]>, wdet: &mut [f64]) {
+    let Some(s) = scale else { return };
+    let nn = tab.nn;
+    for (q, w) in wdet.iter_mut().enumerate() {
+        let f: f64 = tab.n[q * nn..(q + 1) * nn]
+            .iter()
+            .zip(s)
+            .map(|(n, s)| n * s)
+            .sum();
+        *w *= f;
+    }
+}
+
 /// Checks the Jacobian at the stiffness integration points (used by the mesh readers).
 pub fn check_jacobian(kind: ElementKind, x: &[[f64; 3]]) -> Result<(), BadJacobian> {
     let mut g = Vec::new();
@@ -307,11 +322,13 @@ fn add_isotropic_block(k: &mut [f64], ndof: usize, ga: &[[f64; 3]], w: f64, mat:
     }
 }
 
-/// Element stiffness matrix, row-major (3n)×(3n), dof index 3a+i.
+/// Element stiffness matrix, row-major (3n)×(3n), dof index 3a+i; with `scale` the nodal
+/// Arlequin factors 1 − w of an overlap element ([`scale_weights`]).
 pub fn stiffness(
     kind: ElementKind,
     x: &[[f64; 3]],
     mat: Lame,
+    scale: Option<&[f64]>,
     k: &mut Vec<f64>,
 ) -> Result<(), BadJacobian> {
     let nn = kind.num_nodes();
@@ -322,6 +339,7 @@ pub fn stiffness(
     let mut g = Vec::with_capacity(nn * tab.weights.len());
     let mut w = Vec::with_capacity(tab.weights.len());
     gradients(tab, x, &mut g, &mut w)?;
+    scale_weights(tab, scale, &mut w);
     if kind == ElementKind::Hex8i {
         return hex8i_stiffness(x, mat, &g, &w, k);
     }
@@ -434,11 +452,13 @@ fn hex8i_stiffness(
     Ok(())
 }
 
-/// Consistent scalar mass matrix ρ ∫ N_a N_b dV (2.78), row-major n×n (same for each direction).
+/// Consistent scalar mass matrix ρ ∫ N_a N_b dV (2.78), row-major n×n (same for each direction);
+/// with `scale` the Arlequin-weighted ρ ∫ (1 − w) N_a N_b dV.
 pub fn mass(
     kind: ElementKind,
     x: &[[f64; 3]],
     rho: f64,
+    scale: Option<&[f64]>,
     m: &mut Vec<f64>,
 ) -> Result<(), BadJacobian> {
     let nn = kind.num_nodes();
@@ -448,6 +468,7 @@ pub fn mass(
     let mut g = Vec::new();
     let mut w = Vec::new();
     gradients(tab, x, &mut g, &mut w)?;
+    scale_weights(tab, scale, &mut w);
     for q in 0..w.len() {
         let n = &tab.n[q * nn..(q + 1) * nn];
         let f = rho * w[q];
@@ -465,11 +486,12 @@ pub fn lumped_mass(
     kind: ElementKind,
     x: &[[f64; 3]],
     rho: f64,
+    scale: Option<&[f64]>,
     out: &mut [f64],
 ) -> Result<(), BadJacobian> {
     let nn = kind.num_nodes();
     let mut m = Vec::new();
-    mass(kind, x, rho, &mut m)?;
+    mass(kind, x, rho, scale, &mut m)?;
     let total: f64 = m.iter().sum();
     let diag: f64 = (0..nn).map(|a| m[a * nn + a]).sum();
     for a in 0..nn {
@@ -850,14 +872,14 @@ mod tests {
                 8.0
             };
             let mut m = Vec::new();
-            mass(kind, &x, 7.0, &mut m).unwrap();
+            mass(kind, &x, 7.0, None, &mut m).unwrap();
             let total: f64 = m.iter().sum();
             assert!(
                 (total - 7.0 * 24.0 * vref).abs() < 1e-10 * total,
                 "{kind:?}: {total}"
             );
             let mut l = vec![0.0; kind.num_nodes()];
-            lumped_mass(kind, &x, 7.0, &mut l).unwrap();
+            lumped_mass(kind, &x, 7.0, None, &mut l).unwrap();
             assert!(l.iter().all(|&v| v > 0.0));
         }
     }

@@ -31,6 +31,7 @@ pub mod mesh;
 mod model;
 pub mod nonlinear;
 pub mod output;
+pub mod overlap;
 pub mod resources;
 pub mod shell;
 mod shell_model;
@@ -220,6 +221,22 @@ pub struct InterfaceMesh {
     pub positions: Vec<f64>,
     /// Outward-oriented triangles indexing the interface node list (0-based).
     pub triangles: Vec<u32>,
+    /// A volume interface ([`config::OverlapSpec`]): its elements and nodal weights; then
+    /// `triangles` is empty.
+    pub volume: Option<VolumeMesh>,
+}
+
+/// The elements and weights of a volume (Arlequin) interface.
+#[derive(Clone, Debug, PartialEq)]
+pub struct VolumeMesh {
+    /// "tet4", "tet10", "hex8" or "hex20".
+    pub shape: String,
+    /// The shape's node count of indices into the interface node list per element.
+    pub elements: Vec<u32>,
+    /// The particles' weight w_I at each interface node (6.27).
+    pub weights: Vec<f64>,
+    /// ε of (6.23) [N/m⁴].
+    pub penalty: f64,
 }
 
 /// Errors of the FEM engine; each names the file/line, config field, set or node concerned.

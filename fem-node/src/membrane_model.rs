@@ -170,6 +170,12 @@ impl MembraneModel {
         triangles: bool,
         cylinder_centre: Option<[f64; 3]>,
     ) -> Result<MembraneModel, FemError> {
+        if cfg.overlap.is_some() {
+            return Err(config(
+                "fem.overlap",
+                "a volume overlap with particles needs volume elements, not membranes",
+            ));
+        }
         let sec = cfg
             .membrane
             .as_ref()
@@ -620,6 +626,7 @@ impl MembraneModel {
                 .flat_map(|&n| self.mesh.nodes[n as usize])
                 .collect(),
             triangles: self.iface_triangles.clone(),
+            volume: None,
         }
     }
 

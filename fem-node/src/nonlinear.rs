@@ -13,9 +13,22 @@ use crate::material::{Model, PointFailure};
 pub struct Scratch {
     g: Vec<[f64; 3]>,
     w: Vec<f64>,
+    /// The element's nodal Arlequin factors 1 − w (empty outside an overlap): the caller sets
+    /// them with [`Scratch::set_scale`] before each element.
+    scale: Vec<f64>,
     gbar: Vec<[f64; 3]>,
     b: Vec<[[f64; 3]; 6]>,
     db: Vec<[[f64; 3]; 6]>,
+}
+
+impl Scratch {
+    /// The nodal Arlequin factors of the next element (`None`: unweighted).
+    pub fn set_scale(&mut self, scale: Option<&[f64]>) {
+        self.scale.clear();
+        if let Some(s) = scale {
+            self.scale.extend_from_slice(s);
+        }
+    }
 }
 
 /// Why an element could not be evaluated.
@@ -56,6 +69,9 @@ fn point_gradients(
     let nn = kind.num_nodes();
     let tab = element::stiffness_rule(kind);
     element::gradients(tab, x, &mut s.g, &mut s.w).map_err(ElementFailure::Jacobian)?;
+    if !s.scale.is_empty() {
+        element::scale_weights(tab, Some(&s.scale), &mut s.w);
+    }
     let bbar = kind == ElementKind::Hex8b && !finite;
     let mut mean_tr = 0.0;
     if bbar {

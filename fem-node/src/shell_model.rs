@@ -154,6 +154,12 @@ impl ShellModel {
     pub fn from_mesh(cfg: &FemConfig, mesh: Mesh) -> Result<ShellModel, FemError> {
         cfg.validate()
             .map_err(|(field, message)| FemError::Config { field, message })?;
+        if cfg.overlap.is_some() {
+            return Err(FemError::Config {
+                field: "fem.overlap".into(),
+                message: "a volume overlap with particles needs volume elements, not shells".into(),
+            });
+        }
         let mesh_err = |line: usize, message: String| FemError::Mesh {
             file: mesh.source.clone(),
             line,
@@ -648,6 +654,7 @@ impl ShellModel {
             node_ids,
             positions,
             triangles: self.iface.triangles.clone(),
+            volume: None,
         }
     }
 

@@ -207,6 +207,7 @@ mod tests {
             node_ids: vec![1, 2, 3],
             positions: vec![0., 0., 0., 1., 0., 0., 0., 1., 0.].into(),
             triangles: vec![0, 1, 2],
+            volume: None,
         };
         let kin = InterfaceKinematics {
             version: PROTOCOL_VERSION,
@@ -336,6 +337,46 @@ mod tests {
             .contains("node index 3"));
         mesh.triangles = vec![0, 1];
         assert!(mesh.validate().is_err());
+    }
+
+    /// A volume interface's mesh carries elements and weights (and no triangles); it round
+    /// trips, an older message without the field reads as a surface, and bad elements or
+    /// weights are refused naming them.
+    #[test]
+    fn volume_interface_meshes_round_trip_and_are_checked() {
+        let (_, _, mut mesh, _, _) = all_messages();
+        let surface = encode(&mesh).unwrap();
+        assert_eq!(decode::<InterfaceMesh>(&surface, RUN).unwrap().volume, None);
+        mesh.node_ids = vec![1, 2, 3, 4];
+        mesh.positions = vec![0., 0., 0., 1., 0., 0., 0., 1., 0., 0., 0., 1.].into();
+        mesh.triangles.clear();
+        mesh.volume = Some(VolumeElements {
+            shape: "tet4".into(),
+            elements: vec![0, 1, 2, 3],
+            weights: vec![0.0, 0.0, 0.5, 1.0].into(),
+            penalty: 1e14,
+        });
+        round_trip(&mesh);
+        mesh.validate().unwrap();
+        let check = |m: &InterfaceMesh, needle: &str| {
+            let e = m.validate().unwrap_err().to_string();
+            assert!(e.contains(needle), "{e}");
+        };
+        let mut bad = mesh.clone();
+        bad.volume.as_mut().unwrap().weights.0[2] = 1.5;
+        check(&bad, "weights[2] = 1.5");
+        let mut bad = mesh.clone();
+        bad.volume.as_mut().unwrap().elements[3] = 4;
+        check(&bad, "node index 4");
+        let mut bad = mesh.clone();
+        bad.volume.as_mut().unwrap().shape = "wedge6".into();
+        check(&bad, "unknown element shape `wedge6`");
+        let mut bad = mesh.clone();
+        bad.triangles = vec![0, 1, 2];
+        check(&bad, "not triangles");
+        let mut bad = mesh.clone();
+        bad.volume.as_mut().unwrap().penalty = 0.0;
+        check(&bad, "penalty 0");
     }
 
     #[test]

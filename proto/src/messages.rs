@@ -377,8 +377,41 @@ pub struct InterfaceMesh {
     pub node_ids: Vec<u64>,
     /// Reference positions, node-major xyz (3 × nodes values).
     pub positions: F64Array,
-    /// Triangles as node indices into this message's node list (3 × triangles values).
+    /// Triangles as node indices into this message's node list (3 × triangles values);
+    /// empty for a volume interface.
     pub triangles: Vec<u32>,
+    /// A volume (Arlequin) interface: the overlap's elements and nodal weights. Absent for a
+    /// surface.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub volume: Option<VolumeElements>,
+}
+
+/// The overlap of a volume interface: elements of one isoparametric interpolation over the
+/// message's nodes and the particles' weight w_I at each node (Wellmann (6.27)).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct VolumeElements {
+    /// `tet4`, `tet10`, `hex8` or `hex20` (Abaqus/VTK node order).
+    pub shape: String,
+    /// The shape's node count of node indices per element.
+    pub elements: Vec<u32>,
+    /// One weight in [0, 1] per node: 1 on the particle side, 0 on the FE side.
+    pub weights: F64Array,
+    /// The penalty ε of (6.23) [N/m⁴]: the users apply ε V (u^FE − u^DE) to their particles,
+    /// the provider adds ε V to its operator and reads ε V u^DE as its forces.
+    pub penalty: f64,
+}
+
+impl VolumeElements {
+    /// Nodes per element of `shape`, `None` for an unknown shape.
+    pub fn nodes_per_element(shape: &str) -> Option<usize> {
+        Some(match shape {
+            "tet4" => 4,
+            "tet10" => 10,
+            "hex8" => 8,
+            "hex20" => 20,
+            _ => return None,
+        })
+    }
 }
 
 /// Interface kinematics, provider → users: the provider's positions P, velocities V and
@@ -500,6 +533,59 @@ impl InterfaceMesh {
             format!("3 per node, {n} nodes")
         })?;
         check_finite(W, "positions", &self.positions)?;
+        if let Some(v) = &self.volume {
+            if !self.triangles.is_empty() {
+                return Err(ProtoError::Invalid {
+                    what: W,
+                    reason: "a volume interface has elements, not triangles".into(),
+                });
+            }
+            let nn =
+                VolumeElements::nodes_per_element(&v.shape).ok_or_else(|| ProtoError::Invalid {
+                    what: W,
+                    reason: format!(
+                        "unknown element shape `{}` (tet4, tet10, hex8, hex20)",
+                        v.shape
+                    ),
+                })?;
+            if v.elements.is_empty() || v.elements.len() % nn != 0 {
+                return Err(ProtoError::Invalid {
+                    what: W,
+                    reason: format!(
+                        "`elements` has {} indices, expected a positive multiple of {nn} ({})",
+                        v.elements.len(),
+                        v.shape
+                    ),
+                });
+            }
+            if let Some(k) = v.elements.iter().position(|&i| i as usize >= n) {
+                return Err(ProtoError::Invalid {
+                    what: W,
+                    reason: format!(
+                        "element {} refers to node index {}, but there are {n} nodes",
+                        k / nn,
+                        v.elements[k]
+                    ),
+                });
+            }
+            check_len(W, "weights", v.weights.len(), n, || {
+                format!("1 per node, {n} nodes")
+            })?;
+            if !(v.penalty.is_finite() && v.penalty > 0.0) {
+                return Err(ProtoError::Invalid {
+                    what: W,
+                    reason: format!("penalty {} is not a positive number", v.penalty),
+                });
+            }
+            check_finite(W, "weights", &v.weights)?;
+            if let Some(k) = v.weights.0.iter().position(|w| !(0.0..=1.0).contains(w)) {
+                return Err(ProtoError::Invalid {
+                    what: W,
+                    reason: format!("weights[{k}] = {} is not in [0, 1]", v.weights.0[k]),
+                });
+            }
+            return Ok(());
+        }
         if self.triangles.len() % 3 != 0 || self.triangles.is_empty() {
             return Err(ProtoError::Invalid {
                 what: W,

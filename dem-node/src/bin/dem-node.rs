@@ -26,10 +26,13 @@ struct Args {
     node: NodeArgs,
 }
 
-/// A coupled interface: the provider's mesh as the DEM sees it.
+/// A coupled interface: the provider's mesh as the DEM sees it (a surface mesh, or the
+/// overlap of a volume interface).
 struct Coupled {
     name: String,
+    /// Index among the engine's coupled meshes, or its volume interfaces when `volume`.
     mesh: usize,
+    volume: bool,
     nodes: usize,
     /// Send the mean of the window's substep forces (Ullrich (3.8)) instead of the last.
     force_averaging: bool,
@@ -45,6 +48,26 @@ struct DemNode {
     /// Substeps of the last window (the number of forces an averaged message is the mean of).
     substeps: u32,
     trace: Option<Trace>,
+}
+
+impl Coupled {
+    /// The forces on the provider's nodes: contact forces on a surface, penalty forces
+    /// (6.25) on a volume interface's nodes.
+    fn forces(&self, engine: &Engine, averaged: bool) -> Vec<f64> {
+        if self.volume {
+            engine.volume_forces(self.mesh, averaged)
+        } else {
+            engine.interface_forces(self.mesh, averaged)
+        }
+    }
+
+    fn positions(&self, engine: &Engine) -> Vec<f64> {
+        if self.volume {
+            engine.volume_node_positions(self.mesh)
+        } else {
+            engine.mesh_positions(self.mesh)
+        }
+    }
 }
 
 fn scene_error(e: impl std::fmt::Display) -> NodeError {
@@ -75,7 +98,7 @@ impl DemNode {
                 window: label.window,
                 iteration: label.iteration,
                 time,
-                forces: engine.interface_forces(c.mesh, c.force_averaging).into(),
+                forces: c.forces(engine, c.force_averaging).into(),
                 averaged: c.force_averaging,
                 samples: if c.force_averaging { substeps } else { 1 },
             })
@@ -168,19 +191,54 @@ impl Solver for DemNode {
                     p.node()
                 )));
             }
-            if decl.kind != proto::InterfaceKind::Surface {
-                return Err(scene_error(format!(
-                    "{}: interface `{name}` is a {:?} interface; the DEM node couples surfaces",
-                    init.scene_path, decl.kind
-                )));
-            }
             let mesh = p.read_mesh(name, self.data_timeout).await?;
-            let id = engine
-                .add_coupled_mesh(name, mesh.positions.as_slice(), &mesh.triangles)
-                .map_err(|e| scene_error(format!("interface `{name}`: {e}")))?;
+            let volume = decl.kind == proto::InterfaceKind::Volume;
+            let id =
+                match (&mesh.volume, volume) {
+                    (Some(v), true) => {
+                        let shape = dem::volume_coupling::shape_of(&v.shape).ok_or_else(|| {
+                            scene_error(format!(
+                                "interface `{name}`: unknown element shape `{}`",
+                                v.shape
+                            ))
+                        })?;
+                        let overlap = dem::volume_coupling::OverlapMesh {
+                            shape,
+                            node_ids: mesh.node_ids.clone(),
+                            nodes: mesh
+                                .positions
+                                .as_slice()
+                                .chunks(3)
+                                .map(|c| dem::hertz_mindlin::V3::new(c[0], c[1], c[2]))
+                                .collect(),
+                            elements: v.elements.clone(),
+                            weights: v.weights.as_slice().to_vec(),
+                        };
+                        // the provider's ε: both sides use the same penalty
+                        let settings = dem::volume_coupling::VolumeSettings {
+                            penalty: v.penalty,
+                            ..cfg.volume_coupling
+                        };
+                        engine
+                            .add_volume_interface(name, overlap, settings)
+                            .map_err(|e| scene_error(format!("{}: {e}", init.scene_path)))?
+                    }
+                    (None, false) => engine
+                        .add_coupled_mesh(name, mesh.positions.as_slice(), &mesh.triangles)
+                        .map_err(|e| scene_error(format!("interface `{name}`: {e}")))?,
+                    (Some(_), false) | (None, true) => {
+                        return Err(scene_error(format!(
+                        "interface `{name}` is declared a {:?} interface but its provider sent \
+                         a {} mesh",
+                        decl.kind,
+                        if mesh.volume.is_some() { "volume" } else { "surface" }
+                    )))
+                    }
+                };
             self.coupled.push(Coupled {
                 name: name.clone(),
                 mesh: id,
+                volume,
                 nodes: mesh.num_nodes(),
                 force_averaging: decl.force_averaging,
             });
@@ -231,7 +289,7 @@ impl Solver for DemNode {
                     let pos = self
                         .engine
                         .as_ref()
-                        .map(|e| e.mesh_positions(c.mesh))
+                        .map(|e| c.positions(e))
                         .unwrap_or_default();
                     let zeros = vec![0.0; pos.len()];
                     (pos, zeros.clone(), zeros)
@@ -239,15 +297,24 @@ impl Solver for DemNode {
             });
         }
         let wait_s = t_wait.elapsed().as_secs_f64();
-        let meshes: Vec<usize> = self.coupled.iter().map(|c| c.mesh).collect();
+        let meshes: Vec<(usize, bool)> = self.coupled.iter().map(|c| (c.mesh, c.volume)).collect();
         let out_dir = self.out_dir.clone();
         let engine = self.engine.as_mut().ok_or_else(|| {
             NodeError::new(ErrorCode::Protocol, "a window command came before `init`")
         })?;
-        for (mesh, (pos, vel, acc)) in meshes.iter().zip(&kinematics) {
-            engine
-                .set_mesh_kinematics(*mesh, pos, vel, acc, rule)
-                .map_err(|e| NodeError::new(ErrorCode::Protocol, e.to_string()))?;
+        for (&(mesh, volume), (pos, vel, acc)) in meshes.iter().zip(&kinematics) {
+            if volume {
+                // a particle that left its element stops the run (Wellmann §6.3)
+                engine
+                    .set_volume_kinematics(mesh, pos, vel, acc, rule)
+                    .map_err(|e| {
+                        NodeError::new(ErrorCode::Unstable, format!("window {}: {e}", w.window))
+                    })?;
+            } else {
+                engine
+                    .set_mesh_kinematics(mesh, pos, vel, acc, rule)
+                    .map_err(|e| NodeError::new(ErrorCode::Protocol, e.to_string()))?;
+            }
         }
         let unstable = |e: dem::DemError| {
             NodeError::new(ErrorCode::Unstable, format!("window {}: {e}", w.window))
@@ -258,7 +325,7 @@ impl Solver for DemNode {
             for s in 0..substeps {
                 engine.advance(1).map_err(unstable)?;
                 for c in &self.coupled {
-                    let f = total(&engine.interface_forces(c.mesh, false));
+                    let f = total(&c.forces(engine, false));
                     let path = out_dir.join(format!("trace_{}_substep_forces.csv", c.name));
                     trace.row(
                         &path,
@@ -271,7 +338,7 @@ impl Solver for DemNode {
             for c in &self.coupled {
                 let path = out_dir.join(format!("trace_{}_mesh.csv", c.name));
                 let mut row = vec![engine.time()];
-                row.extend(engine.mesh_positions(c.mesh));
+                row.extend(c.positions(engine));
                 trace.row(
                     &path,
                     "window,t_end,positions...",
@@ -296,17 +363,30 @@ impl Solver for DemNode {
         for c in &self.coupled {
             monitor.insert(
                 format!("interface_work.{}", c.name),
-                engine.interface_work(c.mesh),
+                if c.volume {
+                    engine.volume_work(c.mesh)
+                } else {
+                    engine.interface_work(c.mesh)
+                },
             );
+            if c.volume {
+                monitor.insert(
+                    format!("penalty_energy.{}", c.name),
+                    engine.volume_energy(c.mesh),
+                );
+            }
             // whether the interface carries contacts now (adaptive windows keep the stiffness
             // limit while it does): the largest nodal force of the window
-            let largest = engine
-                .interface_forces(c.mesh, c.force_averaging)
+            let largest = c
+                .forces(engine, c.force_averaging)
                 .chunks_exact(3)
                 .map(|f| (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt())
                 .fold(0.0f64, f64::max);
             monitor.insert(format!("interface_force_max.{}", c.name), largest);
-            if let Some(t) = engine.interface_approach_time(c.mesh) {
+            if let Some(t) = (!c.volume)
+                .then(|| engine.interface_approach_time(c.mesh))
+                .flatten()
+            {
                 monitor.insert(format!("interface_approach_time.{}", c.name), t);
             }
         }

@@ -200,13 +200,25 @@ impl Solver for FemNode {
                 )));
             }
             let name = &decl.name;
-            if decl.kind != proto::InterfaceKind::Surface {
-                return Err(scene_error(format!(
-                    "{}: interface `{name}` is a {:?} interface; the FEM node provides surfaces",
-                    init.scene_path, decl.kind
-                )));
-            }
             let m = model.interface_mesh();
+            match (decl.kind, m.volume.is_some()) {
+                (proto::InterfaceKind::Volume, false) => {
+                    return Err(scene_error(format!(
+                        "{}: interface `{name}` is a volume interface but the FEM model has no \
+                         [fem.overlap]",
+                        init.scene_path
+                    )))
+                }
+                (proto::InterfaceKind::Surface, true) => {
+                    return Err(scene_error(format!(
+                        "{}: the FEM model overlaps particles ([fem.overlap]) but interface \
+                         `{name}` is declared a surface: give it kind = \"volume\" in \
+                         coupling.interfaces",
+                        init.scene_path
+                    )))
+                }
+                _ => {}
+            }
             let mesh = InterfaceMesh {
                 version: PROTOCOL_VERSION,
                 run_id: p.run_id().to_string(),
@@ -214,6 +226,12 @@ impl Solver for FemNode {
                 node_ids: m.node_ids,
                 positions: m.positions.into(),
                 triangles: m.triangles,
+                volume: m.volume.map(|v| proto::VolumeElements {
+                    shape: v.shape,
+                    elements: v.elements,
+                    weights: v.weights.into(),
+                    penalty: v.penalty,
+                }),
             };
             self.interface = Some((name.clone(), mesh.num_nodes()));
             p.provide_mesh(&mesh).await?;

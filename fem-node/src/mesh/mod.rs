@@ -37,6 +37,10 @@ pub struct Mesh {
     /// Abaqus S4/S4R/M3D4/M3D4R and S3/S3R/M3D3/STRI3); empty when the mesh has volume
     /// elements (its surface elements are then faces).
     pub shells: Shells,
+    /// Arlequin factor 1 − w_I per node (Wellmann (6.3)) when the mesh overlaps particles
+    /// ([`crate::config::OverlapSpec`]); empty otherwise. Every integral of an element
+    /// (stiffness, internal forces, mass, body loads) is weighted by its interpolation.
+    pub arlequin_scale: Vec<f64>,
 }
 
 /// Surface elements (shells or membranes): corners counter-clockwise about the element's
@@ -140,6 +144,25 @@ impl Mesh {
     pub fn element_nodes(&self, e: usize) -> &[u32] {
         &self.conn[self.offsets[e]..self.offsets[e + 1]]
     }
+    /// The nodal Arlequin factors 1 − w of element e into `buf`, or `None` when the mesh has
+    /// none or they are all 1 (the element lies outside the overlap).
+    pub fn element_scale<'a>(&self, e: usize, buf: &'a mut Vec<f64>) -> Option<&'a [f64]> {
+        if self.arlequin_scale.is_empty() {
+            return None;
+        }
+        buf.clear();
+        buf.extend(
+            self.element_nodes(e)
+                .iter()
+                .map(|&n| self.arlequin_scale[n as usize]),
+        );
+        if buf.iter().all(|&s| s == 1.0) {
+            None
+        } else {
+            Some(&buf[..])
+        }
+    }
+
     pub fn element_coords(&self, e: usize, buf: &mut Vec<[f64; 3]>) {
         buf.clear();
         buf.extend(

@@ -104,6 +104,8 @@ pub struct Model {
     histories: BTreeMap<String, History>,
     boundary: Boundary,
     iface: Interface,
+    /// The volume overlap with particles (`[fem.overlap]`), whose nodes are `iface.nodes`.
+    overlap: Option<crate::overlap::Overlap>,
     probes: Vec<(String, u32)>,
     /// Strain gauges: name and the elements they watch.
     gauges: Vec<(String, Vec<u32>)>,
@@ -221,6 +223,19 @@ impl Model {
         }
         mesh.check_elements()?;
         lap("check_elements");
+        // the overlap's Arlequin factors weight every integral assembled below
+        let overlap = match &cfg.overlap {
+            Some(_) if cfg.interface.is_some() => {
+                return Err(FemError::Config {
+                    field: "fem.overlap".into(),
+                    message: "a FEM node provides one interface: [fem.interface] (a surface) \
+                              or [fem.overlap] (a volume), not both"
+                        .into(),
+                })
+            }
+            Some(spec) => Some(crate::overlap::select(&mesh, spec)?),
+            None => None,
+        };
         let (materials, elem_mat) = newton::assign_materials(cfg, &mesh)?;
         let lame: Vec<Lame> = materials.iter().map(|m| m.model.initial_lame()).collect();
         let densities: Vec<f64> = materials.iter().map(|m| m.density).collect();
@@ -234,6 +249,15 @@ impl Model {
                 .iter()
                 .zip(&used)
                 .any(|(m, &u)| u && !m.model.is_linear());
+        if nonlinear && overlap.is_some() {
+            return Err(FemError::Config {
+                field: "fem.overlap".into(),
+                message: "the volume overlap couples linear elastic materials so far (the \
+                          penalty stiffness is added to the linear operator); a nonlinear \
+                          material or newton.always is not supported with it yet"
+                    .into(),
+            });
+        }
         if nonlinear {
             newton::check_element_kinds(&mesh, &materials, &elem_mat)?;
         }
@@ -286,7 +310,41 @@ impl Model {
         lap("supports");
         let pattern = Pattern::build(&mesh, &dofs)?;
         lap("pattern");
-        let k = assembly::assemble(&mesh, &dofs, &pattern, Operator::Stiffness, props)?;
+        // The implicit penalty (Wellmann (6.25) on the FE side): ε V_IJ ⊗ I over the overlap's
+        // elements enters the operator, the DEM's ε V u^DE arrives as the interface forces,
+        // so that (K + ε V) u = F + ε V u^DE is solved at any ε (an explicit penalty force from
+        // the particles is unstable once ε V exceeds the FE stiffness).
+        let penalty_matrix = match &overlap {
+            Some(o) => {
+                let mut of = vec![0u32; mesh.num_elements()];
+                for &e in &o.mesh_elements {
+                    of[e] = 1;
+                }
+                let pen_props = ElementProps {
+                    of: &of,
+                    lame: &[Lame::from_young_poisson(0.0, 0.0); 2],
+                    density: &[0.0, o.penalty],
+                };
+                // V_IJ is unweighted: assembled before the mesh gets its Arlequin factors
+                Some(assembly::assemble(
+                    &mesh,
+                    &dofs,
+                    &pattern,
+                    Operator::Mass,
+                    pen_props,
+                )?)
+            }
+            None => None,
+        };
+        if let Some(o) = &overlap {
+            mesh.arlequin_scale = o.scale.clone();
+        }
+        let mut k = assembly::assemble(&mesh, &dofs, &pattern, Operator::Stiffness, props)?;
+        if let Some(pm) = &penalty_matrix {
+            for (a, b) in k.iter_mut().zip(pm) {
+                *a += b;
+            }
+        }
         lap("stiffness");
         let m_lumped = assembly::lumped_mass(&mesh, props)?;
         lap("lumped mass");
@@ -364,12 +422,16 @@ impl Model {
             });
         }
 
-        let iface = match &cfg.interface {
-            Some(spec) => {
+        let iface = match (&overlap, &cfg.interface) {
+            (Some(o), _) => Interface {
+                nodes: o.nodes.clone(),
+                triangles: Vec::new(),
+            },
+            (None, Some(spec)) => {
                 let faces = surface::select_faces(&mesh, &boundary, &spec.on, "fem.interface.on")?;
                 Interface::from_faces(&mesh, &boundary, &faces)
             }
-            None => {
+            (None, None) => {
                 Interface::from_faces(&mesh, &boundary, &(0..boundary.len()).collect::<Vec<_>>())
             }
         };
@@ -472,6 +534,7 @@ impl Model {
             histories: cfg.histories.clone(),
             boundary,
             iface,
+            overlap,
             probes,
             gauges,
             output: cfg.output.clone(),
@@ -515,6 +578,12 @@ impl Model {
                 .flat_map(|&n| self.mesh.nodes[n as usize])
                 .collect(),
             triangles: self.iface.triangles.clone(),
+            volume: self.overlap.as_ref().map(|o| crate::VolumeMesh {
+                shape: o.shape.to_string(),
+                elements: o.elements.clone(),
+                weights: o.weights.clone(),
+                penalty: o.penalty,
+            }),
         }
     }
 
@@ -649,6 +718,11 @@ impl Model {
         // the coordinator's checks need to know whether Δt_crit binds (it does not for Bossak)
         let explicit = matches!(self.analysis, Analysis::Explicit { .. });
         l.insert("explicit".to_string(), if explicit { 1.0 } else { 0.0 });
+        if let Some(o) = &self.overlap {
+            // the penalty is implicit here (ε V in the operator): no contact-period window limit
+            l.insert("volume_interface".to_string(), 1.0);
+            l.insert("volume_penalty".to_string(), o.penalty);
+        }
         let masses = self.interface_node_masses();
         crate::insert_mass_limits(&mut l, &masses);
         if !matches!(self.analysis, Analysis::Static) {
@@ -1688,13 +1762,14 @@ impl Model {
             let fe: Vec<Vec<f64>> = (start..end)
                 .into_par_iter()
                 .map_init(
-                    || (Vec::new(), Vec::new()),
-                    |(x, ke), e| {
+                    || (Vec::new(), Vec::new(), Vec::new()),
+                    |(x, ke, sc), e| {
                         self.mesh.element_coords(e, x);
                         let kind = self.mesh.kinds[e];
                         let nodes = self.mesh.element_nodes(e);
                         let nd = 3 * nodes.len();
-                        if element::stiffness(kind, x, self.lame_of(e), ke).is_err() {
+                        let scale = self.mesh.element_scale(e, sc);
+                        if element::stiffness(kind, x, self.lame_of(e), scale, ke).is_err() {
                             return vec![f64::NAN; nd];
                         }
                         let ue: Vec<f64> = nodes
@@ -1815,7 +1890,9 @@ fn gravity_loads(
         let kind = mesh.kinds[e];
         let nn = kind.num_nodes();
         let mut m = Vec::new();
-        element::mass(kind, &x, 1.0, &mut m).map_err(|b| FemError::Mesh {
+        let mut sc = Vec::new();
+        let scale = mesh.element_scale(e, &mut sc);
+        element::mass(kind, &x, 1.0, scale, &mut m).map_err(|b| FemError::Mesh {
             file: mesh.source.clone(),
             line: mesh.elem_lines[e],
             message: format!("element {} has det J = {:.3e}", mesh.elem_ids[e], b.det_j),

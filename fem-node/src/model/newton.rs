@@ -284,10 +284,19 @@ impl Model {
                 .zip(states[start * ssc..end * ssc].par_chunks_mut(ssc))
                 .enumerate()
                 .try_for_each_init(
-                    || (Vec::new(), Vec::new(), Scratch::default(), Vec::new()),
-                    |(x, ue, scratch, h), (i, (out, st_new))| {
+                    || {
+                        (
+                            Vec::new(),
+                            Vec::new(),
+                            Scratch::default(),
+                            Vec::new(),
+                            Vec::new(),
+                        )
+                    },
+                    |(x, ue, scratch, h, sc), (i, (out, st_new))| {
                         let e = start + i;
                         self.mesh.element_coords(e, x);
+                        scratch.set_scale(self.mesh.element_scale(e, sc));
                         let kind = self.mesh.kinds[e];
                         let nodes = self.mesh.element_nodes(e);
                         ue.clear();
@@ -789,6 +798,7 @@ impl Model {
             .map_init(
                 || (Scratch::default(), Vec::new()),
                 |(scratch, pts), e| {
+                    // stresses as output: the element's own, not Arlequin-weighted, means
                     let (x, u) = self.element_state(e);
                     let kind = self.mesh.kinds[e];
                     let model = &self.materials[self.elem_mat[e] as usize].model;

@@ -1,0 +1,217 @@
+//! The overlap of the FE mesh with a particle region for the Arlequin volume coupling
+//! (Wellmann ch. 6, SEED-SPEC §4): nodal weights w_I of the particles (6.27), the overlap's
+//! elements Ω^C, and the mesh's Arlequin factors 1 − w that weight every FE integral (6.3).
+
+use crate::config::OverlapSpec;
+use crate::element::ElementKind;
+use crate::mesh::Mesh;
+use crate::FemError;
+
+/// The overlap as the DEM needs it: its nodes (mesh indices, sorted), its elements in one
+/// interpolation (local node indices), the nodal weights.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Overlap {
+    /// "tet4", "tet10", "hex8" or "hex20" (hex8i and hex8b interpolate as hex8).
+    pub shape: &'static str,
+    pub nodes: Vec<u32>,
+    /// Node count of the shape per element, indexing `nodes`.
+    pub elements: Vec<u32>,
+    pub weights: Vec<f64>,
+    /// The mesh's element indices of the overlap.
+    pub mesh_elements: Vec<usize>,
+    /// The Arlequin factor 1 − w of every mesh node, for `Mesh::arlequin_scale`.
+    pub scale: Vec<f64>,
+    /// ε of (6.23).
+    pub penalty: f64,
+}
+
+fn shape_of(kind: ElementKind) -> &'static str {
+    match kind {
+        ElementKind::Tet4 => "tet4",
+        ElementKind::Tet10 => "tet10",
+        ElementKind::Hex8 | ElementKind::Hex8i | ElementKind::Hex8b => "hex8",
+        ElementKind::Hex20 => "hex20",
+    }
+}
+
+/// Distance from `x` to the box [min, max] (0 inside).
+fn box_distance(x: &[f64; 3], min: &[f64; 3], max: &[f64; 3]) -> f64 {
+    (0..3)
+        .map(|k| {
+            let d = (min[k] - x[k]).max(x[k] - max[k]).max(0.0);
+            d * d
+        })
+        .sum::<f64>()
+        .sqrt()
+}
+
+/// Computes the weights and the overlap (the caller puts `scale` into the mesh once the
+/// unweighted penalty matrix is assembled). Refuses (naming the field or element) a bad box,
+/// width or penalty, an element inside the particle region (its FE integrals would vanish),
+/// an overlap without elements or with several interpolations.
+pub fn select(mesh: &Mesh, spec: &OverlapSpec) -> Result<Overlap, FemError> {
+    let cerr = |field: &str, message: String| FemError::Config {
+        field: format!("fem.overlap.{field}"),
+        message,
+    };
+    let (min, max) = (&spec.de_region.min, &spec.de_region.max);
+    if !(0..3).all(|k| min[k].is_finite() && max[k].is_finite() && min[k] <= max[k]) {
+        return Err(cerr(
+            "de_region",
+            format!("min {min:?} must not exceed max {max:?} (finite)"),
+        ));
+    }
+    if !(spec.width.is_finite() && spec.width > 0.0) {
+        return Err(cerr(
+            "width",
+            format!("must be positive, got {}", spec.width),
+        ));
+    }
+    if !(spec.penalty.is_finite() && spec.penalty > 0.0) {
+        return Err(cerr(
+            "penalty",
+            format!("must be positive (Pa/m²), got {}", spec.penalty),
+        ));
+    }
+    let w: Vec<f64> = mesh
+        .nodes
+        .iter()
+        .map(|x| (1.0 - box_distance(x, min, max) / spec.width).clamp(0.0, 1.0))
+        .collect();
+    let mut elements = Vec::new();
+    let mut kind: Option<ElementKind> = None;
+    for e in 0..mesh.num_elements() {
+        let nodes = mesh.element_nodes(e);
+        if !nodes.iter().any(|&n| w[n as usize] > 0.0) {
+            continue;
+        }
+        if nodes.iter().all(|&n| w[n as usize] == 1.0) {
+            return Err(FemError::Mesh {
+                file: mesh.source.clone(),
+                line: mesh.elem_lines[e],
+                message: format!(
+                    "element {} lies in fem.overlap.de_region, where the particles alone carry \
+                     the load (its FE integrals would vanish): remove it from the mesh",
+                    mesh.elem_ids[e]
+                ),
+            });
+        }
+        let k = mesh.kinds[e];
+        match kind {
+            None => kind = Some(k),
+            Some(first) if shape_of(first) != shape_of(k) => {
+                return Err(FemError::Mesh {
+                    file: mesh.source.clone(),
+                    line: mesh.elem_lines[e],
+                    message: format!(
+                        "element {} is a {} but the overlap's first element is a {}: the \
+                         overlap needs one interpolation",
+                        mesh.elem_ids[e],
+                        k.name(),
+                        first.name()
+                    ),
+                });
+            }
+            Some(_) => {}
+        }
+        elements.push(e);
+    }
+    let Some(kind) = kind else {
+        return Err(cerr(
+            "de_region",
+            format!(
+                "no element has a node within width {} of the box: the overlap is empty",
+                spec.width
+            ),
+        ));
+    };
+    let mut nodes: Vec<u32> = elements
+        .iter()
+        .flat_map(|&e| mesh.element_nodes(e).iter().copied())
+        .collect();
+    nodes.sort_unstable();
+    nodes.dedup();
+    let mut local = vec![u32::MAX; mesh.num_nodes()];
+    for (i, &n) in nodes.iter().enumerate() {
+        local[n as usize] = i as u32;
+    }
+    let conn: Vec<u32> = elements
+        .iter()
+        .flat_map(|&e| mesh.element_nodes(e).iter().map(|&n| local[n as usize]))
+        .collect();
+    Ok(Overlap {
+        shape: shape_of(kind),
+        weights: nodes.iter().map(|&n| w[n as usize]).collect(),
+        nodes,
+        elements: conn,
+        mesh_elements: elements,
+        scale: w.iter().map(|w| 1.0 - w).collect(),
+        penalty: spec.penalty,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::BoxSelector;
+    use crate::mesh::box_mesh;
+
+    fn spec(zmin: f64, width: f64) -> OverlapSpec {
+        OverlapSpec {
+            de_region: BoxSelector {
+                min: [-10.0, -10.0, zmin],
+                max: [10.0, 10.0, 20.0],
+            },
+            width,
+            penalty: 1e14,
+        }
+    }
+
+    /// A 2 × 2 × 4 block of 1 m hexahedra under a particle region from z = 4 m: the top layer
+    /// is the overlap with w = 1 on top, 0 one layer down; the FE mass is ρ ∫ (1 − w) dv.
+    #[test]
+    fn one_layer_overlap_weights_and_weighted_mass() {
+        let mut mesh = box_mesh([0.0; 3], [2.0, 2.0, 4.0], [2, 2, 4], ElementKind::Hex8);
+        let o = select(&mesh, &spec(4.0, 1.0)).unwrap();
+        mesh.arlequin_scale = o.scale.clone();
+        assert_eq!(o.shape, "hex8");
+        assert_eq!(o.elements.len(), 4 * 8);
+        assert_eq!(o.nodes.len(), 18);
+        for (i, &n) in o.nodes.iter().enumerate() {
+            let z = mesh.nodes[n as usize][2];
+            assert_eq!(o.weights[i], if z == 4.0 { 1.0 } else { 0.0 });
+        }
+        // total consistent mass with ρ = 1: 3 full layers + the overlap's ∫(1 − w) = ½ layer
+        let mut total = 0.0;
+        let mut sc = Vec::new();
+        for e in 0..mesh.num_elements() {
+            let mut x = Vec::new();
+            mesh.element_coords(e, &mut x);
+            let mut m = Vec::new();
+            crate::element::mass(
+                mesh.kinds[e],
+                &x,
+                1.0,
+                mesh.element_scale(e, &mut sc),
+                &mut m,
+            )
+            .unwrap();
+            total += m.iter().sum::<f64>();
+        }
+        assert!((total - (3.0 * 4.0 + 0.5 * 4.0)).abs() < 1e-12, "{total}");
+    }
+
+    #[test]
+    fn elements_in_the_particle_region_and_empty_overlaps_are_refused() {
+        let mesh = box_mesh([0.0; 3], [2.0, 2.0, 4.0], [2, 2, 4], ElementKind::Hex8);
+        let e = select(&mesh, &spec(3.0, 1.0)).unwrap_err().to_string();
+        assert!(e.contains("lies in fem.overlap.de_region"), "{e}");
+        let e = select(&mesh, &spec(10.0, 1.0)).unwrap_err().to_string();
+        assert!(
+            e.contains("fem.overlap.de_region") && e.contains("empty"),
+            "{e}"
+        );
+        let e = select(&mesh, &spec(4.0, -1.0)).unwrap_err().to_string();
+        assert!(e.contains("fem.overlap.width"), "{e}");
+    }
+}
