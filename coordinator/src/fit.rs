@@ -67,6 +67,8 @@ pub struct Fit {
     pub curves: Vec<CurveFit>,
     /// Standard deviations over the curves of E, ν, ψ (0 for one curve).
     pub spread: [f64; 3],
+    /// How φ and c were found (a line through the circles, or the given c).
+    pub envelope: String,
 }
 
 /// Reads the shear stage of a run folder's `dem/periodic.csv` (or of that file given
@@ -343,7 +345,7 @@ pub fn fit(
         }
     }
     let density = given.density;
-    let (friction_angle, cohesion) = mohr_envelope(&fits, cohesion);
+    let (friction_angle, cohesion, envelope) = mohr_envelope(&fits, cohesion);
     let mean_sd = |f: &dyn Fn(&CurveFit) -> f64| {
         let n = fits.len() as f64;
         let m = fits.iter().map(f).sum::<f64>() / n;
@@ -369,14 +371,16 @@ pub fn fit(
         density,
         curves: fits,
         spread: [e_sd, nu_sd, psi_sd],
+        envelope,
     })
 }
 
 /// φ (degrees) and c of the Mohr–Coulomb envelope t = s sin φ + c cos φ: through the mean
 /// circle top of curves at one confining pressure (an ensemble) with the given c, or the
 /// least-squares line through the circles of curves at confining pressures more than 10 %
-/// apart (c not below `floor`).
-fn mohr_envelope(fits: &[CurveFit], floor: f64) -> (f64, f64) {
+/// apart (c not below `floor`; when the line's c is, φ through the mean circle with `floor`).
+/// The third value says which, for the fitted table's comments.
+fn mohr_envelope(fits: &[CurveFit], floor: f64) -> (f64, f64, String) {
     let pts: Vec<(f64, f64)> = fits.iter().map(|f| f.peak).collect();
     let (lo, hi) = fits.iter().fold((f64::INFINITY, 0.0f64), |(a, b), f| {
         (a.min(f.lateral), b.max(f.lateral))
@@ -390,10 +394,32 @@ fn mohr_envelope(fits: &[CurveFit], floor: f64) -> (f64, f64) {
         let intercept = ys.iter().sum::<f64>() / n - sin_phi * xs.iter().sum::<f64>() / n;
         let cos_phi = (1.0 - sin_phi * sin_phi).sqrt();
         let c = intercept / cos_phi;
+        let phi = sin_phi.asin().to_degrees();
         if c >= floor {
-            return (sin_phi.asin().to_degrees(), c);
+            return (
+                phi,
+                c,
+                format!(
+                    "envelope: the least-squares line through the {} circles' tops (φ {phi:.2}°, c {c:.4e} Pa)",
+                    pts.len()
+                ),
+            );
         }
+        let (phi_f, _, _) = mohr_envelope_through_mean(&pts, floor);
+        return (
+            phi_f,
+            floor,
+            format!(
+                "envelope: the line through the {} circles' tops has φ {phi:.2}° and c {c:.4e} Pa < {floor:.4e} Pa: φ through their mean circle top with c = {floor:.4e} Pa",
+                pts.len()
+            ),
+        );
     }
+    mohr_envelope_through_mean(&pts, floor)
+}
+
+/// φ of the envelope t = s sin φ + c cos φ through the mean circle top of `pts` with c given.
+fn mohr_envelope_through_mean(pts: &[(f64, f64)], floor: f64) -> (f64, f64, String) {
     // t = s sin φ + c cos φ for the mean circle top, solved for φ by bisection
     let n = pts.len() as f64;
     let (s, t) = (
@@ -410,7 +436,14 @@ fn mohr_envelope(fits: &[CurveFit], floor: f64) -> (f64, f64) {
             hi = mid;
         }
     }
-    (0.5 * (lo + hi).to_degrees(), floor)
+    (
+        0.5 * (lo + hi).to_degrees(),
+        floor,
+        format!(
+            "envelope: through the mean circle top of {} curve(s) at one pressure with c = {floor:.4e} Pa",
+            pts.len()
+        ),
+    )
 }
 
 /// The drained triaxial response of the fitted single element at lateral stress `sl` and the
@@ -482,6 +515,7 @@ pub fn material_toml(f: &Fit, name: &str, sources: &[PathBuf]) -> String {
             ms(&|c| c.poisson_ratio),
         ));
     }
+    out.push_str(&format!("# {}\n", f.envelope));
     out.push_str(&format!(
         "[fem.materials.{name}]\nmodel = \"mohr_coulomb\"\nyoungs_modulus = {:.6e}\n\
          poisson_ratio = {:.6}\nfriction_angle = {:.4}\ndilation_angle = {:.4}\n\
@@ -588,6 +622,7 @@ mod tests {
             density: None,
             curves: vec![],
             spread: [0.0; 3],
+            envelope: String::new(),
         }
     }
 
