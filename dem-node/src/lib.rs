@@ -1315,6 +1315,13 @@ impl Engine {
         if self.state.volumes.iter().any(|v| v.name == name) {
             return Err(verr("a volume interface of this name exists".into()));
         }
+        if self.cfg.impact_substeps > 1 {
+            return Err(verr(
+                "impact_substeps > 1 would step the particles between the FE nodes' window \
+                 positions; set dem.impact_substeps = 1"
+                    .into(),
+            ));
+        }
         let p = &self.state.particles;
         let cands: Vec<volume_coupling::Candidate> = (0..p.len())
             .map(|k| volume_coupling::Candidate {
@@ -1334,6 +1341,18 @@ impl Engine {
             return Err(verr(
                 "no particle centre lies in the overlap's elements".into(),
             ));
+        }
+        // a particle in two overlaps would be weighted twice
+        for other in &self.state.volumes {
+            let theirs: std::collections::HashSet<u32> =
+                other.particles.iter().map(|p| p.0).collect();
+            if let Some(id) = coupling.ids().iter().find(|id| theirs.contains(id)) {
+                return Err(verr(format!(
+                    "particle {id} also lies in the overlap of volume interface `{}`: \
+                     overlaps must not share particles",
+                    other.name
+                )));
+            }
         }
         // the penalty's explicit step limit per coupled particle (§4.3's caution)
         let by_id: std::collections::HashMap<u32, usize> =
@@ -1365,6 +1384,7 @@ impl Engine {
             elements: mesh.elements,
             weights: mesh.weights,
             settings,
+            penalty: settings.penalty,
             particles,
             window_p: mesh.nodes,
             window_v: vec![V3::zeros(); n],
@@ -1463,19 +1483,6 @@ impl Engine {
                 )));
             }
         }
-        let to_v = |a: &[f64]| {
-            a.chunks(3)
-                .map(|c| V3::new(c[0], c[1], c[2]))
-                .collect::<Vec<V3>>()
-        };
-        st.window_p = to_v(positions);
-        st.window_v = to_v(velocities);
-        st.window_a = to_v(accelerations);
-        st.rule = rule;
-        st.window_steps = 0;
-        st.force_sum.iter_mut().for_each(|f| *f = V3::zeros());
-        st.window_substeps = 0;
-        st.window_work = 0.0;
         let v = &self.volumes[iface];
         let pos = &self.state.particles.position;
         for k in 0..v.coupling.len() {
@@ -1490,6 +1497,19 @@ impl Engine {
                 )));
             }
         }
+        let to_v = |a: &[f64]| {
+            a.chunks(3)
+                .map(|c| V3::new(c[0], c[1], c[2]))
+                .collect::<Vec<V3>>()
+        };
+        st.window_p = to_v(positions);
+        st.window_v = to_v(velocities);
+        st.window_a = to_v(accelerations);
+        st.rule = rule;
+        st.window_steps = 0;
+        st.force_sum.iter_mut().for_each(|f| *f = V3::zeros());
+        st.window_substeps = 0;
+        st.window_work = 0.0;
         Ok(())
     }
 
@@ -1559,15 +1579,10 @@ impl Engine {
         })
     }
 
-    /// The volume interfaces after the contact forces: the penalty forces (6.25)–(6.26) from
-    /// the particles' displacements and the FE nodes' at window time τ, and the weighted
-    /// equations of motion (6.10)–(6.11) of the coupled particles — their contact forces and
-    /// torques were weighted at the contact points by the kernels; here they are divided by
-    /// the floored weight of mass and inertia, gravity stays m g, the penalty force is added.
-    /// The nodal forces enter the window sum with `weight`; `count_step` counts a substep.
-    fn volume_stage(&mut self, weight: f64, count_step: bool) {
+    /// u^DE, u^FE, the penalty forces and the pull of every volume interface at the current
+    /// state and window time, without touching the particles or the window sums.
+    fn evaluate_volumes(&mut self) {
         let dt = self.dt;
-        let g = self.gravity;
         let s = &mut self.state;
         for (st, v) in s.volumes.iter_mut().zip(&mut self.volumes) {
             let tau = st.window_steps as f64 * dt;
@@ -1581,11 +1596,28 @@ impl Engine {
             st.energy =
                 v.coupling
                     .penalty_forces(&v.u_de, &v.u_fe, &mut v.on_nodes, &mut v.on_particles);
+            v.coupling.pull(&v.u_de, &mut v.pull);
+        }
+    }
+
+    /// The volume interfaces after the contact forces: the penalty forces (6.25)–(6.26) from
+    /// the particles' displacements and the FE nodes' at window time τ, and the weighted
+    /// equations of motion (6.10)–(6.11) of the coupled particles — their contact forces and
+    /// torques were weighted at the contact points by the kernels; here they are divided by
+    /// the floored weight w̃ of mass and inertia, gravity is weighted by w (w m g / w̃), the
+    /// penalty force is added.
+    /// The nodal forces enter the window sum with `weight`; `count_step` counts a substep.
+    fn volume_stage(&mut self, weight: f64, count_step: bool) {
+        self.evaluate_volumes();
+        let dt = self.dt;
+        let g = self.gravity;
+        let s = &mut self.state;
+        for (st, v) in s.volumes.iter_mut().zip(&self.volumes) {
+            let tau = st.window_steps as f64 * dt;
             if weight > 0.0 {
                 let power: f64 = (0..v.on_nodes.len())
                     .map(|i| v.on_nodes[i].dot(&st.node_motion(i, tau).1))
                     .sum();
-                v.coupling.pull(&v.u_de, &mut v.pull);
                 for (sum, f) in st.force_sum.iter_mut().zip(&v.pull) {
                     *sum += f * weight;
                 }
@@ -1597,9 +1629,11 @@ impl Engine {
             let p = &mut s.particles;
             for k in 0..v.coupling.len() {
                 let slot = v.slot[k] as usize;
-                let w = v.coupling.weight(k).max(st.settings.min_weight);
+                let wk = v.coupling.weight(k);
+                let w = wk.max(st.settings.min_weight);
+                // (6.10): w m c̈ = w m g + Σ w_β f_β + f^C, the mass weight floored
                 let mg = g * p.mass[slot];
-                p.force[slot] = mg + (p.force[slot] - mg + v.on_particles[k]) / w;
+                p.force[slot] = mg * (wk / w) + (p.force[slot] - mg + v.on_particles[k]) / w;
                 p.torque[slot] /= w;
             }
         }
@@ -2342,6 +2376,29 @@ impl Engine {
                 )));
             }
         }
+        // the volume interfaces the node attached at set-up, with their coupled particles
+        let names = |v: &[volume_coupling::VolumeInterfaceState]| -> Vec<String> {
+            v.iter().map(|i| i.name.clone()).collect()
+        };
+        if names(&s.volumes) != names(&self.state.volumes) {
+            return Err(DemError::Snapshot(format!(
+                "snapshot has volume interfaces {:?}, this run attached {:?}",
+                names(&s.volumes),
+                names(&self.state.volumes)
+            )));
+        }
+        let ids: std::collections::HashSet<u32> = s.particles.id.iter().copied().collect();
+        if let Some((v, id)) = s.volumes.iter().find_map(|v| {
+            v.particles
+                .iter()
+                .find(|p| !ids.contains(&p.0))
+                .map(|p| (v, p.0))
+        }) {
+            return Err(DemError::Snapshot(format!(
+                "coupled particle {id} of volume interface `{}` is missing from the snapshot",
+                v.name
+            )));
+        }
         let volumes = s
             .volumes
             .iter()
@@ -2352,13 +2409,14 @@ impl Engine {
             .collect::<Result<Vec<_>, _>>()?;
         self.state = s;
         self.volumes = volumes;
-        if !self.volumes.is_empty() && !self.refresh_volume_slots() {
-            return Err(DemError::Snapshot(
-                "a coupled particle of a volume interface is missing from the snapshot".into(),
-            ));
-        }
         if self.volumes.is_empty() {
             self.volume_weights = None;
+        } else {
+            // every coupled id is in the snapshot (checked above)
+            self.refresh_volume_slots();
+            // the last evaluation's penalty forces and pull, as they were when the snapshot
+            // was taken (same positions and window time): a replayed `publish` sends them
+            self.evaluate_volumes();
         }
         if self.state.lists.valid {
             self.state.lists.index_blocks();
@@ -2652,16 +2710,8 @@ impl Engine {
         if let Some(ws) = &self.volume_weights {
             let p = &self.state.particles;
             for (st, v) in self.state.volumes.iter().zip(&self.volumes) {
-                let floor = st.settings.min_weight;
                 let gravity: V3 = (0..p.len())
-                    .map(|k| {
-                        let w = if ws.weight[k] < 1.0 {
-                            ws.weight[k].max(floor)
-                        } else {
-                            1.0
-                        };
-                        self.gravity * (p.mass[k] * w)
-                    })
+                    .map(|k| self.gravity * (p.mass[k] * ws.weight[k]))
                     .sum();
                 let force: V3 = v.on_nodes.iter().sum();
                 let n = &st.name;

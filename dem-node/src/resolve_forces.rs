@@ -601,25 +601,22 @@ fn wall_forces(
         let cf = wall_contact(k, ctx, i, &geo, &mut shear);
         let params = ctx.materials.pair(k.mat[i], geo.material);
         let w = k.omega[i];
-        let mut fc = cf.force;
-        let mut tc = geo.n.cross(&cf.tangential) * (-geo.lever);
+        // the weight of the contact point (1 without volume interfaces: the sums keep the
+        // order of unweighted runs, bitwise)
+        let s = ctx.weights.map_or(1.0, |ws| ws.at(i, x, geo.point));
+        let fc = cf.force * s;
+        f += fc;
+        t += geo.n.cross(&cf.tangential) * (-geo.lever * s);
         if params.rolling_friction > 0.0 {
-            tc += rolling_torque(
+            t += rolling_torque(
                 params.rolling_friction,
                 r,
                 cf.normal,
                 &w,
                 k.inertia[i],
                 ctx.dt,
-            );
+            ) * s;
         }
-        if let Some(ws) = ctx.weights {
-            let s = ws.at(i, x, geo.point);
-            fc *= s;
-            tc *= s;
-        }
-        f += fc;
-        t += tc;
         *slot = WallContact {
             shear,
             overlap: geo.delta,

@@ -128,8 +128,13 @@ impl ElementGrid {
             hi = hi.sup(b);
             cell = cell.max((b - a).max());
         }
-        let cell = cell.max(f64::MIN_POSITIVE);
-        let dims = [0, 1, 2].map(|k| (((hi[k] - lo[k]) / cell).floor() as usize + 1).min(1 << 10));
+        // cells no smaller than the largest element, and no more than ~8 per element
+        let span = hi - lo;
+        let per_element = (span.x.max(cell) * span.y.max(cell) * span.z.max(cell)
+            / (8.0 * boxes.len() as f64))
+            .cbrt();
+        let cell = cell.max(per_element).max(f64::MIN_POSITIVE);
+        let dims = [0, 1, 2].map(|k| ((hi[k] - lo[k]) / cell).floor() as usize + 1);
         let index = |c: [usize; 3]| (c[2] * dims[1] + c[1]) * dims[0] + c[0];
         let cell_of =
             |x: f64, k: usize| (((x - lo[k]) / cell).floor().max(0.0) as usize).min(dims[k] - 1);
@@ -167,10 +172,11 @@ impl ElementGrid {
         let mut c = [0usize; 3];
         for k in 0..3 {
             let f = ((x[k] - self.lo[k]) / self.cell).floor();
-            if !(f >= 0.0 && (f as usize) < self.dims[k]) {
+            // a point beyond the last cell (by round-off) is looked up there, like the boxes
+            if !(f >= 0.0 && f <= self.dims[k] as f64) {
                 return &[];
             }
-            c[k] = f as usize;
+            c[k] = (f as usize).min(self.dims[k] - 1);
         }
         let i = (c[2] * self.dims[1] + c[1]) * self.dims[0] + c[0];
         &self.items[self.start[i] as usize..self.start[i + 1] as usize]
@@ -234,14 +240,14 @@ impl OverlapMesh {
     }
 }
 
-/// The Gauss rule for V_IJ = ∫ N_I N_J dv: exact for the product of two shape functions on an
-/// affine element.
+/// The Gauss rule for V_IJ = ∫ N_I N_J dv: the FE side's consistent-mass rule (PROTOCOL.md),
+/// so that both sides hold the same V on any element, affine or not.
 fn product_rule(shape: IsoShape) -> Vec<([f64; 3], f64)> {
     match shape {
         IsoShape::Tet4 => iso::tet_rule_4(),
         IsoShape::Tet10 => iso::tet_collapsed_rule(4),
-        IsoShape::Hex8 => iso::hex_rule(2),
-        IsoShape::Hex20 => iso::hex_rule(3),
+        IsoShape::Hex8 => iso::hex_rule(3),
+        IsoShape::Hex20 => iso::hex_rule(4),
     }
 }
 
@@ -255,7 +261,11 @@ pub fn contact_weight(wa: f64, wb: f64, ca: V3, cb: V3, x: V3) -> f64 {
         return wa;
     }
     let d = cb - ca;
-    let t = (d.dot(&(x - ca)) / d.norm_squared()).clamp(0.0, 1.0);
+    let d2 = d.norm_squared();
+    if d2 == 0.0 {
+        return 0.5 * (wa + wb);
+    }
+    let t = (d.dot(&(x - ca)) / d2).clamp(0.0, 1.0);
     wa + t * (wb - wa)
 }
 
@@ -720,6 +730,9 @@ pub struct VolumeInterfaceState {
     pub elements: Vec<u32>,
     pub weights: Vec<f64>,
     pub settings: VolumeSettings,
+    /// ε of (6.23) [N/m⁴] (the provider's; `settings.penalty` is not stored).
+    #[serde(default = "default_penalty")]
+    pub penalty: f64,
     /// Coupled particles: id, reference centre, volume.
     pub particles: Vec<(u32, V3, f64)>,
     pub window_p: Vec<V3>,
@@ -807,8 +820,7 @@ impl VolumeInterface {
             .iter()
             .map(|&(id, centre, volume)| Candidate { id, centre, volume })
             .collect();
-        let coupling =
-            VolumeCoupling::new(mesh, &cands, st.settings.projection, st.settings.penalty)?;
+        let coupling = VolumeCoupling::new(mesh, &cands, st.settings.projection, st.penalty)?;
         if coupling.len() != cands.len() {
             return Err(VolumeError::Mesh(format!(
                 "{} of the {} stored coupled particles were located again",

@@ -231,7 +231,9 @@ fn weighted_forces_balance_with_the_penalty_reaction() {
 }
 
 /// The result does not depend on the thread count, and a snapshot taken mid-run continues
-/// bitwise (the coupling operators are rebuilt from the stored overlap and particles).
+/// bitwise (the coupling operators are rebuilt from the stored overlap, particles and ε — the
+/// restoring engine attached its interface with another ε — and the last step's pull is
+/// there again for a replayed publish).
 #[test]
 fn coupled_runs_are_bitwise_for_threads_and_resume() {
     let run = |threads: usize, split: Option<usize>| {
@@ -240,6 +242,7 @@ fn coupled_runs_are_bitwise_for_threads_and_resume() {
             &mut e,
             VolumeSettings {
                 projection: Projection::Consistent,
+                penalty: 5e13,
                 ..Default::default()
             },
         )
@@ -253,6 +256,13 @@ fn coupled_runs_are_bitwise_for_threads_and_resume() {
             let mut f = bed_r(0.5, 1.0, 0.0, threads, 2e-7);
             attach(&mut f, VolumeSettings::default()).unwrap();
             f.restore(&snap).unwrap();
+            let last = e.volume_forces(0, false);
+            assert!(last.iter().any(|&v| v != 0.0));
+            assert_eq!(
+                f.volume_forces(0, false),
+                last,
+                "the last pull after a restore"
+            );
             f.advance(300 - n).unwrap();
             e = f;
         } else {

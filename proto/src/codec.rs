@@ -377,6 +377,14 @@ mod tests {
         let mut bad = mesh.clone();
         bad.volume.as_mut().unwrap().penalty = 0.0;
         check(&bad, "penalty 0");
+        let mut bad = mesh.clone();
+        bad.volume.as_mut().unwrap().elements = vec![0, 1, 2, 2];
+        check(&bad, "element 0 repeats node index 2");
+        let mut bad = mesh.clone();
+        bad.node_ids.push(5);
+        bad.positions.0.extend([2.0, 2.0, 2.0]);
+        bad.volume.as_mut().unwrap().weights.0.push(0.0);
+        check(&bad, "node 5 (index 4) is in no element");
     }
 
     #[test]

@@ -396,8 +396,8 @@ pub struct VolumeElements {
     pub elements: Vec<u32>,
     /// One weight in [0, 1] per node: 1 on the particle side, 0 on the FE side.
     pub weights: F64Array,
-    /// The penalty ε of (6.23) [N/m⁴]: the users apply ε V (u^FE − u^DE) to their particles,
-    /// the provider adds ε V to its operator and reads ε V u^DE as its forces.
+    /// The penalty ε of (6.23) [N/m⁴]: the users apply −Πᵀ ε V (u^DE − u^FE) to their
+    /// particles (6.26), the provider adds ε V to its operator and reads ε V u^DE as its forces.
     pub penalty: f64,
 }
 
@@ -565,6 +565,27 @@ impl InterfaceMesh {
                         "element {} refers to node index {}, but there are {n} nodes",
                         k / nn,
                         v.elements[k]
+                    ),
+                });
+            }
+            let mut used = vec![false; n];
+            for (e, el) in v.elements.chunks_exact(nn).enumerate() {
+                for (a, &i) in el.iter().enumerate() {
+                    if el[..a].contains(&i) {
+                        return Err(ProtoError::Invalid {
+                            what: W,
+                            reason: format!("element {e} repeats node index {i}: {el:?}"),
+                        });
+                    }
+                    used[i as usize] = true;
+                }
+            }
+            if let Some(i) = used.iter().position(|u| !u) {
+                return Err(ProtoError::Invalid {
+                    what: W,
+                    reason: format!(
+                        "node {} (index {i}) is in no element of the volume interface",
+                        self.node_ids[i]
                     ),
                 });
             }

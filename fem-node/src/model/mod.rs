@@ -249,6 +249,25 @@ impl Model {
                 .iter()
                 .zip(&used)
                 .any(|(m, &u)| u && !m.model.is_linear());
+        if overlap.is_some() {
+            let refuse = match cfg.analysis {
+                Analysis::Explicit { .. } => Some(
+                    "an explicit analysis would apply the penalty ε V explicitly (its step \
+                     √((1 − w) ρ / ε)); use \"static\" or \"dynamic\"",
+                ),
+                Analysis::Dynamic { rayleigh_b, .. } if rayleigh_b != 0.0 => Some(
+                    "stiffness-proportional damping (rayleigh_b) would damp the penalty ε V on \
+                     the FE side only; use rayleigh_a",
+                ),
+                _ => None,
+            };
+            if let Some(message) = refuse {
+                return Err(FemError::Config {
+                    field: "fem.overlap".into(),
+                    message: message.into(),
+                });
+            }
+        }
         if nonlinear && overlap.is_some() {
             return Err(FemError::Config {
                 field: "fem.overlap".into(),
