@@ -205,3 +205,34 @@ pub fn wait_for_windows(out: &Path, n: usize, child: &mut Child, limit: std::tim
         std::thread::sleep(std::time::Duration::from_millis(20));
     }
 }
+
+/// Starts `cosim run <scene> --no-progress --run-id <run_id> --out <out>` in the background,
+/// its output discarded (a run the test will kill).
+pub fn spawn_run(scene: &Path, run_id: &str, out: &Path) -> Child {
+    let mut c = cosim();
+    c.arg("run")
+        .arg(scene)
+        .args(["--no-progress", "--run-id", run_id, "--out"])
+        .arg(out);
+    c.stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("start cosim run")
+}
+
+/// Waits until the checkpoint after `window` exists in `out`; fails if `child` (the run) ends
+/// first or a minute passes.
+pub fn wait_for_checkpoint(out: &Path, window: u64, child: &mut Child) {
+    let t0 = std::time::Instant::now();
+    while latest_checkpoint_window(out) < window {
+        assert!(
+            t0.elapsed() < std::time::Duration::from_secs(60),
+            "no checkpoint after window {window}"
+        );
+        assert!(
+            child.try_wait().expect("run status").is_none(),
+            "the run ended before it could be killed"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+}

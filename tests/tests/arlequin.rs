@@ -4,9 +4,6 @@
 //! `scenes/arlequin-column-ci.toml`, a column of grains standing in and on an elastic block.
 //! `ARLEQUIN_DIR=<dir>` keeps the outputs.
 
-use std::process::Stdio;
-use std::time::{Duration, Instant};
-
 use cosim_tests::*;
 
 fn scene(end_time: &str, extra: &str) -> String {
@@ -70,6 +67,44 @@ fn grains_in_an_overlap_load_the_block_with_their_weighted_weight() {
     assert_eq!(windows.lines().count(), 601);
 }
 
+/// The same column on a Mohr–Coulomb block (Wellmann's φ and ψ, with a cohesion of 10 kPa that
+/// keeps this unconfined column elastic — with his 15 Pa it yields and settles 6.5 times as
+/// much, measured): the Newton path carries the implicit penalty too, and the block settles
+/// as the linear one does.
+#[test]
+fn a_mohr_coulomb_block_carries_the_grains_through_the_newton_path() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = out_dir(&tmp);
+    let text = scene("40 ms", "")
+        .replace(
+            "material = { youngs_modulus = 6e7, poisson_ratio = 0.3, density = 1500.0 }\n",
+            "",
+        )
+        .replace(
+            "analysis = \"static\"\n",
+            "analysis = \"static\"\n\n[fem.materials.sand]\nmodel = \"mohr_coulomb\"\n\
+             youngs_modulus = 6e7\npoisson_ratio = 0.3\nfriction_angle = 23.15\n\
+             dilation_angle = 5.17\ncohesion = 1e4\ndensity = 1500.0\n\n\
+             [[fem.sections]]\nelements = \"all\"\nmaterial = \"sand\"\n",
+        );
+    assert!(text.contains("mohr_coulomb") && !text.contains("material = { youngs"));
+    let s = run_scene(&dir, "column-mc.toml", &text);
+    assert_eq!(s["status"], "completed", "{s}");
+    let dem = &s["nodes"]["dem"]["results"];
+    let force = dem["volume.soil.penalty_force_z"].as_f64().unwrap();
+    let weight = dem["volume.soil.weighted_gravity_z"].as_f64().unwrap();
+    assert!((force / weight - 1.0).abs() < 1e-3, "{force} vs {weight}");
+    let settled = s["nodes"]["fem"]["results"]["max_displacement"]
+        .as_f64()
+        .unwrap();
+    let expected = (-force / 1e-4 * 0.01 + 1500.0 * 9.81 * 1e-4 / 2.0) / 6e7;
+    eprintln!("Mohr–Coulomb block settlement {settled:.4e} m, free column {expected:.4e} m");
+    assert!(
+        (settled / expected - 1.0).abs() < 0.02,
+        "{settled} vs {expected}"
+    );
+}
+
 /// A run killed after a checkpoint and resumed ends in the same final state, bit for bit, as
 /// an uninterrupted one: both nodes restore the volume interface (the DEM its overlap and
 /// coupled particles in their reference configuration, the FEM its weighted operator).
@@ -92,28 +127,8 @@ fn a_volume_coupled_run_resumes_bitwise() {
 
     let broken = dir.join("broken");
     let run_id = format!("arlequin-resume-{}", std::process::id());
-    let mut c = cosim();
-    c.arg("run")
-        .arg(&path)
-        .args(["--no-progress", "--overwrite", "--run-id", &run_id, "--out"])
-        .arg(&broken);
-    let mut child = c
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let t0 = Instant::now();
-    while latest_checkpoint_window(&broken) < 49 {
-        assert!(
-            t0.elapsed() < Duration::from_secs(60),
-            "no checkpoint after window 49"
-        );
-        assert!(
-            child.try_wait().unwrap().is_none(),
-            "the run ended before it was killed"
-        );
-        std::thread::sleep(Duration::from_millis(2));
-    }
+    let mut child = spawn_run(&path, &run_id, &broken);
+    wait_for_checkpoint(&broken, 49, &mut child);
     let pid = pid_of(&["dem-node", &run_id]).expect("the DEM node runs");
     kill(pid);
     assert!(

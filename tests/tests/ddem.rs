@@ -3,8 +3,6 @@
 //! run stopping when the refusal is overridden), and a killed run resumed bit for bit.
 
 use cosim_tests::{cosim, kill, pid_of, root, run, run_scene, summary, write_scene};
-use std::process::Stdio;
-use std::time::{Duration, Instant};
 
 fn sc() -> String {
     std::fs::read_to_string(root().join("scenes/ddem-sc.toml")).unwrap()
@@ -117,23 +115,8 @@ fn a_killed_disc_run_resumes_bit_for_bit() {
 
     let broken = dir.path().join("broken");
     let run_id = format!("ddem-resume-{}", std::process::id());
-    let mut c = cosim();
-    c.arg("run")
-        .arg(&scene)
-        .args(["--no-progress", "--run-id", &run_id, "--out"])
-        .arg(&broken);
-    let mut child = c
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let latest_window = || cosim_tests::latest_checkpoint_window(&broken);
-    let t0 = Instant::now();
-    while latest_window() < 19 {
-        assert!(t0.elapsed() < Duration::from_secs(60), "no checkpoint");
-        assert!(child.try_wait().unwrap().is_none(), "ended before the kill");
-        std::thread::sleep(Duration::from_millis(2));
-    }
+    let mut child = cosim_tests::spawn_run(&scene, &run_id, &broken);
+    cosim_tests::wait_for_checkpoint(&broken, 19, &mut child);
     kill(pid_of(&["dem-node", &run_id]).expect("the dem-node process"));
     assert!(!child.wait().unwrap().success());
     let mut c = cosim();

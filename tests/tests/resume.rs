@@ -2,7 +2,6 @@
 //! bit for bit, as a run that was never interrupted.
 
 use std::path::Path;
-use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use cosim_tests::{cosim, kill, pid_of, root, run, summary, write_scene};
@@ -58,29 +57,8 @@ fn killed_and_resumed_equals_uninterrupted_with(schedule: &str, tables: &str, vi
 
     let broken = dir.path().join("broken");
     let run_id = format!("resume-{victim}-{}", std::process::id());
-    let mut c = cosim();
-    c.arg("run")
-        .arg(&scene)
-        .args(["--no-progress", "--run-id", &run_id, "--out"])
-        .arg(&broken);
-    let mut child = c
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let t0 = Instant::now();
-    let latest_window = || cosim_tests::latest_checkpoint_window(&broken);
-    while latest_window() < 49 {
-        assert!(
-            t0.elapsed() < Duration::from_secs(60),
-            "no checkpoint after window 49"
-        );
-        assert!(
-            child.try_wait().unwrap().is_none(),
-            "the run ended before it could be killed"
-        );
-        std::thread::sleep(Duration::from_millis(5));
-    }
+    let mut child = cosim_tests::spawn_run(&scene, &run_id, &broken);
+    cosim_tests::wait_for_checkpoint(&broken, 49, &mut child);
     let pid = match victim {
         "cosim" => child.id(),
         node => pid_of(&[&format!("{node}-node"), &run_id]).expect("node process"),

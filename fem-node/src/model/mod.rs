@@ -86,6 +86,9 @@ pub struct Model {
     dofs: DofMap,
     pattern: Pattern,
     k: Vec<f64>,
+    /// ε V ⊗ I of a volume overlap on the pattern (also inside `k`): the Newton path adds it to
+    /// its tangent and ε V u to its internal forces.
+    penalty_matrix: Option<Vec<f64>>,
     m_consistent: Option<Vec<f64>>,
     m_lumped: Vec<f64>,
     diag_pos: Vec<usize>,
@@ -268,15 +271,6 @@ impl Model {
                 });
             }
         }
-        if nonlinear && overlap.is_some() {
-            return Err(FemError::Config {
-                field: "fem.overlap".into(),
-                message: "the volume overlap couples linear elastic materials so far (the \
-                          penalty stiffness is added to the linear operator); a nonlinear \
-                          material or newton.always is not supported with it yet"
-                    .into(),
-            });
-        }
         if nonlinear {
             newton::check_element_kinds(&mesh, &materials, &elem_mat)?;
         }
@@ -359,6 +353,7 @@ impl Model {
             mesh.arlequin_scale = o.scale.clone();
         }
         let mut k = assembly::assemble(&mesh, &dofs, &pattern, Operator::Stiffness, props)?;
+        // the linear operator holds the penalty; the Newton path adds it itself
         if let Some(pm) = &penalty_matrix {
             for (a, b) in k.iter_mut().zip(pm) {
                 *a += b;
@@ -542,6 +537,7 @@ impl Model {
             diag_pos,
             symbolic: None,
             k_factor: None,
+            penalty_matrix,
             solver: cfg.solver,
             k_mixed: None,
             mixed_failed: false,
