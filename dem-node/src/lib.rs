@@ -232,6 +232,21 @@ fn penalty_step_limit(
     worst
 }
 
+/// Nodal forces of a window as flat xyz: the mean of `sum` over `substeps` (zeros before the
+/// first) with `averaged`, else `last`.
+fn window_forces(averaged: bool, sum: &[V3], substeps: u64, last: &[V3]) -> Vec<f64> {
+    let flat = |f: &[V3], scale: f64| {
+        f.iter()
+            .flat_map(|v| [v.x * scale, v.y * scale, v.z * scale])
+            .collect()
+    };
+    match (averaged, substeps) {
+        (true, 0) => vec![0.0; 3 * sum.len()],
+        (true, n) => flat(sum, 1.0 / n as f64),
+        (false, _) => flat(last, 1.0),
+    }
+}
+
 /// The generator of a source's shapes and orientations: its own stream, so that drawing
 /// shapes leaves the positions of sphere sources as they were.
 /// The stones of a polyhedral source (its `library` of STL files, or its random stones),
@@ -1521,19 +1536,7 @@ impl Engine {
         let (Some(st), Some(v)) = (self.state.volumes.get(iface), self.volumes.get(iface)) else {
             return Vec::new();
         };
-        let flat = |f: &[V3], scale: f64| {
-            f.iter()
-                .flat_map(|v| [v.x * scale, v.y * scale, v.z * scale])
-                .collect()
-        };
-        if averaged {
-            if st.window_substeps == 0 {
-                return vec![0.0; 3 * st.nodes.len()];
-            }
-            flat(&st.force_sum, 1.0 / st.window_substeps as f64)
-        } else {
-            flat(&v.pull, 1.0)
-        }
+        window_forces(averaged, &st.force_sum, st.window_substeps, &v.pull)
     }
 
     /// The penalty forces (6.25) on the FE nodes of a volume interface at their window motion
@@ -2228,19 +2231,12 @@ impl Engine {
         let Some(m) = self.coupled_mesh(mesh) else {
             return Vec::new();
         };
-        let flat = |f: &[V3], scale: f64| {
-            f.iter()
-                .flat_map(|v| [v.x * scale, v.y * scale, v.z * scale])
-                .collect()
-        };
-        if averaged {
-            if m.window_substeps == 0 {
-                return vec![0.0; 3 * m.positions.len()];
-            }
-            flat(&m.nodal_force_sum, 1.0 / m.window_substeps as f64)
-        } else {
-            flat(&m.nodal_force_last, 1.0)
-        }
+        window_forces(
+            averaged,
+            &m.nodal_force_sum,
+            m.window_substeps,
+            &m.nodal_force_last,
+        )
     }
 
     /// Work the particles did on a coupled mesh since its window kinematics were set,

@@ -879,16 +879,9 @@ mod tests {
         for k in 0..nz {
             for j in 0..ny {
                 for i in 0..nx {
-                    for [a, b, c] in [
-                        [0, 0, 0],
-                        [1, 0, 0],
-                        [1, 1, 0],
-                        [0, 1, 0],
-                        [0, 0, 1],
-                        [1, 0, 1],
-                        [1, 1, 1],
-                        [0, 1, 1],
-                    ] {
+                    // the corners in hex8 order: reference ±1 → lattice offsets 0/1
+                    for r in &IsoShape::Hex8.reference_nodes()[..8] {
+                        let [a, b, c] = r.map(|x| usize::from(x > 0.0));
                         elements.push(id(i + a, j + b, k + c) as u32);
                     }
                 }

@@ -58,16 +58,9 @@ fn overlap() -> (Vec<u64>, Vec<f64>, Vec<u32>, Vec<f64>) {
     let mut e = Vec::new();
     for j in 0..ny {
         for i in 0..nx {
-            for [a, b, c] in [
-                [0, 0, 0],
-                [1, 0, 0],
-                [1, 1, 0],
-                [0, 1, 0],
-                [0, 0, 1],
-                [1, 0, 1],
-                [1, 1, 1],
-                [0, 1, 1],
-            ] {
+            // the corners in hex8 order: reference ±1 → lattice offsets 0/1
+            for r in IsoShape::Hex8.reference_nodes() {
+                let [a, b, c] = r.map(|x| usize::from(x > 0.0));
                 e.push(id(i + a, j + b, c) as u32);
             }
         }
