@@ -1411,8 +1411,8 @@ impl Engine {
             energy: 0.0,
             window_work: 0.0,
         };
-        let iface = volume_coupling::VolumeInterface::from_state(&state)
-            .map_err(|e| verr(e.to_string()))?;
+        // the coupling located above is the one a restore rebuilds from `state`
+        let iface = volume_coupling::VolumeInterface::new(coupling);
         self.state.volumes.push(state);
         self.volumes.push(iface);
         self.refresh_volume_slots();
@@ -1596,9 +1596,13 @@ impl Engine {
             for (i, u) in v.u_fe.iter_mut().enumerate() {
                 *u = st.node_motion(i, tau).0 - st.nodes[i];
             }
-            st.energy =
-                v.coupling
-                    .penalty_forces(&v.u_de, &v.u_fe, &mut v.on_nodes, &mut v.on_particles);
+            st.energy = v.coupling.penalty_forces(
+                &v.u_de,
+                &v.u_fe,
+                &mut v.on_nodes,
+                &mut v.on_particles,
+                &mut v.scratch,
+            );
             v.coupling.pull(&v.u_de, &mut v.pull);
         }
     }

@@ -525,13 +525,15 @@ impl VolumeCoupling {
 
     /// The penalty forces (6.25)–(6.26) for the projected particle displacements `u_de` and
     /// the FE displacements `u_fe` at the coupling nodes: on the FE nodes into `on_nodes`, on
-    /// the coupled particles into `on_particles`. Returns the penalty energy C (6.23).
+    /// the coupled particles into `on_particles` (`scratch`: a buffer kept by the caller, so
+    /// that a step allocates nothing). Returns the penalty energy C (6.23).
     pub fn penalty_forces(
         &self,
         u_de: &[V3],
         u_fe: &[V3],
         on_nodes: &mut [V3],
         on_particles: &mut [V3],
+        scratch: &mut Vec<V3>,
     ) -> f64 {
         let nodes = self.mesh.nodes.len();
         assert!(u_de.len() == nodes && u_fe.len() == nodes && on_nodes.len() == nodes);
@@ -547,20 +549,14 @@ impl VolumeCoupling {
             on_nodes[i] = f * self.penalty;
         }
         // Πᵀ f: lumped Π_Iα = N_Iα V_α / A*_II; consistent Πᵀ = V Nᵀ A⁻¹ (A symmetric)
-        let mut y: Vec<V3> = match &self.llt {
-            None => on_nodes
-                .iter()
-                .zip(&self.lumped)
-                .map(|(f, a)| f / *a)
-                .collect(),
+        let y = scratch;
+        y.clear();
+        match &self.llt {
+            None => y.extend(on_nodes.iter().zip(&self.lumped).map(|(f, a)| f / *a)),
             Some(llt) => {
-                let mut y = on_nodes.to_vec();
-                solve3(llt, &mut y);
-                y
+                y.extend_from_slice(on_nodes);
+                solve3(llt, y);
             }
-        };
-        if y.is_empty() {
-            y.push(V3::zeros());
         }
         for (k, out) in on_particles.iter_mut().enumerate() {
             let nk = &self.values[k * self.nn..(k + 1) * self.nn];
@@ -800,6 +796,8 @@ pub struct VolumeInterface {
     pub on_particles: Vec<V3>,
     /// ε V u^DE of the last evaluation (what the provider reads).
     pub pull: Vec<V3>,
+    /// Scratch of the penalty evaluation.
+    pub scratch: Vec<V3>,
 }
 
 impl VolumeInterface {
@@ -828,8 +826,13 @@ impl VolumeInterface {
                 cands.len()
             )));
         }
+        Ok(VolumeInterface::new(coupling))
+    }
+
+    /// The scratch of a coupling (slots unknown until the engine maps them).
+    pub fn new(coupling: VolumeCoupling) -> VolumeInterface {
         let (n, p) = (coupling.num_nodes(), coupling.len());
-        Ok(VolumeInterface {
+        VolumeInterface {
             coupling,
             slot: vec![u32::MAX; p],
             u_d: vec![V3::zeros(); p],
@@ -838,7 +841,8 @@ impl VolumeInterface {
             on_nodes: vec![V3::zeros(); n],
             on_particles: vec![V3::zeros(); p],
             pull: vec![V3::zeros(); n],
-        })
+            scratch: Vec::with_capacity(n),
+        }
     }
 }
 
@@ -1006,12 +1010,12 @@ mod tests {
                 let mut ude = vec![V3::zeros(); nn];
                 c.project(ud, &mut ude);
                 let (mut a, mut b) = (vec![V3::zeros(); nn], vec![V3::zeros(); np]);
-                c.penalty_forces(&ude, ufe, &mut a, &mut b)
+                c.penalty_forces(&ude, ufe, &mut a, &mut b, &mut Vec::new())
             };
             let mut ude = vec![V3::zeros(); nn];
             c.project(&ud, &mut ude);
             let (mut fi, mut fa) = (vec![V3::zeros(); nn], vec![V3::zeros(); np]);
-            let e0 = c.penalty_forces(&ude, &ufe, &mut fi, &mut fa);
+            let e0 = c.penalty_forces(&ude, &ufe, &mut fi, &mut fa, &mut Vec::new());
             assert!(e0 > 0.0);
             let total: V3 = fi.iter().chain(&fa).sum();
             let scale: f64 = fi.iter().map(|f| f.norm()).sum();
@@ -1061,7 +1065,7 @@ mod tests {
         let ude = projected(&c, affine);
         let ufe: Vec<V3> = mesh.nodes.iter().map(|x| affine(*x)).collect();
         let (mut fi, mut fa) = (vec![V3::zeros(); c.num_nodes()], vec![V3::zeros(); c.len()]);
-        let e = c.penalty_forces(&ude, &ufe, &mut fi, &mut fa);
+        let e = c.penalty_forces(&ude, &ufe, &mut fi, &mut fa, &mut Vec::new());
         // against the force of a rigid offset of one element size × strain
         let unit = 1e14 * h * h * h * 1e-3 * h;
         assert!(e.abs() < 1e-20, "energy {e:e}");
