@@ -515,6 +515,30 @@ pub struct WallMotion {
     /// Oscillation frequency in Hz (> 0 when an amplitude is given).
     #[serde(default)]
     pub frequency: f64,
+    /// Further constant-velocity stages, each adding its own displacement
+    /// `velocity·(min(t, end) − start)` from its `start` on (a strain path in phases: a
+    /// triaxial sample's wall compressed isotropically, then sheared at another rate).
+    #[serde(default)]
+    pub then: Vec<MotionStage>,
+    /// Report the wall in `dem_timeseries.csv` and the summary: `<name>.force_{x,y,z}` (the
+    /// particles' contact forces on it, weighted at their contact points in a volume overlap)
+    /// and `<name>.displacement_{x,y,z}`.
+    #[serde(default)]
+    pub name: Option<String>,
+}
+
+/// A stage of a wall's prescribed motion (`motion.then`): constant `velocity` in
+/// [`start`, `end`).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct MotionStage {
+    /// Velocity in m/s.
+    pub velocity: [f64; 3],
+    /// Start time in s.
+    pub start: f64,
+    /// End time in s (> start), default: never stops.
+    #[serde(default)]
+    pub end: Option<f64>,
 }
 
 /// Force-controlled rigid translation of a wall along one axis (`[[dem.walls]] load`): the wall
@@ -1393,6 +1417,30 @@ impl DemConfig {
                             g("end"),
                             format!("must be finite and > start = {}, got {end}", m.start),
                         );
+                    }
+                }
+                for (j, st) in m.then.iter().enumerate() {
+                    let g = |field: &str| {
+                        pi(
+                            &["dem", "walls"],
+                            k,
+                            &["motion", &format!("then[{j}]"), field],
+                        )
+                    };
+                    c.finite3(g("velocity"), &st.velocity);
+                    c.non_negative(g("start"), st.start);
+                    if let Some(end) = st.end {
+                        if !(end.is_finite() && end > st.start) {
+                            c.fail(
+                                g("end"),
+                                format!("must be finite and > start = {}, got {end}", st.start),
+                            );
+                        }
+                    }
+                }
+                if let Some(name) = &m.name {
+                    if name.is_empty() || name.contains([',', '"', '\n']) {
+                        c.fail(g("name"), format!("'{name}' is not a column name"));
                     }
                 }
             }

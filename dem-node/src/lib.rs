@@ -451,6 +451,12 @@ impl Engine {
                         end: motion.and_then(|m| m.end).unwrap_or(f64::INFINITY),
                         remove_at,
                         base,
+                        stages: motion.map_or(Vec::new(), |m| {
+                            (m.then.iter())
+                                .map(|s| (v3(&s.velocity), s.start, s.end.unwrap_or(f64::INFINITY)))
+                                .collect()
+                        }),
+                        name: motion.and_then(|m| m.name.clone()),
                     });
                 }
             }
@@ -1923,6 +1929,30 @@ impl Engine {
         finite
     }
 
+    /// The particles' contact force on wall `w` (planes first, then meshes) from the force
+    /// records of the last evaluation (weighted at the contact points in a volume overlap).
+    fn wall_contact_force(&self, w: usize) -> V3 {
+        let s = &self.state;
+        let mut f = V3::zeros();
+        for (k, rec) in s.records.iter().enumerate() {
+            if s.lists.wall_contacts[k].touching() && s.lists.walls[k].wall as usize == w {
+                f += rec.force;
+            }
+        }
+        let mesh_contacts = (s.lists.shaped_mesh.iter())
+            .zip(&s.lists.shaped_mesh_contacts)
+            .map(|(&(_, c), k)| (c.wall, k));
+        let plane_contacts = (s.lists.shaped_walls.iter())
+            .zip(&s.lists.shaped_wall_contacts)
+            .map(|(&[_, w], k)| (w, k));
+        for (cw, c) in plane_contacts.chain(mesh_contacts) {
+            if c.touching() && cw as usize == w {
+                f -= c.force;
+            }
+        }
+        f
+    }
+
     /// The axis components of the particles' contact forces on the loaded walls (from the
     /// force records of the touching wall contacts, in list order); a wall that is held or
     /// removed is at rest.
@@ -2048,8 +2078,9 @@ impl Engine {
     fn detect_contacts(&mut self, particles_moved: bool) {
         let t = self.state.time;
         let walls_moved = self.wall_shift_since_build(t) > 0.5 * self.state.lists.skin;
-        let keep_records =
-            !self.loaded_walls.is_empty() || self.state.meshes.iter().any(|m| m.coupled);
+        let keep_records = !self.loaded_walls.is_empty()
+            || self.state.meshes.iter().any(|m| m.coupled)
+            || self.wall_motions.iter().any(|m| m.name.is_some());
         let s = &mut self.state;
         let rebuilt = contact_detection::detect(
             &mut s.lists,
@@ -2699,6 +2730,21 @@ impl Engine {
             (&self.state.cell, &self.servo, self.cell_averages())
         {
             r.extend(periodic::results(cell, servo, &avg));
+        }
+        let t = self.state.time;
+        for m in &self.wall_motions {
+            let Some(name) = &m.name else { continue };
+            let w = match m.wall {
+                WallRef::Plane(k) => k,
+                WallRef::Mesh(k) => self.planes.len() + k,
+            };
+            let (f, u) = (self.wall_contact_force(w), m.displacement(t));
+            for (c, ax) in ["x", "y", "z"].iter().enumerate() {
+                r.push((format!("{name}.force_{ax}"), f[c]));
+            }
+            for (c, ax) in ["x", "y", "z"].iter().enumerate() {
+                r.push((format!("{name}.displacement_{ax}"), u[c]));
+            }
         }
         for (w, st) in self.loaded_walls.iter().zip(&self.state.loaded_walls) {
             r.push((format!("{}.displacement", w.name), st.u));

@@ -50,6 +50,10 @@ pub struct PrescribedMotion {
     pub remove_at: f64,
     /// Plane point or mesh node positions at rest before `start`.
     pub base: Vec<V3>,
+    /// Further constant-velocity stages (velocity, start, end), each adding its displacement.
+    pub stages: Vec<(V3, f64, f64)>,
+    /// The wall's report name (`motion.name`), if reported.
+    pub name: Option<String>,
 }
 
 impl PrescribedMotion {
@@ -59,19 +63,26 @@ impl PrescribedMotion {
         if self.omega > 0.0 {
             u += self.amplitude * (self.omega * tau).sin();
         }
+        for &(v, start, end) in &self.stages {
+            u += v * (t.min(end) - start).max(0.0);
+        }
         u
     }
 
     pub fn velocity_at(&self, t: f64) -> V3 {
+        let mut v = V3::zeros();
         if t >= self.start && t < self.end {
-            let mut v = self.velocity;
+            v = self.velocity;
             if self.omega > 0.0 {
                 v += self.amplitude * (self.omega * (self.omega * (t - self.start)).cos());
             }
-            v
-        } else {
-            V3::zeros()
         }
+        for &(vs, start, end) in &self.stages {
+            if t >= start && t < end {
+                v += vs;
+            }
+        }
+        v
     }
 
     pub fn present(&self, t: f64) -> bool {

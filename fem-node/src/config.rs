@@ -683,6 +683,11 @@ pub struct Support {
     /// settles under a load and is then driven at a constant rate).
     #[serde(default)]
     pub drive: Option<SupportDrive>,
+    /// Volume meshes: report the support's reaction force (the sum over its nodes of
+    /// K u − F on the fixed components) as `reaction.<name>.{x,y,z}` in the results and in
+    /// `fem_probes.csv` (a triaxial sample's boundary stress: reaction / face area).
+    #[serde(default)]
+    pub name: Option<String>,
 }
 
 /// `[[fem.supports]] drive = { velocity = [..], start = .. }` (membranes).

@@ -340,6 +340,12 @@ impl MembraneModel {
         let mut prescribed = Vec::new();
         let mut drives: Vec<Option<Drive>> = vec![None; 3 * nn];
         for (i, s) in cfg.supports.iter().enumerate() {
+            if s.name.is_some() {
+                return Err(config(
+                    &format!("fem.supports[{i}].name"),
+                    "reaction reports are offered for volume meshes only",
+                ));
+            }
             if s.rotations.is_some() {
                 return Err(config(
                     &format!("fem.supports[{i}].rotations"),

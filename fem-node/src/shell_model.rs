@@ -389,6 +389,12 @@ impl ShellModel {
         let nd = 6 * nn;
         let mut fixed = vec![false; nd];
         for (i, s) in cfg.supports.iter().enumerate() {
+            if s.name.is_some() {
+                return Err(config(
+                    &format!("fem.supports[{i}].name"),
+                    "reaction reports are offered for volume meshes only",
+                ));
+            }
             if s.displacement.is_some() {
                 return Err(config(
                     &format!("fem.supports[{i}].displacement"),

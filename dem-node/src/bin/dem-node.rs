@@ -240,7 +240,11 @@ impl Solver for DemNode {
                 mesh: id,
                 volume,
                 nodes: mesh.num_nodes(),
-                force_averaging: decl.force_averaging,
+                // a volume interface sends the pull ε V u^DE of the window's end: the FE's
+                // implicit penalty (K + ε V) u = F + ε V u^DE is an end-of-step balance, and a
+                // window mean lags the driven grains by half a window, which ε V (far stiffer
+                // than the continuum) turns into a spurious load
+                force_averaging: decl.force_averaging && !volume,
             });
         }
         p.wait_for_peers(self.data_timeout).await?;

@@ -89,6 +89,10 @@ pub struct Model {
     /// ε V ⊗ I of a volume overlap on the pattern (also inside `k`): the Newton path adds it to
     /// its tangent and ε V u to its internal forces.
     penalty_matrix: Option<Vec<f64>>,
+    /// The same ε V_e per overlap element (scalar n×n, row-major) over all dofs: ε V u in the
+    /// internal forces reaches the supported dofs too (reactions, and K_fg g of a support that
+    /// moves inside the overlap).
+    penalty_blocks: Vec<(usize, Vec<f64>)>,
     m_consistent: Option<Vec<f64>>,
     m_lumped: Vec<f64>,
     diag_pos: Vec<usize>,
@@ -110,6 +114,8 @@ pub struct Model {
     /// The volume overlap with particles (`[fem.overlap]`), whose nodes are `iface.nodes`.
     overlap: Option<crate::overlap::Overlap>,
     probes: Vec<(String, u32)>,
+    /// Named supports (`[[fem.supports]] name`) and their nodes: reaction reports.
+    reported_supports: Vec<(String, Vec<u32>, [bool; 3])>,
     /// Strain gauges: name and the elements they watch.
     gauges: Vec<(String, Vec<u32>)>,
     output: Output,
@@ -349,6 +355,21 @@ impl Model {
             }
             None => None,
         };
+        let mut penalty_blocks = Vec::new();
+        if let Some(o) = &overlap {
+            let mut x = Vec::new();
+            for &e in &o.mesh_elements {
+                mesh.element_coords(e, &mut x);
+                let mut v = Vec::new();
+                element::mass(mesh.kinds[e], &x, o.penalty, None, &mut v).map_err(|_| {
+                    FemError::Config {
+                        field: "fem.overlap".into(),
+                        message: format!("element {e} of the overlap is inverted"),
+                    }
+                })?;
+                penalty_blocks.push((e, v));
+            }
+        }
         if let Some(o) = &overlap {
             mesh.arlequin_scale = o.scale.clone();
         }
@@ -493,6 +514,24 @@ impl Model {
             probes.push((p.name.clone(), node));
         }
 
+        let mut reported_supports = Vec::new();
+        for (i, s) in cfg.supports.iter().enumerate() {
+            if let Some(name) = &s.name {
+                if reported_supports.iter().any(|(n, _, _)| n == name) {
+                    return Err(FemError::Config {
+                        field: format!("fem.supports[{i}].name"),
+                        message: format!("'{name}' names two supports"),
+                    });
+                }
+                let nodes = surface::select_nodes(&mesh, &s.on, &format!("fem.supports[{i}].on"))?;
+                let mut fix = [false; 3];
+                for a in &s.fix {
+                    fix[a.index()] = true;
+                }
+                reported_supports.push((name.clone(), nodes, fix));
+            }
+        }
+
         let mut gauges = Vec::new();
         for (i, g) in cfg.strain_gauges.iter().enumerate() {
             let elements =
@@ -538,6 +577,7 @@ impl Model {
             symbolic: None,
             k_factor: None,
             penalty_matrix,
+            penalty_blocks,
             solver: cfg.solver,
             k_mixed: None,
             mixed_failed: false,
@@ -551,6 +591,7 @@ impl Model {
             iface,
             overlap,
             probes,
+            reported_supports,
             gauges,
             output: cfg.output.clone(),
             crit: OnceLock::new(),
@@ -632,7 +673,17 @@ impl Model {
             Analysis::Static => {
                 let t = self.st.time + dt;
                 self.move_supports(t);
+                // a volume overlap's grains follow the continuum's nodes through the window:
+                // they get the rate of the quasi-static path (u(t + dt) − u(t)) / dt, so the
+                // DEM carries the nodes on with it instead of holding them a window behind
+                // (the stiff penalty ε V would turn that lag into a spurious load)
+                let before = self.overlap.is_some().then(|| self.st.u.clone());
                 self.static_solve_at(t)?;
+                if let Some(u0) = before {
+                    for ((v, u), u0) in self.st.v.iter_mut().zip(&self.st.u).zip(&u0) {
+                        *v = (u - u0) / dt;
+                    }
+                }
                 self.st.time = t;
             }
             Analysis::Dynamic { max_step, .. } => {
@@ -915,7 +966,11 @@ impl Model {
                 peak[2].max(now[2]),
             ];
         }
-        if self.output.csv && !(self.probes.is_empty() && self.gauges.is_empty()) {
+        if self.output.csv
+            && !(self.probes.is_empty()
+                && self.gauges.is_empty()
+                && self.reported_supports.is_empty())
+        {
             let path = out_dir.join("fem_probes.csv");
             let mut text = String::new();
             if !self.st.csv_started {
@@ -937,6 +992,11 @@ impl Model {
                         }
                     }
                 }
+                for (name, _, _) in &self.reported_supports {
+                    for c in ["x", "y", "z"] {
+                        text.push_str(&format!(",reaction.{name}.{c}"));
+                    }
+                }
                 text.push('\n');
             }
             text.push_str(&format!("{:.9e}", self.st.time));
@@ -954,6 +1014,11 @@ impl Model {
                     for x in &v[..k] {
                         text.push_str(&format!(",{x:.9e}"));
                     }
+                }
+            }
+            for (_, f) in self.support_reactions() {
+                for x in f {
+                    text.push_str(&format!(",{x:.9e}"));
                 }
             }
             text.push('\n');
@@ -1010,6 +1075,11 @@ impl Model {
         for (name, n) in &self.probes {
             for (c, ax) in ["ux", "uy", "uz"].iter().enumerate() {
                 r.push((format!("probe.{name}.{ax}"), self.st.u[3 * *n as usize + c]));
+            }
+        }
+        for (name, f) in self.support_reactions() {
+            for (c, ax) in ["x", "y", "z"].iter().enumerate() {
+                r.push((format!("reaction.{name}.{ax}"), f[c]));
             }
         }
         let mut total = [0.0; 3];
@@ -1206,6 +1276,29 @@ impl Model {
         }
         self.element_forces(&self.st.u)
     }
+    /// The summed reaction force of every named support, over the components it fixes [N].
+    pub fn support_reactions(&self) -> Vec<(String, [f64; 3])> {
+        if self.reported_supports.is_empty() {
+            return Vec::new();
+        }
+        let r = self.reactions();
+        (self.reported_supports.iter())
+            .map(|(name, nodes, fix)| {
+                // the components this support fixes (a node on two supports' faces gives each
+                // its own components)
+                let mut f = [0.0; 3];
+                for &n in nodes {
+                    for (c, fc) in f.iter_mut().enumerate() {
+                        if fix[c] {
+                            *fc += r[3 * n as usize + c];
+                        }
+                    }
+                }
+                (name.clone(), f)
+            })
+            .collect()
+    }
+
     /// Support reactions R = K u − F(t) (non-zero only on supported dofs) [N].
     pub fn reactions(&self) -> Vec<f64> {
         let fi = self.internal_forces();
@@ -1806,7 +1899,24 @@ impl Model {
             }
             start = end;
         }
+        self.add_penalty_forces(u, &mut out);
         out
+    }
+
+    /// Adds ε V u of a volume overlap (Wellmann (6.25), FE side) over all dofs.
+    pub(super) fn add_penalty_forces(&self, u: &[f64], out: &mut [f64]) {
+        for (e, v) in &self.penalty_blocks {
+            let nodes = self.mesh.element_nodes(*e);
+            let nn = nodes.len();
+            for (a, &na) in nodes.iter().enumerate() {
+                for c in 0..3 {
+                    let f: f64 = (0..nn)
+                        .map(|b| v[a * nn + b] * u[3 * nodes[b] as usize + c])
+                        .sum();
+                    out[3 * na as usize + c] += f;
+                }
+            }
+        }
     }
 }
 

@@ -357,15 +357,9 @@ impl Model {
             start = end;
         }
         if let Some(pm) = &self.penalty_matrix {
-            // the implicit penalty of a volume overlap: ε V u in the forces, ε V in the tangent
-            let uf = self.dofs.gather(u);
-            let mut y = vec![0.0; uf.len()];
-            self.pattern.mul(pm, &uf, &mut y);
-            for (d, &e) in self.dofs.eq.iter().enumerate() {
-                if e != assembly::FIXED {
-                    f[d] += y[e as usize];
-                }
-            }
+            // the implicit penalty of a volume overlap: ε V u in the forces (over all dofs,
+            // the supported ones and their prescribed values too), ε V in the tangent
+            self.add_penalty_forces(u, &mut f);
             if let Some(kv) = kv.as_mut() {
                 for (a, b) in kv.iter_mut().zip(pm) {
                     *a += b;
