@@ -1416,6 +1416,7 @@ impl Engine {
             window_substeps: 0,
             energy: 0.0,
             window_work: 0.0,
+            prediction_defect: 0.0,
         };
         // the coupling located above is the one a restore rebuilds from `state`
         let iface = volume_coupling::VolumeInterface::new(coupling);
@@ -1523,7 +1524,17 @@ impl Engine {
                 .map(|c| V3::new(c[0], c[1], c[2]))
                 .collect::<Vec<V3>>()
         };
-        st.window_p = to_v(positions);
+        let new_p = to_v(positions);
+        if st.window_steps > 0 {
+            let tau = st.window_steps as f64 * self.dt;
+            let miss: Vec<V3> = (0..new_p.len())
+                .map(|i| new_p[i] - st.node_motion(i, tau).0)
+                .collect();
+            let mut f = vec![V3::zeros(); miss.len()];
+            v.coupling.pull(&miss, &mut f);
+            st.prediction_defect = f.iter().sum::<V3>().norm();
+        }
+        st.window_p = new_p;
         st.window_v = to_v(velocities);
         st.window_a = to_v(accelerations);
         st.rule = rule;
@@ -2766,6 +2777,10 @@ impl Engine {
                     v.coupling.len() as f64,
                 ));
                 r.push((format!("volume.{n}.penalty_energy"), st.energy));
+                r.push((
+                    format!("volume.{n}.prediction_defect"),
+                    st.prediction_defect,
+                ));
                 for (c, ax) in ["x", "y", "z"].iter().enumerate() {
                     r.push((format!("volume.{n}.penalty_force_{ax}"), force[c]));
                     r.push((format!("volume.{n}.weighted_gravity_{ax}"), gravity[c]));

@@ -341,3 +341,49 @@ spheres = [{{ position = [0.05, 0.05, 0.00999], radius = 0.01 }}]
         "{err}"
     );
 }
+
+/// A wall motion in stages (`motion.then`) adds each stage's displacement, and a named wall
+/// (`motion.name`) reports the particles' force on it and its displacement: a sphere resting
+/// on a floor presses it with its weight, the floor lifts it by 2 mm (20 mm/s for 0.1 s from
+/// t = 0.2 s) and lowers it by 1 mm (−10 mm/s from t = 0.3 s, until 0.4 s), where the sphere
+/// rests on it again.
+#[test]
+fn a_named_wall_moves_in_stages_and_reports_the_force_on_it() {
+    let mut e = engine(&format!(
+        r#"
+[dem]
+time_step = 1e-4
+gravity = [0.0, 0.0, -9.81]
+{GRAIN}{STEEL}
+[[dem.walls]]
+kind = "plane"
+material = "steel"
+point = [0.0, 0.0, 0.0]
+normal = [0.0, 0.0, 1.0]
+motion = {{ name = "floor", then = [{{ velocity = [0.0, 0.0, 0.02], start = 0.2, end = 0.3 }}, {{ velocity = [0.0, 0.0, -0.01], start = 0.3, end = 0.4 }}] }}
+[[dem.particles]]
+kind = "list"
+material = "grain"
+spheres = [{{ position = [0.0, 0.0, 0.00999], radius = 0.01 }}]
+"#
+    ));
+    let weight = 1000.0 * 4.0 / 3.0 * std::f64::consts::PI * 1e-6 * 9.81;
+    e.advance(2000).unwrap(); // t = 0.2: at rest
+    assert_eq!(result(&e, "floor.displacement_z"), 0.0);
+    let f = result(&e, "floor.force_z");
+    assert!((f + weight).abs() < 0.01 * weight, "{f} vs −{weight}");
+    e.advance(1000).unwrap(); // t = 0.3: lifted by 2 mm
+    let u = result(&e, "floor.displacement_z");
+    assert!((u - 2e-3).abs() < 1e-12, "{u}");
+    e.advance(2000).unwrap(); // t = 0.5: lowered by 1 mm, at rest again
+    let u = result(&e, "floor.displacement_z");
+    assert!((u - 1e-3).abs() < 1e-12, "{u}");
+    let (x, _) = state_of(&e, 0);
+    assert!(
+        (x[2] - 0.011).abs() < 1e-4,
+        "the sphere rides on the floor: {x:?}"
+    );
+    let f = result(&e, "floor.force_z");
+    assert!((f + weight).abs() < 0.02 * weight, "{f} vs −{weight}");
+    assert_eq!(result(&e, "floor.force_x"), 0.0);
+}

@@ -684,8 +684,9 @@ pub struct Support {
     #[serde(default)]
     pub drive: Option<SupportDrive>,
     /// Volume meshes: report the support's reaction force (the sum over its nodes of
-    /// K u − F on the fixed components) as `reaction.<name>.{x,y,z}` in the results and in
-    /// `fem_probes.csv` (a triaxial sample's boundary stress: reaction / face area).
+    /// K u − F on the fixed components; a component two supports fix reports to the first) as
+    /// `reaction.<name>.{x,y,z}` in the results and in `fem_probes.csv` (a triaxial sample's
+    /// boundary stress: reaction / face area).
     #[serde(default)]
     pub name: Option<String>,
 }

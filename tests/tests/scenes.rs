@@ -1,8 +1,8 @@
 //! Every shipped scene passes `cosim check` (real nodes read their tables, build their models
 //! and report their limits), except the sleeper's later steps, which must name the bed file
 //! the step before writes when it has not been run yet (sleeper-compact.toml reads
-//! sleeper-bed's, sleeper.toml sleeper-compact's; the same for the -poly chain and the
-//! triaxial cells' membrane steps). (plate-python.toml needs the Python node's
+//! sleeper-bed's, sleeper.toml sleeper-compact's; the same for the -poly chain, the
+//! triaxial cells' membrane steps and the triaxial cube's models). (plate-python.toml needs the Python node's
 //! packages and is run by python_node.rs.)
 
 use cosim_tests::{cosim, root, run};
@@ -45,6 +45,12 @@ fn every_shipped_scene_checks() {
             "out/triaxial-membrane-prep-ci/dem/particles_final.csv",
             "dem.particles[0].path",
         )),
+        "triaxial-cube-de-ci.toml" | "triaxial-cube-dfl-ci.toml" | "triaxial-cube-dfc-ci.toml" => {
+            Some((
+                "out/triaxial-cube-pack-ci/dem/particles_final.csv",
+                "dem.particles[0].path",
+            ))
+        }
         "triaxial-membrane.toml" => Some((
             "out/triaxial-membrane-prep/dem/particles_final.csv",
             "dem.particles[0].path",

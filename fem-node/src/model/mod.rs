@@ -114,8 +114,9 @@ pub struct Model {
     /// The volume overlap with particles (`[fem.overlap]`), whose nodes are `iface.nodes`.
     overlap: Option<crate::overlap::Overlap>,
     probes: Vec<(String, u32)>,
-    /// Named supports (`[[fem.supports]] name`) and their nodes: reaction reports.
-    reported_supports: Vec<(String, Vec<u32>, [bool; 3])>,
+    /// Named supports (`[[fem.supports]] name`) and the dofs each reports: those it fixes and
+    /// no earlier support fixes (a dof held by two supports reports to the first).
+    reported_supports: Vec<(String, Vec<usize>)>,
     /// Strain gauges: name and the elements they watch.
     gauges: Vec<(String, Vec<u32>)>,
     output: Output,
@@ -515,20 +516,27 @@ impl Model {
         }
 
         let mut reported_supports = Vec::new();
-        for (i, s) in cfg.supports.iter().enumerate() {
-            if let Some(name) = &s.name {
-                if reported_supports.iter().any(|(n, _, _)| n == name) {
+        if cfg.supports.iter().any(|s| s.name.is_some()) {
+            let mut claimed = vec![false; 3 * mesh.num_nodes()];
+            for (i, s) in cfg.supports.iter().enumerate() {
+                let nodes = surface::select_nodes(&mesh, &s.on, &format!("fem.supports[{i}].on"))?;
+                let mut dofs = Vec::new();
+                for n in nodes {
+                    for a in &s.fix {
+                        let d = 3 * n as usize + a.index();
+                        if !std::mem::replace(&mut claimed[d], true) {
+                            dofs.push(d);
+                        }
+                    }
+                }
+                let Some(name) = &s.name else { continue };
+                if reported_supports.iter().any(|(n, _)| n == name) {
                     return Err(FemError::Config {
                         field: format!("fem.supports[{i}].name"),
                         message: format!("'{name}' names two supports"),
                     });
                 }
-                let nodes = surface::select_nodes(&mesh, &s.on, &format!("fem.supports[{i}].on"))?;
-                let mut fix = [false; 3];
-                for a in &s.fix {
-                    fix[a.index()] = true;
-                }
-                reported_supports.push((name.clone(), nodes, fix));
+                reported_supports.push((name.clone(), dofs));
             }
         }
 
@@ -992,7 +1000,7 @@ impl Model {
                         }
                     }
                 }
-                for (name, _, _) in &self.reported_supports {
+                for (name, _) in &self.reported_supports {
                     for c in ["x", "y", "z"] {
                         text.push_str(&format!(",reaction.{name}.{c}"));
                     }
@@ -1276,23 +1284,17 @@ impl Model {
         }
         self.element_forces(&self.st.u)
     }
-    /// The summed reaction force of every named support, over the components it fixes [N].
+    /// The summed reaction force of every named support, over the dofs it reports [N].
     pub fn support_reactions(&self) -> Vec<(String, [f64; 3])> {
         if self.reported_supports.is_empty() {
             return Vec::new();
         }
         let r = self.reactions();
         (self.reported_supports.iter())
-            .map(|(name, nodes, fix)| {
-                // the components this support fixes (a node on two supports' faces gives each
-                // its own components)
+            .map(|(name, dofs)| {
                 let mut f = [0.0; 3];
-                for &n in nodes {
-                    for (c, fc) in f.iter_mut().enumerate() {
-                        if fix[c] {
-                            *fc += r[3 * n as usize + c];
-                        }
-                    }
+                for &d in dofs {
+                    f[d % 3] += r[d];
                 }
                 (name.clone(), f)
             })
