@@ -24,6 +24,27 @@ fn node(kind: &str, run_id: &str, cfg: &Path) -> Command {
 
 #[test]
 fn two_runs_on_one_router_do_not_cross_talk_and_a_late_duplicate_node_is_refused() {
+    let text = std::fs::read_to_string(root().join("scenes/plate.toml"))
+        .unwrap()
+        .replace("end_time = \"30 ms\"", "end_time = \"20 ms\"");
+    two_runs_on_one_router(&text, "plate");
+}
+
+/// The same for two Arlequin runs (a volume interface: the overlap, the kinematics and the
+/// penalty pull keyed by the run, nothing else).
+#[test]
+fn two_volume_coupled_runs_on_one_router_do_not_cross_talk() {
+    let text = std::fs::read_to_string(root().join("scenes/arlequin-column-ci.toml"))
+        .unwrap()
+        .replace("end_time = \"40 ms\"", "end_time = \"4 ms\"");
+    assert!(text.contains("end_time = \"4 ms\""));
+    two_runs_on_one_router(&text, "column");
+}
+
+/// Runs the scene `text` twice at once on one router (each run's nodes started by hand with
+/// its run id), joins a late duplicate DEM node to the first (refused), and compares both
+/// runs' results bitwise with a run alone.
+fn two_runs_on_one_router(text: &str, name: &str) {
     let dir = tempfile::tempdir().unwrap();
     let port = proto::link::free_loopback_port().unwrap();
     let endpoint = format!("tcp/127.0.0.1:{port}");
@@ -51,14 +72,11 @@ fn two_runs_on_one_router_do_not_cross_talk_and_a_late_duplicate_node_is_refused
         .unwrap()]);
     std::thread::sleep(Duration::from_millis(300));
 
-    let text = std::fs::read_to_string(root().join("scenes/plate.toml"))
-        .unwrap()
-        .replace("end_time = \"30 ms\"", "end_time = \"20 ms\"");
-    let scene = write_scene(dir.path(), "plate.toml", &text);
+    let scene = write_scene(dir.path(), &format!("{name}.toml"), text);
     let tag = std::process::id();
     let runs: Vec<String> = ["a", "b"]
         .iter()
-        .map(|r| format!("xtalk-{r}-{tag}"))
+        .map(|r| format!("xtalk-{name}-{r}-{tag}"))
         .collect();
     let mut coordinators = Vec::new();
     for id in &runs {
