@@ -234,6 +234,20 @@ fn penalty_step_limit(
 
 /// Nodal forces of a window as flat xyz: the mean of `sum` over `substeps` (zeros before the
 /// first) with `averaged`, else `last`.
+/// The shaped bodies' wall contacts, planes then meshes in list order, with their wall
+/// index (planes first, then meshes).
+fn shaped_wall_contacts(
+    l: &broad_phase::NeighbourLists,
+) -> impl Iterator<Item = (u32, &broad_phase::ShapedContact)> + '_ {
+    let planes = (l.shaped_walls.iter())
+        .zip(&l.shaped_wall_contacts)
+        .map(|(&[_, w], k)| (w, k));
+    let meshes = (l.shaped_mesh.iter())
+        .zip(&l.shaped_mesh_contacts)
+        .map(|(&(_, c), k)| (c.wall, k));
+    planes.chain(meshes)
+}
+
 fn window_forces(averaged: bool, sum: &[V3], substeps: u64, last: &[V3]) -> Vec<f64> {
     let flat = |f: &[V3], scale: f64| {
         f.iter()
@@ -1950,13 +1964,7 @@ impl Engine {
                 f += rec.force;
             }
         }
-        let mesh_contacts = (s.lists.shaped_mesh.iter())
-            .zip(&s.lists.shaped_mesh_contacts)
-            .map(|(&(_, c), k)| (c.wall, k));
-        let plane_contacts = (s.lists.shaped_walls.iter())
-            .zip(&s.lists.shaped_wall_contacts)
-            .map(|(&[_, w], k)| (w, k));
-        for (cw, c) in plane_contacts.chain(mesh_contacts) {
+        for (cw, c) in shaped_wall_contacts(&s.lists) {
             if c.touching() && cw as usize == w {
                 f -= c.force;
             }
@@ -1992,13 +2000,7 @@ impl Engine {
             }
         }
         // shaped bodies on loaded walls: the reaction of their contact force
-        let mesh_contacts = (s.lists.shaped_mesh.iter())
-            .zip(&s.lists.shaped_mesh_contacts)
-            .map(|(&(_, c), k)| (c.wall, k));
-        let plane_contacts = (s.lists.shaped_walls.iter())
-            .zip(&s.lists.shaped_wall_contacts)
-            .map(|(&[_, w], k)| (w, k));
-        for (w, c) in plane_contacts.chain(mesh_contacts) {
+        for (w, c) in shaped_wall_contacts(&s.lists) {
             if !c.touching() {
                 continue;
             }
