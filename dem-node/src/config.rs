@@ -1439,13 +1439,35 @@ impl DemConfig {
                     }
                 }
                 if let Some(name) = &m.name {
-                    if name.is_empty() || name.contains([',', '"', '\n']) {
-                        c.fail(g("name"), format!("'{name}' is not a column name"));
-                    }
+                    c.column_name(g("name"), name);
                 }
             }
             if let Some(t) = remove_at {
                 c.non_negative(f("remove_at"), t);
+            }
+        }
+        // the walls' report columns (`load.name`, default wall<k>, and `motion.name`)
+        let mut wall_names: Vec<(String, Vec<Seg>)> = Vec::new();
+        for (k, w) in self.walls.iter().enumerate() {
+            let (motion, load, _) = w.kinematics();
+            let named = match (motion, load) {
+                (_, Some(l)) => Some((
+                    l.name.clone().unwrap_or_else(|| format!("wall{k}")),
+                    pi(&["dem", "walls"], k, &["load", "name"]),
+                )),
+                (Some(m), None) => m
+                    .name
+                    .clone()
+                    .map(|n| (n, pi(&["dem", "walls"], k, &["motion", "name"]))),
+                _ => None,
+            };
+            if let Some((name, field)) = named {
+                if let Some((_, first)) = wall_names.iter().find(|(n, _)| *n == name) {
+                    let first = scenefile::path_string(first);
+                    c.fail(field, format!("'{name}' already names the wall of {first}"));
+                } else {
+                    wall_names.push((name, field));
+                }
             }
         }
         self.check_particle_counts(&mut c);

@@ -387,3 +387,46 @@ spheres = [{{ position = [0.0, 0.0, 0.00999], radius = 0.01 }}]
     assert!((f + weight).abs() < 0.02 * weight, "{f} vs −{weight}");
     assert_eq!(result(&e, "floor.force_x"), 0.0);
 }
+
+/// Two walls reporting under one name, and a stage that ends before it starts, are refused
+/// naming the field.
+#[test]
+fn wall_report_names_are_unique_and_stages_are_checked() {
+    let scene = |second: &str| {
+        format!(
+            r#"
+[dem]
+time_step = 1e-4
+{STEEL}
+[[dem.walls]]
+kind = "plane"
+material = "steel"
+point = [0.0, 0.0, 0.0]
+normal = [0.0, 0.0, 1.0]
+motion = {{ name = "floor" }}
+[[dem.walls]]
+kind = "plane"
+material = "steel"
+point = [0.0, 0.0, 1.0]
+normal = [0.0, 0.0, -1.0]
+{second}
+"#
+        )
+    };
+    let err = |text: &str| match dem::parse_scene_section(text) {
+        Err(e) => e.to_string(),
+        Ok(_) => panic!("accepted: {text}"),
+    };
+    let e = err(&scene("motion = { name = \"floor\" }"));
+    assert!(
+        e.contains("dem.walls[1].motion.name") && e.contains("already names"),
+        "{e}"
+    );
+    let e = err(&scene("load = { name = \"floor\", mass = 1.0 }"));
+    assert!(e.contains("dem.walls[1].load.name"), "{e}");
+    let e = err(&scene(
+        "motion = { then = [{ velocity = [0.0, 0.0, 1.0], start = 0.2, end = 0.1 }] }",
+    ));
+    assert!(e.contains("dem.walls[1].motion.then[0].end"), "{e}");
+    assert!(dem::parse_scene_section(&scene("motion = { name = \"roof\" }")).is_ok());
+}
