@@ -771,6 +771,10 @@ pub struct OverlapSpec {
     /// The penalty ε of (6.23) [Pa/m² = N/m⁴] (default Wellmann's converged 1e8 Pa/mm²).
     #[serde(default = "default_overlap_penalty")]
     pub penalty: f64,
+    /// Remove the mesh's elements that lie in `de_region` (all their nodes inside) instead of
+    /// refusing them: a box mesh with a pocket for the particles (default false).
+    #[serde(default)]
+    pub carve: bool,
 }
 
 fn default_overlap_penalty() -> f64 {

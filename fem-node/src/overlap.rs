@@ -49,6 +49,32 @@ fn box_distance(x: &[f64; 3], min: &[f64; 3], max: &[f64; 3]) -> f64 {
 /// unweighted penalty matrix is assembled). Refuses (naming the field or element) a bad box,
 /// width or penalty, an element inside the particle region (its FE integrals would vanish),
 /// an overlap without elements or with several interpolations.
+/// With `carve`, removes the elements that lie in the particle box (all nodes at w = 1);
+/// returns how many. An error when nothing is left.
+pub fn carve(mesh: &mut Mesh, spec: &OverlapSpec) -> Result<usize, FemError> {
+    if !spec.carve {
+        return Ok(0);
+    }
+    let (min, max) = (&spec.de_region.min, &spec.de_region.max);
+    let keep: Vec<bool> = (0..mesh.num_elements())
+        .map(|e| {
+            !(mesh.element_nodes(e).iter())
+                .all(|&n| box_distance(&mesh.nodes[n as usize], min, max) == 0.0)
+        })
+        .collect();
+    let removed = mesh.retain_elements(&keep);
+    if mesh.num_elements() == 0 {
+        return Err(FemError::Config {
+            field: "fem.overlap.carve".into(),
+            message: format!(
+                "every element of {} lies in de_region: nothing is left",
+                mesh.source
+            ),
+        });
+    }
+    Ok(removed)
+}
+
 pub fn select(mesh: &Mesh, spec: &OverlapSpec) -> Result<Overlap, FemError> {
     let cerr = |field: &str, message: String| FemError::Config {
         field: format!("fem.overlap.{field}"),
@@ -164,6 +190,7 @@ mod tests {
             },
             width,
             penalty: 1e14,
+            carve: false,
         }
     }
 
@@ -213,5 +240,45 @@ mod tests {
         );
         let e = select(&mesh, &spec(4.0, -1.0)).unwrap_err().to_string();
         assert!(e.contains("fem.overlap.width"), "{e}");
+    }
+
+    /// `carve` cuts a pocket for the particles out of a box mesh: a 4 × 4 × 4 block with the
+    /// particles in its top-centre 2 × 2 × 2 elements loses those 8, keeps its element sets
+    /// consistent, and the ring of elements around the pocket is the overlap.
+    #[test]
+    fn carve_cuts_a_pocket_and_the_ring_around_it_is_the_overlap() {
+        let mut mesh = box_mesh([0.0; 3], [4.0, 4.0, 4.0], [4, 4, 4], ElementKind::Hex8);
+        let all = mesh.elem_sets.get("all").map(|s| s.len());
+        let mut sp = spec(2.0, 1.0);
+        sp.de_region = BoxSelector {
+            min: [1.0, 1.0, 2.0],
+            max: [3.0, 3.0, 10.0],
+        };
+        // refused without carve, as before
+        assert!(select(&mesh, &sp).is_err());
+        sp.carve = true;
+        assert_eq!(carve(&mut mesh, &sp).unwrap(), 8);
+        assert_eq!(mesh.num_elements(), 56);
+        assert_eq!(mesh.offsets.len(), 57);
+        if let Some(n) = all {
+            assert_eq!(mesh.elem_sets["all"].len(), n - 8);
+        }
+        for set in mesh.elem_sets.values() {
+            assert!(set.iter().all(|&e| (e as usize) < 56));
+        }
+        // no element left with all its nodes in the pocket
+        let o = select(&mesh, &sp).unwrap();
+        // the overlap: the elements touching the pocket (w = 1 on its faces, 0 one element
+        // away): the 4 × 4 × 2 upper half less the pocket, and the 4 × 4 layer under it
+        assert_eq!(o.elements.len() / 8, 32 - 8 + 16);
+        // nothing left to carve: an error says so
+        let mut tiny = box_mesh(
+            [1.0, 1.0, 2.0],
+            [2.0, 2.0, 2.0],
+            [1, 1, 1],
+            ElementKind::Hex8,
+        );
+        let e = carve(&mut tiny, &sp).unwrap_err().to_string();
+        assert!(e.contains("nothing is left"), "{e}");
     }
 }

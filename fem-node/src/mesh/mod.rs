@@ -163,6 +163,33 @@ impl Mesh {
         }
     }
 
+    /// Keeps the elements with `keep[e]` (in order), renumbering the element sets; the nodes
+    /// stay (those no element uses any more carry no dofs). Returns how many were removed.
+    pub fn retain_elements(&mut self, keep: &[bool]) -> usize {
+        let mut new_index = vec![u32::MAX; self.kinds.len()];
+        let (mut kinds, mut offsets, mut conn) = (Vec::new(), vec![0], Vec::new());
+        let (mut ids, mut lines) = (Vec::new(), Vec::new());
+        for e in 0..self.kinds.len() {
+            if !keep[e] {
+                continue;
+            }
+            new_index[e] = kinds.len() as u32;
+            kinds.push(self.kinds[e]);
+            conn.extend_from_slice(self.element_nodes(e));
+            offsets.push(conn.len());
+            ids.push(self.elem_ids[e]);
+            lines.push(self.elem_lines[e]);
+        }
+        let removed = self.kinds.len() - kinds.len();
+        for set in self.elem_sets.values_mut() {
+            set.retain(|&e| new_index[e as usize] != u32::MAX);
+            set.iter_mut().for_each(|e| *e = new_index[*e as usize]);
+        }
+        (self.kinds, self.offsets, self.conn) = (kinds, offsets, conn);
+        (self.elem_ids, self.elem_lines) = (ids, lines);
+        removed
+    }
+
     pub fn element_coords(&self, e: usize, buf: &mut Vec<[f64; 3]>) {
         buf.clear();
         buf.extend(

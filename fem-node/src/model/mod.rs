@@ -243,7 +243,16 @@ impl Model {
                         .into(),
                 })
             }
-            Some(spec) => Some(crate::overlap::select(&mesh, spec)?),
+            Some(spec) => {
+                let carved = crate::overlap::carve(&mut mesh, spec)?;
+                if carved > 0 {
+                    tracing::info!(
+                        "fem.overlap.carve: removed {carved} elements inside de_region, {} left",
+                        mesh.num_elements()
+                    );
+                }
+                Some(crate::overlap::select(&mesh, spec)?)
+            }
             None => None,
         };
         let (materials, elem_mat) = newton::assign_materials(cfg, &mesh)?;
