@@ -616,6 +616,35 @@ impl Scene {
             }
             (None, _) => None,
         };
+        if let Some(v) = interfaces.iter().find(|i| i.kind == InterfaceKind::Volume) {
+            // a volume interface sends the pull of the window's end (the FE's implicit
+            // penalty balance is an end-of-step one): no window means to average or iterate on
+            let (field, what) = if implicit.is_some() {
+                (
+                    "coupling.schedule",
+                    "the implicit schedule iterates on window means",
+                )
+            } else if c.force_averaging {
+                (
+                    "coupling.force_averaging",
+                    "force_averaging sends window means",
+                )
+            } else {
+                ("", "")
+            };
+            if !field.is_empty() {
+                return Err(err_at(
+                    text.find(field.rsplit('.').next().unwrap_or(field))
+                        .unwrap_or(0),
+                    field,
+                    format!(
+                        "{what}, but the volume interface `{}` sends the penalty pull of the \
+                         window's end: use jit, predictive or concurrent without force_averaging",
+                        v.name
+                    ),
+                ));
+            }
+        }
         let mut interfaces = interfaces;
         if let Some(settings) = &implicit {
             // the iteration works on the mean forces of the window; the provider gets the
@@ -849,6 +878,24 @@ mod tests {
         assert_eq!(s.windows, 10);
         assert_eq!(s.name, "s");
         assert!(s.has_dem && !s.has_fem);
+    }
+
+    /// A volume interface sends the pull of the window's end: window means (force_averaging,
+    /// the implicit schedule) are refused with it, naming the field and the interface.
+    #[test]
+    fn volume_interfaces_refuse_window_means() {
+        let scene = |coupling: &str| {
+            format!(
+                "[scene]\nend_time = 1\n[coupling]\nwindow = 0.1\n{coupling}\n\
+                 interfaces = [{{ name = \"soil\", kind = \"volume\" }}]\n[dem]\n[fem]\n"
+            )
+        };
+        assert!(parse(&scene("schedule = \"jit\"")).is_ok());
+        let e = parse(&scene("schedule = \"jit\"\nforce_averaging = true")).unwrap_err();
+        assert_eq!(e.field, "coupling.force_averaging");
+        assert!(e.message.contains("`soil`"), "{e}");
+        let e = parse(&scene("schedule = \"implicit\"")).unwrap_err();
+        assert_eq!(e.field, "coupling.schedule");
     }
 
     #[test]

@@ -745,7 +745,7 @@ pub struct VolumeInterfaceState {
     /// Σ_steps Δt Σ_I f_I·v_I [J] (the interface energy audit).
     #[serde(default)]
     pub window_work: f64,
-    /// The load the window's prediction of the FE nodes missed, |Σ_I ε Σ_J V_IJ δ_J| with δ
+    /// The net load the window's prediction of the FE nodes missed, |Σ_I ε Σ_J V_IJ δ_J| with δ
     /// the nodes' new positions less where the window's rule had carried them [N]: a
     /// staggered coupling's error, which the stiff penalty turns into a spurious load on
     /// both sides (0 before the second window).

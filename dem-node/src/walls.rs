@@ -85,6 +85,13 @@ impl PrescribedMotion {
         v
     }
 
+    /// Whether the wall ever moves (a velocity, an oscillation or a stage with a velocity).
+    pub fn moves(&self) -> bool {
+        self.velocity != V3::zeros()
+            || self.amplitude != V3::zeros()
+            || self.stages.iter().any(|s| s.0 != V3::zeros())
+    }
+
     pub fn present(&self, t: f64) -> bool {
         t < self.remove_at
     }

@@ -689,12 +689,15 @@ impl Model {
         match self.analysis {
             Analysis::Static => {
                 let t = self.st.time + dt;
-                self.move_supports(t);
                 // a volume overlap's grains follow the continuum's nodes through the window:
                 // they get the rate of the quasi-static path (u(t + dt) − u(t)) / dt, so the
                 // DEM carries the nodes on with it instead of holding them a window behind
-                // (the stiff penalty ε V would turn that lag into a spurious load)
-                let before = self.overlap.is_some().then(|| self.st.u.clone());
+                // (the stiff penalty ε V would turn that lag into a spurious load). Taken
+                // before the supports move (a linear model writes them into u), and not on
+                // the first step, whose jump from the unloaded start is no rate.
+                let before =
+                    (self.overlap.is_some() && self.st.steps > 0).then(|| self.st.u.clone());
+                self.move_supports(t);
                 self.static_solve_at(t)?;
                 if let Some(u0) = before {
                     for ((v, u), u0) in self.st.v.iter_mut().zip(&self.st.u).zip(&u0) {
