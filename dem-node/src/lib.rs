@@ -232,8 +232,6 @@ fn penalty_step_limit(
     worst
 }
 
-/// Nodal forces of a window as flat xyz: the mean of `sum` over `substeps` (zeros before the
-/// first) with `averaged`, else `last`.
 /// The shaped bodies' wall contacts, planes then meshes in list order, with their wall
 /// index (planes first, then meshes).
 fn shaped_wall_contacts(
@@ -248,6 +246,8 @@ fn shaped_wall_contacts(
     planes.chain(meshes)
 }
 
+/// Nodal forces of a window as flat xyz: the mean of `sum` over `substeps` (zeros before the
+/// first) with `averaged`, else `last`.
 fn window_forces(averaged: bool, sum: &[V3], substeps: u64, last: &[V3]) -> Vec<f64> {
     let flat = |f: &[V3], scale: f64| {
         f.iter()
@@ -2545,10 +2545,9 @@ impl Engine {
                 output::write_pvd(out_dir, "polyhedra", self.dt)?;
             }
             for (k, m) in self.state.meshes.iter().enumerate() {
-                let moving = self.wall_motions.iter().any(|w| {
-                    w.wall == WallRef::Mesh(k)
-                        && (w.velocity != V3::zeros() || w.amplitude != V3::zeros())
-                }) || self.loaded_walls.iter().any(|w| w.wall == WallRef::Mesh(k));
+                let moving = (self.wall_motions.iter())
+                    .any(|w| w.wall == WallRef::Mesh(k) && w.moves())
+                    || self.loaded_walls.iter().any(|w| w.wall == WallRef::Mesh(k));
                 if !m.active {
                     continue;
                 }

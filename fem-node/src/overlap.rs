@@ -45,10 +45,6 @@ fn box_distance(x: &[f64; 3], min: &[f64; 3], max: &[f64; 3]) -> f64 {
         .sqrt()
 }
 
-/// Computes the weights and the overlap (the caller puts `scale` into the mesh once the
-/// unweighted penalty matrix is assembled). Refuses (naming the field or element) a bad box,
-/// width or penalty, an element inside the particle region (its FE integrals would vanish),
-/// an overlap without elements or with several interpolations.
 /// With `carve`, removes the elements that lie in the particle box (all nodes at w = 1);
 /// returns how many. An error when nothing is left.
 pub fn carve(mesh: &mut Mesh, spec: &OverlapSpec) -> Result<usize, FemError> {
@@ -75,6 +71,10 @@ pub fn carve(mesh: &mut Mesh, spec: &OverlapSpec) -> Result<usize, FemError> {
     Ok(removed)
 }
 
+/// Computes the weights and the overlap (the caller puts `scale` into the mesh once the
+/// unweighted penalty matrix is assembled). Refuses (naming the field or element) a bad box,
+/// width or penalty, an element inside the particle region (its FE integrals would vanish),
+/// an overlap without elements or with several interpolations.
 pub fn select(mesh: &Mesh, spec: &OverlapSpec) -> Result<Overlap, FemError> {
     let cerr = |field: &str, message: String| FemError::Config {
         field: format!("fem.overlap.{field}"),

@@ -45,12 +45,10 @@ fn every_shipped_scene_checks() {
             "out/triaxial-membrane-prep-ci/dem/particles_final.csv",
             "dem.particles[0].path",
         )),
-        "triaxial-cube-de-ci.toml" | "triaxial-cube-dfl-ci.toml" | "triaxial-cube-dfc-ci.toml" => {
-            Some((
-                "out/triaxial-cube-pack-ci/dem/particles_final.csv",
-                "dem.particles[0].path",
-            ))
-        }
+        "triaxial-cube-de-ci.toml" | "triaxial-cube-dfl-ci.toml" => Some((
+            "out/triaxial-cube-pack-ci/dem/particles_final.csv",
+            "dem.particles[0].path",
+        )),
         "triaxial-membrane.toml" => Some((
             "out/triaxial-membrane-prep/dem/particles_final.csv",
             "dem.particles[0].path",
