@@ -142,6 +142,16 @@ pub struct MaterialConfig {
     /// Rolling resistance coefficient μ_r ≥ 0 (constant directional torque), default 0.
     #[serde(default)]
     pub rolling_friction: f64,
+    /// A linear spring-dashpot contact instead of Hertz–Mindlin: this material's half of the
+    /// normal contact spring in N/m (> 0). A pair's normal stiffness is the two halves in
+    /// series, k_n = 1/(1/k_a + 1/k_b) (a near-rigid wall: give its material a large value);
+    /// the tangential spring is k_t = k_n · 4G*/E* (Mindlin's ratio of the same pair, from
+    /// the Poisson ratios), the dashpot the one of an exact restitution e for the unclamped
+    /// law, 2ζ√(k_n m*) with ζ = −ln e/√(ln²e + π²). All materials of a scene or none, spheres
+    /// only. For verification (a lattice under homogeneous strain has stresses linear in the
+    /// strain: the Arlequin patch test) and for codes calibrated with Hooke contacts.
+    #[serde(default)]
+    pub normal_stiffness: Option<f64>,
 }
 
 /// `[[dem.interactions]]`: overrides for one material pair.
@@ -1073,6 +1083,43 @@ impl DemConfig {
             c.restitution(f("restitution"), m.restitution);
             c.non_negative(f("friction"), m.friction);
             c.non_negative(f("rolling_friction"), m.rolling_friction);
+            if let Some(k) = m.normal_stiffness {
+                c.positive(f("normal_stiffness"), k);
+            }
+        }
+        // the linear law is the scene's, not a pair's: a Hertz material touching a linear one
+        // would have no defined contact
+        let linear: Vec<&String> = (self.materials.iter())
+            .filter(|(_, m)| m.normal_stiffness.is_some())
+            .map(|(n, _)| n)
+            .collect();
+        if !linear.is_empty() {
+            if let Some((name, _)) =
+                (self.materials.iter()).find(|(_, m)| m.normal_stiffness.is_none())
+            {
+                c.fail(
+                    p(&["dem", "materials", name, "normal_stiffness"]),
+                    format!(
+                        "missing: material '{}' has a linear contact spring (normal_stiffness),                          so every material needs one (the contact law is the scene's)",
+                        linear[0]
+                    ),
+                );
+            }
+            for (k, src) in self.particles.iter().enumerate() {
+                let shape = match src {
+                    ParticleSource::List { shape, .. }
+                    | ParticleSource::Lattice { shape, .. }
+                    | ParticleSource::Fill { shape, .. } => shape,
+                    ParticleSource::File { .. } => continue,
+                };
+                if !shape.is_sphere() {
+                    c.fail(
+                        pi(&["dem", "particles"], k, &["shape"]),
+                        "the linear contact law (materials' normal_stiffness) is for spheres only; shaped particles use their own laws"
+                            .into(),
+                    );
+                }
+            }
         }
         for (k, ia) in self.interactions.iter().enumerate() {
             for name in &ia.materials {

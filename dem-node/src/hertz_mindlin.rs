@@ -37,12 +37,22 @@ pub fn contact_force(
     shear: &mut V3,
     dt: f64,
 ) -> ContactForce {
-    let sqrt_rd = (r_eff * delta).sqrt();
-    // (2.12) S_n = k_n = 2E*√(Rδ); (2.16) S_t = k_t = 8G*√(Rδ)
-    let s_n = p.two_e_star * sqrt_rd;
-    let s_t = p.eight_g_star * sqrt_rd;
-    // (2.6) F_n,e = 4/3 E* √R δ^{3/2}
-    let f_elastic = p.four_thirds_e_star * sqrt_rd * delta;
+    let (s_n, s_t, f_elastic) = if p.linear_normal > 0.0 {
+        // the linear spring-dashpot law (`MaterialConfig::normal_stiffness`)
+        (
+            p.linear_normal,
+            p.linear_tangential,
+            p.linear_normal * delta,
+        )
+    } else {
+        let sqrt_rd = (r_eff * delta).sqrt();
+        // (2.12) S_n = k_n = 2E*√(Rδ); (2.16) S_t = k_t = 8G*√(Rδ); (2.6) F_n,e = 4/3 E* √R δ^{3/2}
+        (
+            p.two_e_star * sqrt_rd,
+            p.eight_g_star * sqrt_rd,
+            p.four_thirds_e_star * sqrt_rd * delta,
+        )
+    };
     let v_n = v_c.dot(n);
     // Tsuji/LIGGGHTS damping (replaces the schematic eq. 2.10); √(S_t m*) = √(S_n m*) √(S_t/S_n)
     let gamma_n = p.damping_factor * (s_n * m_eff).sqrt();

@@ -21,6 +21,9 @@
 //!   t_c = 2.87 (m*²/(R* E*² v))^{1/5}, over the same pairs with the smallest radii (and
 //!   masses) of each material; m* = m for a wall.
 //!
+//! With the linear contact law (materials' `normal_stiffness`) the stiffnesses are the pairs'
+//! springs k_n and the duration is half the undamped period, π√(m*/k_n).
+//!
 //! Radii are the radii that enter Hertz: a sphere's radius, a superquadric's bounding
 //! radius, a dilated polyhedron's dilation radius r_ds (its contact law is Hertz between the
 //! dilation spheres, U (2.20)). With dilated polyhedra also the validity limit of that model
@@ -32,7 +35,7 @@
 //! - `dilation_force_max`: the static contact force 4/3 E* √R (r_ds,1 + r_ds,2)^{3/2} at which
 //!   the cores touch.
 
-use crate::materials::MaterialTable;
+use crate::materials::{MaterialTable, PairParams};
 use crate::particles::Particles;
 
 /// Overlap at which `contact_stiffness_max` is evaluated, as a fraction of the smaller radius.
@@ -117,16 +120,33 @@ pub fn contact_limits(
     let mut k_typical = 0.0f64;
     let mut t_min = f64::INFINITY;
     let mut k_interface = 0.0f64;
-    // k_n of a particle pair with radii ra, rb at the reference overlap
-    let pair_k = |e_star: f64, ra: f64, rb: f64| {
+    // k_n of a particle pair with radii ra, rb at the reference overlap (a linear spring's k_n
+    // whatever the radii)
+    let pair_k = |pp: &PairParams, ra: f64, rb: f64| {
+        if pp.linear_normal > 0.0 {
+            return pp.linear_normal;
+        }
         hertz_stiffness(
-            e_star,
+            pp.e_star,
             ra * rb / (ra + rb),
             REFERENCE_OVERLAP_FRACTION * ra.min(rb),
         )
     };
     // ... and of a particle of radius r on a flat wall
-    let wall_k = |e_star: f64, r: f64| hertz_stiffness(e_star, r, REFERENCE_OVERLAP_FRACTION * r);
+    let wall_k = |pp: &PairParams, r: f64| {
+        if pp.linear_normal > 0.0 {
+            return pp.linear_normal;
+        }
+        hertz_stiffness(pp.e_star, r, REFERENCE_OVERLAP_FRACTION * r)
+    };
+    // the contact duration at 1 m/s: Hertz's, or half the undamped period π√(m*/k) of a
+    // linear spring
+    let duration = |pp: &PairParams, m_eff: f64, r_eff: f64| {
+        if pp.linear_normal > 0.0 {
+            return std::f64::consts::PI * (m_eff / pp.linear_normal).sqrt();
+        }
+        hertz_contact_duration(m_eff, r_eff, pp.e_star, REFERENCE_IMPACT_VELOCITY)
+    };
     let present: Vec<(u16, Extent)> = ext
         .iter()
         .enumerate()
@@ -134,28 +154,18 @@ pub fn contact_limits(
         .collect();
     for (x, &(a, ea)) in present.iter().enumerate() {
         for &(b, eb) in &present[x..] {
-            let e_star = materials.pair(a, b).e_star;
-            k_max = k_max.max(pair_k(e_star, ea.r_max, eb.r_max));
-            k_typical = k_typical.max(pair_k(e_star, ea.r_mean(), eb.r_mean()));
+            let pp = materials.pair(a, b);
+            k_max = k_max.max(pair_k(pp, ea.r_max, eb.r_max));
+            k_typical = k_typical.max(pair_k(pp, ea.r_mean(), eb.r_mean()));
             let (ra, rb, ma, mb) = (ea.r_min, eb.r_min, ea.m_of_r_min, eb.m_of_r_min);
-            t_min = t_min.min(hertz_contact_duration(
-                ma * mb / (ma + mb),
-                ra * rb / (ra + rb),
-                e_star,
-                REFERENCE_IMPACT_VELOCITY,
-            ));
+            t_min = t_min.min(duration(pp, ma * mb / (ma + mb), ra * rb / (ra + rb)));
         }
         if let Some(w) = interface_material {
-            let e_star = materials.pair(a, w).e_star;
-            k_max = k_max.max(wall_k(e_star, ea.r_max));
-            k_typical = k_typical.max(wall_k(e_star, ea.r_mean()));
-            k_interface = k_interface.max(wall_k(e_star, ea.r_mean()));
-            t_min = t_min.min(hertz_contact_duration(
-                ea.m_of_r_min,
-                ea.r_min,
-                e_star,
-                REFERENCE_IMPACT_VELOCITY,
-            ));
+            let pp = materials.pair(a, w);
+            k_max = k_max.max(wall_k(pp, ea.r_max));
+            k_typical = k_typical.max(wall_k(pp, ea.r_mean()));
+            k_interface = k_interface.max(wall_k(pp, ea.r_mean()));
+            t_min = t_min.min(duration(pp, ea.m_of_r_min, ea.r_min));
         }
     }
     let mut out: Vec<(String, f64)> = vec![

@@ -12,6 +12,9 @@ pub struct Material {
     pub restitution: f64,
     pub friction: f64,
     pub rolling_friction: f64,
+    /// This material's half of a linear contact spring (N/m), `None` for Hertz–Mindlin.
+    #[serde(default)]
+    pub normal_stiffness: Option<f64>,
 }
 
 impl Material {
@@ -49,6 +52,13 @@ pub struct PairParams {
     /// Dashpot of superquadric contacts.
     #[serde(default)]
     pub shaped_damping: ShapedDamping,
+    /// Linear spring-dashpot law (both materials' `normal_stiffness` in series), N/m; 0 for
+    /// Hertz–Mindlin. `damping_factor` is then 2ζ of the exact restitution.
+    #[serde(default)]
+    pub linear_normal: f64,
+    /// Its tangential spring k_t = k_n · 4G*/E*, N/m.
+    #[serde(default)]
+    pub linear_tangential: f64,
 }
 
 /// The normal dashpot of a superquadric contact (Wellmann 3.27–3.30).
@@ -83,6 +93,7 @@ impl MaterialTable {
                 restitution: m.restitution,
                 friction: m.friction,
                 rolling_friction: m.rolling_friction,
+                normal_stiffness: m.normal_stiffness,
             })
             .collect();
         let n = materials.len();
@@ -113,7 +124,25 @@ impl MaterialTable {
                 let g_star = 1.0
                     / ((2.0 - a.poisson_ratio) / a.shear_modulus()
                         + (2.0 - b.poisson_ratio) / b.shear_modulus());
-                let beta = crate::hertz_mindlin::damping_beta(restitution);
+                // the linear law where both halves of the spring are given (config checks that
+                // a scene's materials all have one or none)
+                let linear_normal = match (a.normal_stiffness, b.normal_stiffness) {
+                    (Some(ka), Some(kb)) => 1.0 / (1.0 / ka + 1.0 / kb),
+                    _ => 0.0,
+                };
+                let sqrt_stiffness_ratio = (4.0 * g_star / e_star).sqrt();
+                let beta = if linear_normal > 0.0 {
+                    crate::hertz_mindlin::textbook_beta(restitution)
+                } else {
+                    crate::hertz_mindlin::damping_beta(restitution)
+                };
+                // F_d = −γ v, γ = damping_factor √(S_n m*): −2√(5/6)β for Hertz (Tsuji), −2β
+                // = 2ζ for the linear spring (exact restitution of the unclamped law)
+                let damping_factor = if linear_normal > 0.0 {
+                    -2.0 * beta
+                } else {
+                    -2.0 * crate::hertz_mindlin::SQRT_5_6 * beta
+                };
                 let mindlin = crate::elliptic_hertz::MindlinConstants::new(
                     a.youngs_modulus,
                     a.poisson_ratio,
@@ -130,11 +159,13 @@ impl MaterialTable {
                     two_e_star: 2.0 * e_star,
                     eight_g_star: 8.0 * g_star,
                     four_thirds_e_star: 4.0 / 3.0 * e_star,
-                    damping_factor: -2.0 * crate::hertz_mindlin::SQRT_5_6 * beta,
-                    sqrt_stiffness_ratio: (4.0 * g_star / e_star).sqrt(),
+                    damping_factor,
+                    sqrt_stiffness_ratio,
                     mindlin_lambda1: mindlin.lambda1,
                     mindlin_lambda2: mindlin.lambda2,
                     shaped_damping,
+                    linear_normal,
+                    linear_tangential: linear_normal * sqrt_stiffness_ratio.powi(2),
                 });
             }
         }

@@ -197,3 +197,115 @@ fn bouncing_sphere_error_falls_with_time_step() {
         assert!(slope > 1.3, "order {slope}");
     }
 }
+
+/// The linear spring-dashpot law (`normal_stiffness`): both halves of the spring in series,
+/// k = 1/(1/k_a + 1/k_b); an elastic impact lasts half the period π√(m*/k) with the largest
+/// overlap v√(m*/k); a damped one rebounds as the independently integrated clamped
+/// spring-dashpot m* ẍ = −max(k x + 2ζ√(k m*) ẋ, 0) with ζ = −ln e/√(ln²e + π²) (the clamp
+/// makes e a little larger than requested).
+#[test]
+fn linear_law_impacts_match_the_spring_dashpot() {
+    const K_HALF: f64 = 2e5;
+    let k = 0.5 * K_HALF;
+    let linear = |dt: f64, e_rest: f64, body: &str| {
+        let text = scene(dt, e_rest, body);
+        assert!(text.contains("friction = 0.0\n"));
+        text.replacen(
+            "friction = 0.0\n",
+            &format!("friction = 0.0\nnormal_stiffness = {K_HALF:e}\n"),
+            1,
+        )
+    };
+    // the clamped spring-dashpot's rebound, RK4 on the dimensionless x'' = −max(x + 2ζx', 0)
+    let clamped_rebound = |e: f64| -> f64 {
+        let l = e.ln();
+        let zeta = -l / (l * l + std::f64::consts::PI.powi(2)).sqrt();
+        let acc = |x: f64, v: f64| -(x + 2.0 * zeta * v).max(0.0);
+        let (h, mut x, mut v) = (1e-5, 0.0f64, 1.0f64);
+        loop {
+            let (k1x, k1v) = (v, acc(x, v));
+            let (k2x, k2v) = (v + 0.5 * h * k1v, acc(x + 0.5 * h * k1x, v + 0.5 * h * k1v));
+            let (k3x, k3v) = (v + 0.5 * h * k2v, acc(x + 0.5 * h * k2x, v + 0.5 * h * k2v));
+            let (k4x, k4v) = (v + h * k3v, acc(x + h * k3x, v + h * k3v));
+            let nx = x + h / 6.0 * (k1x + 2.0 * k2x + 2.0 * k3x + k4x);
+            let nv = v + h / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v);
+            if nx <= 0.0 {
+                return -(v + x / (x - nx) * (nv - v));
+            }
+            (x, v) = (nx, nv);
+        }
+    };
+    let m_pair = 0.5 * mass();
+    let t_c = std::f64::consts::PI * (m_pair / k).sqrt();
+    for &e_req in &[1.0, 0.5, 0.2] {
+        let v = 1.0;
+        let body = format!(
+            "[[dem.particles]]\nkind = \"list\"\nmaterial = \"ball\"\nspheres = [\n  {{ position = [0.0, 0.0, 0.0], radius = {R}, velocity = [0.5, 0.0, 0.0] }},\n  {{ position = [{x}, 0.0, 0.0], radius = {R}, velocity = [-0.5, 0.0, 0.0] }},\n]\n",
+            x = 2.0 * R + 1e-4
+        );
+        let mut eng = engine(&linear(t_c / 4000.0, e_req, &body));
+        let limits: std::collections::BTreeMap<String, f64> = eng.limits().into_iter().collect();
+        assert!((limits["contact_stiffness_max"] - k).abs() < 1e-9 * k);
+        assert!((limits["contact_duration_min"] - t_c).abs() < 1e-12 * t_c);
+        let (dm, tc, v_out) = impact(
+            &mut eng,
+            v,
+            40_000,
+            |e| 2.0 * R - (state_of(e, 1).0[0] - state_of(e, 0).0[0]),
+            |e| state_of(e, 1).1[0] - state_of(e, 0).1[0],
+        );
+        let want = clamped_rebound(e_req);
+        println!("linear pair e {e_req}: rebound {} (clamped law {want}), overlap {dm:e} vs {:e}, t_c {tc:e} vs {t_c:e}", v_out / v, v * (m_pair / k).sqrt());
+        assert!(
+            (v_out / v - want).abs() < 2e-3,
+            "rebound {} vs {want}",
+            v_out / v
+        );
+        if e_req == 1.0 {
+            assert!((dm - v * (m_pair / k).sqrt()).abs() < 1e-3 * dm);
+            assert!((tc - t_c).abs() < 1e-3 * t_c);
+        }
+    }
+    // on a wall of the same material: the same spring, the sphere's own mass
+    let v = 0.3;
+    let body = format!(
+        "[[dem.walls]]\nkind = \"plane\"\nmaterial = \"ball\"\npoint = [0.0, 0.0, 0.0]\nnormal = [0.0, 0.0, 1.0]\n\
+         [[dem.particles]]\nkind = \"list\"\nmaterial = \"ball\"\nspheres = [ {{ position = [0.0, 0.0, {R}], radius = {R}, velocity = [0.0, 0.0, {mv}] }} ]\n",
+        mv = -v
+    );
+    let mut eng = engine(&linear(t_c / 4000.0, 1.0, &body));
+    let (dm, _, v_out) = impact(
+        &mut eng,
+        v,
+        40_000,
+        |e| R - state_of(e, 0).0[2],
+        |e| state_of(e, 0).1[2],
+    );
+    assert!((dm - v * (mass() / k).sqrt()).abs() < 1e-3 * dm, "{dm}");
+    assert!((v_out - v).abs() < 1e-4 * v);
+}
+
+/// A linear material beside a Hertz one, or on a shaped particle, is refused naming the field.
+#[test]
+fn linear_law_is_all_or_none_and_for_spheres() {
+    let base = scene(1e-6, 0.5, "");
+    let two = format!(
+        "{base}normal_stiffness = 1e5\n[dem.materials.other]\nyoungs_modulus = 1e9\npoisson_ratio = 0.25\ndensity = 1000.0\nrestitution = 0.5\nfriction = 0.0\n"
+    );
+    let err = dem::parse_scene_section(&two).unwrap_err().to_string();
+    assert!(
+        err.contains("dem.materials.other.normal_stiffness") && err.contains("'ball'"),
+        "{err}"
+    );
+    let shaped = format!(
+        "{base}normal_stiffness = 1e5\n[[dem.particles]]\nkind = \"list\"\nmaterial = \"ball\"\nshape = {{ kind = \"superquadric\", elongation = 1.6, angularity = 0.3 }}\nspheres = [ {{ position = [0.0, 0.0, 0.0], radius = 1e-3 }} ]\n"
+    );
+    let err = dem::parse_scene_section(&shaped).unwrap_err().to_string();
+    assert!(
+        err.contains("dem.particles[0].shape") && err.contains("spheres only"),
+        "{err}"
+    );
+    let negative = format!("{base}normal_stiffness = -1.0\n");
+    let err = dem::parse_scene_section(&negative).unwrap_err().to_string();
+    assert!(err.contains("dem.materials.ball.normal_stiffness"), "{err}");
+}
