@@ -524,16 +524,14 @@ fn block_forces_generic<const WEIGHTED: bool>(
                 pair_force_torques(k, ctx, (i, j), d, dist2, k.vel[j], &mut shear[pk - pair0]);
             if WEIGHTED {
                 if let Some(ws) = ctx.weights {
-                    let (wi, wj) = (ws.weight[i], ws.weight[j]);
-                    if wi != 1.0 || wj != 1.0 {
-                        // (6.29) at the contact point on the line of centres, r_i − δ/2 from c_i
-                        let dist = dist2.sqrt();
-                        let at = ((dist + ri - rj) / (2.0 * dist)).clamp(0.0, 1.0);
-                        let w = wi + at * (wj - wi);
-                        f *= w;
-                        t *= w;
-                        tj *= w;
-                    }
+                    // the weight at the contact point on the line of centres, r_i − δ/2 from
+                    // c_i (`SlotWeights::pair`, our form of 6.29; 1 away from every overlap)
+                    let dist = dist2.sqrt();
+                    let at = ((dist + ri - rj) / (2.0 * dist)).clamp(0.0, 1.0);
+                    let w = ws.pair(i, j, xi, k.pos[j], xi - d * at);
+                    f *= w;
+                    t *= w;
+                    tj *= w;
                 }
             }
             fi += f;

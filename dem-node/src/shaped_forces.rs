@@ -742,15 +742,10 @@ pub fn shaped_forces(lists: &mut NeighbourLists, p: &mut Particles, ctx: &ForceC
                             (-c.force, x + image_of(ctx, images, (e >> 1) as usize).0)
                         };
                         if let Some(ws) = ctx.weights {
-                            // (6.29), the same for both bodies of the pair
+                            // the weight at the contact point, the same for both bodies of the
+                            // pair (`SlotWeights::pair`, our form of 6.29)
                             let [a, b] = pair_bodies[(e >> 1) as usize].map(|i| i as usize);
-                            fk *= crate::volume_coupling::contact_weight(
-                                ws.weight[a],
-                                ws.weight[b],
-                                pos[a],
-                                pos[b],
-                                c.point,
-                            );
+                            fk *= ws.pair(a, b, pos[a], pos[b], c.point);
                         }
                         *f += fk;
                         *t += (c.point - at).cross(&fk);
