@@ -69,6 +69,13 @@ const _: () = assert!(CONCURRENT_WINDOW_FRACTION < JIT_WINDOW_FRACTION);
 /// The longest implicit window measured stable, as a fraction of T_c (sleeper-ci: 1 ms =
 /// 6.8 T_c, serial and concurrent; no limit found).
 pub const IMPLICIT_STABLE_TESTED: f64 = 6.8;
+/// The window of a volume interface beyond which the run is warned about, as a fraction of
+/// the penalty's explicit step limit 2√(w m / k̂), measured on scenes/arlequin-patch.toml (a
+/// regular lattice with only contact damping, JIT): at ε = 1e14 N/m⁴ windows of 0.28 × stable
+/// (both projections), 0.55 × diverging with the consistent projection (stable lumped), 1.1–1.4
+/// × diverging with both, and 5.5 × diverging or oscillating; at ε = 1e13 stable to 1.75 ×.
+/// Dissipative packings are more forgiving (the triaxial cube: 4 × at 1e13 and 12 × at 1e14).
+pub const VOLUME_WINDOW_FRACTION: f64 = 0.5;
 /// Beyond the limit the run is warned about; beyond this many times the limit it is refused
 /// (the limit is an estimate: T_c uses the stiffness at a 1 % overlap and the lightest node).
 /// Measured: 2× the limit diverged on the sleeper (JIT and predictive), 6.5× on the plate
@@ -301,15 +308,16 @@ pub fn assess(
     if scene.has_dem && scene.has_fem && f.get("volume_interface") == Some(&1.0) {
         // an Arlequin overlap: the FE side holds the penalty ε V in its operator, the
         // particles feel it explicitly at every DEM step (refused at set-up beyond the limit)
+        let penalty = f.get("volume_penalty").copied().unwrap_or(f64::NAN);
+        let step_limit = d.get("volume_penalty_step_limit").copied();
         push(
             Level::Info,
             "coupling window",
             format!(
-                "volume interface (ε = {:.3e} N/m⁴): the penalty acts implicitly on the FE side \
-                 and explicitly on the particles within the DEM step{}; no window limit from a \
-                 contact period",
-                f.get("volume_penalty").copied().unwrap_or(f64::NAN),
-                d.get("volume_penalty_step_limit")
+                "volume interface (ε = {penalty:.3e} N/m⁴): the penalty acts implicitly on the FE \
+                 side and explicitly on the particles within the DEM step{}; no window limit \
+                 from a contact period",
+                step_limit
                     .map(|l| format!(
                         " (its limit 2√(w m / k̂) = {l:.3e} s, Δt^D = {:.3} of it)",
                         d.get("time_step").copied().unwrap_or(f64::NAN) / l
@@ -317,6 +325,26 @@ pub fn assess(
                     .unwrap_or_default()
             ),
         );
+        // the staggered exchange: the continuum answers the particles a window late, and the
+        // light, stiffly tied particles of the overlap oscillate with a period of the order of
+        // the penalty's step limit (the window sweep of docs/two-scale.md)
+        if let Some(l) = step_limit.filter(|&l| scene.window > VOLUME_WINDOW_FRACTION * l) {
+            push(
+                Level::Warn,
+                "coupling window",
+                format!(
+                    "volume interface: Δt^C = {:.3e} s is {:.2} × the penalty's step limit \
+                     2√(w m / k̂) = {l:.3e} s; in the patch test (a regular, nearly undamped \
+                     lattice at ε = 1e14 N/m⁴) windows of 0.55–5.5 × that limit diverged and \
+                     0.28 × did not, while dissipative packings ran stable at 4–12 × (the \
+                     triaxial cube). Watch the energy audit and `volume.<name>.prediction_defect`, \
+                     or use Δt^C ≤ {:.3e} s",
+                    scene.window,
+                    scene.window / l,
+                    VOLUME_WINDOW_FRACTION * l
+                ),
+            );
+        }
     } else if scene.has_dem && scene.has_fem {
         if let (Some(tc), Some((k, which))) = (contact_period(d, f), contact_stiffness(d)) {
             let m = f["interface_node_mass_min"];

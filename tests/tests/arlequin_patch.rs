@@ -225,3 +225,30 @@ fn homogeneous_strain_passes_the_overlap_with_the_consistent_projection() {
     let lumped = run_patch(&dir, "lumped", "1e13", "5 us");
     check(&lumped, "lumped, 1e13", 5e-2, 0.4);
 }
+
+/// `cosim check` warns about a volume interface's window beyond half the penalty's explicit
+/// step limit (where the patch test diverged), and not about the patch test's own windows.
+#[test]
+fn check_warns_about_a_volume_window_near_the_penalty_limit() {
+    let tmp = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(root().join("scenes/arlequin-patch.toml")).unwrap();
+    let check = |name: &str, text: &str| -> String {
+        let scene = write_scene(tmp.path(), name, text);
+        let mut c = cosim();
+        c.arg("check").arg(&scene);
+        let o = c.output().unwrap();
+        String::from_utf8_lossy(&o.stdout).to_string() + &String::from_utf8_lossy(&o.stderr)
+    };
+    let ok = check("ok.toml", &text);
+    assert!(!ok.contains("[warning] coupling window"), "{ok}");
+    assert!(text.contains("penalty = 1e13"));
+    let stiff = check(
+        "stiff.toml",
+        &text.replace("penalty = 1e13", "penalty = 1e14"),
+    );
+    // 5 µs = 1.4 × the limit 3.6 µs at ε = 1e14
+    assert!(
+        stiff.contains("[warning] coupling window: volume interface: Δt^C = 5.000e-6 s is 1.38"),
+        "{stiff}"
+    );
+}
