@@ -1521,14 +1521,24 @@ impl Engine {
         }
         let v = &self.volumes[iface];
         let pos = &self.state.particles.position;
+        // against the continuum's elements where they are now
+        let at: Vec<V3> = positions
+            .chunks(3)
+            .map(|c| V3::new(c[0], c[1], c[2]))
+            .collect();
         for k in 0..v.coupling.len() {
-            let d = v.coupling.drift(k, pos[v.slot[k] as usize]);
+            let x = pos[v.slot[k] as usize];
+            let d = v.coupling.drift(k, x, Some(&at));
             if d > st.settings.max_drift {
                 return Err(verr(format!(
-                    "particle {} left its overlap element by {d:.3} element sizes (max_drift \
-                     {}): the coupling terms built in the reference configuration no longer \
-                     hold (Wellmann §6.3)",
+                    "particle {} at ({:.4e}, {:.4e}, {:.4e}) m left its overlap element by \
+                     {d:.3} element sizes (max_drift {}) relative to the continuum: the \
+                     coupling terms built in the reference configuration no longer hold \
+                     (Wellmann §6.3)",
                     v.coupling.ids()[k],
+                    x.x,
+                    x.y,
+                    x.z,
                     st.settings.max_drift
                 )));
             }

@@ -601,12 +601,24 @@ impl VolumeCoupling {
             .collect()
     }
 
-    /// How far coupled particle k, now at `x`, lies outside the element it was located in
-    /// (reference configuration), in ξ units: 0 inside, 0.5 half an element out; infinite when
-    /// the point cannot be located at all.
-    pub fn drift(&self, k: usize, x: V3) -> f64 {
+    /// How far coupled particle k, now at `x`, lies outside the element it was located in,
+    /// that element with its nodes at `nodes` (the coupling nodes' current positions, in the
+    /// order of the overlap's nodes; the reference ones without), in ξ units: 0 inside, 0.5
+    /// half an element out; infinite when the point cannot be located at all. Against the
+    /// deformed element, since §6.3 assumes small displacements of the particles *relative to
+    /// the continuum*: grains heaving with the continuum beside a pile stay in their element.
+    pub fn drift(&self, k: usize, x: V3, nodes: Option<&[V3]>) -> f64 {
         let e = self.element[k] as usize;
-        let nodes = self.mesh.element_nodes(e, self.nn);
+        let nodes: Vec<[f64; 3]> = match nodes {
+            None => self.mesh.element_nodes(e, self.nn),
+            Some(at) => self.mesh.elements[e * self.nn..(e + 1) * self.nn]
+                .iter()
+                .map(|&a| {
+                    let p = at[a as usize];
+                    [p.x, p.y, p.z]
+                })
+                .collect(),
+        };
         match iso::locate(self.mesh.shape, &nodes, [x.x, x.y, x.z], 0.0) {
             None => f64::INFINITY,
             Some(l) => match self.mesh.shape {
@@ -693,8 +705,8 @@ pub struct VolumeSettings {
     #[serde(default = "default_min_weight")]
     pub min_weight: f64,
     /// How far (in element sizes, ξ/2) a coupled particle may leave the element it was
-    /// located in before the reference-configuration terms are no longer trusted and the run
-    /// stops naming it.
+    /// located in (with the element's nodes where the continuum has them now) before the
+    /// reference-configuration terms are no longer trusted and the run stops naming it.
     #[serde(default = "default_max_drift")]
     pub max_drift: f64,
 }
@@ -1157,9 +1169,25 @@ mod tests {
         let cands = lattice([1, 1, 1], h, 2, 0.0);
         let c = VolumeCoupling::new(mesh, &cands, Projection::Lumped, 1e14).unwrap();
         let x = c.reference(0);
-        assert_eq!(c.drift(0, x), 0.0);
+        assert_eq!(c.drift(0, x, None), 0.0);
         // half an element beyond the face x = 0
-        let d = c.drift(0, V3::new(-0.5 * h, x.y, x.z));
+        let d = c.drift(0, V3::new(-0.5 * h, x.y, x.z), None);
         assert!((d - 0.5).abs() < 1e-12, "{d}");
+        // the same point inside the element moved by −h/2 in x with its nodes
+        let moved: Vec<V3> = c
+            .mesh()
+            .nodes
+            .iter()
+            .map(|p| p - V3::new(0.5 * h, 0.0, 0.0))
+            .collect();
+        assert_eq!(c.drift(0, V3::new(-0.5 * h, x.y, x.z), Some(&moved)), 0.0);
+        // and a particle left behind by an element that moved on by h
+        let on: Vec<V3> = c
+            .mesh()
+            .nodes
+            .iter()
+            .map(|p| p + V3::new(h, 0.0, 0.0))
+            .collect();
+        assert!(c.drift(0, x, Some(&on)) > 0.1);
     }
 }

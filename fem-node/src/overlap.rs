@@ -34,6 +34,10 @@ fn shape_of(kind: ElementKind) -> &'static str {
     }
 }
 
+/// Nodal weights closer than this to 0 or 1 are taken as 0 or 1 (round-off of grid
+/// coordinates at exactly one width from the particle box, or on it).
+const WEIGHT_SNAP: f64 = 1e-9;
+
 /// Distance from `x` to the box [min, max] (0 inside).
 fn box_distance(x: &[f64; 3], min: &[f64; 3], max: &[f64; 3]) -> f64 {
     (0..3)
@@ -102,7 +106,18 @@ pub fn select(mesh: &Mesh, spec: &OverlapSpec) -> Result<Overlap, FemError> {
     let w: Vec<f64> = mesh
         .nodes
         .iter()
-        .map(|x| (1.0 - box_distance(x, min, max) / spec.width).clamp(0.0, 1.0))
+        .map(|x| {
+            // a node one width away, as a grid puts it (0.015 − 0.01 = 0.004999…), is out:
+            // weights within 1e-9 of 0 or 1 snap to them
+            let w = 1.0 - box_distance(x, min, max) / spec.width;
+            if w < WEIGHT_SNAP {
+                0.0
+            } else if w > 1.0 - WEIGHT_SNAP {
+                1.0
+            } else {
+                w
+            }
+        })
         .collect();
     let mut elements = Vec::new();
     let mut kind: Option<ElementKind> = None;
@@ -226,6 +241,33 @@ mod tests {
             total += m.iter().sum::<f64>();
         }
         assert!((total - (3.0 * 4.0 + 0.5 * 4.0)).abs() < 1e-12, "{total}");
+    }
+
+    /// A grid node one width below the particle box by round-off (0.015 − 0.01 = 0.00499…)
+    /// has w = 0, so the layer beneath stays out of the overlap.
+    #[test]
+    fn a_node_one_width_away_by_round_off_is_out() {
+        let mesh = box_mesh(
+            [0.0; 3],
+            [0.005, 0.005, 0.015],
+            [2, 2, 6],
+            ElementKind::Hex8,
+        );
+        let o = select(&mesh, &spec(0.015, 0.005)).unwrap();
+        // two layers (z ∈ [10, 15] mm): nodes at z = 10, 12.5 and 15 mm
+        assert_eq!(o.elements.len(), 2 * 4 * 8);
+        for (i, &n) in o.nodes.iter().enumerate() {
+            let z = mesh.nodes[n as usize][2];
+            let want = ((z - 0.01) / 0.005).clamp(0.0, 1.0);
+            assert!(
+                (o.weights[i] - want).abs() < 1e-12,
+                "z {z}: {}",
+                o.weights[i]
+            );
+            if z < 0.0101 {
+                assert_eq!(o.weights[i], 0.0);
+            }
+        }
     }
 
     #[test]
