@@ -38,6 +38,21 @@ fn shape_of(kind: ElementKind) -> &'static str {
 /// coordinates at exactly one width from the particle box, or on it).
 const WEIGHT_SNAP: f64 = 1e-9;
 
+/// The particles' weight at node `x`, w = max(0, 1 − d/width) with d its distance from the
+/// particle box. A node one width away as a grid puts it (0.015 − 0.01 = 0.004999…) is out,
+/// one on the box's face by round-off (27.5 mm as 11 × 2.5 mm) in: weights within 1e-9 of 0
+/// or 1 snap to them, for the overlap and for `carve` alike.
+fn node_weight(x: &[f64; 3], spec: &OverlapSpec) -> f64 {
+    let w = 1.0 - box_distance(x, &spec.de_region.min, &spec.de_region.max) / spec.width;
+    if w < WEIGHT_SNAP {
+        0.0
+    } else if w > 1.0 - WEIGHT_SNAP {
+        1.0
+    } else {
+        w
+    }
+}
+
 /// Distance from `x` to the box [min, max] (0 inside).
 fn box_distance(x: &[f64; 3], min: &[f64; 3], max: &[f64; 3]) -> f64 {
     (0..3)
@@ -55,11 +70,10 @@ pub fn carve(mesh: &mut Mesh, spec: &OverlapSpec) -> Result<usize, FemError> {
     if !spec.carve {
         return Ok(0);
     }
-    let (min, max) = (&spec.de_region.min, &spec.de_region.max);
     let keep: Vec<bool> = (0..mesh.num_elements())
         .map(|e| {
             !(mesh.element_nodes(e).iter())
-                .all(|&n| box_distance(&mesh.nodes[n as usize], min, max) == 0.0)
+                .all(|&n| node_weight(&mesh.nodes[n as usize], spec) == 1.0)
         })
         .collect();
     let removed = mesh.retain_elements(&keep);
@@ -103,22 +117,7 @@ pub fn select(mesh: &Mesh, spec: &OverlapSpec) -> Result<Overlap, FemError> {
             format!("must be positive (Pa/m²), got {}", spec.penalty),
         ));
     }
-    let w: Vec<f64> = mesh
-        .nodes
-        .iter()
-        .map(|x| {
-            // a node one width away, as a grid puts it (0.015 − 0.01 = 0.004999…), is out:
-            // weights within 1e-9 of 0 or 1 snap to them
-            let w = 1.0 - box_distance(x, min, max) / spec.width;
-            if w < WEIGHT_SNAP {
-                0.0
-            } else if w > 1.0 - WEIGHT_SNAP {
-                1.0
-            } else {
-                w
-            }
-        })
-        .collect();
+    let w: Vec<f64> = mesh.nodes.iter().map(|x| node_weight(x, spec)).collect();
     let mut elements = Vec::new();
     let mut kind: Option<ElementKind> = None;
     for e in 0..mesh.num_elements() {
@@ -268,6 +267,19 @@ mod tests {
                 assert_eq!(o.weights[i], 0.0);
             }
         }
+        // and `carve` takes a layer whose lower face lies on the box by round-off (11 × 2.5 mm
+        // against 27.5 mm)
+        let mut mesh = box_mesh(
+            [0.0; 3],
+            [0.005, 0.005, 0.03],
+            [2, 2, 12],
+            ElementKind::Hex8,
+        );
+        let mut sp = spec(0.0275, 0.005);
+        sp.carve = true;
+        assert_eq!(carve(&mut mesh, &sp).unwrap(), 4);
+        let o = select(&mesh, &sp).unwrap();
+        assert_eq!(o.elements.len(), 2 * 4 * 8);
     }
 
     #[test]
