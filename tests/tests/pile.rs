@@ -49,10 +49,9 @@ fn flat_pile_driven_into_grains_coupled_to_a_continuum() {
     let packing = dir.join("out-pack.toml/dem/particles_final.csv");
     let text = std::fs::read_to_string(root().join("scenes/pile-ci.toml")).unwrap();
     assert!(text.contains(PACKING) && text.contains("vtk_every = 0"));
-    let text = text.replace(PACKING, packing.to_str().unwrap()).replace(
-        "vtk_every = 0",
-        "vtk_every = 0\nfinal_particles = true",
-    );
+    let text = text
+        .replace(PACKING, packing.to_str().unwrap())
+        .replace("vtk_every = 0", "vtk_every = 0\nfinal_particles = true");
     let s = run_scene(&dir, "pile.toml", &text);
     assert_eq!(s["status"], "completed", "{s}");
     let r = |k: &str| -> f64 {
@@ -113,7 +112,10 @@ fn flat_pile_driven_into_grains_coupled_to_a_continuum() {
         pure_de / start.len() as f64,
     );
     assert!(n_down > 5 && n_heave > 20 && n_deep > 100);
-    assert!(down < -1e-3, "grains in the pile's path carried down {down}");
+    assert!(
+        down < -1e-3,
+        "grains in the pile's path carried down {down}"
+    );
     assert!(heave > 2e-4, "surface beside the pile heaves {heave}");
     assert!(deep.abs() < 1e-4, "deep grains nearly still {deep}");
     assert!(pile > 0.0, "the sand resists the pile: {pile}");
