@@ -2,7 +2,7 @@
 //! and report their limits), except the sleeper's later steps, which must name the bed file
 //! the step before writes when it has not been run yet (sleeper-compact.toml reads
 //! sleeper-bed's, sleeper.toml sleeper-compact's; the same for the -poly chain, the
-//! triaxial cells' membrane steps and the triaxial cube's models). (plate-python.toml needs the Python node's
+//! triaxial cells' membrane steps, the triaxial cube's models and the pile). (plate-python.toml needs the Python node's
 //! packages and is run by python_node.rs.)
 
 use cosim_tests::{cosim, root, run};
@@ -47,6 +47,14 @@ fn every_shipped_scene_checks() {
         )),
         "triaxial-cube-de-ci.toml" | "triaxial-cube-dfl-ci.toml" => Some((
             "out/triaxial-cube-pack-ci/dem/particles_final.csv",
+            "dem.particles[0].path",
+        )),
+        "pile-ci.toml" => Some((
+            "out/pile-pack-ci/dem/particles_final.csv",
+            "dem.particles[0].path",
+        )),
+        "pile.toml" => Some((
+            "out/pile-pack/dem/particles_final.csv",
             "dem.particles[0].path",
         )),
         "triaxial-membrane.toml" => Some((
