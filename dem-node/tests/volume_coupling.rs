@@ -292,9 +292,25 @@ fn a_particle_leaving_its_element_stops_the_run_naming_it() {
         .unwrap_err()
         .to_string();
     assert!(
-        err.contains(&format!("particle {id} left its overlap element")),
+        err.contains(&format!("particle {id} at ("))
+            && err.contains("left its overlap element by 0.500 element sizes")
+            && err.contains("relative to the continuum"),
         "{err}"
     );
+    // the same grain with the continuum moved down alongside it has not left its element
+    let moved: Vec<f64> = x
+        .iter()
+        .enumerate()
+        .map(|(i, v)| if i % 3 == 2 { v - 1.5 * MM } else { *v })
+        .collect();
+    let mut e = bed(1.0, 0.0, 1);
+    let iface = attach(&mut e, VolumeSettings::default()).unwrap();
+    let p = e.particles_mut();
+    for k in 0..p.len() {
+        p.position[k].z -= 1.5 * MM;
+    }
+    e.set_volume_kinematics(iface, &moved, &zero, &zero, MotionRule::Quadratic)
+        .unwrap();
 }
 
 #[test]
