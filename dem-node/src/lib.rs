@@ -1521,14 +1521,16 @@ impl Engine {
         }
         let v = &self.volumes[iface];
         let pos = &self.state.particles.position;
-        // against the continuum's elements where they are now
-        let at: Vec<V3> = positions
-            .chunks(3)
-            .map(|c| V3::new(c[0], c[1], c[2]))
-            .collect();
+        let to_v = |a: &[f64]| {
+            a.chunks(3)
+                .map(|c| V3::new(c[0], c[1], c[2]))
+                .collect::<Vec<V3>>()
+        };
+        let new_p = to_v(positions);
         for k in 0..v.coupling.len() {
             let x = pos[v.slot[k] as usize];
-            let d = v.coupling.drift(k, x, Some(&at));
+            // against the continuum's elements where they are now
+            let d = v.coupling.drift(k, x, &new_p);
             if d > st.settings.max_drift {
                 return Err(verr(format!(
                     "particle {} at ({:.4e}, {:.4e}, {:.4e}) m left its overlap element by \
@@ -1543,12 +1545,6 @@ impl Engine {
                 )));
             }
         }
-        let to_v = |a: &[f64]| {
-            a.chunks(3)
-                .map(|c| V3::new(c[0], c[1], c[2]))
-                .collect::<Vec<V3>>()
-        };
-        let new_p = to_v(positions);
         if st.window_steps > 0 {
             let tau = st.window_steps as f64 * self.dt;
             let miss: Vec<V3> = (0..new_p.len())

@@ -523,9 +523,10 @@ fn block_forces_generic<const WEIGHTED: bool>(
             let (mut f, mut t, mut tj) =
                 pair_force_torques(k, ctx, (i, j), d, dist2, k.vel[j], &mut shear[pk - pair0]);
             if WEIGHTED {
-                if let Some(ws) = ctx.weights {
-                    // the weight at the contact point on the line of centres, r_i − δ/2 from
-                    // c_i (`SlotWeights::pair`, our form of 6.29; 1 away from every overlap)
+                // the weight at the contact point on the line of centres, r_i − δ/2 from c_i
+                // (`SlotWeights::pair`, our form of 6.29); 1 away from every overlap, where
+                // the contact point is not needed
+                if let Some(ws) = ctx.weights.filter(|ws| !(ws.outside(i) && ws.outside(j))) {
                     let dist = dist2.sqrt();
                     let at = ((dist + ri - rj) / (2.0 * dist)).clamp(0.0, 1.0);
                     let w = ws.pair(i, j, xi, k.pos[j], xi - d * at);

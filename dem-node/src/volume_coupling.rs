@@ -602,23 +602,21 @@ impl VolumeCoupling {
     }
 
     /// How far coupled particle k, now at `x`, lies outside the element it was located in,
-    /// that element with its nodes at `nodes` (the coupling nodes' current positions, in the
-    /// order of the overlap's nodes; the reference ones without), in ξ units: 0 inside, 0.5
-    /// half an element out; infinite when the point cannot be located at all. Against the
-    /// deformed element, since §6.3 assumes small displacements of the particles *relative to
-    /// the continuum*: grains heaving with the continuum beside a pile stay in their element.
-    pub fn drift(&self, k: usize, x: V3, nodes: Option<&[V3]>) -> f64 {
+    /// that element with its nodes at `nodes` (the coupling nodes' current positions in the
+    /// order of the overlap's nodes; `mesh().nodes` for the reference configuration), in ξ
+    /// units: 0 inside, 0.5 half an element out; infinite when the point cannot be located at
+    /// all. Against the deformed element, since §6.3 assumes small displacements of the
+    /// particles *relative to the continuum*: grains heaving with the continuum beside a pile
+    /// stay in their element.
+    pub fn drift(&self, k: usize, x: V3, nodes: &[V3]) -> f64 {
         let e = self.element[k] as usize;
-        let nodes: Vec<[f64; 3]> = match nodes {
-            None => self.mesh.element_nodes(e, self.nn),
-            Some(at) => self.mesh.elements[e * self.nn..(e + 1) * self.nn]
-                .iter()
-                .map(|&a| {
-                    let p = at[a as usize];
-                    [p.x, p.y, p.z]
-                })
-                .collect(),
-        };
+        let nodes: Vec<[f64; 3]> = self.mesh.elements[e * self.nn..(e + 1) * self.nn]
+            .iter()
+            .map(|&a| {
+                let p = nodes[a as usize];
+                [p.x, p.y, p.z]
+            })
+            .collect();
         match iso::locate(self.mesh.shape, &nodes, [x.x, x.y, x.z], 0.0) {
             None => f64::INFINITY,
             Some(l) => match self.mesh.shape {
@@ -660,6 +658,13 @@ impl SlotWeights {
         (w + g.dot(&(point - x))).clamp(0.0, 1.0)
     }
 
+    /// Whether body `i` lies outside every overlap (w = 1, ∇w = 0): its contacts with another
+    /// such body weigh 1, and a kernel may skip the contact point.
+    #[inline(always)]
+    pub fn outside(&self, i: usize) -> bool {
+        self.weight[i] == 1.0 && self.gradient[i] == V3::zeros()
+    }
+
     /// The weight of a contact between bodies `i` and `j` (centres `xi`, `xj`) at `point`,
     /// the same for both bodies so that the weighted pair forces balance (no spurious (6.15)
     /// force): the weight field at the contact point, w linearised about each coupled body's
@@ -676,9 +681,7 @@ impl SlotWeights {
     pub fn pair(&self, i: usize, j: usize, xi: V3, xj: V3, point: V3) -> f64 {
         let (wi, wj) = (self.weight[i], self.weight[j]);
         let (gi, gj) = (self.gradient[i], self.gradient[j]);
-        let outside_i = wi == 1.0 && gi == V3::zeros();
-        let outside_j = wj == 1.0 && gj == V3::zeros();
-        let w = match (outside_i, outside_j) {
+        let w = match (self.outside(i), self.outside(j)) {
             (true, true) => return 1.0,
             (false, true) => wi + gi.dot(&(point - xi)),
             (true, false) => wj + gj.dot(&(point - xj)),
@@ -1169,9 +1172,10 @@ mod tests {
         let cands = lattice([1, 1, 1], h, 2, 0.0);
         let c = VolumeCoupling::new(mesh, &cands, Projection::Lumped, 1e14).unwrap();
         let x = c.reference(0);
-        assert_eq!(c.drift(0, x, None), 0.0);
+        let reference = &c.mesh().nodes;
+        assert_eq!(c.drift(0, x, reference), 0.0);
         // half an element beyond the face x = 0
-        let d = c.drift(0, V3::new(-0.5 * h, x.y, x.z), None);
+        let d = c.drift(0, V3::new(-0.5 * h, x.y, x.z), reference);
         assert!((d - 0.5).abs() < 1e-12, "{d}");
         // the same point inside the element moved by −h/2 in x with its nodes
         let moved: Vec<V3> = c
@@ -1180,7 +1184,7 @@ mod tests {
             .iter()
             .map(|p| p - V3::new(0.5 * h, 0.0, 0.0))
             .collect();
-        assert_eq!(c.drift(0, V3::new(-0.5 * h, x.y, x.z), Some(&moved)), 0.0);
+        assert_eq!(c.drift(0, V3::new(-0.5 * h, x.y, x.z), &moved), 0.0);
         // and a particle left behind by an element that moved on by h
         let on: Vec<V3> = c
             .mesh()
@@ -1188,6 +1192,6 @@ mod tests {
             .iter()
             .map(|p| p + V3::new(h, 0.0, 0.0))
             .collect();
-        assert!(c.drift(0, x, Some(&on)) > 0.1);
+        assert!(c.drift(0, x, &on) > 0.1);
     }
 }

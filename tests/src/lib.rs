@@ -88,6 +88,17 @@ pub fn csv_column(text: &str, name: &str) -> Vec<String> {
         .collect()
 }
 
+/// The numbers of a CSV column (panics naming a value that is not one).
+pub fn csv_f64(text: &str, name: &str) -> Vec<f64> {
+    csv_column(text, name)
+        .iter()
+        .map(|v| {
+            v.parse()
+                .unwrap_or_else(|e| panic!("{name}: '{v}' is not a number ({e})"))
+        })
+        .collect()
+}
+
 /// Writes a scene into `dir` (with the other files it names copied from `scenes/`).
 pub fn write_scene(dir: &Path, name: &str, text: &str) -> PathBuf {
     let p = dir.join(name);

@@ -86,14 +86,14 @@ fn run_patch(dir: &Path, projection: &str, penalty: &str, window: &str) -> Patch
     let text =
         std::fs::read_to_string(dir.join(format!("out-{name}/dem/particles_final.csv"))).unwrap();
     let (x, y, z) = (
-        csv_column(&text, "x"),
-        csv_column(&text, "y"),
-        csv_column(&text, "z"),
+        csv_f64(&text, "x"),
+        csv_f64(&text, "y"),
+        csv_f64(&text, "z"),
     );
     let mut columns: BTreeMap<(i64, i64), BTreeMap<i64, f64>> = BTreeMap::new();
     let (mut drift, mut misfit) = (0.0f64, 0.0f64);
     for n in 0..x.len() {
-        let p = [&x[n], &y[n], &z[n]].map(|v| v.parse::<f64>().unwrap());
+        let p = [x[n], y[n], z[n]];
         let site = [p[0] - 0.5 * D, p[1] - 0.5 * D, p[2] - Z0].map(|c| (c / D).round() as i64);
         let reference = [
             0.5 * D + site[0] as f64 * D,

@@ -23,13 +23,11 @@ fn out_dir(tmp: &tempfile::TempDir) -> PathBuf {
 /// (x, z, radius) of each grain of a particle file, in file order (= particle id order).
 fn grains(path: &Path) -> Vec<[f64; 3]> {
     let text = std::fs::read_to_string(path).unwrap();
-    let col = |c: &str| -> Vec<f64> {
-        csv_column(&text, c)
-            .iter()
-            .map(|v| v.parse().unwrap())
-            .collect()
-    };
-    let (x, z, r) = (col("x"), col("z"), col("radius"));
+    let (x, z, r) = (
+        csv_f64(&text, "x"),
+        csv_f64(&text, "z"),
+        csv_f64(&text, "radius"),
+    );
     (0..x.len()).map(|i| [x[i], z[i], r[i]]).collect()
 }
 

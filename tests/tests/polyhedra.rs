@@ -7,7 +7,7 @@
 //! `POLY_CHAIN_TRIANGLES` (default 30) and `POLY_CHAIN_SEED` (default 7) change the stones
 //! and the bed for the resolution comparison there.
 
-use cosim_tests::{csv_column, run_scene};
+use cosim_tests::{csv_column, csv_f64, run_scene};
 use std::path::Path;
 
 const MATERIALS: &str = r#"
@@ -215,12 +215,7 @@ fn bed_top(csv: &Path, level: f64, xy: [f64; 4]) -> f64 {
         &std::fs::read_to_string(csv.with_file_name("particles_final.stones.json")).unwrap(),
     )
     .unwrap();
-    let col = |name: &str| -> Vec<f64> {
-        csv_column(&text, name)
-            .iter()
-            .map(|v| v.parse().unwrap())
-            .collect()
-    };
+    let col = |name: &str| csv_f64(&text, name);
     let (x, y, z) = (col("x"), col("y"), col("z"));
     let (qw, qx, qy, qz) = (col("qw"), col("qx"), col("qy"), col("qz"));
     let (stone, size) = (col("stone"), col("size"));
