@@ -15,6 +15,7 @@
 
 use crate::config::CentreBox;
 use crate::hertz_mindlin::V3;
+use crate::narrow::superquadric::Linearised;
 use crate::particles::{Orientation, Particles, SPHERE};
 use crate::triangle_contact::distance_squared;
 use crate::walls::{Mesh, Plane};
@@ -86,6 +87,15 @@ pub struct ShapedContact {
     /// `u16::MAX` where unused: the next step's GJK starts from it (temporal coherence).
     #[serde(default = "no_simplex")]
     pub simplex: [u16; 6],
+    /// A touching superquadric pair's surfaces linearised about their last exact evaluation
+    /// (`Linearised::NONE` otherwise): the next step's search evaluates them while the
+    /// normal stays within their reach.
+    #[serde(default = "no_linearisation")]
+    pub linear: Linearised,
+}
+
+fn no_linearisation() -> Linearised {
+    Linearised::NONE
 }
 
 fn nan() -> f64 {
@@ -107,6 +117,7 @@ impl ShapedContact {
         support: f64::NAN,
         frames: [Orientation::new_unchecked(nalgebra::Quaternion::new(1.0, 0.0, 0.0, 0.0)); 2],
         simplex: [u16::MAX; 6],
+        linear: Linearised::NONE,
     };
 
     pub fn touching(&self) -> bool {
@@ -128,6 +139,7 @@ impl ShapedContact {
                 let s = self.simplex;
                 [s[1], s[0], s[3], s[2], s[5], s[4]]
             },
+            linear: self.linear.swapped(),
         }
     }
 }

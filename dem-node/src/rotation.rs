@@ -60,14 +60,17 @@ pub fn angular_momentum(q: &UnitQuaternion<f64>, omega: &V3, inertia: &V3) -> V3
 fn rotation(omega: &V3, tau: f64) -> Quaternion<f64> {
     let x = 0.5 * omega.norm() * tau;
     let x2 = x * x;
-    let sinc = if x2 < 1e-6 {
-        // sin(x)/x to its x⁶ term: the next term is below 1e-24 relative here
-        1.0 - x2 / 6.0 * (1.0 - x2 / 20.0 * (1.0 - x2 / 42.0))
+    let (sinc, cos) = if x2 < 1e-6 {
+        // sin(x)/x and cos x to their x⁶ terms: the next terms are below 1e-24 here
+        (
+            1.0 - x2 / 6.0 * (1.0 - x2 / 20.0 * (1.0 - x2 / 42.0)),
+            1.0 - x2 / 2.0 * (1.0 - x2 / 12.0 * (1.0 - x2 / 30.0)),
+        )
     } else {
-        x.sin() / x
+        (x.sin() / x, x.cos())
     };
     let s = 0.5 * tau * sinc;
-    Quaternion::new(x.cos(), s * omega.x, s * omega.y, s * omega.z)
+    Quaternion::new(cos, s * omega.x, s * omega.y, s * omega.z)
 }
 
 /// `ω(R(ω', τ) qⁿ, H)`: the angular velocity (3.38) at the trial orientation (3.39)

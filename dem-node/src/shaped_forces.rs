@@ -17,9 +17,7 @@ use crate::materials::{PairParams, ShapedDamping};
 use crate::narrow::polyhedron::{
     detect_pair_warm, detect_plane, detect_triangle, Core, PolyBody, PolyDetection, POINT_CORE,
 };
-use crate::narrow::superquadric::{
-    detect, detect_tracked, Detection, SearchSettings, SearchStats, SqBody,
-};
+use crate::narrow::superquadric::{search, track, Detection, SearchSettings, SearchStats, SqBody};
 use crate::narrow::superquadric_patch::patch_contact;
 use crate::particles::{Particles, Shape};
 use crate::resolve_forces::ForceContext;
@@ -40,8 +38,9 @@ const RADIUS_FLOOR: f64 = 1e-2;
 const RADIUS_CEILING: f64 = 10.0;
 
 /// A body as the narrow phase and the law see it.
-struct BodyView {
-    shape: Superquadric,
+struct BodyView<'a> {
+    /// Its template's superquadric, or a sphere's (made in the caller's slot).
+    shape: &'a Superquadric,
     position: V3,
     rotation: Matrix3<f64>,
     velocity: V3,
@@ -51,13 +50,16 @@ struct BodyView {
     radius_range: (f64, f64),
 }
 
-fn body(p: &Particles, k: usize) -> BodyView {
+/// Body `k` as the narrow phase sees it; a sphere's superquadric is made in `slot`.
+fn body<'a>(p: &'a Particles, k: usize, slot: &'a mut Option<Superquadric>) -> BodyView<'a> {
     let shape = match p.template(k).and_then(|t| t.superquadric()) {
-        Some(s) => *s,
+        Some(s) => s,
         // a sphere is the superquadric with equal semi-axes and ε = 1 (exact in the search);
         // polyhedra never come here (`pair_contact` sends them to `poly_pair_contact`)
-        None => Superquadric::new(V3::repeat(p.radius[k]), 1.0, 1.0)
-            .expect("a particle radius is positive"),
+        None => slot.insert(
+            Superquadric::new(V3::repeat(p.radius[k]), 1.0, 1.0)
+                .expect("a particle radius is positive"),
+        ),
     };
     let smallest = shape.radii.min();
     BodyView {
@@ -98,8 +100,33 @@ struct Geometry {
     k2: [[f64; 2]; 2],
 }
 
+/// What the law gives for a touching contact.
+struct Response {
+    /// Tangential force and total force on body 1.
+    tangential: V3,
+    force: V3,
+    /// γ of (3.19) used.
+    stiffness: f64,
+}
+
+impl Response {
+    /// The record of a touching contact of geometry `g`.
+    fn record(self, g: &Geometry) -> ShapedContact {
+        ShapedContact {
+            normal: g.normal,
+            tangential: self.tangential,
+            overlap: g.overlap,
+            point: g.point,
+            force: self.force,
+            stiffness: self.stiffness,
+            ..ShapedContact::NONE
+        }
+    }
+}
+
 /// Elliptic Hertz + Mindlin + Coulomb (W 3.13–3.31) on body 1; `d_dot` is the velocity of
-/// body 2's contact point relative to body 1's, `m_eff` the effective mass.
+/// body 2's contact point relative to body 1's, `m_eff` the effective mass. `None` where the
+/// surfaces have no curvature at all (unreachable with the radius bounds).
 fn law(
     g: &Geometry,
     params: &PairParams,
@@ -108,11 +135,9 @@ fn law(
     old: &ShapedContact,
     dt: f64,
     hold: bool,
-) -> ShapedContact {
+) -> Option<Response> {
     let rel = relative_curvature(g.k1, g.k2);
-    let Some(mut ell) = hertz_ellipse(rel.a, rel.b) else {
-        return ShapedContact::NONE; // no curvature at all: unreachable with the radius bounds
-    };
+    let mut ell = hertz_ellipse(rel.a, rel.b)?;
     if hold && old.touching() {
         // γ from the first touch (StiffnessUpdate::FirstTouch): f = −∂W/∂x exactly
         ell.gamma = old.stiffness;
@@ -155,15 +180,11 @@ fn law(
         f_n,
     )
     .force;
-    ShapedContact {
-        normal: g.normal,
+    Some(Response {
         tangential: ft,
-        overlap: delta,
-        point: g.point,
         force: -g.normal * f_n + ft, // (3.13)
         stiffness: ell.gamma,
-        ..ShapedContact::NONE
-    }
+    })
 }
 
 /// True if the separating plane of the pair's last evaluation still separates it (*not in
@@ -191,81 +212,109 @@ fn still_separated(p: &Particles, i: usize, j: usize, x21: &V3, old: &ShapedCont
     bound > 1e-12 * (p.radius[i] + p.radius[j])
 }
 
-/// Evaluates one shaped pair; the second body is seen at its image across a periodic cell's
-/// faces shifted by `image` = (d, ḋ) (zero inside the cell).
+/// Evaluates one shaped pair into its record `c` (which holds the last step's); the second
+/// body is seen at its image across a periodic cell's faces shifted by `image` = (d, ḋ)
+/// (zero inside the cell). In place: a record is several hundred bytes, most of which a
+/// touching pair's step leaves as they are.
 fn pair_contact(
     p: &Particles,
     ctx: &ForceContext,
     [i, j]: [u32; 2],
     image: (V3, V3),
-    old: &ShapedContact,
-) -> ShapedContact {
+    c: &mut ShapedContact,
+) {
     let (i, j) = (i as usize, j as usize);
     let x21 = p.position[j] + image.0 - p.position[i];
     // bounding spheres apart: no contact, and nothing to evaluate (the last normal stays
     // the warm start)
     let reach = p.radius[i] + p.radius[j];
     if x21.norm_squared() >= reach * reach {
-        return ShapedContact {
-            normal: old.normal,
+        *c = ShapedContact {
+            normal: c.normal,
             ..ShapedContact::NONE
         };
+        return;
     }
-    if still_separated(p, i, j, &x21, old) {
-        return *old;
+    if still_separated(p, i, j, &x21, c) {
+        return;
     }
     if p.polyhedron(i).is_some() || p.polyhedron(j).is_some() {
-        return poly_pair_contact(p, ctx, [i, j], image, &x21, old);
+        *c = poly_pair_contact(p, ctx, [i, j], image, &x21, c);
+        return;
     }
-    let (a, mut b) = (body(p, i), body(p, j));
+    let old = &*c;
+    let (mut slot_a, mut slot_b) = (None, None);
+    let (a, mut b) = (body(p, i, &mut slot_a), body(p, j, &mut slot_b));
     b.position += image.0;
     b.velocity += image.1;
     let (ba, bb) = (
         SqBody {
-            shape: &a.shape,
+            shape: a.shape,
             position: a.position,
             rotation: a.rotation,
         },
         SqBody {
-            shape: &b.shape,
+            shape: b.shape,
             position: b.position,
             rotation: b.rotation,
         },
     );
     let mut stats = SearchStats::default();
     let settings = SearchSettings::default();
+    let mut linear = old.linear;
     let found = if old.touching() {
-        detect_tracked(&ba, &bb, old.normal, old.overlap, &settings, &mut stats)
+        track(
+            &ba,
+            &bb,
+            old.normal,
+            old.overlap,
+            &mut linear,
+            &settings,
+            &mut stats,
+        )
     } else {
         let guess = (old.normal != V3::zeros()).then_some(old.normal);
-        detect(&ba, &bb, guess, &settings, &mut stats)
+        search(&ba, &bb, guess, &settings, &mut stats, &mut linear)
     };
-    let c = match found {
+    let sq = match found {
         Detection::Separated { normal, gap } => {
-            return ShapedContact {
+            *c = ShapedContact {
                 normal,
                 support: normal.dot(&x21) - gap,
                 frames: [p.orientation[i], p.orientation[j]],
                 ..ShapedContact::NONE
-            }
+            };
+            return;
         }
-        Detection::Contact(c) => c,
+        Detection::Contact(sq) => sq,
     };
-    let point = (c.p1 + c.p2) * 0.5;
+    let point = (sq.p1 + sq.p2) * 0.5;
     let g = Geometry {
-        normal: c.normal,
-        overlap: c.overlap,
+        normal: sq.normal,
+        overlap: sq.overlap,
         point,
-        t1: c.t1,
-        t2: c.t2,
-        k1: curvature(c.radii1, a.radius_range),
-        k2: curvature(c.radii2, b.radius_range),
+        t1: sq.t1,
+        t2: sq.t2,
+        k1: curvature(sq.radii1, a.radius_range),
+        k2: curvature(sq.radii2, b.radius_range),
     };
     let d_dot = (b.velocity + b.omega.cross(&(point - b.position)))
         - (a.velocity + a.omega.cross(&(point - a.position)));
     let params = ctx.materials.pair(p.material[i], p.material[j]);
     let m_eff = a.mass * b.mass / (a.mass + b.mass);
-    law(&g, params, &d_dot, m_eff, old, ctx.dt, ctx.hold_stiffness)
+    match law(&g, params, &d_dot, m_eff, old, ctx.dt, ctx.hold_stiffness) {
+        Some(r) => {
+            c.normal = g.normal;
+            c.tangential = r.tangential;
+            c.overlap = g.overlap;
+            c.point = g.point;
+            c.force = r.force;
+            c.stiffness = r.stiffness;
+            c.support = f64::NAN;
+            c.linear = linear;
+        }
+        None => *c = ShapedContact::NONE,
+    }
 }
 
 /// Evaluates a shaped body's contact with plane `w`: the deepest point of the body is its
@@ -281,7 +330,8 @@ fn plane_contact(
     if p.polyhedron(k).is_some() {
         return poly_plane_contact(p, ctx, k, pl, old);
     }
-    let a = body(p, k);
+    let mut slot = None;
+    let a = body(p, k, &mut slot);
     let c = -pl.normal;
     let n_body = a.rotation.tr_mul(&c);
     let sp = a.shape.point_from_normal(&n_body);
@@ -310,6 +360,7 @@ fn plane_contact(
     let d_dot = pl.velocity - (a.velocity + a.omega.cross(&(point - a.position)));
     let params = ctx.materials.pair(p.material[k], pl.material);
     law(&g, params, &d_dot, a.mass, old, ctx.dt, ctx.hold_stiffness)
+        .map_or(ShapedContact::NONE, |r| r.record(&g))
 }
 
 /// Evaluates a shaped body's contact with one (mesh, patch) group of triangle candidates:
@@ -353,7 +404,8 @@ fn mesh_contact(
         return poly_mesh_contact(p, ctx, group, old);
     }
     let vertices: Vec<V3> = nodes.iter().map(|&n| mesh.positions[n as usize]).collect();
-    let a = body(p, k);
+    let mut slot = None;
+    let a = body(p, k, &mut slot);
     // Walls are two-sided (as for spheres): the patch's front is the side of the body's
     // centre, judged at the nearest triangle; seen from behind, its triangles turn over.
     let nearest = tris
@@ -379,7 +431,7 @@ fn mesh_contact(
     }
     // the stored normal points from the body to the wall, the search's from the wall
     let warm = (old.normal != V3::zeros()).then_some(-old.normal);
-    let Some(pc) = patch_contact(&a.shape, a.position, &a.rotation, &vertices, &tris, warm) else {
+    let Some(pc) = patch_contact(a.shape, a.position, &a.rotation, &vertices, &tris, warm) else {
         return none;
     };
     let c = -pc.normal;
@@ -406,7 +458,8 @@ fn mesh_contact(
     });
     let d_dot = wall_velocity - (a.velocity + a.omega.cross(&(point - a.position)));
     let params = ctx.materials.pair(p.material[k], mesh.material);
-    let contact = law(&g, params, &d_dot, a.mass, old, ctx.dt, ctx.hold_stiffness);
+    let contact = law(&g, params, &d_dot, a.mass, old, ctx.dt, ctx.hold_stiffness)
+        .map_or(ShapedContact::NONE, |r| r.record(&g));
     let record = MeshForceRecord {
         triangle: tri,
         bary,
@@ -687,7 +740,7 @@ pub fn shaped_forces(lists: &mut NeighbourLists, p: &mut Particles, ctx: &ForceC
             .enumerate()
             .for_each(|(k, (c, &pair))| {
                 let image = image_of(ctx, images, k);
-                *c = pair_contact(pv, ctx, pair, image, c)
+                pair_contact(pv, ctx, pair, image, c)
             });
         lists
             .shaped_wall_contacts
@@ -866,7 +919,7 @@ mod tests {
             }
             let detect_now = |p: &Particles| {
                 let mut st = SearchStats::default();
-                detect(
+                crate::narrow::superquadric::detect(
                     &view(p, 0),
                     &view(p, 1),
                     None,

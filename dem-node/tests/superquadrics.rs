@@ -720,3 +720,121 @@ fn superquadric_dashpots_quasi_static_and_viscoelastic() {
     let ratio = (1.0 - fast) / (1.0 - slow);
     assert!((ratio - 10f64.powf(0.2)).abs() < 0.15, "{ratio}");
 }
+
+/// The linearised surfaces of a tracked pair (`Linearised`, *not in thesis*): over many steps
+/// of small random turns and shifts of touching pairs, the tracked search on them gives the
+/// exact tracked search's overlap, normal and contact points to within the search tolerance,
+/// while it evaluates the exact surfaces only where the normal left the map's reach (it
+/// measures the map's error each time and sizes the reach from it).
+#[test]
+fn linearised_tracking_matches_exact_tracking() {
+    use dem::generate::{random_orientation, random_unit_vector, SplitMix64};
+    use dem::narrow::superquadric::{
+        detect, detect_tracked, track, Detection, Linearised, SearchSettings, SearchStats, SqBody,
+    };
+    let settings = SearchSettings::default();
+    let mut rng = SplitMix64::new(2026);
+    // (exponent range, largest turn per step in rad): a creeping bed (W's sand), a flowing
+    // one, and sharp bodies
+    for (eps, turn) in [((0.6, 1.2), 1e-6), ((0.6, 1.2), 1e-4), ((0.3, 1.7), 1e-6)] {
+        let (mut steps, mut exact_evaluations) = (0u32, 0u32);
+        let (mut worst_overlap, mut worst_normal, mut worst_point) = (0.0f64, 0.0f64, 0.0f64);
+        for _ in 0..30 {
+            let mut draw = || {
+                let r = V3::new(
+                    0.3 + 0.3 * rng.uniform(),
+                    0.3 + 0.3 * rng.uniform(),
+                    0.3 + 0.3 * rng.uniform(),
+                ) * 1e-3;
+                let e = |u: f64| eps.0 + (eps.1 - eps.0) * u;
+                sq([r.x, r.y, r.z], e(rng.uniform()), e(rng.uniform()))
+            };
+            let (s1, s2) = (draw(), draw());
+            let scale = 0.5 * (s1.bounding_radius() + s2.bounding_radius());
+            let target = 1e-3 * scale;
+            let mut q = [random_orientation(&mut rng), random_orientation(&mut rng)];
+            let axis = random_unit_vector(&mut rng);
+            let mut x2 = axis * (s1.bounding_radius() + s2.bounding_radius());
+            let bodies = |q: &[Orientation; 2], x2: V3| {
+                [
+                    SqBody {
+                        shape: &s1,
+                        position: V3::zeros(),
+                        rotation: q[0].to_rotation_matrix().into_inner(),
+                    },
+                    SqBody {
+                        shape: &s2,
+                        position: x2,
+                        rotation: q[1].to_rotation_matrix().into_inner(),
+                    },
+                ]
+            };
+            // bring the pair into contact with an overlap ≈ target
+            let mut start = None;
+            for _ in 0..50 {
+                let [b1, b2] = bodies(&q, x2);
+                let st = &mut SearchStats::default();
+                match detect(&b1, &b2, None, &settings, st) {
+                    Detection::Separated { normal, gap } if gap.is_finite() => {
+                        x2 -= normal * (gap + target)
+                    }
+                    Detection::Contact(c) if (c.overlap - target).abs() < 0.5 * target => {
+                        start = Some(c);
+                        break;
+                    }
+                    Detection::Contact(c) => x2 += c.normal * (c.overlap - target),
+                    Detection::Separated { .. } => x2 -= axis * target,
+                }
+            }
+            let start = start.expect("the pair comes into contact");
+            let (mut exact_prev, mut lin_prev) = ((start.normal, start.overlap), start);
+            let mut lin = Linearised::NONE;
+            for _ in 0..300 {
+                for qk in q.iter_mut() {
+                    let a = nalgebra::Unit::new_normalize(random_unit_vector(&mut rng));
+                    *qk = Orientation::from_axis_angle(&a, turn * rng.uniform()) * *qk;
+                }
+                // a random shift of the order of the turn, and back towards the target overlap
+                x2 += random_unit_vector(&mut rng) * (turn * scale * rng.uniform())
+                    + lin_prev.normal * (lin_prev.overlap - target) * 0.1;
+                let [b1, b2] = bodies(&q, x2);
+                let st = &mut SearchStats::default();
+                let exact = detect_tracked(&b1, &b2, exact_prev.0, exact_prev.1, &settings, st);
+                let st = &mut SearchStats::default();
+                let tracked = track(
+                    &b1,
+                    &b2,
+                    lin_prev.normal,
+                    lin_prev.overlap,
+                    &mut lin,
+                    &settings,
+                    st,
+                );
+                let (Detection::Contact(e), Detection::Contact(l)) = (exact, tracked) else {
+                    panic!("a pair held in contact separated: {exact:?} / {tracked:?}");
+                };
+                steps += 1;
+                exact_evaluations += st.exact_evaluations;
+                worst_overlap = worst_overlap.max((l.overlap - e.overlap).abs() / scale);
+                worst_normal = worst_normal.max((l.normal - e.normal).norm());
+                worst_point =
+                    worst_point.max((l.p1 - e.p1).norm().max((l.p2 - e.p2).norm()) / scale);
+                exact_prev = (e.normal, e.overlap);
+                lin_prev = l;
+            }
+        }
+        let per_step = exact_evaluations as f64 / steps as f64;
+        println!(
+            "exponents {eps:?}, turns ≤ {turn:e} rad a step: {per_step:.3} exact evaluations \
+             a step; worst |Δδ|/scale {worst_overlap:.1e}, |Δc| {worst_normal:.1e}, \
+             |Δp|/scale {worst_point:.1e}"
+        );
+        // the search tolerance is 1e-10 × scale in |d_t|
+        assert!(worst_overlap < 1e-10, "{worst_overlap:e}");
+        assert!(worst_point < 1e-8, "{worst_point:e}");
+        assert!(worst_normal < 1e-8, "{worst_normal:e}");
+        if turn <= 1e-6 {
+            assert!(per_step < 0.5, "{per_step}");
+        }
+    }
+}

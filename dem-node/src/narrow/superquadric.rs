@@ -26,8 +26,9 @@
 //! search + Nelder–Mead; fixed directions keep the result deterministic).
 
 use crate::hertz_mindlin::V3;
-use crate::shape::superquadric::{hypot_fast, tangent_basis, Superquadric};
+use crate::shape::superquadric::{hypot_fast, sym2_eigen, tangent_basis, Superquadric};
 use nalgebra::Matrix3;
+use serde::{Deserialize, Serialize};
 
 /// A superquadric body placed in space: centre and rotation T (body → global).
 #[derive(Debug, Clone, Copy)]
@@ -101,6 +102,83 @@ pub struct SearchStats {
     pub not_converged: u32,
     /// No start converged to an accepted minimum: the best iterate was returned.
     pub failed: bool,
+    /// Evaluations on the exact surfaces with the Jacobian (the others of a tracked pair were
+    /// on its linearised surfaces, [`Linearised`]; the restarts' samples are not counted).
+    pub exact_evaluations: u32,
+}
+
+/// The two surfaces of a tracked pair linearised about their last exact evaluation (*not in
+/// thesis*; a temporal coherence of the surface points, beside W's of the normal, 3.60–3.61).
+///
+/// In its body frame each surface point is X(n) for the body-frame normal n, and the exact
+/// evaluation gives X(n_b) and the Jacobian J = ∂X/∂n there (symmetric, J n_b = 0, so
+/// J = E B Eᵀ with E = `tangent_basis(n_b)` and B its 2×2 tangent block). For unit n near n_b,
+/// X(n) ≈ X(n_b) + J n (J n_b = 0), with an error ≈ C |n − n_b|². While the bodies turn and the
+/// normal moves by less than `reach` in both body frames, the search evaluates this linear map
+/// (a few products instead of ten `exp`/`ln` per body); beyond it, or where the linear surfaces
+/// separate (a separation must be proven on the exact ones), it evaluates exactly and
+/// linearises anew. Each re-linearisation measures the old map's error at the new normal, so
+/// C is known and `reach` = |n − n_b| √(tol/(4 err)) keeps the error below a quarter of the
+/// search tolerance (at most 4× the last reach; the first from the largest principal radius
+/// ρ of the tangent block, whose term is ½ ρ θ² for a sphere).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Linearised {
+    /// Body-frame unit normals n_b of bodies 1 and 2 at the last exact evaluation.
+    pub normals: [V3; 2],
+    /// Their surface points X(n_b).
+    pub points: [V3; 2],
+    /// Tangent blocks [a, b, c] of J in `tangent_basis(n_b)`.
+    pub blocks: [[f64; 3]; 2],
+    /// Largest |n − n_b| (both bodies) at which the linear map is used; 0: none.
+    pub reach: f64,
+}
+
+impl Linearised {
+    pub const NONE: Linearised = Linearised {
+        normals: [V3::new(0.0, 0.0, 0.0); 2],
+        points: [V3::new(0.0, 0.0, 0.0); 2],
+        blocks: [[0.0; 3]; 2],
+        reach: 0.0,
+    };
+
+    /// The same linearisation with the bodies swapped.
+    pub fn swapped(&self) -> Linearised {
+        Linearised {
+            normals: [self.normals[1], self.normals[0]],
+            points: [self.points[1], self.points[0]],
+            blocks: [self.blocks[1], self.blocks[0]],
+            reach: self.reach,
+        }
+    }
+
+    /// J n of body k (J = E B Eᵀ).
+    #[inline]
+    fn jacobian_times(&self, k: usize, n: &V3) -> V3 {
+        let (e1, e2) = tangent_basis(&self.normals[k]);
+        let (u, v) = (e1.dot(n), e2.dot(n));
+        let b = &self.blocks[k];
+        e1 * (b[0] * u + b[1] * v) + e2 * (b[1] * u + b[2] * v)
+    }
+
+    /// The tangent block of J_k in the body-frame tangents (u, v).
+    #[inline]
+    fn block_in(&self, k: usize, u: &V3, v: &V3) -> [f64; 3] {
+        let (e1, e2) = tangent_basis(&self.normals[k]);
+        let b = &self.blocks[k];
+        let (u1, u2, v1, v2) = (e1.dot(u), e2.dot(u), e1.dot(v), e2.dot(v));
+        let q = |x1: f64, x2: f64, y1: f64, y2: f64| {
+            x1 * (b[0] * y1 + b[1] * y2) + x2 * (b[1] * y1 + b[2] * y2)
+        };
+        [q(u1, u2, u1, u2), q(u1, u2, v1, v2), q(v1, v2, v1, v2)]
+    }
+}
+
+/// An exact evaluation's body-frame data: normals, surface points, Jacobian tangent blocks.
+#[derive(Clone, Copy)]
+struct Sample {
+    normals: [V3; 2],
+    points: [V3; 2],
+    blocks: [[f64; 3]; 2],
 }
 
 /// One evaluation at direction c, relative to x1 (no loss of digits far from the origin).
@@ -130,6 +208,18 @@ impl Eval {
 
 #[inline]
 fn evaluate(b1: &SqBody, b2: &SqBody, x21: &V3, c: V3, with_jacobian: bool) -> Eval {
+    sampled(b1, b2, x21, c, with_jacobian).0
+}
+
+/// [`evaluate`], with the body-frame data of an exact evaluation with the Jacobian.
+#[inline]
+fn sampled(
+    b1: &SqBody,
+    b2: &SqBody,
+    x21: &V3,
+    c: V3,
+    with_jacobian: bool,
+) -> (Eval, Option<Sample>) {
     let n1 = b1.rotation.tr_mul(&c);
     let n2 = -b2.rotation.tr_mul(&c);
     let (t1, t2) = tangent_basis(&c);
@@ -138,28 +228,164 @@ fn evaluate(b1: &SqBody, b2: &SqBody, x21: &V3, c: V3, with_jacobian: bool) -> E
         let (ju, jv) = (j * u, j * v);
         [u.dot(&ju), 0.5 * (u.dot(&jv) + v.dot(&ju)), v.dot(&jv)]
     };
-    let (x1, x2, g1, g2) = if with_jacobian {
+    let (x1, x2, g1, g2, sample) = if with_jacobian {
         let s1 = b1.shape.point_from_normal(&n1);
         let s2 = b2.shape.point_from_normal(&n2);
+        let body_block = |n: &V3, j: &Matrix3<f64>| {
+            let (e1, e2) = tangent_basis(n);
+            let (je1, je2) = (j * e1, j * e2);
+            [
+                e1.dot(&je1),
+                0.5 * (e1.dot(&je2) + e2.dot(&je1)),
+                e2.dot(&je2),
+            ]
+        };
         (
             s1.x,
             s2.x,
             block(&b1.rotation, &s1.jacobian),
             block(&b2.rotation, &s2.jacobian),
+            Some(Sample {
+                normals: [n1, n2],
+                points: [s1.x, s2.x],
+                blocks: [body_block(&n1, &s1.jacobian), body_block(&n2, &s2.jacobian)],
+            }),
         )
     } else {
-        (b1.shape.point(&n1), b2.shape.point(&n2), [0.0; 3], [0.0; 3])
+        (
+            b1.shape.point(&n1),
+            b2.shape.point(&n2),
+            [0.0; 3],
+            [0.0; 3],
+            None,
+        )
     };
     let p1 = b1.rotation * x1;
     let p2 = x21 + b2.rotation * x2;
-    Eval {
-        c,
-        d: p2 - p1,
-        p1,
-        p2,
-        t: (t1, t2),
-        g1,
-        g2,
+    (
+        Eval {
+            c,
+            d: p2 - p1,
+            p1,
+            p2,
+            t: (t1, t2),
+            g1,
+            g2,
+        },
+        sample,
+    )
+}
+
+/// The evaluations of one search: exact, or on the linearised surfaces of [`Linearised`]
+/// where they are within reach.
+struct Surfaces<'a, 'b> {
+    b1: &'b SqBody<'a>,
+    b2: &'b SqBody<'a>,
+    x21: V3,
+    lin: &'b mut Linearised,
+    /// The search tolerance (a length): the linearisation keeps its error below a quarter.
+    tol: f64,
+    /// The count of exact evaluations ([`SearchStats::exact_evaluations`]).
+    exact: &'b mut u32,
+}
+
+impl Surfaces<'_, '_> {
+    /// The evaluation at c: linearised if within reach and not separating, else exact (and
+    /// the surfaces are linearised anew about it).
+    fn eval(&mut self, c: V3) -> Eval {
+        if self.lin.reach > 0.0 {
+            if let Some(e) = self.linear(c) {
+                if e.s() <= 0.0 {
+                    return e;
+                }
+            }
+        }
+        *self.exact += 1;
+        let (e, sample) = sampled(self.b1, self.b2, &self.x21, c, true);
+        if let Some(sample) = &sample {
+            self.relinearise(sample);
+        }
+        e
+    }
+
+    fn linear(&self, c: V3) -> Option<Eval> {
+        let (b1, b2, lin) = (self.b1, self.b2, &*self.lin);
+        let n1 = b1.rotation.tr_mul(&c);
+        let n2 = -b2.rotation.tr_mul(&c);
+        let r2 = lin.reach * lin.reach;
+        if (n1 - lin.normals[0]).norm_squared() > r2 || (n2 - lin.normals[1]).norm_squared() > r2 {
+            return None;
+        }
+        let x1 = lin.points[0] + lin.jacobian_times(0, &n1);
+        let x2 = lin.points[1] + lin.jacobian_times(1, &n2);
+        let (t1, t2) = tangent_basis(&c);
+        let g = |k: usize, rot: &Matrix3<f64>| lin.block_in(k, &rot.tr_mul(&t1), &rot.tr_mul(&t2));
+        let p1 = b1.rotation * x1;
+        let p2 = self.x21 + b2.rotation * x2;
+        Some(Eval {
+            c,
+            d: p2 - p1,
+            p1,
+            p2,
+            t: (t1, t2),
+            g1: g(0, &b1.rotation),
+            g2: g(1, &b2.rotation),
+        })
+    }
+
+    /// Linearises about an exact sample; the reach from the old map's measured error at the
+    /// sample's normals, or, without one, from the largest principal radius.
+    fn relinearise(&mut self, s: &Sample) {
+        let old = *self.lin;
+        let new = Linearised {
+            normals: s.normals,
+            points: s.points,
+            blocks: s.blocks,
+            reach: 0.0,
+        };
+        let mut reach = f64::INFINITY;
+        // no old map, or one linearised far away (a restart, a jump): C is not known
+        let mut unknown = old.reach <= 0.0;
+        let mut measured = false;
+        if !unknown {
+            for k in 0..2 {
+                let theta = (s.normals[k] - old.normals[k]).norm();
+                // only a move well inside the quadratic range measures C; round-off makes
+                // the estimate of a tiny move larger (a smaller reach: on the safe side)
+                if theta >= 0.1 {
+                    unknown = true;
+                } else if theta > 0.0 {
+                    let predicted = old.points[k] + old.jacobian_times(k, &s.normals[k]);
+                    let err = (s.points[k] - predicted).norm();
+                    if err > 0.0 {
+                        reach = reach.min(theta * (self.tol / (4.0 * err)).sqrt());
+                    }
+                    measured = true;
+                }
+            }
+        }
+        if unknown {
+            reach = f64::INFINITY;
+            for b in &s.blocks {
+                let (_, hi, ..) = sym2_eigen(b[0], b[1], b[2]);
+                if hi > 0.0 {
+                    reach = reach.min((self.tol / (2.0 * hi)).sqrt());
+                }
+            }
+        } else if measured {
+            reach = reach.min(4.0 * old.reach);
+        } else {
+            // re-evaluated where it was linearised (a separation to prove): nothing learnt
+            reach = old.reach;
+        }
+        *self.lin = Linearised {
+            reach: if reach.is_finite() {
+                reach.min(1e-2)
+            } else {
+                0.0
+            },
+            ..new
+        };
     }
 }
 
@@ -171,7 +397,18 @@ pub(crate) fn rotate_normal(c: &V3, t: &(V3, V3), da: [f64; 2]) -> V3 {
         return *c;
     }
     let dir = (t.0 * da[0] + t.1 * da[1]) / angle;
-    (c * angle.cos() + dir * angle.sin()).normalize()
+    // a tracked contact turns by ~1e-6 rad a step: the series are exact to round-off there
+    // and cheaper than the library's sin and cos
+    let (sin, cos) = if angle < 1e-3 {
+        let a2 = angle * angle;
+        (
+            angle * (1.0 - a2 / 6.0 * (1.0 - a2 / 20.0)),
+            1.0 - a2 / 2.0 * (1.0 - a2 / 12.0),
+        )
+    } else {
+        angle.sin_cos()
+    };
+    (c * cos + dir * sin).normalize()
 }
 
 /// The step Δα = (G_t + sI)⁻¹ d_t of the common-normal iteration, G_t = [[g0, g1], [g1, g2]],
@@ -199,18 +436,10 @@ enum Run {
     NotConverged(Eval),
 }
 
-fn newton(
-    b1: &SqBody,
-    b2: &SqBody,
-    x21: &V3,
-    c0: V3,
-    tol: f64,
-    max_iter: u32,
-    iterations: &mut u32,
-) -> Run {
+fn newton(surf: &mut Surfaces, c0: V3, tol: f64, max_iter: u32, iterations: &mut u32) -> Run {
     // one evaluation with the Jacobian blocks: they cost arithmetic only, the surface points
     // cost the transcendental functions, which a separate test would pay twice
-    let mut e = evaluate(b1, b2, x21, c0, true);
+    let mut e = surf.eval(c0);
     if e.s() > 0.0 {
         return Run::Separated(e.c, e.s());
     }
@@ -240,7 +469,7 @@ fn newton(
             let ok = step.is_some();
             let da = step.unwrap_or([0.0, 0.0]);
             let cn = rotate_normal(&e.c, &e.t, da);
-            let trial = evaluate(b1, b2, x21, cn, true);
+            let trial = surf.eval(cn);
             if trial.s() > 0.0 {
                 return Run::Separated(cn, trial.s());
             }
@@ -338,24 +567,57 @@ pub fn detect_tracked(
     settings: &SearchSettings,
     stats: &mut SearchStats,
 ) -> Detection {
+    track(
+        b1,
+        b2,
+        normal,
+        overlap,
+        &mut Linearised::default(),
+        settings,
+        stats,
+    )
+}
+
+/// [`detect_tracked`] on the pair's linearised surfaces (see [`Linearised`]): `lin` is the
+/// map of the last step (`Linearised::NONE` for none) and, on return, the one to keep for the
+/// next (`NONE` when the pair separated).
+pub fn track(
+    b1: &SqBody,
+    b2: &SqBody,
+    normal: V3,
+    overlap: f64,
+    lin: &mut Linearised,
+    settings: &SearchSettings,
+    stats: &mut SearchStats,
+) -> Detection {
     let x21 = b2.position - b1.position;
     let scale = 0.5 * (b1.shape.bounding_radius() + b2.shape.bounding_radius());
     let tol = settings.tolerance * scale;
     let size = b1.shape.inscribed_radius().min(b2.shape.inscribed_radius());
-    match newton(
+    let mut surf = Surfaces {
         b1,
         b2,
-        &x21,
+        x21,
+        lin: &mut *lin,
+        tol,
+        exact: &mut stats.exact_evaluations,
+    };
+    let run = newton(
+        &mut surf,
         normal,
         tol,
         settings.max_iterations,
         &mut stats.iterations,
-    ) {
-        Run::Separated(normal, gap) => Detection::Separated { normal, gap },
+    );
+    match run {
+        Run::Separated(normal, gap) => {
+            *lin = Linearised::NONE;
+            Detection::Separated { normal, gap }
+        }
         Run::Converged(e) if -e.s() <= 2.0 * overlap.max(0.0) + 0.01 * size => {
             Detection::Contact(finish(b1, e))
         }
-        _ => detect(b1, b2, Some(normal), settings, stats),
+        _ => search(b1, b2, Some(normal), settings, stats, lin),
     }
 }
 
@@ -368,6 +630,36 @@ pub fn detect(
     settings: &SearchSettings,
     stats: &mut SearchStats,
 ) -> Detection {
+    search(b1, b2, guess, settings, stats, &mut Linearised::default())
+}
+
+/// [`detect`], with the linearised surfaces of a found contact left in `lin` for [`track`]
+/// (`NONE` when separated or when no start was accepted).
+pub fn search(
+    b1: &SqBody,
+    b2: &SqBody,
+    guess: Option<V3>,
+    settings: &SearchSettings,
+    stats: &mut SearchStats,
+    lin: &mut Linearised,
+) -> Detection {
+    *lin = Linearised::NONE;
+    let (found, accepted) = search_starts(b1, b2, guess, settings, stats, lin);
+    if !accepted {
+        *lin = Linearised::NONE;
+    }
+    found
+}
+
+/// The search of [`detect`] on `lin`'s surfaces; true with an accepted contact.
+fn search_starts(
+    b1: &SqBody,
+    b2: &SqBody,
+    guess: Option<V3>,
+    settings: &SearchSettings,
+    stats: &mut SearchStats,
+    lin: &mut Linearised,
+) -> (Detection, bool) {
     let x21 = b2.position - b1.position;
     let centre = if x21.norm_squared() > 0.0 {
         x21.normalize()
@@ -376,6 +668,14 @@ pub fn detect(
     };
     let scale = 0.5 * (b1.shape.bounding_radius() + b2.shape.bounding_radius());
     let tol = settings.tolerance * scale;
+    let mut surf = Surfaces {
+        b1,
+        b2,
+        x21,
+        lin,
+        tol,
+        exact: &mut stats.exact_evaluations,
+    };
     let finish = |e: Eval| finish(b1, e);
     let start = guess.filter(|g| g.norm_squared() > 0.0).unwrap_or(centre);
     let mut best: Option<Eval> = None;
@@ -385,16 +685,16 @@ pub fn detect(
         }
     };
     match newton(
-        b1,
-        b2,
-        &x21,
+        &mut surf,
         start,
         tol,
         settings.max_iterations,
         &mut stats.iterations,
     ) {
-        Run::Separated(normal, gap) => return Detection::Separated { normal, gap },
-        Run::Converged(e) if accepted(b1, b2, &x21, &e) => return Detection::Contact(finish(e)),
+        Run::Separated(normal, gap) => return (Detection::Separated { normal, gap }, false),
+        Run::Converged(e) if accepted(b1, b2, &x21, &e) => {
+            return (Detection::Contact(finish(e)), true)
+        }
         Run::Converged(e) => {
             stats.local_minima += 1;
             keep(e, &mut best)
@@ -412,10 +712,8 @@ pub fn detect(
         for c in restart_directions(&centre, ring) {
             let e = evaluate(b1, b2, &x21, c, false);
             if e.s() > 0.0 {
-                return Detection::Separated {
-                    normal: c,
-                    gap: e.s(),
-                };
+                let normal = c;
+                return (Detection::Separated { normal, gap: e.s() }, false);
             }
             let key = (!accepted(b1, b2, &x21, &e), e.f());
             if pick.is_none_or(|(k, _)| key < k) {
@@ -424,17 +722,15 @@ pub fn detect(
         }
         let Some((_, c)) = pick else { break };
         match newton(
-            b1,
-            b2,
-            &x21,
+            &mut surf,
             c,
             tol,
             settings.max_iterations,
             &mut stats.iterations,
         ) {
-            Run::Separated(normal, gap) => return Detection::Separated { normal, gap },
+            Run::Separated(normal, gap) => return (Detection::Separated { normal, gap }, false),
             Run::Converged(e) if accepted(b1, b2, &x21, &e) => {
-                return Detection::Contact(finish(e))
+                return (Detection::Contact(finish(e)), true)
             }
             Run::Converged(e) => {
                 stats.local_minima += 1;
@@ -447,11 +743,12 @@ pub fn detect(
         }
     }
     stats.failed = true;
-    match best {
+    let found = match best {
         Some(e) => Detection::Contact(finish(e)),
         None => Detection::Separated {
             normal: centre,
             gap: f64::NAN,
         },
-    }
+    };
+    (found, false)
 }
