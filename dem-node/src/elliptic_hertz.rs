@@ -133,10 +133,10 @@ pub fn hertz_ellipse(a_curv: f64, b_curv: f64) -> Option<HertzEllipse> {
     } else {
         MAX_CURVATURE_RATIO
     };
-    let (s, p) = fitted_kappa(ratio);
+    let (_, p) = fitted_kappa(ratio);
     let root_sum = sum.sqrt();
     // (3.19) with E(e), K(e) (W4): γ = (2/3) π κ √(E/(K³ (A+B)))
-    let kappa = s.exp();
+    let kappa = p.kappa;
     let gamma = 2.0 / 3.0 * PI * kappa * (p.ee / (p.k * p.k * p.k)).sqrt() / root_sum;
     // (3.21) with A = (A+B)/(1 + B/A), written to stay finite for tiny A + B
     let axis_coef = (p.d * (1.0 + ratio) / p.k).sqrt() / root_sum;
@@ -576,9 +576,12 @@ fn solve_kappa(r: f64) -> (f64, Elliptic) {
 
 /// Breaks of the pieces of [`KappaFit`] in L = ln(B/A) (the last is ln [`MAX_CURVATURE_RATIO`]
 /// with a margin).
-const FIT_BREAKS: [f64; 11] = [0.0, 0.25, 0.6, 1.2, 2.0, 3.2, 5.0, 7.5, 11.0, 16.0, 23.1];
+const FIT_BREAKS: [f64; 20] = [
+    0.0, 0.1, 0.25, 0.45, 0.7, 1.0, 1.4, 1.9, 2.5, 3.2, 4.0, 5.0, 6.2, 7.6, 9.2, 11.0, 13.2, 15.8,
+    18.8, 23.1,
+];
 /// Chebyshev terms per piece.
-const FIT_TERMS: usize = 14;
+const FIT_TERMS: usize = 10;
 
 /// ln κ, B(e) and D(e) as functions of L = ln(B/A), fitted once (*not in thesis*): on each
 /// piece of [`FIT_BREAKS`] Chebyshev series of ln κ / L (smooth, from 2/3 at L → 0 to ½ at
@@ -623,10 +626,7 @@ impl KappaFit {
     /// (ln κ, B, D) at L = ln(B/A) ∈ (0, ln MAX_CURVATURE_RATIO].
     #[inline]
     fn eval(&self, l: f64) -> (f64, f64, f64) {
-        let piece = FIT_BREAKS[1..FIT_BREAKS.len() - 1]
-            .iter()
-            .take_while(|&&b| l >= b)
-            .count();
+        let piece = FIT_BREAKS[1..FIT_BREAKS.len() - 1].partition_point(|&b| b <= l);
         let (lo, hi) = (FIT_BREAKS[piece], FIT_BREAKS[piece + 1]);
         let x = (2.0 * l - lo - hi) / (hi - lo);
         // Clenshaw, the three series side by side
@@ -644,9 +644,10 @@ impl KappaFit {
     }
 }
 
-/// What the law needs of the ellipse at ratio r: s = ln κ, m = e², k' = 1/κ, K, E, B, D.
+/// What the law needs of the ellipse at ratio r: κ, m = e², K, E, B, D.
 #[derive(Debug, Clone, Copy)]
 struct Fitted {
+    kappa: f64,
     m: f64,
     k: f64,
     ee: f64,
@@ -664,6 +665,7 @@ fn fitted_kappa(r: f64) -> (f64, Fitted) {
         return (
             0.0,
             Fitted {
+                kappa: 1.0,
                 m: 0.0,
                 k: p.k,
                 ee: p.ee,
@@ -673,12 +675,22 @@ fn fitted_kappa(r: f64) -> (f64, Fitted) {
         );
     }
     let (s, b, d) = FIT.get_or_init(KappaFit::new).eval(target);
-    // m = 1 − k'², k' = e^{−s}: accurate also for κ → 1
-    let m = -(-2.0 * s).exp_m1();
-    let kp2 = 1.0 - m;
+    // one transcendental either way, each accurate where it is used: near κ = 1,
+    // k' = e^{−s} = 1 + x and m = 1 − k'² = −x(2 + x) from x = expm1(−s); for long ellipses
+    // κ = e^s (1/(1 + x) would lose the digits of a small k')
+    let (kappa, kp, m) = if s < 0.5 {
+        let x = (-s).exp_m1();
+        (1.0 / (1.0 + x), 1.0 + x, -x * (2.0 + x))
+    } else {
+        let kappa = s.exp();
+        let kp = 1.0 / kappa;
+        (kappa, kp, 1.0 - kp * kp)
+    };
+    let kp2 = kp * kp;
     (
         s,
         Fitted {
+            kappa,
             m,
             k: b + d,
             ee: b + kp2 * d,
@@ -710,7 +722,9 @@ mod tests {
             let (exact, p) = solve_kappa(r);
             let (fit, q) = fitted_kappa(r);
             // |Δ ln κ| is the relative error of κ; ln κ itself is known to a few ulps
-            let e = (fit - exact).abs() / exact.max(1.0);
+            // and of κ itself (formed from s by one exp or expm1), in the same measure
+            let e = ((fit - exact).abs() / exact.max(1.0))
+                .max(((q.kappa - exact.exp()) / exact.exp()).abs() / exact.max(1.0));
             if e > worst {
                 worst = e;
                 at = l;
@@ -727,7 +741,7 @@ mod tests {
                 }
             }
         }
-        println!("worst |Δ ln κ| / max(1, ln κ): {worst:.2e} at ln(B/A) = {at}");
+        println!("worst |Δ ln κ|, |Δκ/κ| / max(1, ln κ): {worst:.2e} at ln(B/A) = {at}");
         println!(
             "worst relative error of B, D, K, E: {:.2e} ({} at ln(B/A) = {})",
             worst_integrals.0, worst_integrals.1, worst_integrals.2

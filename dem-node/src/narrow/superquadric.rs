@@ -453,14 +453,14 @@ fn newton(surf: &mut Surfaces, c0: V3, tol: f64, max_iter: u32, iterations: &mut
         *iterations += 1;
         let s = e.s();
         let g = [e.g1[0] + e.g2[0], e.g1[1] + e.g2[1], e.g1[2] + e.g2[2]];
-        let (lo, ..) = crate::shape::superquadric::sym2_eigen(g[0], g[1], g[2]);
         let floor = 1e-3 * (0.5 * (g[0] + g[2])).abs().max(tol);
         // First the plain Newton step (shift 0, or the last successful shift): it also solves
         // the parallel condition where f is flat (two sharp tips: the points hardly move
         // with c, so only the direction of c is found, and G_t + sI is indefinite). If it
         // neither lowers f nor the residual, shift to a positive definite matrix (a descent
         // step of f) and grow the shift (Levenberg–Marquardt).
-        let pd_shift = (floor - (lo + s)).max(0.0);
+        // formed only when the plain step fails (a tracked pair's step hardly ever does)
+        let pd_shift = || (floor - (sym2_eigen(g[0], g[1], g[2]).0 + s)).max(0.0);
         let mut shift = mu;
         let mut tries = 0;
         loop {
@@ -488,6 +488,7 @@ fn newton(surf: &mut Surfaces, c0: V3, tol: f64, max_iter: u32, iterations: &mut
                 }
                 break;
             }
+            let pd_shift = pd_shift();
             mu = if shift < pd_shift {
                 pd_shift + floor
             } else {
