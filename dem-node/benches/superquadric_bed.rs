@@ -12,7 +12,8 @@
 //!    on the settled state: what a step would pay without the linearised surfaces of tracked
 //!    pairs, `Linearised`, which the engine evaluates instead while the normals stay in reach).
 //!    The material is softened (E = 10 MPa instead of 50 GPa, Δt = 4 µs: the cost per step does not
-//!    depend on it, the number of steps to settle does). SQ_BED_THREADS (default: all),
+//!    depend on it, the number of steps to settle does). SQ_BED_WARMUP (untimed steps before
+//!    the timed ones, default 100), SQ_BED_THREADS (default: all),
 //!    SQ_BED_SETTLE (settling steps, default 40,000 = 0.16 s), SQ_BED_CACHE (file: the settled
 //!    state is restored from it when it holds a snapshot of this engine version, else written
 //!    there after settling; one file per SQ_BED_COUNT), SQ_BED_NARROW (0: skip the narrow-phase
@@ -168,6 +169,9 @@ fn bed(count: usize) {
         e.num_wall_contacts(),
         packing(&e, side)
     );
+    // untimed steps first: a restored state (or one written by an older build) starts its
+    // tracked pairs without linearised surfaces
+    e.advance(env("SQ_BED_WARMUP", 100)).expect("warm-up steps");
     let builds0 = e.neighbour_list_builds();
     let t = Instant::now();
     e.advance(steps).expect("timed steps");

@@ -242,7 +242,6 @@ fn pair_contact(
         *c = poly_pair_contact(p, ctx, [i, j], image, &x21, c);
         return;
     }
-    let old = &*c;
     let (mut slot_a, mut slot_b) = (None, None);
     let (a, mut b) = (body(p, i, &mut slot_a), body(p, j, &mut slot_b));
     b.position += image.0;
@@ -261,20 +260,21 @@ fn pair_contact(
     );
     let mut stats = SearchStats::default();
     let settings = SearchSettings::default();
-    let mut linear = old.linear;
-    let found = if old.touching() {
+    // the search updates the record's linearised surfaces in place
+    let (normal, overlap) = (c.normal, c.overlap);
+    let found = if c.touching() {
         track(
             &ba,
             &bb,
-            old.normal,
-            old.overlap,
-            &mut linear,
+            normal,
+            overlap,
+            &mut c.linear,
             &settings,
             &mut stats,
         )
     } else {
-        let guess = (old.normal != V3::zeros()).then_some(old.normal);
-        search(&ba, &bb, guess, &settings, &mut stats, &mut linear)
+        let guess = (normal != V3::zeros()).then_some(normal);
+        search(&ba, &bb, guess, &settings, &mut stats, &mut c.linear)
     };
     let sq = match found {
         Detection::Separated { normal, gap } => {
@@ -302,7 +302,7 @@ fn pair_contact(
         - (a.velocity + a.omega.cross(&(point - a.position)));
     let params = ctx.materials.pair(p.material[i], p.material[j]);
     let m_eff = a.mass * b.mass / (a.mass + b.mass);
-    match law(&g, params, &d_dot, m_eff, old, ctx.dt, ctx.hold_stiffness) {
+    match law(&g, params, &d_dot, m_eff, c, ctx.dt, ctx.hold_stiffness) {
         Some(r) => {
             c.normal = g.normal;
             c.tangential = r.tangential;
@@ -311,7 +311,6 @@ fn pair_contact(
             c.force = r.force;
             c.stiffness = r.stiffness;
             c.support = f64::NAN;
-            c.linear = linear;
         }
         None => *c = ShapedContact::NONE,
     }
