@@ -127,8 +127,9 @@ pub struct Linearised {
     pub normals: [V3; 2],
     /// Their surface points X(n_b).
     pub points: [V3; 2],
-    /// Tangent blocks [a, b, c] of J in `tangent_basis(n_b)`.
-    pub blocks: [[f64; 3]; 2],
+    /// J = E B Eᵀ with B the tangent block of ∂X/∂n in E = `tangent_basis(n_b)` (so
+    /// J n_b = 0), as its six entries xx, yy, zz, xy, xz, yz.
+    pub jacobians: [[f64; 6]; 2],
     /// Largest |n − n_b| (both bodies) at which the linear map is used; 0: none.
     pub reach: f64,
 }
@@ -137,7 +138,7 @@ impl Linearised {
     pub const NONE: Linearised = Linearised {
         normals: [V3::new(0.0, 0.0, 0.0); 2],
         points: [V3::new(0.0, 0.0, 0.0); 2],
-        blocks: [[0.0; 3]; 2],
+        jacobians: [[0.0; 6]; 2],
         reach: 0.0,
     };
 
@@ -146,31 +147,37 @@ impl Linearised {
         Linearised {
             normals: [self.normals[1], self.normals[0]],
             points: [self.points[1], self.points[0]],
-            blocks: [self.blocks[1], self.blocks[0]],
+            jacobians: [self.jacobians[1], self.jacobians[0]],
             reach: self.reach,
         }
     }
 
-    /// J n of body k (J = E B Eᵀ).
+    /// J n of body k.
     #[inline]
     fn jacobian_times(&self, k: usize, n: &V3) -> V3 {
-        let (e1, e2) = tangent_basis(&self.normals[k]);
-        let (u, v) = (e1.dot(n), e2.dot(n));
-        let b = &self.blocks[k];
-        e1 * (b[0] * u + b[1] * v) + e2 * (b[1] * u + b[2] * v)
+        let j = &self.jacobians[k];
+        V3::new(
+            j[0] * n.x + j[3] * n.y + j[4] * n.z,
+            j[3] * n.x + j[1] * n.y + j[5] * n.z,
+            j[4] * n.x + j[5] * n.y + j[2] * n.z,
+        )
     }
 
     /// The tangent block of J_k in the body-frame tangents (u, v).
     #[inline]
     fn block_in(&self, k: usize, u: &V3, v: &V3) -> [f64; 3] {
-        let (e1, e2) = tangent_basis(&self.normals[k]);
-        let b = &self.blocks[k];
-        let (u1, u2, v1, v2) = (e1.dot(u), e2.dot(u), e1.dot(v), e2.dot(v));
-        let q = |x1: f64, x2: f64, y1: f64, y2: f64| {
-            x1 * (b[0] * y1 + b[1] * y2) + x2 * (b[1] * y1 + b[2] * y2)
-        };
-        [q(u1, u2, u1, u2), q(u1, u2, v1, v2), q(v1, v2, v1, v2)]
+        let (ju, jv) = (self.jacobian_times(k, u), self.jacobian_times(k, v));
+        [u.dot(&ju), 0.5 * (u.dot(&jv) + v.dot(&ju)), v.dot(&jv)]
     }
+}
+
+/// The six entries of E B Eᵀ (E = `tangent_basis(n)`, B = [[b0, b1], [b1, b2]]).
+fn embed(n: &V3, b: &[f64; 3]) -> [f64; 6] {
+    let (e1, e2) = tangent_basis(n);
+    let m = |p: usize, q: usize| {
+        b[0] * e1[p] * e1[q] + b[1] * (e1[p] * e2[q] + e2[p] * e1[q]) + b[2] * e2[p] * e2[q]
+    };
+    [m(0, 0), m(1, 1), m(2, 2), m(0, 1), m(0, 2), m(1, 2)]
 }
 
 /// An exact evaluation's body-frame data: normals, surface points, Jacobian tangent blocks.
@@ -340,7 +347,10 @@ impl Surfaces<'_, '_> {
         let new = Linearised {
             normals: s.normals,
             points: s.points,
-            blocks: s.blocks,
+            jacobians: [
+                embed(&s.normals[0], &s.blocks[0]),
+                embed(&s.normals[1], &s.blocks[1]),
+            ],
             reach: 0.0,
         };
         let mut reach = f64::INFINITY;
