@@ -52,6 +52,21 @@ struct BodyView<'a> {
 
 /// Body `k` as the narrow phase sees it; a sphere's superquadric is made in `slot`.
 fn body<'a>(p: &'a Particles, k: usize, slot: &'a mut Option<Superquadric>) -> BodyView<'a> {
+    body_turned(
+        p,
+        k,
+        slot,
+        p.orientation[k].to_rotation_matrix().into_inner(),
+    )
+}
+
+/// [`body`] with its rotation matrix formed already (once per body and step for the pairs).
+fn body_turned<'a>(
+    p: &'a Particles,
+    k: usize,
+    slot: &'a mut Option<Superquadric>,
+    rotation: Matrix3<f64>,
+) -> BodyView<'a> {
     let shape = match p.template(k).and_then(|t| t.superquadric()) {
         Some(s) => s,
         // a sphere is the superquadric with equal semi-axes and ε = 1 (exact in the search);
@@ -69,7 +84,7 @@ fn body<'a>(p: &'a Particles, k: usize, slot: &'a mut Option<Superquadric>) -> B
         ),
         shape,
         position: p.position[k],
-        rotation: p.orientation[k].to_rotation_matrix().into_inner(),
+        rotation,
         velocity: p.velocity[k],
         omega: p.angular_velocity[k],
         mass: p.mass[k],
@@ -219,6 +234,7 @@ fn still_separated(p: &Particles, i: usize, j: usize, x21: &V3, old: &ShapedCont
 fn pair_contact(
     p: &Particles,
     ctx: &ForceContext,
+    rotations: &[Matrix3<f64>],
     [i, j]: [u32; 2],
     image: (V3, V3),
     c: &mut ShapedContact,
@@ -243,7 +259,10 @@ fn pair_contact(
         return;
     }
     let (mut slot_a, mut slot_b) = (None, None);
-    let (a, mut b) = (body(p, i, &mut slot_a), body(p, j, &mut slot_b));
+    let (a, mut b) = (
+        body_turned(p, i, &mut slot_a, rotations[i]),
+        body_turned(p, j, &mut slot_b, rotations[j]),
+    );
     b.position += image.0;
     b.velocity += image.1;
     let (ba, bb) = (
@@ -731,6 +750,17 @@ pub fn shaped_forces(lists: &mut NeighbourLists, p: &mut Particles, ctx: &ForceC
     {
         let pv: &Particles = p;
         let images = &lists.shaped_pair_image;
+        // the bodies' rotation matrices once per step (a body is in several pairs)
+        let rotations: Vec<Matrix3<f64>> = if lists.shaped_pairs.is_empty() {
+            Vec::new()
+        } else {
+            pv.orientation
+                .par_iter()
+                .with_min_len(1024)
+                .map(|q| q.to_rotation_matrix().into_inner())
+                .collect()
+        };
+        let rotations = &rotations;
         lists
             .shaped_pair_contacts
             .par_iter_mut()
@@ -739,7 +769,7 @@ pub fn shaped_forces(lists: &mut NeighbourLists, p: &mut Particles, ctx: &ForceC
             .enumerate()
             .for_each(|(k, (c, &pair))| {
                 let image = image_of(ctx, images, k);
-                pair_contact(pv, ctx, pair, image, c)
+                pair_contact(pv, ctx, rotations, pair, image, c)
             });
         lists
             .shaped_wall_contacts
