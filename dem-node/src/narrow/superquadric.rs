@@ -655,22 +655,6 @@ pub fn search(
     lin: &mut Linearised,
 ) -> Detection {
     *lin = Linearised::NONE;
-    let (found, accepted) = search_starts(b1, b2, guess, settings, stats, lin);
-    if !accepted {
-        *lin = Linearised::NONE;
-    }
-    found
-}
-
-/// The search of [`detect`] on `lin`'s surfaces; true with an accepted contact.
-fn search_starts(
-    b1: &SqBody,
-    b2: &SqBody,
-    guess: Option<V3>,
-    settings: &SearchSettings,
-    stats: &mut SearchStats,
-    lin: &mut Linearised,
-) -> (Detection, bool) {
     let x21 = b2.position - b1.position;
     let centre = if x21.norm_squared() > 0.0 {
         x21.normalize()
@@ -702,10 +686,11 @@ fn search_starts(
         settings.max_iterations,
         &mut stats.iterations,
     ) {
-        Run::Separated(normal, gap) => return (Detection::Separated { normal, gap }, false),
-        Run::Converged(e) if accepted(b1, b2, &x21, &e) => {
-            return (Detection::Contact(finish(e)), true)
+        Run::Separated(normal, gap) => {
+            *surf.lin = Linearised::NONE;
+            return Detection::Separated { normal, gap };
         }
+        Run::Converged(e) if accepted(b1, b2, &x21, &e) => return Detection::Contact(finish(e)),
         Run::Converged(e) => {
             stats.local_minima += 1;
             keep(e, &mut best)
@@ -723,8 +708,11 @@ fn search_starts(
         for c in restart_directions(&centre, ring) {
             let e = evaluate(b1, b2, &x21, c, false);
             if e.s() > 0.0 {
-                let normal = c;
-                return (Detection::Separated { normal, gap: e.s() }, false);
+                *surf.lin = Linearised::NONE;
+                return Detection::Separated {
+                    normal: c,
+                    gap: e.s(),
+                };
             }
             let key = (!accepted(b1, b2, &x21, &e), e.f());
             if pick.is_none_or(|(k, _)| key < k) {
@@ -739,9 +727,12 @@ fn search_starts(
             settings.max_iterations,
             &mut stats.iterations,
         ) {
-            Run::Separated(normal, gap) => return (Detection::Separated { normal, gap }, false),
+            Run::Separated(normal, gap) => {
+                *surf.lin = Linearised::NONE;
+                return Detection::Separated { normal, gap };
+            }
             Run::Converged(e) if accepted(b1, b2, &x21, &e) => {
-                return (Detection::Contact(finish(e)), true)
+                return Detection::Contact(finish(e))
             }
             Run::Converged(e) => {
                 stats.local_minima += 1;
@@ -754,12 +745,12 @@ fn search_starts(
         }
     }
     stats.failed = true;
-    let found = match best {
+    *surf.lin = Linearised::NONE;
+    match best {
         Some(e) => Detection::Contact(finish(e)),
         None => Detection::Separated {
             normal: centre,
             gap: f64::NAN,
         },
-    };
-    (found, false)
+    }
 }
