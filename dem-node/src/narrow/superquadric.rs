@@ -111,9 +111,8 @@ pub struct SearchStats {
 /// thesis*; a temporal coherence of the surface points, beside W's of the normal, 3.60–3.61).
 ///
 /// In its body frame each surface point is X(n) for the body-frame normal n, and the exact
-/// evaluation gives X(n_b) and the Jacobian J = ∂X/∂n there (symmetric, J n_b = 0, so
-/// J = E B Eᵀ with E = `tangent_basis(n_b)` and B its 2×2 tangent block). For unit n near n_b,
-/// X(n) ≈ X(n_b) + J n (J n_b = 0), with an error ≈ C |n − n_b|². While the bodies turn and the
+/// evaluation gives X(n_b) and the Jacobian J = ∂X/∂n there (symmetric, J n_b = 0). For unit
+/// n near n_b, X(n) ≈ X(n_b) + J (n − n_b), with an error ≈ C |n − n_b|². While the bodies turn and the
 /// normal moves by less than `reach` in both body frames, the search evaluates this linear map
 /// (a few products instead of ten `exp`/`ln` per body); beyond it, or where the linear surfaces
 /// separate (a separation must be proven on the exact ones), it evaluates exactly and
@@ -125,10 +124,9 @@ pub struct SearchStats {
 pub struct Linearised {
     /// Body-frame unit normals n_b of bodies 1 and 2 at the last exact evaluation.
     pub normals: [V3; 2],
-    /// Their surface points X(n_b).
+    /// The maps' constant terms X(n_b) − J n_b (X(n_b) itself but for round-off: J n_b = 0).
     pub points: [V3; 2],
-    /// J = E B Eᵀ with B the tangent block of ∂X/∂n in E = `tangent_basis(n_b)` (so
-    /// J n_b = 0), as its six entries xx, yy, zz, xy, xz, yz.
+    /// J = ∂X/∂n at n_b (symmetrised), as its six entries xx, yy, zz, xy, xz, yz.
     pub jacobians: [[f64; 6]; 2],
     /// Largest |n − n_b| (both bodies) at which the linear map is used; 0: none.
     pub reach: f64,
@@ -171,21 +169,48 @@ impl Linearised {
     }
 }
 
-/// The six entries of E B Eᵀ (E = `tangent_basis(n)`, B = [[b0, b1], [b1, b2]]).
-fn embed(n: &V3, b: &[f64; 3]) -> [f64; 6] {
-    let (e1, e2) = tangent_basis(n);
-    let m = |p: usize, q: usize| {
-        b[0] * e1[p] * e1[q] + b[1] * (e1[p] * e2[q] + e2[p] * e1[q]) + b[2] * e2[p] * e2[q]
-    };
-    [m(0, 0), m(1, 1), m(2, 2), m(0, 1), m(0, 2), m(1, 2)]
-}
-
-/// An exact evaluation's body-frame data: normals, surface points, Jacobian tangent blocks.
+/// An exact evaluation's body-frame data: normals, the linear maps' constant terms and
+/// Jacobians, and the tangent blocks of the Jacobians (global frame, for the first reach).
 #[derive(Clone, Copy)]
 struct Sample {
     normals: [V3; 2],
     points: [V3; 2],
+    jacobians: [[f64; 6]; 2],
     blocks: [[f64; 3]; 2],
+}
+
+impl Sample {
+    /// X(n) ≈ X(n_b) + J (n − n_b) = (X(n_b) − J n_b) + J n with J symmetrised (J n_b = 0
+    /// holds only to round-off, amplified for exponents near 2: the constant term keeps the
+    /// map exact at n_b whatever it is).
+    fn new(n: [V3; 2], x: [V3; 2], j: [&Matrix3<f64>; 2], blocks: [[f64; 3]; 2]) -> Sample {
+        let sym = |j: &Matrix3<f64>| {
+            [
+                j[(0, 0)],
+                j[(1, 1)],
+                j[(2, 2)],
+                0.5 * (j[(0, 1)] + j[(1, 0)]),
+                0.5 * (j[(0, 2)] + j[(2, 0)]),
+                0.5 * (j[(1, 2)] + j[(2, 1)]),
+            ]
+        };
+        let jacobians = [sym(j[0]), sym(j[1])];
+        let lin = Linearised {
+            normals: n,
+            points: x,
+            jacobians,
+            reach: 0.0,
+        };
+        Sample {
+            normals: n,
+            points: [
+                x[0] - lin.jacobian_times(0, &n[0]),
+                x[1] - lin.jacobian_times(1, &n[1]),
+            ],
+            jacobians,
+            blocks,
+        }
+    }
 }
 
 /// One evaluation at direction c, relative to x1 (no loss of digits far from the origin).
@@ -238,25 +263,21 @@ fn sampled(
     let (x1, x2, g1, g2, sample) = if with_jacobian {
         let s1 = b1.shape.point_from_normal(&n1);
         let s2 = b2.shape.point_from_normal(&n2);
-        let body_block = |n: &V3, j: &Matrix3<f64>| {
-            let (e1, e2) = tangent_basis(n);
-            let (je1, je2) = (j * e1, j * e2);
-            [
-                e1.dot(&je1),
-                0.5 * (e1.dot(&je2) + e2.dot(&je1)),
-                e2.dot(&je2),
-            ]
-        };
+        let (g1, g2) = (
+            block(&b1.rotation, &s1.jacobian),
+            block(&b2.rotation, &s2.jacobian),
+        );
         (
             s1.x,
             s2.x,
-            block(&b1.rotation, &s1.jacobian),
-            block(&b2.rotation, &s2.jacobian),
-            Some(Sample {
-                normals: [n1, n2],
-                points: [s1.x, s2.x],
-                blocks: [body_block(&n1, &s1.jacobian), body_block(&n2, &s2.jacobian)],
-            }),
+            g1,
+            g2,
+            Some(Sample::new(
+                [n1, n2],
+                [s1.x, s2.x],
+                [&s1.jacobian, &s2.jacobian],
+                [g1, g2],
+            )),
         )
     } else {
         (
@@ -347,10 +368,7 @@ impl Surfaces<'_, '_> {
         let new = Linearised {
             normals: s.normals,
             points: s.points,
-            jacobians: [
-                embed(&s.normals[0], &s.blocks[0]),
-                embed(&s.normals[1], &s.blocks[1]),
-            ],
+            jacobians: s.jacobians,
             reach: 0.0,
         };
         let mut reach = f64::INFINITY;
