@@ -205,6 +205,10 @@ pub struct NeighbourLists {
     /// Derived from the shaped lists (not part of snapshots).
     #[serde(skip)]
     pub shaped_incidence: ShapedIncidence,
+    /// Scratch of the force evaluation: the rotation matrix of every body in a shaped pair
+    /// this step (formed once per body, not per pair; the others are left as they were).
+    #[serde(skip)]
+    pub shaped_rotations: Vec<nalgebra::Matrix3<f64>>,
     /// Periodic cell (Wellmann §5.1.1): per shaped pair, the image of its second body, whose
     /// centre is at x_j + s∘L (zero for a pair inside the cell; empty without a cell).
     #[serde(default)]

@@ -661,16 +661,16 @@ fn fitted_kappa(r: f64) -> (f64, Fitted) {
     static FIT: std::sync::OnceLock<KappaFit> = std::sync::OnceLock::new();
     let target = (r - 1.0).ln_1p();
     if target <= 0.0 {
-        let p = Elliptic::new(0.0, 1.0);
+        // a circle: K = E = π/2, B = D = π/4 exactly
         return (
             0.0,
             Fitted {
                 kappa: 1.0,
                 m: 0.0,
-                k: p.k,
-                ee: p.ee,
-                b: p.b,
-                d: p.d,
+                k: FRAC_PI_2,
+                ee: FRAC_PI_2,
+                b: 0.5 * FRAC_PI_2,
+                d: 0.5 * FRAC_PI_2,
             },
         );
     }

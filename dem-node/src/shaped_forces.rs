@@ -125,17 +125,23 @@ struct Response {
 }
 
 impl Response {
+    /// Writes the touching contact of geometry `g` into `c` (the fields a touching record
+    /// has; the others, such as a pair's linearised surfaces, are left as they are).
+    fn write(self, g: &Geometry, c: &mut ShapedContact) {
+        c.normal = g.normal;
+        c.tangential = self.tangential;
+        c.overlap = g.overlap;
+        c.point = g.point;
+        c.force = self.force;
+        c.stiffness = self.stiffness;
+        c.support = f64::NAN;
+    }
+
     /// The record of a touching contact of geometry `g`.
     fn record(self, g: &Geometry) -> ShapedContact {
-        ShapedContact {
-            normal: g.normal,
-            tangential: self.tangential,
-            overlap: g.overlap,
-            point: g.point,
-            force: self.force,
-            stiffness: self.stiffness,
-            ..ShapedContact::NONE
-        }
+        let mut c = ShapedContact::NONE;
+        self.write(g, &mut c);
+        c
     }
 }
 
@@ -322,15 +328,7 @@ fn pair_contact(
     let params = ctx.materials.pair(p.material[i], p.material[j]);
     let m_eff = a.mass * b.mass / (a.mass + b.mass);
     match law(&g, params, &d_dot, m_eff, c, ctx.dt, ctx.hold_stiffness) {
-        Some(r) => {
-            c.normal = g.normal;
-            c.tangential = r.tangential;
-            c.overlap = g.overlap;
-            c.point = g.point;
-            c.force = r.force;
-            c.stiffness = r.stiffness;
-            c.support = f64::NAN;
-        }
+        Some(r) => r.write(&g, c),
         None => *c = ShapedContact::NONE,
     }
 }
@@ -750,17 +748,20 @@ pub fn shaped_forces(lists: &mut NeighbourLists, p: &mut Particles, ctx: &ForceC
     {
         let pv: &Particles = p;
         let images = &lists.shaped_pair_image;
-        // the bodies' rotation matrices once per step (a body is in several pairs)
-        let rotations: Vec<Matrix3<f64>> = if lists.shaped_pairs.is_empty() {
-            Vec::new()
-        } else {
-            pv.orientation
-                .par_iter()
+        // the rotation matrices of the bodies in shaped pairs, once per step (a body is in
+        // several pairs; a bed of spheres with a few shaped bodies forms only theirs)
+        let starts = &lists.shaped_incidence.pair_start;
+        let rotations = &mut lists.shaped_rotations;
+        if !starts.is_empty() {
+            rotations.resize(pv.len(), Matrix3::identity());
+            rotations
+                .par_iter_mut()
                 .with_min_len(1024)
-                .map(|q| q.to_rotation_matrix().into_inner())
-                .collect()
-        };
-        let rotations = &rotations;
+                .enumerate()
+                .filter(|(k, _)| starts[k + 1] > starts[*k])
+                .for_each(|(k, r)| *r = pv.orientation[k].to_rotation_matrix().into_inner());
+        }
+        let rotations = &lists.shaped_rotations;
         lists
             .shaped_pair_contacts
             .par_iter_mut()

@@ -161,6 +161,12 @@ impl Linearised {
         )
     }
 
+    /// Body k's linearised surface point of the body-frame normal n.
+    #[inline]
+    fn point(&self, k: usize, n: &V3) -> V3 {
+        self.points[k] + self.jacobian_times(k, n)
+    }
+
     /// The tangent block of J_k in the body-frame tangents (u, v).
     #[inline]
     fn block_in(&self, k: usize, u: &V3, v: &V3) -> [f64; 3] {
@@ -169,13 +175,11 @@ impl Linearised {
     }
 }
 
-/// An exact evaluation's body-frame data: normals, the linear maps' constant terms and
-/// Jacobians, and the tangent blocks of the Jacobians (global frame, for the first reach).
+/// An exact evaluation's linearisation (reach not set yet) and the tangent blocks of its
+/// Jacobians in the global frame (for the first reach).
 #[derive(Clone, Copy)]
 struct Sample {
-    normals: [V3; 2],
-    points: [V3; 2],
-    jacobians: [[f64; 6]; 2],
+    lin: Linearised,
     blocks: [[f64; 3]; 2],
 }
 
@@ -194,22 +198,17 @@ impl Sample {
                 0.5 * (j[(1, 2)] + j[(2, 1)]),
             ]
         };
-        let jacobians = [sym(j[0]), sym(j[1])];
-        let lin = Linearised {
+        let mut lin = Linearised {
             normals: n,
             points: x,
-            jacobians,
+            jacobians: [sym(j[0]), sym(j[1])],
             reach: 0.0,
         };
-        Sample {
-            normals: n,
-            points: [
-                x[0] - lin.jacobian_times(0, &n[0]),
-                x[1] - lin.jacobian_times(1, &n[1]),
-            ],
-            jacobians,
-            blocks,
-        }
+        lin.points = [
+            x[0] - lin.jacobian_times(0, &n[0]),
+            x[1] - lin.jacobian_times(1, &n[1]),
+        ];
+        Sample { lin, blocks }
     }
 }
 
@@ -344,8 +343,7 @@ impl Surfaces<'_, '_> {
         if (n1 - lin.normals[0]).norm_squared() > r2 || (n2 - lin.normals[1]).norm_squared() > r2 {
             return None;
         }
-        let x1 = lin.points[0] + lin.jacobian_times(0, &n1);
-        let x2 = lin.points[1] + lin.jacobian_times(1, &n2);
+        let (x1, x2) = (lin.point(0, &n1), lin.point(1, &n2));
         let (t1, t2) = tangent_basis(&c);
         let g = |k: usize, rot: &Matrix3<f64>| lin.block_in(k, &rot.tr_mul(&t1), &rot.tr_mul(&t2));
         let p1 = b1.rotation * x1;
@@ -364,27 +362,22 @@ impl Surfaces<'_, '_> {
     /// Linearises about an exact sample; the reach from the old map's measured error at the
     /// sample's normals, or, without one, from the largest principal radius.
     fn relinearise(&mut self, s: &Sample) {
-        let old = *self.lin;
-        let new = Linearised {
-            normals: s.normals,
-            points: s.points,
-            jacobians: s.jacobians,
-            reach: 0.0,
-        };
+        let (old, new) = (*self.lin, &s.lin);
         let mut reach = f64::INFINITY;
         // no old map, or one linearised far away (a restart, a jump): C is not known
         let mut unknown = old.reach <= 0.0;
         let mut measured = false;
         if !unknown {
             for k in 0..2 {
-                let theta = (s.normals[k] - old.normals[k]).norm();
+                let n = &new.normals[k];
+                let theta = (n - old.normals[k]).norm();
                 // only a move well inside the quadratic range measures C; round-off makes
                 // the estimate of a tiny move larger (a smaller reach: on the safe side)
                 if theta >= 0.1 {
                     unknown = true;
                 } else if theta > 0.0 {
-                    let predicted = old.points[k] + old.jacobian_times(k, &s.normals[k]);
-                    let err = (s.points[k] - predicted).norm();
+                    // the old map against the exact point (the new map at its own normal)
+                    let err = (new.point(k, n) - old.point(k, n)).norm();
                     if err > 0.0 {
                         reach = reach.min(theta * (self.tol / (4.0 * err)).sqrt());
                     }
@@ -412,7 +405,7 @@ impl Surfaces<'_, '_> {
             } else {
                 0.0
             },
-            ..new
+            ..*new
         };
     }
 }
