@@ -15,7 +15,8 @@ use crate::hertz_mindlin;
 use crate::hertz_mindlin::V3;
 use crate::materials::{PairParams, ShapedDamping};
 use crate::narrow::polyhedron::{
-    detect_pair_warm, detect_plane, detect_triangle, Core, PolyBody, PolyDetection, POINT_CORE,
+    detect_pair_warm, detect_plane, detect_triangle, track_pair, Core, PolyBody, PolyDetection,
+    POINT_CORE,
 };
 use crate::narrow::superquadric::{search, track, Detection, SearchSettings, SearchStats, SqBody};
 use crate::narrow::superquadric_patch::patch_contact;
@@ -261,7 +262,15 @@ fn pair_contact(
         return;
     }
     if p.polyhedron(i).is_some() || p.polyhedron(j).is_some() {
-        *c = poly_pair_contact(p, ctx, [i, j], image, &x21, c);
+        poly_pair_contact(
+            p,
+            ctx,
+            [&rotations[i], &rotations[j]],
+            [i, j],
+            image,
+            &x21,
+            c,
+        );
         return;
     }
     let (mut slot_a, mut slot_b) = (None, None);
@@ -570,20 +579,28 @@ fn point_velocity(p: &Particles, k: usize, point: &V3) -> V3 {
     p.velocity[k] + p.angular_velocity[k].cross(&(point - p.position[k]))
 }
 
-/// A pair with a dilated polyhedron (the other a polyhedron, a sphere or a superquadric).
+/// A pair with a dilated polyhedron (the other a polyhedron, a sphere or a superquadric),
+/// evaluated into its record `c` (the last step's): the closest-feature tracker where the
+/// last simplex still holds, else GJK warm-started from it. `rotations` are the bodies'.
+#[allow(clippy::too_many_arguments)] // the pair, its image and its record
 fn poly_pair_contact(
     p: &Particles,
     ctx: &ForceContext,
+    rotations: [&Matrix3<f64>; 2],
     [i, j]: [usize; 2],
     image: (V3, V3),
     x21: &V3,
-    old: &ShapedContact,
-) -> ShapedContact {
+    c: &mut ShapedContact,
+) {
     let (a, mut b) = (poly_view(p, i), poly_view(p, j));
     b.position += image.0;
-    let warm = (old.normal != V3::zeros()).then_some(old.normal);
-    let (found, simplex) = detect_pair_warm(&a, &b, warm, &old.simplex);
-    let mut c = match found {
+    let (found, simplex) = track_pair(&a, &b, rotations[0], rotations[1], &c.simplex)
+        .unwrap_or_else(|| {
+            let warm = (c.normal != V3::zeros()).then_some(c.normal);
+            detect_pair_warm(&a, &b, warm, &c.simplex)
+        });
+    let old = &*c;
+    let mut new = match found {
         PolyDetection::Separated { normal, gap } => ShapedContact {
             normal,
             support: normal.dot(x21) - gap, // NaN when no plane was proved
@@ -615,8 +632,8 @@ fn poly_pair_contact(
             )
         }
     };
-    c.simplex = simplex;
-    c
+    new.simplex = simplex;
+    *c = new;
 }
 
 /// A dilated polyhedron against a plane (a flat wall: R = r_ds).

@@ -335,7 +335,7 @@ fn run_pour(threads: usize, steps: usize, split: bool) -> Vec<u8> {
         e.advance(steps).unwrap();
     }
     assert!(
-        e.num_contacts() > 10 && e.num_wall_contacts() > 10,
+        e.num_contacts() >= 8 && e.num_wall_contacts() > 10,
         "the pour should be in contact by now: {} pairs, {} wall contacts",
         e.num_contacts(),
         e.num_wall_contacts()
