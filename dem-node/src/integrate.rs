@@ -16,8 +16,10 @@ use crate::rotation;
 use rayon::prelude::*;
 
 /// Particles per parallel chunk (the passes are element-wise: the result does not depend on
-/// it).
+/// it); a shaped body's turn costs about a hundred times a sphere's update, so beds with
+/// shapes are cut finer.
 const CHUNK: usize = 2048;
+const SHAPED_CHUNK: usize = 128;
 
 /// What a pass over the particles does.
 const DRIFT: u8 = 1; // first half kick and drift (x), skin check
@@ -81,21 +83,24 @@ fn pass_with<const MODE: u8, const SHAPES: bool>(
     let check = position_at_build.len() == p.len();
     let build: &[V3] = if check { position_at_build } else { &[] };
     let templates: &[ShapeTemplate] = &p.templates;
+    let per_chunk = if SHAPES { SHAPED_CHUNK } else { CHUNK };
     let (finite, moved) = (
-        p.position.par_chunks_mut(CHUNK),
-        p.velocity.par_chunks_mut(CHUNK),
-        p.force.par_chunks(CHUNK),
-        p.mass.par_chunks(CHUNK),
-        p.angular_velocity.par_chunks_mut(CHUNK),
-        p.torque.par_chunks(CHUNK),
-        p.inertia.par_chunks(CHUNK),
-        p.orientation.par_chunks_mut(CHUNK),
-        p.shape.par_chunks(CHUNK),
+        p.position.par_chunks_mut(per_chunk),
+        p.velocity.par_chunks_mut(per_chunk),
+        p.force.par_chunks(per_chunk),
+        p.mass.par_chunks(per_chunk),
+        p.angular_velocity.par_chunks_mut(per_chunk),
+        p.torque.par_chunks(per_chunk),
+        p.inertia.par_chunks(per_chunk),
+        p.orientation.par_chunks_mut(per_chunk),
+        p.shape.par_chunks(per_chunk),
     )
         .into_par_iter()
         .enumerate()
         .map(|(c, (x, v, f, m, w, t, inertia, q, shape))| {
-            let x0 = build.get(c * CHUNK..c * CHUNK + x.len()).unwrap_or(&[]);
+            let x0 = build
+                .get(c * per_chunk..c * per_chunk + x.len())
+                .unwrap_or(&[]);
             let s = Chunk {
                 x,
                 v,
@@ -175,12 +180,19 @@ fn chunk<const MODE: u8, const SHAPES: bool>(
         if SHAPES && shape[k] != SPHERE {
             let principal = &templates[shape[k] as usize].principal_inertia;
             let half_kick = f[k] * (0.5 * dt / m[k]);
+            // the half kick of H (3.35) in the body frame: ½Δt Tᵀ M (a kick and the drift
+            // that follows it in one pass see the same orientation and torque)
+            let turn = if rotation {
+                q[k].inverse_transform_vector(&t[k]) * (0.5 * dt)
+            } else {
+                V3::zeros()
+            };
             if MODE & KICK != 0 {
                 v[k] += half_kick;
                 if rotation {
-                    // (3.35) as a half kick of H, then ω(T, H) (3.37)
-                    let h = rotation::angular_momentum(&q[k], &w[k], principal) + t[k] * (0.5 * dt);
-                    w[k] = rotation::angular_velocity(&q[k], &h, principal);
+                    // ω(T, H + ½Δt M) (3.37) = T (Tᵀω + Ĩ⁻¹ ½Δt Tᵀ M)
+                    let wb = q[k].inverse_transform_vector(&w[k]) + turn.component_div(principal);
+                    w[k] = q[k] * wb;
                 }
                 let (a, b, c) = (x[k], v[k], w[k]);
                 ok &= (a.x + a.y + a.z + b.x + b.y + b.z + c.x + c.y + c.z).is_finite();
@@ -192,8 +204,12 @@ fn chunk<const MODE: u8, const SHAPES: bool>(
                     moved |= (x[k] - x0).norm_squared() > half2;
                 }
                 if rotation {
-                    let h = rotation::angular_momentum(&q[k], &w[k], principal) + t[k] * (0.5 * dt);
-                    let (qn, wn) = rotation::rotate(&q[k], &h, principal, dt);
+                    // Tᵀ H after the half kick, then the turn (3.39)–(3.46) in the body frame
+                    let h = q[k]
+                        .inverse_transform_vector(&w[k])
+                        .component_mul(principal)
+                        + turn;
+                    let (qn, wn) = rotation::rotate_body(&q[k], &h, principal, dt);
                     q[k] = qn;
                     w[k] = wn;
                 }

@@ -58,28 +58,20 @@ pub fn angular_momentum(q: &UnitQuaternion<f64>, omega: &V3, inertia: &V3) -> V3
 /// tiny `|ω|` occurs.
 #[inline]
 fn rotation(omega: &V3, tau: f64) -> Quaternion<f64> {
-    let x = 0.5 * omega.norm() * tau;
-    let x2 = x * x;
+    let x2 = omega.norm_squared() * (0.25 * tau * tau);
     let (sinc, cos) = if x2 < 1e-6 {
-        // sin(x)/x and cos x to their x⁶ terms: the next terms are below 1e-24 here
+        // sin(x)/x and cos x to their x⁶ terms: the next terms are below 1e-24 here (products
+        // by the reciprocals and no square root: this is on the turn's critical path)
         (
-            1.0 - x2 / 6.0 * (1.0 - x2 / 20.0 * (1.0 - x2 / 42.0)),
-            1.0 - x2 / 2.0 * (1.0 - x2 / 12.0 * (1.0 - x2 / 30.0)),
+            1.0 - x2 * (1.0 / 6.0) * (1.0 - x2 * (1.0 / 20.0) * (1.0 - x2 * (1.0 / 42.0))),
+            1.0 - x2 * 0.5 * (1.0 - x2 * (1.0 / 12.0) * (1.0 - x2 * (1.0 / 30.0))),
         )
     } else {
+        let x = x2.sqrt();
         (x.sin() / x, x.cos())
     };
     let s = 0.5 * tau * sinc;
     Quaternion::new(cos, s * omega.x, s * omega.y, s * omega.z)
-}
-
-/// `ω(R(ω', τ) qⁿ, H)`: the angular velocity (3.38) at the trial orientation (3.39)
-/// reached from `qn` by rotating with `ω'` over `τ`. The trial quaternion is a product of two
-/// unit quaternions and is used without renormalising (its norm is 1 to round-off).
-#[inline]
-fn stage(qn: &Quaternion<f64>, omega: &V3, tau: f64, h: &V3, inertia: &V3) -> V3 {
-    let trial = UnitQuaternion::new_unchecked(rotation(omega, tau) * qn);
-    angular_velocity(&trial, h, inertia)
 }
 
 /// The orientation update over `dt` at constant angular momentum `h` (global), Wellmann
@@ -99,16 +91,38 @@ fn stage(qn: &Quaternion<f64>, omega: &V3, tau: f64, h: &V3, inertia: &V3) -> V3
 /// other stages rather than taken over from the previous step.
 #[inline]
 pub fn rotate(q: &UnitQuaternion<f64>, h: &V3, inertia: &V3, dt: f64) -> (UnitQuaternion<f64>, V3) {
-    let qn = q.quaternion();
-    let w1 = angular_velocity(q, h, inertia);
-    let w2 = stage(qn, &w1, 0.5 * dt, h, inertia);
-    let w3 = stage(qn, &w2, 0.5 * dt, h, inertia);
-    let w4 = stage(qn, &w3, dt, h, inertia);
+    rotate_body(q, &q.inverse_transform_vector(h), inertia, dt)
+}
+
+/// [`rotate`] with the angular momentum given in the body frame of `q`, `h_body = qⁿᵀ H`,
+/// and every stage evaluated in that frame (*not in thesis*; the same algebra, fewer
+/// products): a trial orientation R(ω, τ) qⁿ equals qⁿ R(qⁿᵀω, τ), so with
+/// `ω_b = qⁿᵀω` each stage (3.41)–(3.43) is `ω_b′ = R_b (Ĩ⁻¹ R_bᵀ h_body)`, R_b = R(ω_b, τ),
+/// (3.40) is `Ĩ⁻¹ h_body`, and (3.45) is qⁿ⁺¹ = qⁿ R(ω̄_b, Δt): two vector rotations per
+/// stage and no quaternion product, where the global form needs four and one.
+#[inline]
+pub fn rotate_body(
+    q: &UnitQuaternion<f64>,
+    h_body: &V3,
+    inertia: &V3,
+    dt: f64,
+) -> (UnitQuaternion<f64>, V3) {
+    let inverse = inertia.map(|i| 1.0 / i);
+    let stage = |omega: &V3, tau: f64| {
+        let r = UnitQuaternion::new_unchecked(rotation(omega, tau));
+        r * r.inverse_transform_vector(h_body).component_mul(&inverse)
+    };
+    let w1 = h_body.component_mul(&inverse);
+    let w2 = stage(&w1, 0.5 * dt);
+    let w3 = stage(&w2, 0.5 * dt);
+    let w4 = stage(&w3, dt);
     let w_bar = (w1 + 2.0 * (w2 + w3) + w4) / 6.0;
+    let r = UnitQuaternion::new_unchecked(rotation(&w_bar, dt));
     // Renormalised after the product (*not in thesis*: Wellmann's matrix T is never
     // re-orthonormalised); this keeps |q| = 1 to round-off over any number of steps.
-    let q_next = UnitQuaternion::new_normalize(rotation(&w_bar, dt) * qn);
-    let w_next = angular_velocity(&q_next, h, inertia);
+    let q_next = UnitQuaternion::new_normalize(q.quaternion() * r.quaternion());
+    // (3.46): ω = qⁿ⁺¹ Ĩ⁻¹ qⁿ⁺¹ᵀ H with qⁿ⁺¹ᵀ H = Rᵀ h_body
+    let w_next = q_next * r.inverse_transform_vector(h_body).component_mul(&inverse);
     (q_next, w_next)
 }
 

@@ -600,7 +600,7 @@ fn poly_pair_contact(
             detect_pair_warm(&a, &b, warm, &c.simplex)
         });
     let old = &*c;
-    let mut new = match found {
+    let new = match found {
         PolyDetection::Separated { normal, gap } => ShapedContact {
             normal,
             support: normal.dot(x21) - gap, // NaN when no plane was proved
@@ -632,8 +632,17 @@ fn poly_pair_contact(
             )
         }
     };
-    new.simplex = simplex;
-    *c = new;
+    // the fields a polyhedral record uses (its superquadric linearisation stays `NONE`:
+    // the record is a few hundred bytes, most of them that)
+    c.normal = new.normal;
+    c.tangential = new.tangential;
+    c.overlap = new.overlap;
+    c.point = new.point;
+    c.force = new.force;
+    c.stiffness = new.stiffness;
+    c.support = new.support;
+    c.frames = new.frames;
+    c.simplex = simplex;
 }
 
 /// A dilated polyhedron against a plane (a flat wall: R = r_ds).
