@@ -594,7 +594,9 @@ fn poly_pair_contact(
 ) {
     let (a, mut b) = (poly_view(p, i), poly_view(p, j));
     b.position += image.0;
-    let (found, simplex) = track_pair(&a, &b, rotations[0], rotations[1], &c.simplex)
+    let graph = |k: usize| p.polyhedron(k).map(|(s, _)| &s.adjacency);
+    let graphs = [graph(i), graph(j)];
+    let (found, simplex) = track_pair(&a, &b, rotations[0], rotations[1], &c.simplex, graphs)
         .unwrap_or_else(|| {
             let warm = (c.normal != V3::zeros()).then_some(c.normal);
             detect_pair_warm(&a, &b, warm, &c.simplex)

@@ -23,7 +23,7 @@
 
 use crate::hertz_mindlin::V3;
 use crate::particles::Orientation;
-use crate::shape::polyhedron::support_index;
+use crate::shape::polyhedron::{support_index, Adjacency};
 use crate::shape::Superquadric;
 use nalgebra::Matrix3;
 use parry3d_f64::math::{Pose, Rotation, Vector};
@@ -353,13 +353,16 @@ fn closest_weights(w: &[V3; 3], n: usize) -> Option<[f64; 3]> {
 /// is GJK's own termination test (parry's relative tolerance, √(10 ε)), so an accepted answer
 /// is the one GJK gives from this simplex; the tracker only saves the set-up of a GJK run.
 /// `None` when the features changed (or the simplex is degenerate, or the cores meet):
-/// then [`detect_pair_warm`] answers. `ra`, `rb` are the bodies' rotation matrices.
+/// then [`detect_pair_warm`] answers. `ra`, `rb` are the bodies' rotation matrices; with
+/// their cores' vertex graphs (`graphs`) the support scans climb from the simplex's vertices
+/// (a few neighbours instead of every vertex).
 pub fn track_pair(
     a: &PolyBody,
     b: &PolyBody,
     ra: &Matrix3<f64>,
     rb: &Matrix3<f64>,
     last: &Simplex,
+    graphs: [Option<&Adjacency>; 2],
 ) -> Option<(PolyDetection, Simplex)> {
     let (
         Core::Points {
@@ -390,6 +393,9 @@ pub fn track_pair(
         w[n] = r12 * (vb[j] * sb) + t - pa[n];
         n += 1;
     }
+    if n == 0 {
+        return None;
+    }
     let lambda = closest_weights(&w, n)?;
     let v = w[0] * lambda[0] + w[1] * lambda[1] + w[2] * lambda[2];
     let dist = v.norm();
@@ -398,10 +404,32 @@ pub fn track_pair(
     }
     let normal = v / dist;
     // the support scans: all of A below p_A·n, all of B above p_B·n (within the tolerance)
-    let ia = support_index(va, &normal);
     let m = -r12.tr_mul(&normal);
-    let jb = support_index(vb, &m);
-    let lower = t.dot(&normal) - sb * vb[jb].dot(&m) - sa * va[ia].dot(&normal);
+    let (ha, hb) = match graphs {
+        [Some(ga), Some(gb)] => {
+            // climb from the simplex's highest vertex of each core
+            let from = |core: &[V3], d: &V3, side: usize| {
+                let mut at = last[side] as usize;
+                let mut h = core[at].dot(d);
+                for k in 1..n {
+                    let i = last[2 * k + side] as usize;
+                    let x = core[i].dot(d);
+                    if x > h {
+                        (at, h) = (i, x);
+                    }
+                }
+                at
+            };
+            let (_, ha) = ga.climb(va, from(va, &normal, 0), &normal)?;
+            let (_, hb) = gb.climb(vb, from(vb, &m, 1), &m)?;
+            (ha, hb)
+        }
+        _ => (
+            va[support_index(va, &normal)].dot(&normal),
+            vb[support_index(vb, &m)].dot(&m),
+        ),
+    };
+    let lower = t.dot(&normal) - sb * hb - sa * ha;
     if dist - lower > (10.0 * f64::EPSILON).sqrt() * dist {
         return None;
     }
@@ -759,11 +787,22 @@ mod tests {
     /// GJK's tolerance, and its normal and kept simplex with GJK's from scratch; it answers for
     /// most pairs (the closest features rarely change in a small motion); its simplex is
     /// tracked again at the next motion.
+    /// With the vertex graphs (the support by climbing) and without (full scans).
     #[test]
     fn the_tracker_gives_the_brute_force_distance() {
+        tracker_against_brute_force(true);
+        tracker_against_brute_force(false);
+    }
+
+    fn tracker_against_brute_force(graphs: bool) {
         let mut rng = SplitMix64::new(77);
         let sa = Stone::random(30, 1.6, 0.1, &mut rng).unwrap();
         let sb = Stone::random(40, 1.3, 0.1, &mut rng).unwrap();
+        let (graph_a, graph_b) = if graphs {
+            (Some(&sa.adjacency), Some(&sb.adjacency))
+        } else {
+            (None, None)
+        };
         let (mut answered, mut contacts, mut separated, mut tries) = (0, 0, 0, 0);
         // after a contact (GJK converged within its reach: the simplex names the features)
         let (mut after_contact, mut tracked_after_contact) = (0, 0);
@@ -787,7 +826,9 @@ mod tests {
                 let was_touching = touching;
                 after_contact += usize::from(was_touching);
                 touching = matches!(cold, PolyDetection::Contact { .. });
-                let Some((tracked, keep)) = track_pair(&a, &b, &rot(&a), &rot(&b), &simplex) else {
+                let Some((tracked, keep)) =
+                    track_pair(&a, &b, &rot(&a), &rot(&b), &simplex, [graph_a, graph_b])
+                else {
                     simplex = detect_pair_warm(&a, &b, None, &simplex).1;
                     continue;
                 };

@@ -38,6 +38,7 @@ pub const DILATION_MAX: f64 = 0.3;
 /// A dilated convex polyhedron at unit size (equivalent-volume diameter 1) in the principal
 /// frame of the dilated body.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(from = "StoneRecord")]
 pub struct Stone {
     /// Core vertices (body frame, unit size).
     pub vertices: Vec<V3>,
@@ -52,6 +53,96 @@ pub struct Stone {
     pub inertia: V3,
     /// max |vertex| + dilation: the bounding radius at unit size.
     pub circumradius: f64,
+    /// The core's edges as each vertex's neighbours (derived from `triangles`, not stored).
+    #[serde(skip_serializing)]
+    pub adjacency: Adjacency,
+}
+
+/// A [`Stone`] as stored: its adjacency is rebuilt on reading.
+#[derive(Deserialize)]
+struct StoneRecord {
+    vertices: Vec<V3>,
+    triangles: Vec<[u32; 3]>,
+    dilation: f64,
+    volume: f64,
+    inertia: V3,
+    circumradius: f64,
+}
+
+impl From<StoneRecord> for Stone {
+    fn from(r: StoneRecord) -> Stone {
+        Stone {
+            adjacency: Adjacency::of(r.vertices.len(), &r.triangles),
+            vertices: r.vertices,
+            triangles: r.triangles,
+            dilation: r.dilation,
+            volume: r.volume,
+            inertia: r.inertia,
+            circumradius: r.circumradius,
+        }
+    }
+}
+
+/// The vertex graph of a triangulated convex core: each vertex's neighbours, in compressed
+/// rows.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Adjacency {
+    start: Vec<u16>,
+    next: Vec<u16>,
+}
+
+impl Adjacency {
+    /// The graph of the edges of `triangles` over `vertices` vertices.
+    pub fn of(vertices: usize, triangles: &[[u32; 3]]) -> Adjacency {
+        let mut lists: Vec<Vec<u16>> = vec![Vec::new(); vertices];
+        for t in triangles {
+            for e in 0..3 {
+                let (i, j) = (t[e] as usize, t[(e + 1) % 3] as usize);
+                if i < vertices && j < vertices {
+                    lists[i].push(j as u16);
+                    lists[j].push(i as u16);
+                }
+            }
+        }
+        let mut start = vec![0u16];
+        let mut next = Vec::new();
+        for mut l in lists {
+            l.sort_unstable();
+            l.dedup();
+            next.extend(l);
+            start.push(next.len() as u16);
+        }
+        Adjacency { start, next }
+    }
+
+    /// The neighbours of vertex `i`.
+    #[inline]
+    pub fn neighbours(&self, i: usize) -> &[u16] {
+        &self.next[self.start[i] as usize..self.start[i + 1] as usize]
+    }
+
+    /// The vertex furthest along `d` and its height, by climbing the graph from `from`: on a
+    /// convex core a vertex no neighbour of which is higher is the highest (the height grows
+    /// strictly at each move, so the climb ends). `None` without a graph.
+    #[inline]
+    pub fn climb(&self, vertices: &[V3], from: usize, d: &V3) -> Option<(usize, f64)> {
+        if self.start.len() != vertices.len() + 1 || from >= vertices.len() {
+            return None;
+        }
+        let (mut at, mut h) = (from, vertices[from].dot(d));
+        loop {
+            let mut moved = false;
+            for &k in self.neighbours(at) {
+                let x = vertices[k as usize].dot(d);
+                if x > h {
+                    (at, h, moved) = (k as usize, x, true);
+                }
+            }
+            if !moved {
+                return Some((at, h));
+            }
+        }
+    }
 }
 
 /// Volume, centre of mass and inertia tensor (about the centre of mass) at unit density.
@@ -504,6 +595,7 @@ impl Stone {
             .collect();
         let circumradius = vertices.iter().map(|v| v.norm()).fold(0.0, f64::max) + dilation;
         Ok(Stone {
+            adjacency: Adjacency::of(vertices.len(), &triangles),
             vertices,
             triangles,
             dilation,
@@ -912,6 +1004,29 @@ mod tests {
                 assert_eq!(support_index(&v, &d), plain, "{n}");
             }
         }
+    }
+
+    /// Climbing the vertex graph from any vertex ends at the height of the full scan's
+    /// support vertex; a stored stone reads back with its graph.
+    #[test]
+    fn climbing_the_vertex_graph_finds_the_support() {
+        let mut rng = SplitMix64::new(12);
+        for tris in [10, 30, 40] {
+            let s = Stone::random(tris, 1.6, 0.1, &mut rng).unwrap();
+            for _ in 0..300 {
+                let d = random_unit_vector(&mut rng);
+                let from = (rng.uniform() * s.vertices.len() as f64) as usize;
+                let (_, h) = s.adjacency.climb(&s.vertices, from, &d).unwrap();
+                let best = s.vertices[support_index(&s.vertices, &d)].dot(&d);
+                assert_eq!(h, best, "{tris} triangles");
+            }
+            let bytes = rmp_serde::to_vec(&s).unwrap();
+            let back: Stone = rmp_serde::from_slice(&bytes).unwrap();
+            assert_eq!(back, s);
+        }
+        assert!(Adjacency::default()
+            .climb(&[V3::zeros()], 0, &V3::x())
+            .is_none());
     }
 
     #[test]
