@@ -173,6 +173,25 @@ fn rotation(q: &Orientation) -> Rotation {
 /// A GJK simplex as vertex indices of the two cores, (first, second) × 3; `u16::MAX` unused.
 pub type Simplex = [u16; 6];
 
+/// The vertex lists and scales of two point cores (stones or spheres); `None` if either is a
+/// superquadric.
+#[allow(clippy::type_complexity)] // two lists and two scales
+fn point_cores<'a>(a: &PolyBody<'a>, b: &PolyBody<'a>) -> Option<([&'a [V3]; 2], [f64; 2])> {
+    match (a.core, b.core) {
+        (
+            Core::Points {
+                vertices: va,
+                scale: sa,
+            },
+            Core::Points {
+                vertices: vb,
+                scale: sb,
+            },
+        ) => Some(([va, vb], [sa, sb])),
+        _ => None,
+    }
+}
+
 /// No simplex.
 pub const NO_SIMPLEX: Simplex = [u16::MAX; 6];
 
@@ -219,17 +238,7 @@ pub fn detect_pair_warm(
     let pos12 = Pose::from_parts(to_parry(&t), rotation(&(q1.inverse() * b.orientation)));
     let reach = a.dilation + b.dilation;
     let warm = warm.map(|n| to_parry(&q1.inverse_transform_vector(&n)));
-    let (
-        Core::Points {
-            vertices: va,
-            scale: sa,
-        },
-        Core::Points {
-            vertices: vb,
-            scale: sb,
-        },
-    ) = (a.core, b.core)
-    else {
+    let Some(([va, vb], [sa, sb])) = point_cores(a, b) else {
         let result = closest(&pos12, &a.core, &b.core, reach, warm);
         return (finish(result, reach, a, b, &q1), NO_SIMPLEX);
     };
@@ -364,19 +373,7 @@ pub fn track_pair(
     last: &Simplex,
     graphs: [Option<&Adjacency>; 2],
 ) -> Option<(PolyDetection, Simplex)> {
-    let (
-        Core::Points {
-            vertices: va,
-            scale: sa,
-        },
-        Core::Points {
-            vertices: vb,
-            scale: sb,
-        },
-    ) = (a.core, b.core)
-    else {
-        return None;
-    };
+    let ([va, vb], [sa, sb]) = point_cores(a, b)?;
     // the second body in the first's frame: x ↦ r12 x + t
     let r12 = ra.tr_mul(rb);
     let t = ra.tr_mul(&(b.position - a.position));
