@@ -23,6 +23,7 @@ use crate::narrow::superquadric_patch::patch_contact;
 use crate::particles::{Particles, Shape};
 use crate::resolve_forces::ForceContext;
 use crate::resolve_forces::MeshForceRecord;
+use crate::shape::polyhedron::Adjacency;
 use crate::shape::superquadric::{sym2_eigen, tangent_basis};
 use crate::shape::Superquadric;
 use nalgebra::Matrix3;
@@ -496,13 +497,19 @@ fn mesh_contact(
 /// A body as the polyhedral narrow phase sees it: a stone, a sphere (a dilated point) or a
 /// superquadric (its support map, no dilation).
 fn poly_view(p: &Particles, k: usize) -> PolyBody<'_> {
-    let (core, dilation) = match p.template(k).map(|t| &t.shape) {
+    poly_view_and_graph(p, k).0
+}
+
+/// [`poly_view`] and, for a stone, its core's vertex graph (the tracker's support climb).
+fn poly_view_and_graph(p: &Particles, k: usize) -> (PolyBody<'_>, Option<&Adjacency>) {
+    let (core, dilation, graph) = match p.template(k).map(|t| &t.shape) {
         None => (
             Core::Points {
                 vertices: &POINT_CORE,
                 scale: 1.0,
             },
             p.radius[k],
+            None,
         ),
         Some(Shape::Polyhedron { stone, scale }) => {
             let s = &p.stones[*stone as usize];
@@ -512,16 +519,18 @@ fn poly_view(p: &Particles, k: usize) -> PolyBody<'_> {
                     scale: *scale,
                 },
                 s.dilation * scale,
+                Some(&s.adjacency),
             )
         }
-        Some(Shape::Superquadric(s)) => (Core::Superquadric(s), 0.0),
+        Some(Shape::Superquadric(s)) => (Core::Superquadric(s), 0.0, None),
     };
-    PolyBody {
+    let body = PolyBody {
         core,
         dilation,
         position: p.position[k],
         orientation: p.orientation[k],
-    }
+    };
+    (body, graph)
 }
 
 /// The record of a pair whose cores interpenetrate: a non-finite force, which stops the run
@@ -592,10 +601,9 @@ fn poly_pair_contact(
     x21: &V3,
     c: &mut ShapedContact,
 ) {
-    let (a, mut b) = (poly_view(p, i), poly_view(p, j));
+    let ((a, graph_a), (mut b, graph_b)) = (poly_view_and_graph(p, i), poly_view_and_graph(p, j));
     b.position += image.0;
-    let graph = |k: usize| p.polyhedron(k).map(|(s, _)| &s.adjacency);
-    let graphs = [graph(i), graph(j)];
+    let graphs = [graph_a, graph_b];
     let (found, simplex) = track_pair(&a, &b, rotations[0], rotations[1], &c.simplex, graphs)
         .unwrap_or_else(|| {
             let warm = (c.normal != V3::zeros()).then_some(c.normal);
