@@ -25,7 +25,6 @@ use crate::hertz_mindlin::V3;
 use crate::particles::Orientation;
 use crate::shape::polyhedron::{support_index, Adjacency};
 use crate::shape::Superquadric;
-use crate::triangle_contact::closest_point_on_triangle;
 use nalgebra::Matrix3;
 use parry3d_f64::math::{Pose, Rotation, Vector};
 use parry3d_f64::query::details::contact_support_map_support_map_with_params;
@@ -299,8 +298,13 @@ pub fn detect_pair_warm(
 }
 
 /// The point of the simplex `w[..n]` (1–3 points) closest to the origin, as convex weights
-/// over its points (zero for the points its closest feature does not use; the triangle's by
-/// [`closest_point_on_triangle`]). `None` for a degenerate simplex.
+/// over its points (zero for the points its closest feature does not use; Ericson, *Real-Time
+/// Collision Detection* 5.1.5 for the triangle). `None` for a degenerate simplex.
+///
+/// The triangle case is `triangle_contact::closest_point_on_triangle` at p = 0 with a guard for
+/// flat triangles; calling that instead changes the tracker's round-off, and with it the CI
+/// polyhedral sleeper chain turns unstable at 19.4 ms (tests/tests/polyhedra.rs) — that chain
+/// sits at the edge of stability and must be made robust before the two are merged.
 fn closest_weights(w: &[V3; 3], n: usize) -> Option<[f64; 3]> {
     match n {
         1 => Some([1.0, 0.0, 0.0]),
@@ -314,12 +318,42 @@ fn closest_weights(w: &[V3; 3], n: usize) -> Option<[f64; 3]> {
             Some([1.0 - t, t, 0.0])
         }
         3 => {
-            let (_, lambda) = closest_point_on_triangle(&V3::zeros(), &w[0], &w[1], &w[2]);
-            // a degenerate (flat) triangle gives non-finite weights, round-off one just below 0
-            lambda
-                .iter()
-                .all(|x| x.is_finite() && *x >= 0.0)
-                .then_some(lambda)
+            let (a, b, c) = (w[0], w[1], w[2]);
+            let (ab, ac) = (b - a, c - a);
+            let (d1, d2) = (-ab.dot(&a), -ac.dot(&a));
+            if d1 <= 0.0 && d2 <= 0.0 {
+                return Some([1.0, 0.0, 0.0]);
+            }
+            let (d3, d4) = (-ab.dot(&b), -ac.dot(&b));
+            if d3 >= 0.0 && d4 <= d3 {
+                return Some([0.0, 1.0, 0.0]);
+            }
+            let vc = d1 * d4 - d3 * d2;
+            if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+                let v = d1 / (d1 - d3);
+                return Some([1.0 - v, v, 0.0]);
+            }
+            let (d5, d6) = (-ab.dot(&c), -ac.dot(&c));
+            if d6 >= 0.0 && d5 <= d6 {
+                return Some([0.0, 0.0, 1.0]);
+            }
+            let vb = d5 * d2 - d1 * d6;
+            if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+                let t = d2 / (d2 - d6);
+                return Some([1.0 - t, 0.0, t]);
+            }
+            let va = d3 * d6 - d5 * d4;
+            if va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0 {
+                let t = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+                return Some([0.0, 1.0 - t, t]);
+            }
+            let sum = va + vb + vc;
+            if sum <= 0.0 || sum.is_nan() {
+                return None;
+            }
+            let (v, t) = (vb / sum, vc / sum);
+            // a nearly flat triangle's round-off can leave a weight just below zero
+            (v >= 0.0 && t >= 0.0 && v + t <= 1.0).then_some([1.0 - v - t, v, t])
         }
         _ => None,
     }
