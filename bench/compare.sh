@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # Side-by-side benchmark of our solvers against the peer programs of REFERENCE D:
 #   dem    dense bed, 24,696 spheres, 10,000 timed steps   ours: dense_bed bench  peer: LIGGGHTS
+#   pour   polydisperse pour, 20,000 spheres d 3-5 mm, fall and settling, 50,000 timed steps
+#                                                           ours: pour bench       peer: LIGGGHTS
 #   fem10  static beam, C3D8 at 10 mm (36,663 dof)         ours: static_beam      peer: CalculiX ccx
 #   fem5   static beam, C3D8 at 5 mm (265,923 dof)         ours: static_beam      peer: CalculiX ccx
 #   transport  zenoh round trip (no peer program; REFERENCE D's figures are printed alongside)
@@ -12,7 +14,7 @@
 #
 # Environment (defaults in brackets):
 #   N [3]               runs of each program per case
-#   CASES ["dem fem10 fem5 transport"]
+#   CASES ["dem pour fem10 fem5 transport"]
 #   THREADS [2]         cores given to each program: MPI ranks of LIGGGHTS, OMP threads of
 #                       ccx (spooles), rayon threads of ours
 #   DEM_SETTLE [40000]  settling steps before the timed ones (0.4 s), both codes
@@ -21,9 +23,11 @@
 #                       is REFERENCE D's exact lattice, which LIGGGHTS keeps as 441 static
 #                       columns while ours breaks that symmetry by itself, later (README.md);
 #                       1e-9 makes both settle into a random packing: like-for-like work
+#   POUR_COUNT [20000] POUR_SEED [1]  spheres and seed of the pour's start (bench/liggghts/pour_gen.py)
+#   POUR_STEPS [50000]  pour steps (0.4 s at 8 us), all timed, both codes
 #   TRANSPORT_ROUNDS [200]
 #   BENCH_WORK [mktemp] folder for the decks, logs and raw records (kept; printed at the end)
-#   COSIM_TARGET_DIR    cargo target folder holding release/deps/{dense_bed,static_beam,transport}-*
+#   COSIM_TARGET_DIR    cargo target folder holding release/deps/{dense_bed,pour,static_beam,transport}-*
 #                       (else $CARGO_TARGET_DIR, ~/.cache/cosim-target, <repo>/target; when no
 #                       bench binary is found there it is built with `cargo bench --no-run`)
 #   LIGGGHTS [liggghts] CCX [ccx] MPIRUN [mpirun]
@@ -34,12 +38,15 @@ set -euo pipefail
 HERE=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
 ROOT=$(dirname "$HERE")
 N=${N:-3}
-CASES=${CASES:-"dem fem10 fem5 transport"}
+CASES=${CASES:-"dem pour fem10 fem5 transport"}
 THREADS=${THREADS:-2}
 DEM_SETTLE=${DEM_SETTLE:-40000}
 DEM_STEPS=${DEM_STEPS:-10000}
 DEM_JITTER=${DEM_JITTER:-0}
 TRANSPORT_ROUNDS=${TRANSPORT_ROUNDS:-200}
+POUR_COUNT=${POUR_COUNT:-20000}
+POUR_SEED=${POUR_SEED:-1}
+POUR_STEPS=${POUR_STEPS:-50000}
 LIGGGHTS=${LIGGGHTS:-liggghts}
 CCX=${CCX:-ccx}
 MPIRUN=${MPIRUN:-mpirun}
@@ -80,6 +87,7 @@ find_bench() {
 build_bench() {
     case $1 in
     dense_bed) (cd "$ROOT" && cargo bench --no-run -p dem-node --bench dense_bed) ;;
+    pour) (cd "$ROOT" && cargo bench --no-run -p dem-node --bench pour) ;;
     static_beam) (cd "$ROOT" && cargo bench --no-run -p fem-node --no-default-features --bench static_beam) ;;
     transport) (cd "$ROOT" && cargo bench --no-run -p proto --bench transport) ;;
     esac
@@ -153,6 +161,50 @@ dem_ours() {
     record dem ours "$1" "$t" "$W" "$CPU" "$((M / 1024))" "particles=$n" "KE=$ke" "contacts=$contacts" "builds=$builds"
 }
 
+# ---------------------------------------------------------------- DEM: polydisperse pour
+# the LIGGGHTS command (one rank, or THREADS ranks under mpirun), each rank under GNU time
+liggghts_cmd() { # dir tag args...
+    local d=$1 tag=$2
+    shift 2
+    if ((THREADS > 1)); then
+        run_timed "$d" "$tag" "$MPIRUN" --allow-run-as-root -np "$THREADS" \
+            sh -c 'exec '"$TIME"' -f %M -o "$0.rss.$OMPI_COMM_WORLD_RANK" '"$LIGGGHTS"' "$@"' "$tag" \
+            "$@" -log "$tag.lammps" -echo none -screen none
+    else
+        run_timed "$d" "$tag" "$LIGGGHTS" "$@" -log "$tag.lammps" -echo none -screen none
+    fi
+    timefile "$d/$tag.time"
+    RSS_KB=$M
+    if ((THREADS > 1)); then RSS_KB=$(cat "$d/$tag".rss.* | awk '{s+=$1} END{print s}'); fi
+}
+
+pour_peer() { # run index
+    local d="$WORK/pour" tag="liggghts.$1"
+    liggghts_cmd "$d" "$tag" -in pour.in -var steps "$POUR_STEPS" -var data pour.data
+    local t atoms ke rke contacts zmax builds
+    t=$(awk '/^Loop time of/{t=$4} END{print t}' "$d/$tag.lammps")
+    builds=$(awk '/^Neighbor list builds/{b=$NF} END{print b}' "$d/$tag.lammps")
+    read -r _ atoms ke rke contacts zmax < <(awk '$1 ~ /^[0-9]+$/ && NF == 6 {l=$0} END{print l}' "$d/$tag.lammps")
+    [[ $atoms == "$POUR_COUNT" ]] || log "WARNING: LIGGGHTS ran $atoms particles (expected $POUR_COUNT)"
+    record pour liggghts "$1" "$t" "$W" "$CPU" "$((RSS_KB / 1024))" "particles=$atoms" \
+        "KE=$(awk -v a="$ke" -v b="$rke" 'BEGIN{printf "%.3e", a + b}')" "contacts=$contacts" "builds=$builds" "zmax=$zmax"
+}
+
+pour_ours() {
+    local d="$WORK/pour" tag="ours.$1"
+    run_timed "$d" "$tag" env POUR_THREADS="$THREADS" POUR_STEPS="$POUR_STEPS" POUR_DATA=pour.data "$POUR"
+    timefile "$d/$tag.time"
+    local line t n
+    line=$(grep -m1 '^timed ' "$d/$tag.log") || die "no 'timed ... steps' line in $d/$tag.log"
+    t=$(sed -n 's/^timed [0-9]* steps: \([0-9.]*\) s wall.*/\1/p' <<<"$line")
+    n=$(sed -n 's/^pour: \([0-9]*\) particles.*/\1/p' "$d/$tag.log")
+    record pour ours "$1" "$t" "$W" "$CPU" "$((M / 1024))" "particles=$n" \
+        "KE=$(sed -n 's/.* KE \([-0-9.e+]*\) J.*/\1/p' <<<"$line")" \
+        "contacts=$(sed -n 's/.*; contacts \([0-9]*\),.*/\1/p' <<<"$line")" \
+        "builds=$(sed -n 's/.*, list builds \([0-9]*\),.*/\1/p' <<<"$line")" \
+        "zmax=$(sed -n 's/.*highest centre \([0-9.]*\) m.*/\1/p' <<<"$line")"
+}
+
 # ---------------------------------------------------------------- FEM: static beam
 fem_prepare() { # h
     local d="$WORK/fem$1"
@@ -216,6 +268,7 @@ have() { command -v "$1" >/dev/null 2>&1; }
 # ---------------------------------------------------------------- run
 declare -A PEER_OK PEER_NAME
 PEER_NAME[dem]=LIGGGHTS
+PEER_NAME[pour]=LIGGGHTS
 PEER_NAME[fem10]=CalculiX
 PEER_NAME[fem5]=CalculiX
 UPTIME_BEFORE=$(uptime)
@@ -246,6 +299,28 @@ for c in $CASES; do
             if ((PEER_OK[dem] && i % 2 == 0)); then dem_peer "$i"; fi
         done
         ;;
+    pour)
+        POUR=$(ours_bin pour)
+        mkdir -p "$WORK/pour"
+        cp "$HERE/liggghts/pour.in" "$WORK/pour/"
+        python3 "$HERE/liggghts/pour_gen.py" "$POUR_COUNT" "$POUR_SEED" >"$WORK/pour/pour.data"
+        PEER_OK[pour]=1
+        if ! have "$LIGGGHTS"; then
+            log "SKIP peer: LIGGGHTS ('$LIGGGHTS') is not installed (Debian: apt-get install liggghts); measuring ours only"
+            PEER_OK[pour]=0
+        elif ((THREADS > 1)) && ! have "$MPIRUN"; then
+            log "SKIP peer: $THREADS LIGGGHTS ranks need '$MPIRUN' (Debian: apt-get install openmpi-bin); measuring ours only"
+            PEER_OK[pour]=0
+        fi
+        export OMPI_MCA_btl_vader_single_copy_mechanism=${OMPI_MCA_btl_vader_single_copy_mechanism:-none}
+        export OMPI_MCA_mpi_yield_when_idle=${OMPI_MCA_mpi_yield_when_idle:-1}
+        for ((i = 1; i <= N; i++)); do
+            log "[pour $i/$N] $(date +%T) load $(cut -d' ' -f1-3 /proc/loadavg)"
+            if ((PEER_OK[pour] && i % 2 == 1)); then pour_peer "$i"; fi
+            pour_ours "$i"
+            if ((PEER_OK[pour] && i % 2 == 0)); then pour_peer "$i"; fi
+        done
+        ;;
     fem10 | fem5)
         h=${c#fem}
         STATIC_BEAM=$(ours_bin static_beam)
@@ -270,16 +345,17 @@ for c in $CASES; do
             transport_ours "$i"
         done
         ;;
-    *) die "unknown case '$c' (dem fem10 fem5 transport)" ;;
+    *) die "unknown case '$c' (dem pour fem10 fem5 transport)" ;;
     esac
 done
 UPTIME_AFTER=$(uptime)
 
 # ---------------------------------------------------------------- report
-peer_prog() { case $1 in dem) echo liggghts ;; *) echo ccx ;; esac; }
+peer_prog() { case $1 in dem | pour) echo liggghts ;; *) echo ccx ;; esac; }
 describe() {
     case $1 in
     dem) echo "DEM dense bed, 24,696 spheres, $DEM_STEPS steps after $DEM_SETTLE settling$( [[ $DEM_JITTER == 0 ]] || echo ", lattice jitter $DEM_JITTER m (both)")" ;;
+    pour) echo "DEM polydisperse pour, $POUR_COUNT spheres d 3–5 mm (seed $POUR_SEED), $POUR_STEPS steps of fall and settling" ;;
     fem10) echo "FEM static beam C3D8 10 mm (36,663 dof)" ;;
     fem5) echo "FEM static beam C3D8 5 mm (265,923 dof)" ;;
     esac
@@ -290,13 +366,13 @@ echo
 echo "- repo $(git -C "$ROOT" rev-parse --short HEAD 2>/dev/null || echo '?'), $N runs per program per case, ABBA order, $THREADS cores per program ($(nproc) online)"
 echo "- load before: \`${UPTIME_BEFORE## }\`"
 echo "- load after:  \`${UPTIME_AFTER## }\`"
-for v in DENSE_BED STATIC_BEAM TRANSPORT; do
+for v in DENSE_BED POUR STATIC_BEAM TRANSPORT; do
     [[ -n ${!v:-} ]] && echo "- ours: \`${!v}\` (built $(date -u -r "${!v}" '+%Y-%m-%d %H:%M UTC'))"
 done
 have "$LIGGGHTS" && echo "- LIGGGHTS: \`$(command -v "$LIGGGHTS")\` $(dpkg-query -W -f='${Version}' liggghts 2>/dev/null || true)"
 have "$CCX" && echo "- CalculiX: \`$(command -v "$CCX")\` $(dpkg-query -W -f='${Version}' calculix-ccx 2>/dev/null || true)"
 echo
-echo "Time: DEM = the $DEM_STEPS timed steps (LIGGGHTS \"Loop time\", ours \"timed ... s wall\");"
+echo "Time: DEM = the $DEM_STEPS timed steps (LIGGGHTS \"Loop time\", ours \"timed ... s wall\"); pour = all its steps;"
 echo "FEM = ccx process wall time vs ours build + assembly + factorise + solve. Peak RSS: LIGGGHTS"
 echo "summed over its ranks; ccx and ours DEM the process maximum; ours FEM VmHWM after the solve."
 echo "Ratio = peer median / ours median (> 1: ours is faster or smaller)."
@@ -325,6 +401,11 @@ for c in $CASES; do
     dem)
         for k in particles KE contacts builds; do
             echo "| dem | $k$( [[ $k == builds ]] && echo ' (neighbour lists, timed steps)') | $(answer dem "$p" $k | paste -sd, - | sed 's/,/, /g') | $(answer dem ours $k | paste -sd, - | sed 's/,/, /g') |"
+        done
+        ;;
+    pour)
+        for k in particles KE contacts builds zmax; do
+            echo "| pour | $k$( [[ $k == zmax ]] && echo ' (highest centre, m)') | $(answer pour "$p" $k | paste -sd, - | sed 's/,/, /g') | $(answer pour ours $k | paste -sd, - | sed 's/,/, /g') |"
         done
         ;;
     fem*)

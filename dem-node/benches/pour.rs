@@ -1,0 +1,197 @@
+//! Polydisperse pour (issue 25), the peer case of `bench/liggghts/pour.in`: the spheres of a
+//! LIGGGHTS data file written by `bench/liggghts/pour_gen.py` (d uniform in [3, 5] mm, random
+//! non-overlapping start up to 0.4 m, at rest) fall into a 0.1 × 0.1 m box open at the top and
+//! settle; wheat material (A4), Hertz–Mindlin, Δt = 8e-6 s (0.28 of the smallest sphere's Rayleigh step), skin 0.5 mm (as LIGGGHTS'
+//! `neighbor 0.0005 bin`). All steps are timed: unlike the dense bed, the case is the fall,
+//! the impacts and the settling (frequent list rebuilds, a growing contact count).
+//!
+//! Both codes read the same file: this bench parses the data file's `Atoms` lines
+//! (`id type diameter density x y z`) and hands the same decimal strings to the engine's
+//! particle-file reader, so the two start from the same doubles.
+//!
+//! Environment: POUR_DATA (data file, default `pour.data` in the working folder), POUR_STEPS
+//! (default 50000 = 0.4 s), POUR_THREADS (default: all), POUR_EVERY (steps between progress
+//! lines, default 10000: time, KE, contacts, highest centre, like LIGGGHTS' thermo).
+
+use dem::{parse_scene_section, Engine};
+use std::fmt::Write as _;
+use std::time::Instant;
+
+fn env(name: &str, default: usize) -> usize {
+    std::env::var(name)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
+}
+
+/// The `Atoms` section of a LIGGGHTS data file as our particle CSV (x,y,z,radius) with the
+/// file's own decimal strings; the radius is half the diameter (exact in binary). Also the
+/// density of the first atom (all must agree).
+fn read_data(path: &str) -> Result<(String, f64, usize), String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{path}: {e}"))?;
+    let mut csv = String::from("x,y,z,radius\n");
+    let mut density: Option<f64> = None;
+    let mut in_atoms = false;
+    let mut n = 0;
+    for (i, line) in text.lines().enumerate() {
+        let line = line.split('#').next().unwrap_or("").trim();
+        if line.is_empty() {
+            continue;
+        }
+        if line == "Atoms" {
+            in_atoms = true;
+            continue;
+        }
+        if !in_atoms {
+            continue;
+        }
+        let f: Vec<&str> = line.split_whitespace().collect();
+        if f.len() < 7 {
+            if f[0].chars().all(|c| c.is_ascii_alphabetic()) {
+                break; // the next section (Velocities, ...)
+            }
+            return Err(format!(
+                "{path}:{}: an Atoms line needs `id type diameter density x y z`",
+                i + 1
+            ));
+        }
+        let num = |s: &str, what: &str| {
+            s.parse::<f64>()
+                .map_err(|_| format!("{path}:{}: {what} `{s}` is not a number", i + 1))
+        };
+        let d = num(f[2], "diameter")?;
+        let rho = num(f[3], "density")?;
+        match density {
+            None => density = Some(rho),
+            Some(r0) if r0 != rho => {
+                return Err(format!(
+                    "{path}:{}: density {rho} differs from the first atom's {r0}",
+                    i + 1
+                ))
+            }
+            _ => {}
+        }
+        for (s, what) in [(f[4], "x"), (f[5], "y"), (f[6], "z")] {
+            num(s, what)?;
+        }
+        let _ = writeln!(csv, "{},{},{},{:e}", f[4], f[5], f[6], 0.5 * d);
+        n += 1;
+    }
+    let density = density.ok_or_else(|| format!("{path}: no Atoms section"))?;
+    Ok((csv, density, n))
+}
+
+fn cpu_seconds() -> f64 {
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
+        return 0.0;
+    };
+    let rest = stat.rsplit_once(')').map_or("", |(_, r)| r);
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks: f64 = f.get(11).and_then(|v| v.parse().ok()).unwrap_or(0.0)
+        + f.get(12).and_then(|v| v.parse().ok()).unwrap_or(0.0);
+    ticks / 100.0
+}
+
+fn z_max(e: &Engine) -> f64 {
+    e.particles()
+        .position
+        .iter()
+        .map(|p| p.z)
+        .fold(f64::NEG_INFINITY, f64::max)
+}
+
+fn main() {
+    let data = std::env::var("POUR_DATA").unwrap_or_else(|_| "pour.data".into());
+    let (csv, density, n_file) = match read_data(&data) {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!(
+                "pour: {e} (write one with `python3 bench/liggghts/pour_gen.py > pour.data`)"
+            );
+            std::process::exit(2);
+        }
+    };
+    let dir = std::env::temp_dir().join(format!("cosim-pour-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temporary folder");
+    std::fs::write(dir.join("pour.csv"), csv).expect("write the particle CSV");
+    let scene = format!(
+        r#"
+[dem]
+time_step = 8e-6
+skin = 0.0005
+gravity = [0.0, 0.0, -9.81]
+[dem.materials.wheat]
+youngs_modulus = 1e8
+poisson_ratio = 0.3
+density = {density:?}
+restitution = 0.4
+friction = 1.0
+[[dem.walls]]
+kind = "box"
+material = "wheat"
+min = [0.0, 0.0, 0.0]
+max = [0.1, 0.1, 0.5]
+open = ["+z"]
+[[dem.particles]]
+kind = "file"
+material = "wheat"
+path = "pour.csv"
+"#
+    );
+    let cfg = parse_scene_section(&scene)
+        .expect("scene")
+        .expect("dem table");
+    let threads = env("POUR_THREADS", 0);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .expect("pool");
+    pool.install(|| {
+        let mut e = Engine::from_config(&cfg, &dir).expect("engine");
+        let _ = std::fs::remove_dir_all(&dir);
+        let n = e.num_particles();
+        assert_eq!(n, n_file, "particles read");
+        let steps = env("POUR_STEPS", 50_000);
+        let every = env("POUR_EVERY", 10_000).max(1);
+        println!(
+            "pour: {n} particles from {data}, {} threads, dt = {} s (Rayleigh {:.3e} s)",
+            rayon::current_num_threads(),
+            e.time_step(),
+            e.rayleigh_time_step()
+        );
+        let cpu0 = cpu_seconds();
+        let t0 = Instant::now();
+        let mut done = 0;
+        while done < steps {
+            let k = every.min(steps - done);
+            e.advance(k).expect("advance");
+            done += k;
+            println!(
+                "  step {done}: {:.1} s wall, KE {:.16e} J, contacts {}, wall contacts {}, highest centre {:.4} m",
+                t0.elapsed().as_secs_f64(),
+                e.kinetic_energy(),
+                e.num_contacts(),
+                e.num_wall_contacts(),
+                z_max(&e)
+            );
+        }
+        let t = t0.elapsed().as_secs_f64();
+        let cpu = cpu_seconds() - cpu0;
+        println!(
+            "timed {steps} steps: {t:.3} s wall, {:.3e} particle-steps/s, {:.1} ns per particle-step \
+             ({:.1} CPU-ns); contacts {}, wall contacts {}, list builds {}, KE {:.3e} J, highest centre {:.4} m",
+            (n * steps) as f64 / t,
+            t * 1e9 / (n * steps) as f64,
+            cpu * 1e9 / (n * steps) as f64,
+            e.num_contacts(),
+            e.num_wall_contacts(),
+            e.neighbour_list_builds(),
+            e.kinetic_energy(),
+            z_max(&e)
+        );
+        println!(
+            "state in memory {:.0} bytes/particle",
+            e.memory_bytes() as f64 / n as f64
+        );
+    });
+}
