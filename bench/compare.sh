@@ -62,49 +62,8 @@ die() { log "compare.sh: $*"; exit 1; }
 TIME=/usr/bin/time
 [[ -x $TIME ]] || die "GNU time is needed at $TIME (Debian: apt-get install time)"
 
-# ---------------------------------------------------------------- our bench executables
-target_dirs() {
-    [[ -n ${COSIM_TARGET_DIR:-} ]] && echo "$COSIM_TARGET_DIR"
-    [[ -n ${CARGO_TARGET_DIR:-} ]] && echo "$CARGO_TARGET_DIR"
-    echo "$HOME/.cache/cosim-target"
-    echo "$ROOT/target"
-}
-
-# newest executable release/deps/<name>-<hash> in the candidate target folders
-find_bench() {
-    local name=$1 best="" t bt=0 d f
-    while read -r d; do
-        for f in "$d"/release/deps/"$name"-*; do
-            [[ -f $f && -x $f && $f != *.d ]] || continue
-            t=$(stat -c %Y "$f")
-            if ((t > bt)); then bt=$t; best=$f; fi
-        done
-    done < <(target_dirs)
-    echo "$best"
-}
-
-# bench name -> cargo package and flags (static_beam builds without the node feature)
-build_bench() {
-    case $1 in
-    dense_bed) (cd "$ROOT" && cargo bench --no-run -p dem-node --bench dense_bed) ;;
-    pour) (cd "$ROOT" && cargo bench --no-run -p dem-node --bench pour) ;;
-    static_beam) (cd "$ROOT" && cargo bench --no-run -p fem-node --no-default-features --bench static_beam) ;;
-    transport) (cd "$ROOT" && cargo bench --no-run -p proto --bench transport) ;;
-    esac
-}
-
-ours_bin() {
-    local b
-    b=$(find_bench "$1")
-    if [[ -z $b ]]; then
-        command -v cargo >/dev/null || die "no $1 bench executable found and no cargo to build it"
-        log "no $1 bench executable found: building it (cargo bench --no-run)"
-        build_bench "$1" >&2
-        b=$(find_bench "$1")
-        [[ -n $b ]] || die "built $1 but cannot find release/deps/$1-*; set COSIM_TARGET_DIR"
-    fi
-    echo "$b"
-}
+# our bench executables (found or built): bench/lib.sh
+source "$HERE/lib.sh"
 
 # ---------------------------------------------------------------- measuring
 # run_timed <dir> <tag> cmd... : runs cmd in <dir> under GNU time; stdout+stderr to <tag>.log,
@@ -254,7 +213,6 @@ transport_ours() {
 }
 
 # ---------------------------------------------------------------- report helpers
-median() { sort -g | awk '{v[NR]=$1} END{if (NR == 0) print ""; else if (NR % 2) print v[(NR+1)/2]; else print (v[NR/2]+v[NR/2+1])/2}'; }
 col() { awk -F'\t' -v c="$1" -v p="$2" -v k="$3" '$1 == c && $2 == p {print $k}' "$RUNS"; }
 all() { col "$@" | awk '{printf "%s%s", (NR > 1 ? ", " : ""), ($1 + 0 >= 100 ? sprintf("%.0f", $1) : sprintf("%.3g", $1))}'; }
 answer() { # case prog key -> values of key=... in the answer fields
