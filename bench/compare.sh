@@ -80,22 +80,57 @@ record() { local IFS=$'\t'; echo "$*" >>"$RUNS"; }
 
 timefile() { read -r W U S M <"$1"; CPU=$(awk -v u="$U" -v s="$S" 'BEGIN{printf "%.2f", u+s}'); }
 
-# ---------------------------------------------------------------- DEM: dense bed
-dem_peer() { # run index
-    local d="$WORK/dem" tag="liggghts.$1" r
+# ---------------------------------------------------------------- LIGGGHTS runs
+# the LIGGGHTS command (one rank, or THREADS ranks under mpirun), each rank under GNU time
+liggghts_cmd() { # dir tag args...
+    local d=$1 tag=$2
+    shift 2
     if ((THREADS > 1)); then
-        # each rank under its own GNU time, for the peak RSS summed over ranks
         run_timed "$d" "$tag" "$MPIRUN" --allow-run-as-root -np "$THREADS" \
             sh -c 'exec '"$TIME"' -f %M -o "$0.rss.$OMPI_COMM_WORLD_RANK" '"$LIGGGHTS"' "$@"' "$tag" \
-            -in dense_bed.in -var settle "$DEM_SETTLE" -var steps "$DEM_STEPS" -var jitter "$DEM_JITTER" \
-            -log "$tag.lammps" -echo none -screen none
+            "$@" -log "$tag.lammps" -echo none -screen none
     else
-        run_timed "$d" "$tag" "$LIGGGHTS" -in dense_bed.in \
-            -var settle "$DEM_SETTLE" -var steps "$DEM_STEPS" -var jitter "$DEM_JITTER" -log "$tag.lammps" -echo none -screen none
+        run_timed "$d" "$tag" "$LIGGGHTS" "$@" -log "$tag.lammps" -echo none -screen none
     fi
     timefile "$d/$tag.time"
-    local rss_kb=$M
-    if ((THREADS > 1)); then rss_kb=$(cat "$d/$tag".rss.* | awk '{s+=$1} END{print s}'); fi
+    RSS_KB=$M
+    if ((THREADS > 1)); then RSS_KB=$(cat "$d/$tag".rss.* | awk '{s+=$1} END{print s}'); fi
+}
+
+# LIGGGHTS usable for case $1 (sets PEER_OK[$1]); Open MPI settings for containers and shared
+# machines: no cross-memory attach; waiting ranks yield the core instead of spinning (a
+# spinning rank steals time from its partner)
+liggghts_check() {
+    PEER_OK[$1]=1
+    if ! have "$LIGGGHTS"; then
+        log "SKIP peer: LIGGGHTS ('$LIGGGHTS') is not installed (Debian: apt-get install liggghts); measuring ours only"
+        PEER_OK[$1]=0
+    elif ((THREADS > 1)) && ! have "$MPIRUN"; then
+        log "SKIP peer: $THREADS LIGGGHTS ranks need '$MPIRUN' (Debian: apt-get install openmpi-bin); measuring ours only"
+        PEER_OK[$1]=0
+    fi
+    export OMPI_MCA_btl_vader_single_copy_mechanism=${OMPI_MCA_btl_vader_single_copy_mechanism:-none}
+    export OMPI_MCA_mpi_yield_when_idle=${OMPI_MCA_mpi_yield_when_idle:-1}
+}
+
+# abba <case> <peer function> <our function> [args...]: N runs of each, alternating (run 1
+# peer first, run 2 ours first, ...); the functions get the args and the run index
+abba() {
+    local c=$1 peer=$2 ours=$3 i
+    shift 3
+    for ((i = 1; i <= N; i++)); do
+        log "[$c $i/$N] $(date +%T) load $(cut -d' ' -f1-3 /proc/loadavg)"
+        if ((PEER_OK[$c] && i % 2 == 1)); then "$peer" "$@" "$i"; fi
+        "$ours" "$@" "$i"
+        if ((PEER_OK[$c] && i % 2 == 0)); then "$peer" "$@" "$i"; fi
+    done
+}
+
+# ---------------------------------------------------------------- DEM: dense bed
+dem_peer() { # run index
+    local d="$WORK/dem" tag="liggghts.$1"
+    liggghts_cmd "$d" "$tag" -in dense_bed.in -var settle "$DEM_SETTLE" -var steps "$DEM_STEPS" -var jitter "$DEM_JITTER"
+    local rss_kb=$RSS_KB
     local t atoms ke contacts builds
     t=$(awk '/^Loop time of/{t=$4} END{print t}' "$d/$tag.lammps")
     builds=$(awk '/^Neighbor list builds/{b=$NF} END{print b}' "$d/$tag.lammps")
@@ -121,22 +156,6 @@ dem_ours() {
 }
 
 # ---------------------------------------------------------------- DEM: polydisperse pour
-# the LIGGGHTS command (one rank, or THREADS ranks under mpirun), each rank under GNU time
-liggghts_cmd() { # dir tag args...
-    local d=$1 tag=$2
-    shift 2
-    if ((THREADS > 1)); then
-        run_timed "$d" "$tag" "$MPIRUN" --allow-run-as-root -np "$THREADS" \
-            sh -c 'exec '"$TIME"' -f %M -o "$0.rss.$OMPI_COMM_WORLD_RANK" '"$LIGGGHTS"' "$@"' "$tag" \
-            "$@" -log "$tag.lammps" -echo none -screen none
-    else
-        run_timed "$d" "$tag" "$LIGGGHTS" "$@" -log "$tag.lammps" -echo none -screen none
-    fi
-    timefile "$d/$tag.time"
-    RSS_KB=$M
-    if ((THREADS > 1)); then RSS_KB=$(cat "$d/$tag".rss.* | awk '{s+=$1} END{print s}'); fi
-}
-
 pour_peer() { # run index
     local d="$WORK/pour" tag="liggghts.$1"
     liggghts_cmd "$d" "$tag" -in pour.in -var steps "$POUR_STEPS" -var data pour.data
@@ -238,46 +257,16 @@ for c in $CASES; do
         mkdir -p "$WORK/dem"
         # a private copy: LIGGGHTS reads its input line by line while it runs
         cp "$HERE/liggghts/dense_bed.in" "$WORK/dem/"
-        PEER_OK[dem]=1
-        if ! have "$LIGGGHTS"; then
-            log "SKIP peer: LIGGGHTS ('$LIGGGHTS') is not installed (Debian: apt-get install liggghts); measuring ours only"
-            PEER_OK[dem]=0
-        elif ((THREADS > 1)) && ! have "$MPIRUN"; then
-            log "SKIP peer: $THREADS LIGGGHTS ranks need '$MPIRUN' (Debian: apt-get install openmpi-bin); measuring ours only"
-            PEER_OK[dem]=0
-        fi
-        # Open MPI in containers: no cross-memory attach; on a shared machine, waiting ranks
-        # yield the core instead of spinning (a spinning rank steals time from its partner)
-        export OMPI_MCA_btl_vader_single_copy_mechanism=${OMPI_MCA_btl_vader_single_copy_mechanism:-none}
-        export OMPI_MCA_mpi_yield_when_idle=${OMPI_MCA_mpi_yield_when_idle:-1}
-        for ((i = 1; i <= N; i++)); do
-            log "[dem $i/$N] $(date +%T) load $(cut -d' ' -f1-3 /proc/loadavg)"
-            if ((PEER_OK[dem] && i % 2 == 1)); then dem_peer "$i"; fi
-            dem_ours "$i"
-            if ((PEER_OK[dem] && i % 2 == 0)); then dem_peer "$i"; fi
-        done
+        liggghts_check dem
+        abba dem dem_peer dem_ours
         ;;
     pour)
         POUR=$(ours_bin pour)
         mkdir -p "$WORK/pour"
         cp "$HERE/liggghts/pour.in" "$WORK/pour/"
         python3 "$HERE/liggghts/pour_gen.py" "$POUR_COUNT" "$POUR_SEED" >"$WORK/pour/pour.data"
-        PEER_OK[pour]=1
-        if ! have "$LIGGGHTS"; then
-            log "SKIP peer: LIGGGHTS ('$LIGGGHTS') is not installed (Debian: apt-get install liggghts); measuring ours only"
-            PEER_OK[pour]=0
-        elif ((THREADS > 1)) && ! have "$MPIRUN"; then
-            log "SKIP peer: $THREADS LIGGGHTS ranks need '$MPIRUN' (Debian: apt-get install openmpi-bin); measuring ours only"
-            PEER_OK[pour]=0
-        fi
-        export OMPI_MCA_btl_vader_single_copy_mechanism=${OMPI_MCA_btl_vader_single_copy_mechanism:-none}
-        export OMPI_MCA_mpi_yield_when_idle=${OMPI_MCA_mpi_yield_when_idle:-1}
-        for ((i = 1; i <= N; i++)); do
-            log "[pour $i/$N] $(date +%T) load $(cut -d' ' -f1-3 /proc/loadavg)"
-            if ((PEER_OK[pour] && i % 2 == 1)); then pour_peer "$i"; fi
-            pour_ours "$i"
-            if ((PEER_OK[pour] && i % 2 == 0)); then pour_peer "$i"; fi
-        done
+        liggghts_check pour
+        abba pour pour_peer pour_ours
         ;;
     fem10 | fem5)
         h=${c#fem}
@@ -288,20 +277,13 @@ for c in $CASES; do
             log "SKIP peer: CalculiX ('$CCX') is not installed (Debian: apt-get install calculix-ccx); measuring ours only"
             PEER_OK[$c]=0
         fi
-        for ((i = 1; i <= N; i++)); do
-            log "[$c $i/$N] $(date +%T) load $(cut -d' ' -f1-3 /proc/loadavg)"
-            if ((PEER_OK[$c] && i % 2 == 1)); then fem_peer "$h" "$i"; fi
-            fem_ours "$h" "$i"
-            if ((PEER_OK[$c] && i % 2 == 0)); then fem_peer "$h" "$i"; fi
-        done
+        abba "$c" fem_peer fem_ours "$h"
         ;;
     transport)
         TRANSPORT=$(ours_bin transport)
         mkdir -p "$WORK/transport"
-        for ((i = 1; i <= N; i++)); do
-            log "[transport $i/$N] $(date +%T) load $(cut -d' ' -f1-3 /proc/loadavg)"
-            transport_ours "$i"
-        done
+        PEER_OK[transport]=0
+        abba transport true transport_ours
         ;;
     *) die "unknown case '$c' (dem pour fem10 fem5 transport)" ;;
     esac
