@@ -13,15 +13,11 @@
 //! displaced at random by up to this much in x and y, as LIGGGHTS' `displace_atoms random`
 //! in bench/liggghts/dense_bed.in; any jitter turns the lattice into a random packing.
 
+mod common;
+use common::cpu_seconds;
+use common::env;
 use dem::{parse_scene_section, Engine};
 use std::time::Instant;
-
-fn env(name: &str, default: usize) -> usize {
-    std::env::var(name)
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(default)
-}
 
 /// Lattice of `n` spheres (r = 2 mm) with `spacing`, the first centre at 4.25 mm from the
 /// walls and at `z0` above the floor, in a box of at least 0.1 × 0.1 × 0.26 m.
@@ -73,20 +69,6 @@ fn timed(e: &mut Engine, steps: usize) -> f64 {
     let t = Instant::now();
     e.advance(steps).expect("advance");
     t.elapsed().as_secs_f64()
-}
-
-/// CPU time (user + system) of this process so far, s, from /proc/self/stat (Linux; 0 where
-/// unavailable). On a shared machine the CPU time per particle-step is steadier than wall time.
-fn cpu_seconds() -> f64 {
-    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
-        return 0.0;
-    };
-    // fields after the parenthesised command name; utime and stime are fields 14 and 15
-    let rest = stat.rsplit_once(')').map_or("", |(_, r)| r);
-    let f: Vec<&str> = rest.split_whitespace().collect();
-    let ticks: f64 = f.get(11).and_then(|v| v.parse().ok()).unwrap_or(0.0)
-        + f.get(12).and_then(|v| v.parse().ok()).unwrap_or(0.0);
-    ticks / 100.0
 }
 
 fn main() {

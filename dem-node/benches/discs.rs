@@ -8,16 +8,11 @@
 //! the 180-disc SC and 110-disc HCP samples, the analytic lattices (3.43)/(3.78) and the
 //! thesis' numerical limits, Tables 3.2/3.3; plot it with `cosim plot`).
 
+mod common;
+use common::env;
 use dem::discs::{parse_scene_table, DiscEngine};
 use std::path::Path;
 use std::time::Instant;
-
-fn env(name: &str, default: usize) -> usize {
-    std::env::var(name)
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(default)
-}
 
 /// A side × side hexagonal bonded lattice (R = 1 mm, k_n = 7e10) loaded by 1 kN per disc on
 /// the top and bottom rows, E_p = 2e11, ν_p = 0.35 (when `ddem`).

@@ -15,16 +15,11 @@
 //! it holds a snapshot of this engine version and size, else written there after settling),
 //! PB_NARROW (0: skip the narrow-phase timing).
 
+mod common;
+use common::env;
 use dem::narrow::polyhedron::{detect_pair_warm, track_pair, Core, PolyBody, Simplex};
 use dem::{parse_scene_section, Engine};
 use std::time::Instant;
-
-fn env(name: &str, default: usize) -> usize {
-    std::env::var(name)
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(default)
-}
 
 fn ballast_scene(count: usize, side: f64, triangles: usize, threads: Option<usize>) -> String {
     let t = threads

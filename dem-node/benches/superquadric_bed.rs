@@ -19,17 +19,12 @@
 //!    there after settling; one file per SQ_BED_COUNT), SQ_BED_NARROW (0: skip the narrow-phase
 //!    timing).
 
+mod common;
+use common::env;
 use dem::hertz_mindlin::V3;
 use dem::narrow::superquadric::{detect, detect_tracked, SearchSettings, SearchStats, SqBody};
 use dem::{parse_scene_section, Engine};
 use std::time::Instant;
-
-fn env(name: &str, default: usize) -> usize {
-    std::env::var(name)
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(default)
-}
 
 fn protocol(pairs: u64) {
     println!("contact detection, Wellmann's protocol, {pairs} pairs per class and test");
