@@ -3,6 +3,8 @@
 #   dem    dense bed, 24,696 spheres, 10,000 timed steps   ours: dense_bed bench  peer: LIGGGHTS
 #   pour   polydisperse pour, 20,000 spheres d 3-5 mm, fall and settling, 50,000 timed steps
 #                                                           ours: pour bench       peer: LIGGGHTS
+#   hopper the same spheres flowing out of a hopper (STL) through a 30 mm outlet, 75,000 steps
+#                                                           ours: pour bench       peer: LIGGGHTS
 #   fem10  static beam, C3D8 at 10 mm (36,663 dof)         ours: static_beam      peer: CalculiX ccx
 #   fem5   static beam, C3D8 at 5 mm (265,923 dof)         ours: static_beam      peer: CalculiX ccx
 #   transport  zenoh round trip (no peer program; REFERENCE D's figures are printed alongside)
@@ -14,7 +16,7 @@
 #
 # Environment (defaults in brackets):
 #   N [3]               runs of each program per case
-#   CASES ["dem pour fem10 fem5 transport"]
+#   CASES ["dem pour hopper fem10 fem5 transport"]
 #   THREADS [2]         cores given to each program: MPI ranks of LIGGGHTS, OMP threads of
 #                       ccx (spooles), rayon threads of ours
 #   DEM_SETTLE [40000]  settling steps before the timed ones (0.4 s), both codes
@@ -25,6 +27,8 @@
 #                       1e-9 makes both settle into a random packing: like-for-like work
 #   POUR_COUNT [20000] POUR_SEED [1]  spheres and seed of the pour's start (bench/liggghts/pour_gen.py)
 #   POUR_STEPS [50000]  pour steps (0.4 s at 8 us), all timed, both codes
+#   HOPPER_STEPS [75000] hopper steps (0.6 s), all timed, both codes (its start: the same
+#                       count and seed, placed in the shaft above the funnel)
 #   TRANSPORT_ROUNDS [200]
 #   BENCH_WORK [mktemp] folder for the decks, logs and raw records (kept; printed at the end)
 #   COSIM_TARGET_DIR    cargo target folder holding release/deps/{dense_bed,pour,static_beam,transport}-*
@@ -38,7 +42,7 @@ set -euo pipefail
 HERE=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
 ROOT=$(dirname "$HERE")
 N=${N:-3}
-CASES=${CASES:-"dem pour fem10 fem5 transport"}
+CASES=${CASES:-"dem pour hopper fem10 fem5 transport"}
 THREADS=${THREADS:-2}
 DEM_SETTLE=${DEM_SETTLE:-40000}
 DEM_STEPS=${DEM_STEPS:-10000}
@@ -47,6 +51,7 @@ TRANSPORT_ROUNDS=${TRANSPORT_ROUNDS:-200}
 POUR_COUNT=${POUR_COUNT:-20000}
 POUR_SEED=${POUR_SEED:-1}
 POUR_STEPS=${POUR_STEPS:-50000}
+HOPPER_STEPS=${HOPPER_STEPS:-75000}
 LIGGGHTS=${LIGGGHTS:-liggghts}
 CCX=${CCX:-ccx}
 MPIRUN=${MPIRUN:-mpirun}
@@ -82,15 +87,17 @@ timefile() { read -r W U S M <"$1"; CPU=$(awk -v u="$U" -v s="$S" 'BEGIN{printf 
 
 # ---------------------------------------------------------------- LIGGGHTS runs
 # the LIGGGHTS command (one rank, or THREADS ranks under mpirun), each rank under GNU time
+# (screen output to /dev/null, not `-screen none`: LIGGGHTS 3.8 segfaults reading a mesh file
+# without a screen)
 liggghts_cmd() { # dir tag args...
     local d=$1 tag=$2
     shift 2
     if ((THREADS > 1)); then
         run_timed "$d" "$tag" "$MPIRUN" --allow-run-as-root -np "$THREADS" \
             sh -c 'exec '"$TIME"' -f %M -o "$0.rss.$OMPI_COMM_WORLD_RANK" '"$LIGGGHTS"' "$@"' "$tag" \
-            "$@" -log "$tag.lammps" -echo none -screen none
+            "$@" -log "$tag.lammps" -echo none -screen /dev/null
     else
-        run_timed "$d" "$tag" "$LIGGGHTS" "$@" -log "$tag.lammps" -echo none -screen none
+        run_timed "$d" "$tag" "$LIGGGHTS" "$@" -log "$tag.lammps" -echo none -screen /dev/null
     fi
     timefile "$d/$tag.time"
     RSS_KB=$M
@@ -156,31 +163,38 @@ dem_ours() {
 }
 
 # ---------------------------------------------------------------- DEM: polydisperse pour
-pour_peer() { # run index
-    local d="$WORK/pour" tag="liggghts.$1"
-    liggghts_cmd "$d" "$tag" -in pour.in -var steps "$POUR_STEPS" -var data pour.data
+# pour_peer / pour_ours <case> <run>: case pour (the box) or hopper (the flowing case)
+pour_steps() { if [[ $1 == hopper ]]; then echo "$HOPPER_STEPS"; else echo "$POUR_STEPS"; fi; }
+
+pour_peer() {
+    local c=$1 d="$WORK/$1" tag="liggghts.$2"
+    liggghts_cmd "$d" "$tag" -in "$c.in" -var steps "$(pour_steps "$c")" -var data "$c.data"
     local t atoms ke rke contacts zmax builds
     t=$(awk '/^Loop time of/{t=$4} END{print t}' "$d/$tag.lammps")
     builds=$(awk '/^Neighbor list builds/{b=$NF} END{print b}' "$d/$tag.lammps")
     read -r _ atoms ke rke contacts zmax < <(awk '$1 ~ /^[0-9]+$/ && NF == 6 {l=$0} END{print l}' "$d/$tag.lammps")
-    [[ $atoms == "$POUR_COUNT" ]] || log "WARNING: LIGGGHTS ran $atoms particles (expected $POUR_COUNT)"
-    record pour liggghts "$1" "$t" "$W" "$CPU" "$((RSS_KB / 1024))" "particles=$atoms" \
-        "KE=$(awk -v a="$ke" -v b="$rke" 'BEGIN{printf "%.3e", a + b}')" "contacts=$contacts" "builds=$builds" "zmax=$zmax"
+    # the hopper's spheres leave the domain below its outlet: LIGGGHTS deletes them ("lost")
+    record "$c" liggghts "$2" "$t" "$W" "$CPU" "$((RSS_KB / 1024))" "particles=$atoms" \
+        "KE=$(awk -v a="$ke" -v b="$rke" 'BEGIN{printf "%.3e", a + b}')" "contacts=$contacts" "builds=$builds" "zmax=$zmax" \
+        "discharged=$((POUR_COUNT - atoms))"
 }
 
 pour_ours() {
-    local d="$WORK/pour" tag="ours.$1"
-    run_timed "$d" "$tag" env POUR_THREADS="$THREADS" POUR_STEPS="$POUR_STEPS" POUR_DATA=pour.data "$POUR"
+    local c=$1 d="$WORK/$1" tag="ours.$2" geometry=box
+    [[ $c == hopper ]] && geometry=hopper
+    run_timed "$d" "$tag" env POUR_THREADS="$THREADS" POUR_STEPS="$(pour_steps "$c")" POUR_DATA="$c.data" \
+        POUR_GEOMETRY=$geometry "$POUR"
     timefile "$d/$tag.time"
-    local line t n
+    local line t n gone
     line=$(grep -m1 '^timed ' "$d/$tag.log") || die "no 'timed ... steps' line in $d/$tag.log"
     t=$(sed -n 's/^timed [0-9]* steps: \([0-9.]*\) s wall.*/\1/p' <<<"$line")
     n=$(sed -n 's/^pour: \([0-9]*\) particles.*/\1/p' "$d/$tag.log")
-    record pour ours "$1" "$t" "$W" "$CPU" "$((M / 1024))" "particles=$n" \
+    gone=$(sed -n 's/.*discharged \([0-9]*\).*/\1/p' <<<"$line")
+    record "$c" ours "$2" "$t" "$W" "$CPU" "$((M / 1024))" "particles=$((n - gone))" \
         "KE=$(sed -n 's/.* KE \([-0-9.e+]*\) J.*/\1/p' <<<"$line")" \
         "contacts=$(sed -n 's/.*; contacts \([0-9]*\),.*/\1/p' <<<"$line")" \
         "builds=$(sed -n 's/.*, list builds \([0-9]*\),.*/\1/p' <<<"$line")" \
-        "zmax=$(sed -n 's/.*highest centre \([0-9.]*\) m.*/\1/p' <<<"$line")"
+        "zmax=$(sed -n 's/.*highest centre \([0-9.]*\) m.*/\1/p' <<<"$line")" "discharged=$gone"
 }
 
 # ---------------------------------------------------------------- FEM: static beam
@@ -246,6 +260,7 @@ have() { command -v "$1" >/dev/null 2>&1; }
 declare -A PEER_OK PEER_NAME
 PEER_NAME[dem]=LIGGGHTS
 PEER_NAME[pour]=LIGGGHTS
+PEER_NAME[hopper]=LIGGGHTS
 PEER_NAME[fem10]=CalculiX
 PEER_NAME[fem5]=CalculiX
 UPTIME_BEFORE=$(uptime)
@@ -260,13 +275,18 @@ for c in $CASES; do
         liggghts_check dem
         abba dem dem_peer dem_ours
         ;;
-    pour)
+    pour | hopper)
         POUR=$(ours_bin pour)
-        mkdir -p "$WORK/pour"
-        cp "$HERE/liggghts/pour.in" "$WORK/pour/"
-        python3 "$HERE/liggghts/pour_gen.py" "$POUR_COUNT" "$POUR_SEED" >"$WORK/pour/pour.data"
-        liggghts_check pour
-        abba pour pour_peer pour_ours
+        mkdir -p "$WORK/$c"
+        cp "$HERE/liggghts/$c.in" "$WORK/$c/"
+        if [[ $c == hopper ]]; then
+            python3 "$HERE/liggghts/pour_gen.py" "$POUR_COUNT" "$POUR_SEED" 0.16 0.45 >"$WORK/$c/$c.data"
+            python3 "$HERE/liggghts/hopper_stl.py" >"$WORK/$c/hopper.stl"
+        else
+            python3 "$HERE/liggghts/pour_gen.py" "$POUR_COUNT" "$POUR_SEED" >"$WORK/$c/$c.data"
+        fi
+        liggghts_check "$c"
+        abba "$c" pour_peer pour_ours "$c"
         ;;
     fem10 | fem5)
         h=${c#fem}
@@ -285,17 +305,18 @@ for c in $CASES; do
         PEER_OK[transport]=0
         abba transport true transport_ours
         ;;
-    *) die "unknown case '$c' (dem pour fem10 fem5 transport)" ;;
+    *) die "unknown case '$c' (dem pour hopper fem10 fem5 transport)" ;;
     esac
 done
 UPTIME_AFTER=$(uptime)
 
 # ---------------------------------------------------------------- report
-peer_prog() { case $1 in dem | pour) echo liggghts ;; *) echo ccx ;; esac; }
+peer_prog() { case $1 in dem | pour | hopper) echo liggghts ;; *) echo ccx ;; esac; }
 describe() {
     case $1 in
     dem) echo "DEM dense bed, 24,696 spheres, $DEM_STEPS steps after $DEM_SETTLE settling$( [[ $DEM_JITTER == 0 ]] || echo ", lattice jitter $DEM_JITTER m (both)")" ;;
     pour) echo "DEM polydisperse pour, $POUR_COUNT spheres d 3–5 mm (seed $POUR_SEED), $POUR_STEPS steps of fall and settling" ;;
+    hopper) echo "DEM hopper discharge, $POUR_COUNT spheres d 3–5 mm (seed $POUR_SEED), 30 mm outlet, $HOPPER_STEPS steps" ;;
     fem10) echo "FEM static beam C3D8 10 mm (36,663 dof)" ;;
     fem5) echo "FEM static beam C3D8 5 mm (265,923 dof)" ;;
     esac
@@ -343,9 +364,9 @@ for c in $CASES; do
             echo "| dem | $k$( [[ $k == builds ]] && echo ' (neighbour lists, timed steps)') | $(answer dem "$p" $k | paste -sd, - | sed 's/,/, /g') | $(answer dem ours $k | paste -sd, - | sed 's/,/, /g') |"
         done
         ;;
-    pour)
-        for k in particles KE contacts builds zmax; do
-            echo "| pour | $k$( [[ $k == zmax ]] && echo ' (highest centre, m)') | $(answer pour "$p" $k | paste -sd, - | sed 's/,/, /g') | $(answer pour ours $k | paste -sd, - | sed 's/,/, /g') |"
+    pour | hopper)
+        for k in particles KE contacts builds zmax discharged; do
+            echo "| $c | $k$( [[ $k == zmax ]] && echo ' (highest centre, m)') | $(answer "$c" "$p" $k | paste -sd, - | sed 's/,/, /g') | $(answer "$c" ours $k | paste -sd, - | sed 's/,/, /g') |"
         done
         ;;
     fem*)

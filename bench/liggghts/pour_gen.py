@@ -1,11 +1,13 @@
 #!/usr/bin/env python3
-"""Start of the polydisperse pour benchmark (issue 25): N spheres with diameters uniform in
-[3, 5] mm at random, non-overlapping positions in the 0.1 x 0.1 m box, from the floor up to
-z = 0.4 m, at rest. Written as a LIGGGHTS data file (atom_style granular: id type diameter
-density x y z), which both codes read: LIGGGHTS by `read_data`, ours by
-dem-node/benches/pour.rs. Seeded; the same arguments give the same file on any machine.
+"""Start of the polydisperse pour and hopper benchmarks (issue 25): N spheres with diameters
+uniform in [3, 5] mm at random, non-overlapping positions in the 0.1 x 0.1 m box between
+z_min and z_max (default: the floor and 0.4 m), at rest. Written as a LIGGGHTS data file
+(atom_style granular: id type diameter density x y z; the box's top 0.1 m above z_max), which
+both codes read: LIGGGHTS by `read_data`, ours by dem-node/benches/pour.rs. Seeded; the same
+arguments give the same file on any machine.
 
-    python3 pour_gen.py [N=20000] [seed=1] > pour.data
+    python3 pour_gen.py [N=20000] [seed=1] [z_min=0 z_max=0.4] > pour.data
+    python3 pour_gen.py 20000 1 0.16 0.45 > hopper.data     # above the hopper's funnel
 """
 import random
 import sys
@@ -13,7 +15,9 @@ import sys
 N = int(sys.argv[1]) if len(sys.argv) > 1 else 20000
 SEED = int(sys.argv[2]) if len(sys.argv) > 2 else 1
 D_MIN, D_MAX = 0.003, 0.005
-L, Z_TOP, BOX_TOP = 0.1, 0.4, 0.5
+Z_MIN = float(sys.argv[3]) if len(sys.argv) > 3 else 0.0
+Z_TOP = float(sys.argv[4]) if len(sys.argv) > 4 else 0.4
+L, BOX_TOP = 0.1, Z_TOP + 0.1
 GAP = 1e-4  # clearance between spheres and from the walls at the start, m
 DENSITY = 1242.0
 
@@ -30,7 +34,7 @@ while len(placed) < N:
     r = 0.5 * d
     x = float(f"{rng.uniform(r + GAP, L - r - GAP):.9e}")
     y = float(f"{rng.uniform(r + GAP, L - r - GAP):.9e}")
-    z = float(f"{rng.uniform(r + GAP, Z_TOP - r):.9e}")
+    z = float(f"{rng.uniform(Z_MIN + r + GAP, Z_TOP - r):.9e}")
     key = (int(x / cell), int(y / cell), int(z / cell))
     ok = True
     for i in (-1, 0, 1):
@@ -51,9 +55,9 @@ while len(placed) < N:
         placed.append((d, x, y, z))
 
 out = sys.stdout
-out.write(f"LIGGGHTS data file: polydisperse pour, {N} spheres d in [3, 5] mm, seed {SEED}\n\n")
+out.write(f"LIGGGHTS data file: {N} spheres d in [3, 5] mm, z in [{Z_MIN}, {Z_TOP}] m, seed {SEED}\n\n")
 out.write(f"{N} atoms\n1 atom types\n\n")
-out.write(f"0.0 {L} xlo xhi\n0.0 {L} ylo yhi\n0.0 {BOX_TOP} zlo zhi\n\n")
+out.write(f"0.0 {L} xlo xhi\n0.0 {L} ylo yhi\n0.0 {BOX_TOP:g} zlo zhi\n\n")
 out.write("Atoms\n\n")
 for i, (d, x, y, z) in enumerate(placed, 1):
     out.write(f"{i} 1 {d:.6e} {DENSITY} {x:.9e} {y:.9e} {z:.9e}\n")

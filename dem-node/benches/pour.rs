@@ -9,20 +9,22 @@
 //! (`id type diameter density x y z`) and hands the same decimal strings to the engine's
 //! particle-file reader, so the two start from the same doubles.
 //!
+//! With POUR_GEOMETRY=hopper the same spheres (a start file from `pour_gen.py N seed 0.16
+//! 0.45`) flow instead through the hopper of `bench/liggghts/hopper.in`: the STL of
+//! `hopper_stl.py` (POUR_STL, default `hopper.stl` beside the data file: a 0.1 m square shaft
+//! and a pyramidal funnel to a 30 mm outlet at z = 0.1 m) and a sink below z = 0, where
+//! LIGGGHTS' domain ends; the discharged count is printed with the other answers.
+//!
 //! Environment: POUR_DATA (data file, default `pour.data` in the working folder), POUR_STEPS
 //! (default 50000 = 0.4 s), POUR_THREADS (default: all), POUR_EVERY (steps between progress
 //! lines, default 10000: time, KE, contacts, highest centre, like LIGGGHTS' thermo).
 
+mod common;
+use common::cpu_seconds;
+use common::env;
 use dem::{parse_scene_section, Engine};
 use std::fmt::Write as _;
 use std::time::Instant;
-
-fn env(name: &str, default: usize) -> usize {
-    std::env::var(name)
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(default)
-}
 
 /// The `Atoms` section of a LIGGGHTS data file as our particle CSV (x,y,z,radius) with the
 /// file's own decimal strings; the radius is half the diameter (exact in binary). Also the
@@ -81,23 +83,20 @@ fn read_data(path: &str) -> Result<(String, f64, usize), String> {
     Ok((csv, density, n))
 }
 
-fn cpu_seconds() -> f64 {
-    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
-        return 0.0;
-    };
-    let rest = stat.rsplit_once(')').map_or("", |(_, r)| r);
-    let f: Vec<&str> = rest.split_whitespace().collect();
-    let ticks: f64 = f.get(11).and_then(|v| v.parse().ok()).unwrap_or(0.0)
-        + f.get(12).and_then(|v| v.parse().ok()).unwrap_or(0.0);
-    ticks / 100.0
-}
-
 fn z_max(e: &Engine) -> f64 {
     e.particles()
         .position
         .iter()
         .map(|p| p.z)
         .fold(f64::NEG_INFINITY, f64::max)
+}
+
+/// Spheres removed by the sink (the hopper's discharge; 0 in the box).
+fn discharged(e: &Engine) -> usize {
+    e.results()
+        .iter()
+        .find(|(k, _)| k == "removed_particles")
+        .map_or(0, |(_, v)| *v as usize)
 }
 
 fn main() {
@@ -114,6 +113,47 @@ fn main() {
     let dir = std::env::temp_dir().join(format!("cosim-pour-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temporary folder");
     std::fs::write(dir.join("pour.csv"), csv).expect("write the particle CSV");
+    let hopper = match std::env::var("POUR_GEOMETRY").as_deref() {
+        Err(_) | Ok("box") => false,
+        Ok("hopper") => true,
+        Ok(other) => {
+            eprintln!("pour: POUR_GEOMETRY must be `box` or `hopper`, not `{other}`");
+            std::process::exit(2);
+        }
+    };
+    let walls = if hopper {
+        let stl = std::env::var("POUR_STL")
+            .map(std::path::PathBuf::from)
+            .unwrap_or_else(|_| std::path::Path::new(&data).with_file_name("hopper.stl"));
+        let stl = std::fs::canonicalize(&stl).unwrap_or_else(|e| {
+            eprintln!(
+                "pour: hopper STL {}: {e} (write one with `python3 bench/liggghts/hopper_stl.py > hopper.stl`)",
+                stl.display()
+            );
+            std::process::exit(2);
+        });
+        format!(
+            r#"
+[[dem.walls]]
+kind = "stl"
+material = "wheat"
+path = {:?}
+[[dem.sinks]]
+max = [1.0, 1.0, 0.0]
+"#,
+            stl.display().to_string()
+        )
+    } else {
+        r#"
+[[dem.walls]]
+kind = "box"
+material = "wheat"
+min = [0.0, 0.0, 0.0]
+max = [0.1, 0.1, 0.5]
+open = ["+z"]
+"#
+        .to_string()
+    };
     let scene = format!(
         r#"
 [dem]
@@ -126,12 +166,7 @@ poisson_ratio = 0.3
 density = {density:?}
 restitution = 0.4
 friction = 1.0
-[[dem.walls]]
-kind = "box"
-material = "wheat"
-min = [0.0, 0.0, 0.0]
-max = [0.1, 0.1, 0.5]
-open = ["+z"]
+{walls}
 [[dem.particles]]
 kind = "file"
 material = "wheat"
@@ -154,7 +189,8 @@ path = "pour.csv"
         let steps = env("POUR_STEPS", 50_000);
         let every = env("POUR_EVERY", 10_000).max(1);
         println!(
-            "pour: {n} particles from {data}, {} threads, dt = {} s (Rayleigh {:.3e} s)",
+            "pour: {n} particles from {data} into {}, {} threads, dt = {} s (Rayleigh {:.3e} s)",
+            if hopper { "the hopper" } else { "the box" },
             rayon::current_num_threads(),
             e.time_step(),
             e.rayleigh_time_step()
@@ -167,19 +203,21 @@ path = "pour.csv"
             e.advance(k).expect("advance");
             done += k;
             println!(
-                "  step {done}: {:.1} s wall, KE {:.16e} J, contacts {}, wall contacts {}, highest centre {:.4} m",
+                "  step {done}: {:.1} s wall, KE {:.4e} J, contacts {}, wall contacts {}, highest centre {:.4} m, discharged {}",
                 t0.elapsed().as_secs_f64(),
                 e.kinetic_energy(),
                 e.num_contacts(),
                 e.num_wall_contacts(),
-                z_max(&e)
+                z_max(&e),
+                discharged(&e)
             );
         }
         let t = t0.elapsed().as_secs_f64();
         let cpu = cpu_seconds() - cpu0;
         println!(
             "timed {steps} steps: {t:.3} s wall, {:.3e} particle-steps/s, {:.1} ns per particle-step \
-             ({:.1} CPU-ns); contacts {}, wall contacts {}, list builds {}, KE {:.3e} J, highest centre {:.4} m",
+             ({:.1} CPU-ns); contacts {}, wall contacts {}, list builds {}, KE {:.3e} J, highest centre {:.4} m, \
+             discharged {}",
             (n * steps) as f64 / t,
             t * 1e9 / (n * steps) as f64,
             cpu * 1e9 / (n * steps) as f64,
@@ -187,7 +225,8 @@ path = "pour.csv"
             e.num_wall_contacts(),
             e.neighbour_list_builds(),
             e.kinetic_energy(),
-            z_max(&e)
+            z_max(&e),
+            discharged(&e)
         );
         println!(
             "state in memory {:.0} bytes/particle",
