@@ -137,14 +137,13 @@ abba() {
 dem_peer() { # run index
     local d="$WORK/dem" tag="liggghts.$1"
     liggghts_cmd "$d" "$tag" -in dense_bed.in -var settle "$DEM_SETTLE" -var steps "$DEM_STEPS" -var jitter "$DEM_JITTER"
-    local rss_kb=$RSS_KB
     local t atoms ke contacts builds
     t=$(awk '/^Loop time of/{t=$4} END{print t}' "$d/$tag.lammps")
     builds=$(awk '/^Neighbor list builds/{b=$NF} END{print b}' "$d/$tag.lammps")
     # last thermo line: step atoms ke rke contacts zmax
     read -r _ atoms ke _ contacts _ < <(awk '$1 ~ /^[0-9]+$/ && NF == 6 {l=$0} END{print l}' "$d/$tag.lammps")
     [[ $atoms == 24696 ]] || log "WARNING: LIGGGHTS ran $atoms particles (expected 24696)"
-    record dem liggghts "$1" "$t" "$W" "$CPU" "$((rss_kb / 1024))" "particles=$atoms" "KE=$ke" "contacts=$contacts" "builds=$builds"
+    record dem liggghts "$1" "$t" "$W" "$CPU" "$((RSS_KB / 1024))" "particles=$atoms" "KE=$ke" "contacts=$contacts" "builds=$builds"
 }
 
 dem_ours() {

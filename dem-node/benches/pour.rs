@@ -6,8 +6,8 @@
 //! the impacts and the settling (frequent list rebuilds, a growing contact count).
 //!
 //! Both codes read the same file: this bench parses the data file's `Atoms` lines
-//! (`id type diameter density x y z`) and hands the same decimal strings to the engine's
-//! particle-file reader, so the two start from the same doubles.
+//! (`id type diameter density x y z`) into the engine's `list` particle source (Rust's and
+//! LIGGGHTS' number parsers both round correctly, so the two start from the same doubles).
 //!
 //! With POUR_GEOMETRY=hopper the same spheres (a start file from `pour_gen.py N seed 0.16
 //! 0.45`) flow instead through the hopper of `bench/liggghts/hopper.in`: the STL of
@@ -22,19 +22,17 @@
 mod common;
 use common::cpu_seconds;
 use common::env;
+use dem::config::{ParticleSource, SphereConfig};
 use dem::{parse_scene_section, Engine};
-use std::fmt::Write as _;
 use std::time::Instant;
 
-/// The `Atoms` section of a LIGGGHTS data file as our particle CSV (x,y,z,radius) with the
-/// file's own decimal strings; the radius is half the diameter (exact in binary). Also the
-/// density of the first atom (all must agree).
-fn read_data(path: &str) -> Result<(String, f64, usize), String> {
+/// The spheres of a LIGGGHTS data file's `Atoms` section (radius = half the diameter, exact
+/// in binary) and their density (all must agree).
+fn read_data(path: &str) -> Result<(Vec<SphereConfig>, f64), String> {
     let text = std::fs::read_to_string(path).map_err(|e| format!("{path}: {e}"))?;
-    let mut csv = String::from("x,y,z,radius\n");
+    let mut spheres = Vec::new();
     let mut density: Option<f64> = None;
     let mut in_atoms = false;
-    let mut n = 0;
     for (i, line) in text.lines().enumerate() {
         let line = line.split('#').next().unwrap_or("").trim();
         if line.is_empty() {
@@ -57,12 +55,11 @@ fn read_data(path: &str) -> Result<(String, f64, usize), String> {
                 i + 1
             ));
         }
-        let num = |s: &str, what: &str| {
-            s.parse::<f64>()
-                .map_err(|_| format!("{path}:{}: {what} `{s}` is not a number", i + 1))
+        let num = |k: usize, what: &str| {
+            f[k].parse::<f64>()
+                .map_err(|_| format!("{path}:{}: {what} `{}` is not a number", i + 1, f[k]))
         };
-        let d = num(f[2], "diameter")?;
-        let rho = num(f[3], "density")?;
+        let rho = num(3, "density")?;
         match density {
             None => density = Some(rho),
             Some(r0) if r0 != rho => {
@@ -73,14 +70,16 @@ fn read_data(path: &str) -> Result<(String, f64, usize), String> {
             }
             _ => {}
         }
-        for (s, what) in [(f[4], "x"), (f[5], "y"), (f[6], "z")] {
-            num(s, what)?;
-        }
-        let _ = writeln!(csv, "{},{},{},{:e}", f[4], f[5], f[6], 0.5 * d);
-        n += 1;
+        spheres.push(SphereConfig {
+            position: [num(4, "x")?, num(5, "y")?, num(6, "z")?],
+            radius: 0.5 * num(2, "diameter")?,
+            velocity: [0.0; 3],
+            angular_velocity: [0.0; 3],
+            orientation: None,
+        });
     }
     let density = density.ok_or_else(|| format!("{path}: no Atoms section"))?;
-    Ok((csv, density, n))
+    Ok((spheres, density))
 }
 
 fn z_max(e: &Engine) -> f64 {
@@ -101,7 +100,7 @@ fn discharged(e: &Engine) -> usize {
 
 fn main() {
     let data = std::env::var("POUR_DATA").unwrap_or_else(|_| "pour.data".into());
-    let (csv, density, n_file) = match read_data(&data) {
+    let (spheres, density) = match read_data(&data) {
         Ok(r) => r,
         Err(e) => {
             eprintln!(
@@ -110,9 +109,7 @@ fn main() {
             std::process::exit(2);
         }
     };
-    let dir = std::env::temp_dir().join(format!("cosim-pour-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("temporary folder");
-    std::fs::write(dir.join("pour.csv"), csv).expect("write the particle CSV");
+    let n_file = spheres.len();
     let hopper = match std::env::var("POUR_GEOMETRY").as_deref() {
         Err(_) | Ok("box") => false,
         Ok("hopper") => true,
@@ -166,24 +163,23 @@ poisson_ratio = 0.3
 density = {density:?}
 restitution = 0.4
 friction = 1.0
-{walls}
-[[dem.particles]]
-kind = "file"
-material = "wheat"
-path = "pour.csv"
-"#
+{walls}"#
     );
-    let cfg = parse_scene_section(&scene)
+    let mut cfg = parse_scene_section(&scene)
         .expect("scene")
         .expect("dem table");
+    cfg.particles.push(ParticleSource::List {
+        material: "wheat".into(),
+        spheres,
+        shape: Default::default(),
+    });
     let threads = env("POUR_THREADS", 0);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
         .expect("pool");
     pool.install(|| {
-        let mut e = Engine::from_config(&cfg, &dir).expect("engine");
-        let _ = std::fs::remove_dir_all(&dir);
+        let mut e = Engine::from_config(&cfg, std::path::Path::new(".")).expect("engine");
         let n = e.num_particles();
         assert_eq!(n, n_file, "particles read");
         let steps = env("POUR_STEPS", 50_000);
