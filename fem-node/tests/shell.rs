@@ -125,6 +125,7 @@ impl Shells {
             col_ptr,
             row_idx,
             order: (0..m).collect(),
+            amd_order: None,
         };
         let factor = fem::assembly::Factor::new(&pattern, &vals, &mut None)
             .expect("the constrained stiffness is positive definite");

@@ -78,3 +78,121 @@ fn an_unknown_solver_is_a_scene_error_naming_the_choices() {
     assert!(err.contains("solver") || err.contains("`lu`"), "{err}");
     assert!(err.contains("direct") && err.contains("mixed"), "{err}");
 }
+
+/// The nodes of an n×n×n grid of hex8 cells, and the cells.
+fn grid(n: usize) -> (Vec<[f64; 3]>, Vec<[u32; 8]>) {
+    let id = |i: usize, j: usize, k: usize| (i + (n + 1) * (j + (n + 1) * k)) as u32;
+    let mut coords = Vec::new();
+    for k in 0..=n {
+        for j in 0..=n {
+            for i in 0..=n {
+                coords.push([i as f64, j as f64, k as f64]);
+            }
+        }
+    }
+    let mut cells = Vec::new();
+    for k in 0..n {
+        for j in 0..n {
+            for i in 0..n {
+                cells.push([
+                    id(i, j, k),
+                    id(i + 1, j, k),
+                    id(i + 1, j + 1, k),
+                    id(i, j + 1, k),
+                    id(i, j, k + 1),
+                    id(i + 1, j, k + 1),
+                    id(i + 1, j + 1, k + 1),
+                    id(i, j + 1, k + 1),
+                ]);
+            }
+        }
+    }
+    (coords, cells)
+}
+
+/// A symmetric positive definite matrix on `p`: diagonally dominant, off-diagonals from the
+/// row and column numbers (not a multiple of the identity: the solve must use the pattern).
+fn spd_values(p: &fem::assembly::Pattern) -> Vec<f64> {
+    let mut vals = vec![0.0; p.nnz()];
+    for j in 0..p.n {
+        let (a, b) = (p.col_ptr[j] as usize, p.col_ptr[j + 1] as usize);
+        for q in a..b {
+            let i = p.row_idx[q] as usize;
+            vals[q] = if i == j {
+                2.0 * (b - a) as f64
+            } else {
+                -1.0 / (1.0 + ((i + j) % 7) as f64)
+            };
+        }
+    }
+    vals
+}
+
+/// The AMD safeguard: where coordinate bisection is poor (here the grid's coordinates are
+/// shuffled among its nodes, so the geometric separators cut nothing), the factor takes the
+/// minimum-degree order of the node graph, whose fill is far smaller; both orders give the
+/// same solution, and the chosen factor is never fuller than either.
+#[test]
+fn the_amd_safeguard_replaces_nested_dissection_where_bisection_is_poor() {
+    use fem::assembly::{DofMap, Factor, Pattern};
+    let (mut coords, cells) = grid(8);
+    // a fixed shuffle of the coordinates (an LCG), keeping the connectivity
+    let mut state = 12345u64;
+    for i in (1..coords.len()).rev() {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        coords.swap(i, (state >> 33) as usize % (i + 1));
+    }
+    let nd = 3 * coords.len();
+    let mut fixed = vec![false; nd];
+    fixed[..3 * 81].fill(true); // the face k = 0
+    let dofs = DofMap::new(&fixed, &vec![true; coords.len()]);
+    let p = Pattern::for_elements(&coords, cells.len(), |e| &cells[e][..], &dofs, 3).unwrap();
+    let amd = p.amd_order.clone().expect("AMD order below the limit");
+    let mut sorted = amd.clone();
+    sorted.sort_unstable();
+    assert_eq!(sorted, (0..p.n as u32).collect::<Vec<_>>(), "a permutation");
+    let vals = spd_values(&p);
+    let b: Vec<f64> = (0..p.n).map(|i| ((i * 37) % 11) as f64 - 5.0).collect();
+
+    let nd_only = Pattern {
+        amd_order: None,
+        ..p.clone()
+    };
+    let amd_only = Pattern {
+        order: amd,
+        amd_order: None,
+        ..p.clone()
+    };
+    let mut x_nd = b.clone();
+    let f_nd = Factor::new(&nd_only, &vals, &mut None).unwrap();
+    f_nd.solve_in_place(&mut x_nd);
+    let mut x_amd = b.clone();
+    let f_amd = Factor::new(&amd_only, &vals, &mut None).unwrap();
+    f_amd.solve_in_place(&mut x_amd);
+    let chosen = Factor::new(&p, &vals, &mut None).unwrap();
+    assert!(
+        f_amd.factor_nnz() * 3 < f_nd.factor_nnz() * 2,
+        "shuffled coordinates: AMD fill {} should be well below bisection's {}",
+        f_amd.factor_nnz(),
+        f_nd.factor_nnz()
+    );
+    assert_eq!(chosen.factor_nnz(), f_amd.factor_nnz());
+    assert!(max_rel_diff(&x_amd, &x_nd) < 1e-12);
+    // and A x = b
+    let mut ax = vec![0.0; p.n];
+    p.mul(&vals, &x_amd, &mut ax);
+    assert!(max_rel_diff(&ax, &b) < 1e-12);
+
+    // on the true coordinates bisection is kept when it fills less
+    let (coords, _) = grid(8);
+    let p = Pattern::for_elements(&coords, cells.len(), |e| &cells[e][..], &dofs, 3).unwrap();
+    let nd_only = Pattern {
+        amd_order: None,
+        ..p.clone()
+    };
+    let chosen = Factor::new(&p, &vals, &mut None).unwrap();
+    let f_nd = Factor::new(&nd_only, &vals, &mut None).unwrap();
+    assert!(chosen.factor_nnz() <= f_nd.factor_nnz());
+}
