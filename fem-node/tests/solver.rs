@@ -116,9 +116,9 @@ fn spd_values(p: &fem::assembly::Pattern) -> Vec<f64> {
     let mut vals = vec![0.0; p.nnz()];
     for j in 0..p.n {
         let (a, b) = (p.col_ptr[j] as usize, p.col_ptr[j + 1] as usize);
-        for q in a..b {
-            let i = p.row_idx[q] as usize;
-            vals[q] = if i == j {
+        for (v, &i) in vals[a..b].iter_mut().zip(&p.row_idx[a..b]) {
+            let i = i as usize;
+            *v = if i == j {
                 2.0 * (b - a) as f64
             } else {
                 -1.0 / (1.0 + ((i + j) % 7) as f64)
