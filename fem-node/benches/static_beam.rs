@@ -5,6 +5,8 @@
 //! `cargo bench -p fem-node --no-default-features --bench static_beam [-- 10]` (sizes in mm).
 //! STATIC_BEAM_SOLVER = auto (default) | direct | mixed sets `[fem] solver` (auto: the f32
 //! factor with f64 conjugate gradients from 100k equations, the f64 factor below).
+//! With a scene file as argument (`-- bench/gmsh/bracket.toml`) it solves that scene's `[fem]`
+//! section once instead (the unstructured tet10 peer case; compare.sh case tet10).
 //! `RUST_LOG=fem=debug` adds the cost split: element matrices vs scatter, ordering fill
 //! (nnz of L), symbolic vs numeric factorisation.
 
@@ -57,6 +59,47 @@ point = [0.5, 0.05, 0.05]
     )
 }
 
+/// One static solve of the `[fem]` section of a scene file (its mesh path relative to the
+/// file), timed like the beam: the unstructured peer cases (bench/gmsh/bracket.toml).
+fn static_scene(path: &Path) {
+    let text = std::fs::read_to_string(path)
+        .unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
+    let cfg = fem::parse_scene_section(&text)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        .unwrap_or_else(|| panic!("{}: no [fem] section", path.display()));
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let t0 = Instant::now();
+    let mut m = fem::Model::from_config(&cfg, dir).unwrap_or_else(|e| panic!("{e}"));
+    let t_build = t0.elapsed().as_secs_f64();
+    let t1 = Instant::now();
+    m.solve_static().unwrap_or_else(|e| panic!("{e}"));
+    let t_solve = t1.elapsed().as_secs_f64();
+    let solver = match m.last_mixed_solve() {
+        Some(s) => format!(
+            "f32 factor + f64 CG, {} iterations, relative residual {:.1e}",
+            s.iterations, s.relative_residual
+        ),
+        None => "f64 factor".into(),
+    };
+    let probes: Vec<String> = cfg
+        .probes
+        .iter()
+        .map(|p| {
+            let u = m.probe_displacement(&p.name).unwrap();
+            format!("{} u {:.7e} {:.7e} {:.7e} m", p.name, u[0], u[1], u[2])
+        })
+        .collect();
+    println!(
+        "static {}: {} dof, read+build+assembly {t_build:.3} s, factorise+solve {t_solve:.3} s, total {:.3} s, \
+         {}, VmHWM {:.0} MB, solver: {solver}",
+        path.display(),
+        m.num_dofs(),
+        t_build + t_solve,
+        probes.join(", "),
+        vm_hwm_mb()
+    );
+}
+
 fn main() {
     if std::env::var_os("RUST_LOG").is_some() {
         tracing_subscriber::fmt()
@@ -68,6 +111,10 @@ fn main() {
         .skip(1)
         .filter(|a| !a.starts_with('-'))
         .collect();
+    if let Some(path) = args.iter().find(|a| a.ends_with(".toml")) {
+        static_scene(Path::new(path));
+        return;
+    }
     let sizes: Vec<f64> = if args.is_empty() {
         vec![10.0, 5.0]
     } else {

@@ -56,6 +56,33 @@ impl DofMap {
         }
         out
     }
+    /// Free dofs numbered node by node in `node_order` (which holds every node with a free
+    /// dof), each node's free dofs consecutive.
+    pub fn in_node_order(
+        fixed: &[bool],
+        used: &[bool],
+        per_node: usize,
+        node_order: &[u32],
+    ) -> DofMap {
+        let mut eq = vec![FIXED; fixed.len()];
+        let mut n = 0u32;
+        for &node in node_order {
+            let node = node as usize;
+            if !used[node] {
+                continue;
+            }
+            for d in per_node * node..per_node * (node + 1) {
+                if !fixed[d] {
+                    eq[d] = n;
+                    n += 1;
+                }
+            }
+        }
+        DofMap {
+            eq,
+            n_eq: n as usize,
+        }
+    }
     /// Writes free-equation values into a full dof vector, leaving the fixed dofs as they are.
     pub fn scatter_free(&self, free: &[f64], full: &mut [f64]) {
         for (d, &e) in self.eq.iter().enumerate() {
@@ -84,11 +111,17 @@ pub struct Pattern {
     /// The approximate-minimum-degree order of the node graph, expanded to the equations: the
     /// safeguard [`Factor`] compares with `order` by fill (up to [`AMD_LIMIT`] equations).
     pub amd_order: Option<Vec<u32>>,
+    /// The elements in the order of their lowest equation: [`assemble`] visits them so, and
+    /// consecutive elements then share nodes and matrix entries (cache hits) whatever the
+    /// mesh file's element numbering. Empty: index order.
+    pub elem_order: Vec<u32>,
 }
 
-/// Largest system for which the AMD safeguard ordering is computed (beyond it bisection is
-/// reliable and AMD's analysis time would matter).
-pub const AMD_LIMIT: usize = 100_000;
+/// Largest system for which the AMD safeguard ordering is computed. Bisection does not always
+/// win at scale: on the Gmsh tet10 bracket (224,781 equations) AMD fills 2.23e8 against
+/// bisection's 2.75e8, on the 5 mm beam (263,277) 3.61e8 against 2.58e8; the node-graph AMD
+/// and its symbolic analysis run beside bisection's, so trying it costs little wall time.
+pub const AMD_LIMIT: usize = 2_000_000;
 
 /// Approximate minimum degree order of the active nodes of the node graph `adj` (faer's AMD on
 /// the graph of nodes rather than of equations: 9× fewer entries, the same fill, since the
@@ -132,26 +165,37 @@ fn amd_node_order(adj: &[Vec<u32>], active: &[bool]) -> Option<Vec<u32>> {
 }
 
 impl Pattern {
-    pub fn build(mesh: &Mesh, dofs: &DofMap) -> Result<Pattern, FemError> {
+    /// The equation numbering and pattern of a solid mesh with the dofs `fixed` (3 per node).
+    pub fn build(mesh: &Mesh, fixed: &[bool]) -> Result<(DofMap, Pattern), FemError> {
         Pattern::for_elements(
             &mesh.nodes,
             mesh.num_elements(),
             |e| mesh.element_nodes(e),
-            dofs,
+            fixed,
+            &mesh.used_nodes(),
             3,
         )
     }
 
-    /// The pattern of elements given by `element_nodes(e)`, e < `n_elements`, over nodes at
-    /// `coords` with `per_node` dofs each (3 for solids, 6 for shells).
+    /// The equation numbering and pattern of elements given by `element_nodes(e)`,
+    /// e < `n_elements`, over nodes at `coords` with `per_node` dofs each (3 for solids, 6 for
+    /// shells); a dof is free when it is not `fixed` and its node is `used`.
+    ///
+    /// The equations are numbered in the nested-dissection order of the nodes (a node's free
+    /// dofs consecutive), so the factorisation's order is the identity and neighbouring nodes
+    /// get nearby equations: an element's entries lie close together in the matrix whatever
+    /// the mesh file's node numbering (a Gmsh tetrahedral mesh numbers its nodes far apart,
+    /// which made the scatter of the element matrices miss the cache on almost every entry).
     pub fn for_elements<'a>(
         coords: &[[f64; 3]],
         n_elements: usize,
         element_nodes: impl Fn(usize) -> &'a [u32] + Sync,
-        dofs: &DofMap,
+        fixed: &[bool],
+        used: &[bool],
         per_node: usize,
-    ) -> Result<Pattern, FemError> {
+    ) -> Result<(DofMap, Pattern), FemError> {
         let nn = coords.len();
+        let k = per_node;
         // node → elements incidence (CSR)
         let mut count = vec![0u32; nn + 1];
         for e in 0..n_elements {
@@ -183,23 +227,59 @@ impl Pattern {
                 v
             })
             .collect();
-        let mut col_ptr = Vec::with_capacity(dofs.n_eq + 1);
+        drop(node_elems);
+        let free = |n: usize| used[n] as usize * (0..k).filter(|&c| !fixed[k * n + c]).count();
+        let active: Vec<bool> = (0..nn).map(|n| free(n) > 0).collect();
+        let n_eq: usize = (0..nn).map(free).sum();
+        let (node_order, amd_nodes) = rayon::join(
+            || nested_dissection(coords, &adj, &active),
+            || {
+                (n_eq <= AMD_LIMIT)
+                    .then(|| amd_node_order(&adj, &active))
+                    .flatten()
+            },
+        );
+        let dofs = DofMap::in_node_order(fixed, used, k, &node_order);
+        debug_assert_eq!(dofs.n_eq, n_eq);
+        // first free equation of each node (its free equations are consecutive)
+        let first: Vec<u32> = (0..nn)
+            .map(|n| {
+                (0..k)
+                    .map(|c| dofs.eq[k * n + c])
+                    .find(|&e| e != FIXED)
+                    .unwrap_or(FIXED)
+            })
+            .collect();
+        let mut col_ptr = Vec::with_capacity(n_eq + 1);
         col_ptr.push(0u32);
         let mut row_idx: Vec<u32> = Vec::new();
-        let k = per_node;
-        for n in 0..nn {
+        let mut rows: Vec<u32> = Vec::new();
+        let mut nbrs: Vec<u32> = Vec::new();
+        // columns in equation order: the nodes in `node_order`, their free dofs in turn
+        for &n in &node_order {
+            let n = n as usize;
+            nbrs.clear();
+            nbrs.extend(
+                adj[n]
+                    .iter()
+                    .copied()
+                    .filter(|&m| first[m as usize] != FIXED),
+            );
+            nbrs.sort_unstable_by_key(|&m| first[m as usize]);
+            rows.clear();
+            for &m in &nbrs {
+                for d in 0..k {
+                    let e = dofs.eq[k * m as usize + d];
+                    if e != FIXED {
+                        rows.push(e);
+                    }
+                }
+            }
             for c in 0..k {
                 if dofs.eq[k * n + c] == FIXED {
                     continue;
                 }
-                for &m in &adj[n] {
-                    for d in 0..k {
-                        let e = dofs.eq[k * m as usize + d];
-                        if e != FIXED {
-                            row_idx.push(e);
-                        }
-                    }
-                }
+                row_idx.extend_from_slice(&rows);
                 if row_idx.len() > u32::MAX as usize {
                     return Err(FemError::Solver(
                         "matrix too large for 32-bit indices".into(),
@@ -208,19 +288,8 @@ impl Pattern {
                 col_ptr.push(row_idx.len() as u32);
             }
         }
-        let active: Vec<bool> = (0..nn)
-            .map(|n| (0..k).any(|c| dofs.eq[k * n + c] != FIXED))
-            .collect();
-        let (node_order, amd_nodes) = rayon::join(
-            || nested_dissection(coords, &adj, &active),
-            || {
-                (dofs.n_eq <= AMD_LIMIT)
-                    .then(|| amd_node_order(&adj, &active))
-                    .flatten()
-            },
-        );
         let expand = |node_order: Vec<u32>| {
-            let mut order = Vec::with_capacity(dofs.n_eq);
+            let mut order = Vec::with_capacity(n_eq);
             for n in node_order {
                 for c in 0..k {
                     let e = dofs.eq[k * n as usize + c];
@@ -229,16 +298,27 @@ impl Pattern {
                     }
                 }
             }
-            debug_assert_eq!(order.len(), dofs.n_eq);
+            debug_assert_eq!(order.len(), n_eq);
             order
         };
-        Ok(Pattern {
-            n: dofs.n_eq,
+        let key = |e: usize| {
+            element_nodes(e)
+                .iter()
+                .map(|&n| first[n as usize])
+                .min()
+                .unwrap_or(FIXED)
+        };
+        let mut keyed: Vec<(u32, u32)> = (0..n_elements).map(|e| (key(e), e as u32)).collect();
+        keyed.sort_unstable();
+        let pattern = Pattern {
+            n: n_eq,
             col_ptr,
             row_idx,
-            order: expand(node_order),
+            order: (0..n_eq as u32).collect(),
             amd_order: amd_nodes.map(expand),
-        })
+            elem_order: keyed.into_iter().map(|(_, e)| e).collect(),
+        };
+        Ok((dofs, pattern))
     }
 
     pub fn nnz(&self) -> usize {
@@ -273,6 +353,17 @@ impl Pattern {
                 *yj = s;
             }
         });
+    }
+
+    /// ‖A‖∞ (the largest absolute row sum; of a symmetric matrix, the largest column sum).
+    pub fn norm_inf(&self, vals: &[f64]) -> f64 {
+        (0..self.n)
+            .into_par_iter()
+            .map(|j| {
+                let (a, b) = (self.col_ptr[j] as usize, self.col_ptr[j + 1] as usize);
+                vals[a..b].iter().map(|v| v.abs()).sum::<f64>()
+            })
+            .reduce(|| 0.0, f64::max)
     }
 
     /// Column ranges with roughly equal numbers of entries, for parallel scatter.
@@ -350,10 +441,18 @@ pub fn assemble(
         .map_or(1, |nd| nd * nd);
     let mut buf = vec![0.0; BATCH.min(ne) * stride];
     let parts = pattern.column_partitions(4 * rayon::current_num_threads().max(1));
+    let index_order: Vec<u32>;
+    let order: &[u32] = if pattern.elem_order.len() == ne {
+        &pattern.elem_order
+    } else {
+        index_order = (0..ne as u32).collect();
+        &index_order
+    };
     let mut start = 0;
     let (mut t_elem, mut t_scatter) = (std::time::Duration::ZERO, std::time::Duration::ZERO);
     while start < ne {
         let end = (start + BATCH).min(ne);
+        let batch = &order[start..end];
         let t0 = std::time::Instant::now();
         // 1. element matrices
         let res: Result<(), (usize, element::BadJacobian)> = buf[..(end - start) * stride]
@@ -362,7 +461,7 @@ pub fn assemble(
             .try_for_each_init(
                 || (Vec::new(), Vec::new(), Vec::new()),
                 |(x, ke, sc), (i, out)| {
-                    let e = start + i;
+                    let e = batch[i] as usize;
                     mesh.element_coords(e, x);
                     let kind = mesh.kinds[e];
                     let nd = 3 * kind.num_nodes();
@@ -400,16 +499,7 @@ pub fn assemble(
         t_elem += t0.elapsed();
         let t0 = std::time::Instant::now();
         // 2. scatter, parallel over column ranges
-        scatter_batch(
-            mesh,
-            dofs,
-            pattern,
-            &parts,
-            start..end,
-            &buf,
-            stride,
-            &mut vals,
-        );
+        scatter_batch(mesh, dofs, pattern, &parts, batch, &buf, stride, &mut vals);
         t_scatter += t0.elapsed();
         start = end;
     }
@@ -424,21 +514,20 @@ pub fn scatter_parts(pattern: &Pattern) -> Vec<(usize, usize)> {
     pattern.column_partitions(4 * rayon::current_num_threads().max(1))
 }
 
-/// Adds the element matrices of `elements` (row-major, element i of the batch at
-/// `buf[i * stride..]`) into `vals`, in parallel over the column ranges `parts` and in element
-/// order within each: the same sums for any thread count.
+/// Adds the element matrices of `elements` (row-major, the matrix of `elements[i]` at
+/// `buf[i * stride..]`) into `vals`, in parallel over the column ranges `parts` and in the
+/// order of `elements` within each: the same sums for any thread count.
 #[allow(clippy::too_many_arguments)]
 pub fn scatter_batch(
     mesh: &Mesh,
     dofs: &DofMap,
     pattern: &Pattern,
     parts: &[(usize, usize)],
-    elements: std::ops::Range<usize>,
+    elements: &[u32],
     buf: &[f64],
     stride: usize,
     vals: &mut [f64],
 ) {
-    let start = elements.start;
     let mut slices: Vec<(usize, usize, &mut [f64])> = Vec::with_capacity(parts.len());
     let mut rest: &mut [f64] = vals;
     let mut offset = 0usize;
@@ -460,8 +549,8 @@ pub fn scatter_batch(
         let mut first = [FIXED; 20];
         let mut free = [[0usize; 3]; 20];
         let mut n_free = [0usize; 20];
-        for e in elements.clone() {
-            let nodes = mesh.element_nodes(e);
+        for (i, &e) in elements.iter().enumerate() {
+            let nodes = mesh.element_nodes(e as usize);
             let nd = 3 * nodes.len();
             let mut in_range = false;
             for (a, &n) in nodes.iter().enumerate() {
@@ -483,7 +572,7 @@ pub fn scatter_batch(
             if !in_range {
                 continue;
             }
-            let ke = &buf[(e - start) * stride..];
+            let ke = &buf[i * stride..];
             // the free columns of one node have the same rows (the node's neighbours), so
             // node a's block sits at the same offset in each of them: searched once per
             // (column node, row node) pair
@@ -556,15 +645,29 @@ pub fn lumped_mass(mesh: &Mesh, props: ElementProps<'_>) -> Result<Vec<f64>, Fem
 }
 
 /// Geometric nested dissection of the node graph: recursively split the active nodes at the
-/// median of the longest bounding-box axis; the nodes of the lower half adjacent to the upper
-/// half form the separator, ordered after both halves. For the slender, structured meshes of
-/// the scenes this gives far less fill than minimum degree.
+/// median along each of the three axes, and keep the split whose vertex separator is smallest:
+/// the nodes of one half adjacent to the other half (the smaller of the two sides' boundary
+/// layers), ordered after both halves. Only nodes within one element's reach of the cut can
+/// be adjacent across it, so only those have their neighbours scanned. For the slender,
+/// structured meshes of the scenes this gives far less fill than minimum degree.
 pub fn nested_dissection(coords: &[[f64; 3]], adj: &[Vec<u32>], active: &[bool]) -> Vec<u32> {
+    // leaves ordered by minimum degree (48 nodes: 7 % less fill than larger leaves on the
+    // 10 mm beam, where 256 / 1,024 / 4,096 gave +1 / +9 / +41 %)
     const LEAF: usize = 48;
+    let mut local = vec![u32::MAX; coords.len()];
     let mut out = Vec::with_capacity(coords.len());
-    let mut owner = vec![u32::MAX; coords.len()];
+    // side[n]: which half of the current split node n is in (tagged with the split's id)
+    let mut side = vec![(u32::MAX, false); coords.len()];
     let mut call_id = 0u32;
-    // explicit stack: Split(nodes) or Emit(nodes)
+    // the longest reach of an edge of the node graph along each axis
+    let mut reach = [0.0f64; 3];
+    for (n, nb) in adj.iter().enumerate() {
+        for &m in nb {
+            for k in 0..3 {
+                reach[k] = reach[k].max((coords[n][k] - coords[m as usize][k]).abs());
+            }
+        }
+    }
     enum Task {
         Split(Vec<u32>),
         Emit(Vec<u32>),
@@ -582,53 +685,136 @@ pub fn nested_dissection(coords: &[[f64; 3]], adj: &[Vec<u32>], active: &[bool])
             Task::Split(v) => v,
         };
         if nodes.len() <= LEAF {
-            out.extend(nodes);
+            leaf_order(adj, &nodes, &mut local, &mut out);
             continue;
         }
-        let mut lo = [f64::INFINITY; 3];
-        let mut hi = [f64::NEG_INFINITY; 3];
-        for &n in &nodes {
-            let p = coords[n as usize];
-            for k in 0..3 {
-                lo[k] = lo[k].min(p[k]);
-                hi[k] = hi[k].max(p[k]);
+        // the best split: (separator size, axis, cut, separator on the upper side)
+        let mut best: Option<(usize, usize, f64, bool)> = None;
+        let mid = nodes.len() / 2;
+        for axis in 0..3 {
+            nodes.select_nth_unstable_by(mid, |&a, &b| {
+                coords[a as usize][axis].total_cmp(&coords[b as usize][axis])
+            });
+            let cut = coords[nodes[mid] as usize][axis];
+            let lo = nodes
+                .iter()
+                .filter(|&&n| coords[n as usize][axis] < cut)
+                .count();
+            if lo == 0 || lo == nodes.len() {
+                continue; // all coordinates equal along this axis
+            }
+            call_id += 1;
+            for &n in &nodes {
+                side[n as usize] = (call_id, coords[n as usize][axis] >= cut);
+            }
+            // boundary layers of both halves, from the nodes within reach of the cut
+            let (mut lower, mut upper) = (0usize, 0usize);
+            for &n in &nodes {
+                let x = coords[n as usize][axis];
+                if (x - cut).abs() > reach[axis] {
+                    continue;
+                }
+                let up = x >= cut;
+                if adj[n as usize]
+                    .iter()
+                    .any(|&m| side[m as usize] == (call_id, !up))
+                {
+                    if up {
+                        upper += 1;
+                    } else {
+                        lower += 1;
+                    }
+                }
+            }
+            let (size, on_upper) = if upper < lower {
+                (upper, true)
+            } else {
+                (lower, false)
+            };
+            if best.is_none_or(|b| size < b.0) {
+                best = Some((size, axis, cut, on_upper));
             }
         }
-        let axis = (0..3)
-            .max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b])))
-            .unwrap_or(0);
-        let mid = nodes.len() / 2;
-        nodes.select_nth_unstable_by(mid, |&a, &b| {
-            coords[a as usize][axis].total_cmp(&coords[b as usize][axis])
-        });
-        let cut = coords[nodes[mid] as usize][axis];
-        let (mut left, right): (Vec<u32>, Vec<u32>) =
-            nodes.iter().partition(|&&n| coords[n as usize][axis] < cut);
-        if left.is_empty() || right.is_empty() {
-            // all coordinates equal along the axis (degenerate): stop splitting
+        let Some((_, axis, cut, on_upper)) = best else {
+            // every node at one point (degenerate): stop splitting
             out.extend(nodes);
             continue;
-        }
+        };
         call_id += 1;
-        for &n in &right {
-            owner[n as usize] = call_id;
+        for &n in &nodes {
+            side[n as usize] = (call_id, coords[n as usize][axis] >= cut);
         }
         let mut sep = Vec::new();
-        left.retain(|&n| {
-            let touches = adj[n as usize]
-                .iter()
-                .any(|&m| owner[m as usize] == call_id);
-            if touches {
+        let (mut left, mut right) = (Vec::new(), Vec::new());
+        for &n in &nodes {
+            let up = side[n as usize].1;
+            let x = coords[n as usize][axis];
+            let in_sep = up == on_upper
+                && (x - cut).abs() <= reach[axis]
+                && adj[n as usize]
+                    .iter()
+                    .any(|&m| side[m as usize] == (call_id, !up));
+            if in_sep {
                 sep.push(n);
+            } else if up {
+                right.push(n);
+            } else {
+                left.push(n);
             }
-            !touches
-        });
+        }
         // order: left, right, separator (the stack is LIFO)
         stack.push(Task::Emit(sep));
         stack.push(Task::Split(right));
         stack.push(Task::Split(left));
     }
     out
+}
+
+/// Appends the nodes of a nested-dissection leaf in the minimum-degree order of the graph
+/// they induce (`local` is scratch: u32::MAX everywhere, restored on return).
+fn leaf_order(adj: &[Vec<u32>], nodes: &[u32], local: &mut [u32], out: &mut Vec<u32>) {
+    for (i, &n) in nodes.iter().enumerate() {
+        local[n as usize] = i as u32;
+    }
+    let mut col_ptr = Vec::with_capacity(nodes.len() + 1);
+    col_ptr.push(0u32);
+    let mut row_idx = Vec::new();
+    for &n in nodes {
+        let start = row_idx.len();
+        row_idx.extend(
+            adj[n as usize]
+                .iter()
+                .map(|&m| local[m as usize])
+                .filter(|&c| c != u32::MAX),
+        );
+        row_idx[start..].sort_unstable();
+        col_ptr.push(row_idx.len() as u32);
+    }
+    for &n in nodes {
+        local[n as usize] = u32::MAX;
+    }
+    let k = nodes.len();
+    let a = SymbolicSparseColMatRef::new_checked(k, k, &col_ptr, None, &row_idx);
+    let mut perm = vec![0u32; k];
+    let mut perm_inv = vec![0u32; k];
+    let ok = MemBuffer::try_new(amd::order_scratch::<u32>(k, row_idx.len()))
+        .ok()
+        .and_then(|mut mem| {
+            amd::order(
+                &mut perm,
+                &mut perm_inv,
+                a,
+                amd::Control::default(),
+                MemStack::new(&mut mem),
+            )
+            .ok()
+        })
+        .is_some();
+    if ok {
+        out.extend(perm.iter().map(|&i| nodes[i as usize]));
+    } else {
+        out.extend_from_slice(nodes);
+    }
 }
 
 /// Sparse Cholesky factor LLᵀ computed by faer (simplicial or supernodal, chosen by faer),
@@ -646,7 +832,7 @@ fn timing() -> bool {
 }
 
 /// The symbolic analysis of `pattern` (computed once, then reused): our nested-dissection
-/// ordering, or faer's AMD when that gives less fill (AMD is tried up to 100k equations).
+/// ordering, or AMD when that gives less fill (tried up to [`AMD_LIMIT`] equations).
 fn ensure_symbolic(
     pattern: &Pattern,
     symbolic: &mut Option<Symbolic>,
@@ -800,6 +986,8 @@ pub struct RefinedSolve {
 pub struct MixedFactor {
     symbolic: Arc<SymbolicCholesky<u32>>,
     values: Vec<f32>,
+    /// ‖A‖∞ of the matrix factored (computed at the first solve).
+    a_norm: std::sync::OnceLock<f64>,
 }
 
 impl MixedFactor {
@@ -827,6 +1015,7 @@ impl MixedFactor {
         Ok(MixedFactor {
             symbolic: sym,
             values,
+            a_norm: std::sync::OnceLock::new(),
         })
     }
 
@@ -902,9 +1091,13 @@ impl MixedFactor {
             }
             let before = rel;
             rel = dot(&r, &r).sqrt() / bnorm;
-            // LAPACK's mixed-precision refinement rule: stop at the tolerance, or when a
-            // round no longer halves the residual (the f64 round-off floor of b − A x)
-            if rel <= tol || rel > 0.5 * before || it >= max_iter {
+            // LAPACK's mixed-precision refinement rules (dsposv): stop at the tolerance, when
+            // x is backward stable (‖r‖∞ ≤ ‖x‖∞ ‖A‖∞ ε √n: the f64 round-off floor of b − A x,
+            // which another round cannot lower), or when a round no longer halves the residual
+            let a_norm = *self.a_norm.get_or_init(|| pattern.norm_inf(vals));
+            let inf = |v: &[f64]| v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+            let floor = inf(&x) * a_norm * f64::EPSILON * (n as f64).sqrt();
+            if rel <= tol || inf(&r) <= floor || rel > 0.5 * before || it >= max_iter {
                 break;
             }
         }

@@ -419,9 +419,9 @@ impl ShellModel {
             }
         }
         let used = mesh.used_nodes();
-        let dofs = DofMap::with_stride(&fixed, &used, 6);
         let quads = &mesh.shells.quads;
-        let pattern = Pattern::for_elements(&mesh.nodes, ns, |e| &quads[e][..], &dofs, 6)?;
+        let (dofs, pattern) =
+            Pattern::for_elements(&mesh.nodes, ns, |e| &quads[e][..], &fixed, &used, 6)?;
         let lumped = matches!(
             cfg.analysis,
             Analysis::Dynamic {

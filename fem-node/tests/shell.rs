@@ -126,6 +126,7 @@ impl Shells {
             row_idx,
             order: (0..m).collect(),
             amd_order: None,
+            elem_order: Vec::new(),
         };
         let factor = fem::assembly::Factor::new(&pattern, &vals, &mut None)
             .expect("the constrained stiffness is positive definite");

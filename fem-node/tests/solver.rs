@@ -134,7 +134,7 @@ fn spd_values(p: &fem::assembly::Pattern) -> Vec<f64> {
 /// same solution, and the chosen factor is never fuller than either.
 #[test]
 fn the_amd_safeguard_replaces_nested_dissection_where_bisection_is_poor() {
-    use fem::assembly::{DofMap, Factor, Pattern};
+    use fem::assembly::{Factor, Pattern};
     let (mut coords, cells) = grid(8);
     // a fixed shuffle of the coordinates (an LCG), keeping the connectivity
     let mut state = 12345u64;
@@ -147,8 +147,9 @@ fn the_amd_safeguard_replaces_nested_dissection_where_bisection_is_poor() {
     let nd = 3 * coords.len();
     let mut fixed = vec![false; nd];
     fixed[..3 * 81].fill(true); // the face k = 0
-    let dofs = DofMap::new(&fixed, &vec![true; coords.len()]);
-    let p = Pattern::for_elements(&coords, cells.len(), |e| &cells[e][..], &dofs, 3).unwrap();
+    let used = vec![true; coords.len()];
+    let (_, p) =
+        Pattern::for_elements(&coords, cells.len(), |e| &cells[e][..], &fixed, &used, 3).unwrap();
     let amd = p.amd_order.clone().expect("AMD order below the limit");
     let mut sorted = amd.clone();
     sorted.sort_unstable();
@@ -187,7 +188,9 @@ fn the_amd_safeguard_replaces_nested_dissection_where_bisection_is_poor() {
 
     // on the true coordinates bisection is kept when it fills less
     let (coords, _) = grid(8);
-    let p = Pattern::for_elements(&coords, cells.len(), |e| &cells[e][..], &dofs, 3).unwrap();
+    let (_, p) =
+        Pattern::for_elements(&coords, cells.len(), |e| &cells[e][..], &fixed, &used, 3).unwrap();
+    let vals = spd_values(&p);
     let nd_only = Pattern {
         amd_order: None,
         ..p.clone()

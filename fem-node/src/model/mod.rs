@@ -318,7 +318,8 @@ impl Model {
                 }
             }
         }
-        let dofs = DofMap::new(&fixed, &mesh.used_nodes());
+        let (dofs, pattern) = Pattern::build(&mesh, &fixed)?;
+        lap("pattern");
         let mut moving = Vec::new();
         for (i, s) in cfg.supports.iter().enumerate() {
             if let Some(d) = s.displacement {
@@ -337,8 +338,6 @@ impl Model {
             }
         }
         lap("supports");
-        let pattern = Pattern::build(&mesh, &dofs)?;
-        lap("pattern");
         // The implicit penalty (Wellmann (6.25) on the FE side): ε V_IJ ⊗ I over the overlap's
         // elements enters the operator, the DEM's ε V u^DE arrives as the interface forces,
         // so that (K + ε V) u = F + ε V u^DE is solved at any ε (an explicit penalty force from

@@ -343,12 +343,13 @@ impl Model {
                 energy += out[60];
             }
             if let Some(kv) = kv.as_mut() {
+                let batch: Vec<u32> = (start as u32..end as u32).collect();
                 assembly::scatter_batch(
                     &self.mesh,
                     &self.dofs,
                     &self.pattern,
                     &parts,
-                    start..end,
+                    &batch,
                     &buf,
                     stride,
                     kv,
