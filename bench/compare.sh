@@ -7,6 +7,8 @@
 #                                                           ours: pour bench       peer: LIGGGHTS
 #   fem10  static beam, C3D8 at 10 mm (36,663 dof)         ours: static_beam      peer: CalculiX ccx
 #   fem5   static beam, C3D8 at 5 mm (265,923 dof)         ours: static_beam      peer: CalculiX ccx
+#   tet10  L-bracket meshed by Gmsh in C3D10 (unstructured, ~225,000 free dof; bench/gmsh/)
+#                                                           ours: static_beam      peer: CalculiX ccx
 #   transport  zenoh round trip (no peer program; REFERENCE D's figures are printed alongside)
 #
 # For each case the two programs alternate in one sitting (ABBA order: run 1 peer then ours,
@@ -16,7 +18,7 @@
 #
 # Environment (defaults in brackets):
 #   N [3]               runs of each program per case
-#   CASES ["dem pour hopper fem10 fem5 transport"]
+#   CASES ["dem pour hopper fem10 fem5 tet10 transport"]
 #   THREADS [2]         cores given to each program: MPI ranks of LIGGGHTS, OMP threads of
 #                       ccx (spooles), rayon threads of ours
 #   DEM_SETTLE [40000]  settling steps before the timed ones (0.4 s), both codes
@@ -29,12 +31,13 @@
 #   POUR_STEPS [50000]  pour steps (0.4 s at 8 us), all timed, both codes
 #   HOPPER_STEPS [75000] hopper steps (0.6 s), all timed, both codes (its start: the same
 #                       count and seed, placed in the shaft above the funnel)
+#   TET10_H [0.004]     Gmsh element size of the bracket (m): 0.004 gives 79,433 nodes
 #   TRANSPORT_ROUNDS [200]
 #   BENCH_WORK [mktemp] folder for the decks, logs and raw records (kept; printed at the end)
 #   COSIM_TARGET_DIR    cargo target folder holding release/deps/{dense_bed,pour,static_beam,transport}-*
 #                       (else $CARGO_TARGET_DIR, ~/.cache/cosim-target, <repo>/target; when no
 #                       bench binary is found there it is built with `cargo bench --no-run`)
-#   LIGGGHTS [liggghts] CCX [ccx] MPIRUN [mpirun]
+#   LIGGGHTS [liggghts] CCX [ccx] MPIRUN [mpirun] GMSH [gmsh] (tet10 needs Gmsh to mesh)
 #
 # Output: markdown on stdout; raw records (one line per run) in $BENCH_WORK/runs.tsv.
 set -euo pipefail
@@ -42,7 +45,7 @@ set -euo pipefail
 HERE=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
 ROOT=$(dirname "$HERE")
 N=${N:-3}
-CASES=${CASES:-"dem pour hopper fem10 fem5 transport"}
+CASES=${CASES:-"dem pour hopper fem10 fem5 tet10 transport"}
 THREADS=${THREADS:-2}
 DEM_SETTLE=${DEM_SETTLE:-40000}
 DEM_STEPS=${DEM_STEPS:-10000}
@@ -52,6 +55,8 @@ POUR_COUNT=${POUR_COUNT:-20000}
 POUR_SEED=${POUR_SEED:-1}
 POUR_STEPS=${POUR_STEPS:-50000}
 HOPPER_STEPS=${HOPPER_STEPS:-75000}
+TET10_H=${TET10_H:-0.004}
+GMSH=${GMSH:-gmsh}
 LIGGGHTS=${LIGGGHTS:-liggghts}
 CCX=${CCX:-ccx}
 MPIRUN=${MPIRUN:-mpirun}
@@ -234,6 +239,43 @@ fem_ours() { # h run
     record "fem$1" ours "$2" "$t" "$W" "$CPU" "$hwm" "uz=$uz"
 }
 
+# ---------------------------------------------------------------- FEM: Gmsh tet10 bracket
+tet10_prepare() {
+    local d="$WORK/tet10"
+    mkdir -p "$d"
+    cp "$HERE/ccx/bracket.inp" "$HERE/gmsh/bracket.toml" "$d/"
+    if [[ ! -s $d/bracket.msh ]]; then
+        have "$GMSH" || die "case tet10: Gmsh ('$GMSH') meshes the bracket and is not installed (Debian: apt-get install gmsh)"
+        "$GMSH" -3 -order 2 -setnumber h "$TET10_H" -format msh41 "$HERE/gmsh/bracket.geo" \
+            -o "$d/bracket.msh" >"$d/gmsh.log" 2>&1 || die "Gmsh failed (see $d/gmsh.log)"
+    fi
+    python3 "$HERE/gmsh/msh2inp.py" "$d/bracket.msh" 0.2 0.1 0.02 >"$d/mesh_bracket.inp"
+}
+
+tet10_peer() { # run
+    local d="$WORK/tet10" tag="ccx.$1"
+    rm -f "$d/bracket.dat"
+    run_timed "$d" "$tag" env OMP_NUM_THREADS="$THREADS" CCX_NPROC_EQUATION_SOLVER="$THREADS" \
+        "$CCX" -i bracket
+    timefile "$d/$tag.time"
+    local uz inner
+    uz=$(awk '/displacements/{f=1; next} f && NF == 4 {print $4; exit}' "$d/bracket.dat")
+    inner=$(awk '/Total CalculiX Time/{print $NF}' "$d/$tag.log")
+    record tet10 ccx "$1" "$W" "$W" "$CPU" "$((M / 1024))" "uz=$uz" "ccx_total=$inner"
+}
+
+tet10_ours() { # run
+    local d="$WORK/tet10" tag="ours.$1"
+    run_timed "$d" "$tag" env RAYON_NUM_THREADS="$THREADS" "$STATIC_BEAM" bracket.toml
+    timefile "$d/$tag.time"
+    local line t uz hwm
+    line=$(grep -m1 "^static bracket.toml:" "$d/$tag.log") || die "no 'static bracket.toml' line in $d/$tag.log"
+    t=$(sed -n 's/.* total \([0-9.]*\) s,.*/\1/p' <<<"$line")
+    uz=$(sed -n 's/.*corner u [-0-9.e+]* [-0-9.e+]* \([-0-9.e+]*\) m.*/\1/p' <<<"$line")
+    hwm=$(sed -n 's/.*VmHWM \([0-9]*\) MB.*/\1/p' <<<"$line")
+    record tet10 ours "$1" "$t" "$W" "$CPU" "$hwm" "uz=$uz"
+}
+
 # ---------------------------------------------------------------- transport (ours only)
 transport_ours() {
     local d="$WORK/transport" tag="ours.$1"
@@ -262,6 +304,7 @@ PEER_NAME[pour]=LIGGGHTS
 PEER_NAME[hopper]=LIGGGHTS
 PEER_NAME[fem10]=CalculiX
 PEER_NAME[fem5]=CalculiX
+PEER_NAME[tet10]=CalculiX
 UPTIME_BEFORE=$(uptime)
 
 for c in $CASES; do
@@ -298,13 +341,23 @@ for c in $CASES; do
         fi
         abba "$c" fem_peer fem_ours "$h"
         ;;
+    tet10)
+        STATIC_BEAM=$(ours_bin static_beam)
+        tet10_prepare
+        PEER_OK[$c]=1
+        if ! have "$CCX"; then
+            log "SKIP peer: CalculiX ('$CCX') is not installed (Debian: apt-get install calculix-ccx); measuring ours only"
+            PEER_OK[$c]=0
+        fi
+        abba "$c" tet10_peer tet10_ours
+        ;;
     transport)
         TRANSPORT=$(ours_bin transport)
         mkdir -p "$WORK/transport"
         PEER_OK[transport]=0
         abba transport true transport_ours
         ;;
-    *) die "unknown case '$c' (dem pour hopper fem10 fem5 transport)" ;;
+    *) die "unknown case '$c' (dem pour hopper fem10 fem5 tet10 transport)" ;;
     esac
 done
 UPTIME_AFTER=$(uptime)
@@ -318,6 +371,7 @@ describe() {
     hopper) echo "DEM hopper discharge, $POUR_COUNT spheres d 3–5 mm (seed $POUR_SEED), 30 mm outlet, $HOPPER_STEPS steps" ;;
     fem10) echo "FEM static beam C3D8 10 mm (36,663 dof)" ;;
     fem5) echo "FEM static beam C3D8 5 mm (265,923 dof)" ;;
+    tet10) echo "FEM static L-bracket, Gmsh C3D10, h = $TET10_H m ($(sed -n 's/.*: \([0-9]*\) nodes.*/\1/p' "$WORK/tet10/mesh_bracket.inp" | head -1) nodes)" ;;
     esac
 }
 
@@ -367,6 +421,9 @@ for c in $CASES; do
         for k in particles KE contacts builds zmax discharged; do
             echo "| $c | $k$( [[ $k == zmax ]] && echo ' (highest centre, m)') | $(answer "$c" "$p" $k | paste -sd, - | sed 's/,/, /g') | $(answer "$c" ours $k | paste -sd, - | sed 's/,/, /g') |"
         done
+        ;;
+    tet10)
+        echo "| $c | corner uz (0.2, 0.1, 0.02), m | $(answer "$c" "$p" uz | sort -u | paste -sd, -) | $(answer "$c" ours uz | sort -u | paste -sd, -) |"
         ;;
     fem*)
         echo "| $c | mid-span uz, m | $(answer "$c" "$p" uz | sort -u | paste -sd, -) | $(answer "$c" ours uz | sort -u | paste -sd, -) |"
