@@ -1070,6 +1070,9 @@ pub struct MixedFactor {
     values: Vec<f32>,
     /// ‖A‖∞ of the matrix factored (computed at the first solve).
     a_norm: std::sync::OnceLock<f64>,
+    /// The symmetric diagonal scaling S = diag(A)^(-1/2): the f32 factor is that of S A S,
+    /// whose unit diagonal loses less to single precision than A's stiffness spread.
+    scale: Vec<f64>,
 }
 
 impl MixedFactor {
@@ -1082,7 +1085,32 @@ impl MixedFactor {
     ) -> Result<MixedFactor, FemError> {
         let sym = ensure_symbolic(pattern, symbolic)?;
         let t0 = std::time::Instant::now();
-        let a32: Vec<f32> = vals.iter().map(|&v| v as f32).collect();
+        let scale: Vec<f64> = (0..pattern.n)
+            .map(|j| {
+                let d = pattern.find(j as u32, j as u32).map_or(0.0, |p| vals[p]);
+                if d > 0.0 {
+                    1.0 / d.sqrt()
+                } else {
+                    1.0 // not positive definite: the factorisation says so
+                }
+            })
+            .collect();
+        let mut a32 = vec![0.0f32; vals.len()];
+        a32.par_chunks_mut(4096)
+            .enumerate()
+            .for_each(|(ci, chunk)| {
+                let base = ci * 4096;
+                // the column of each entry: binary search once per chunk, then walk
+                let mut j = pattern.col_ptr.partition_point(|&c| c as usize <= base) - 1;
+                for (k, out) in chunk.iter_mut().enumerate() {
+                    let p = base + k;
+                    while pattern.col_ptr[j + 1] as usize <= p {
+                        j += 1;
+                    }
+                    let i = pattern.row_idx[p] as usize;
+                    *out = (vals[p] * scale[i] * scale[j]) as f32;
+                }
+            });
         let values = numeric_llt(&sym, pattern, &a32).map_err(|e| {
             FemError::Solver(format!("{e}: not positive definite in single precision"))
         })?;
@@ -1098,13 +1126,14 @@ impl MixedFactor {
             symbolic: sym,
             values,
             a_norm: std::sync::OnceLock::new(),
+            scale,
         })
     }
 
-    /// z = (L Lᵀ)⁻¹ r in single precision.
+    /// z = S (L Lᵀ)⁻¹ S r in single precision (L Lᵀ ≈ S A S).
     fn precondition(&self, r: &[f64], z: &mut [f64], work: &mut [f32], buf: &mut MemBuffer) {
-        for (w, &v) in work.iter_mut().zip(r) {
-            *w = v as f32;
+        for ((w, &v), &s) in work.iter_mut().zip(r).zip(&self.scale) {
+            *w = (v * s) as f32;
         }
         let n = work.len();
         let rhs = faer::MatMut::from_column_major_slice_mut(work, n, 1);
@@ -1114,8 +1143,8 @@ impl MixedFactor {
             faer::get_global_parallelism(),
             MemStack::new(buf),
         );
-        for (zi, &w) in z.iter_mut().zip(work.iter()) {
-            *zi = w as f64;
+        for ((zi, &w), &s) in z.iter_mut().zip(work.iter()).zip(&self.scale) {
+            *zi = w as f64 * s;
         }
     }
 
@@ -1152,6 +1181,8 @@ impl MixedFactor {
         let mut dx = vec![0.0; n];
         let mut it = 0;
         let mut rel = 1.0;
+        let a_norm = *self.a_norm.get_or_init(|| pattern.norm_inf(vals));
+        let inf = |v: &[f64]| v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
         for _round in 0..3 {
             it += self.pcg(
                 pattern,
@@ -1162,6 +1193,9 @@ impl MixedFactor {
                 &mut work,
                 &mut buf,
                 1e-3 * tol,
+                // the backward-stability floor of this round's residual (dsposv's test below)
+                a_norm * f64::EPSILON * (n as f64).sqrt(),
+                inf(&x),
                 max_iter - it.min(max_iter),
             );
             for (xi, d) in x.iter_mut().zip(&dx) {
@@ -1176,8 +1210,6 @@ impl MixedFactor {
             // LAPACK's mixed-precision refinement rules (dsposv): stop at the tolerance, when
             // x is backward stable (‖r‖∞ ≤ ‖x‖∞ ‖A‖∞ ε √n: the f64 round-off floor of b − A x,
             // which another round cannot lower), or when a round no longer halves the residual
-            let a_norm = *self.a_norm.get_or_init(|| pattern.norm_inf(vals));
-            let inf = |v: &[f64]| v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
             let floor = inf(&x) * a_norm * f64::EPSILON * (n as f64).sqrt();
             if rel <= tol || inf(&r) <= floor || rel > 0.5 * before || it >= max_iter {
                 break;
@@ -1200,8 +1232,11 @@ impl MixedFactor {
     }
 
     /// Preconditioned CG for A dx = r from dx = 0 (r is overwritten by the recurrence's
-    /// residual). Stops at ‖r‖ ≤ `tol`·‖r₀‖, when the residual stops falling, or after
-    /// `max_iter` iterations; returns the iterations done.
+    /// residual). Stops at ‖r‖ ≤ `tol`·‖r₀‖, at the backward-stability floor
+    /// ‖r‖∞ ≤ `floor_per_x`·‖x₀ + dx‖∞ (`x_inf` = ‖x₀‖∞, the solution of the earlier rounds;
+    /// below it the true residual no longer follows the recurrence's: further iterations
+    /// only polish round-off), when the residual stops falling, or after `max_iter`
+    /// iterations; returns the iterations done.
     #[allow(clippy::too_many_arguments)]
     fn pcg(
         &self,
@@ -1213,6 +1248,8 @@ impl MixedFactor {
         work: &mut [f32],
         buf: &mut MemBuffer,
         tol: f64,
+        floor_per_x: f64,
+        x_inf: f64,
         max_iter: usize,
     ) -> usize {
         let n = r.len();
@@ -1242,6 +1279,14 @@ impl MixedFactor {
                 });
             let rel = dot(r, r).sqrt() / r0;
             if rel <= tol {
+                break;
+            }
+            let (r_inf, dx_inf) = r
+                .par_iter()
+                .zip(x.par_iter())
+                .map(|(a, b)| (a.abs(), b.abs()))
+                .reduce(|| (0.0, 0.0), |a, b| (a.0.max(b.0), a.1.max(b.1)));
+            if r_inf <= floor_per_x * x_inf.max(dx_inf) {
                 break;
             }
             if rel < 0.5 * best {
