@@ -106,11 +106,9 @@ pub struct Pattern {
     pub n: usize,
     pub col_ptr: Vec<u32>,
     pub row_idx: Vec<u32>,
-    /// Fill-reducing elimination order of the equations (geometric nested dissection).
+    /// Fill-reducing elimination order of the equations (geometric nested dissection; the
+    /// symbolic analysis may replace it by AMD or METIS, see [`ensure_symbolic`]).
     pub order: Vec<u32>,
-    /// The approximate-minimum-degree order of the node graph, expanded to the equations: the
-    /// safeguard [`Factor`] compares with `order` by fill (up to [`AMD_LIMIT`] equations).
-    pub amd_order: Option<Vec<u32>>,
     /// The elements in the order of their lowest equation: [`assemble`] visits them so, and
     /// consecutive elements then share nodes and matrix entries (cache hits) whatever the
     /// mesh file's element numbering. Empty: index order.
@@ -121,111 +119,152 @@ pub struct Pattern {
     pub node_first: Vec<u32>,
 }
 
-/// Largest system for which the AMD safeguard ordering is computed. Bisection does not always
-/// win at scale: on the Gmsh tet10 bracket (224,781 equations) AMD fills 2.23e8 against
-/// bisection's 2.75e8, on the 5 mm beam (263,277) 3.61e8 against 2.58e8; the node-graph AMD
-/// and its symbolic analysis run beside bisection's, so trying it costs little wall time.
-pub const AMD_LIMIT: usize = 2_000_000;
+/// The node graph of a pattern: node i owns the equations `node_first[i]..node_first[i + 1]`;
+/// full symmetric compressed columns with the diagonal, rows sorted.
+struct NodeGraph {
+    col_ptr: Vec<u32>,
+    row_idx: Vec<u32>,
+}
 
-/// METIS's multilevel nested dissection (METIS_NodeND) of the node graph of `p` (nodes: the
-/// equation ranges `p.node_first`), expanded to the equations. None when the pattern has no
-/// node ranges or METIS fails.
-pub fn metis_order(p: &Pattern) -> Option<Vec<u32>> {
-    use metis_sys::idx_t;
-    let nodes = p.node_first.len().checked_sub(1)?;
-    if nodes == 0 {
-        return None;
-    }
-    let mut eq_node = vec![0u32; p.n];
-    for i in 0..nodes {
-        eq_node[p.node_first[i] as usize..p.node_first[i + 1] as usize].fill(i as u32);
-    }
-    let mut xadj: Vec<idx_t> = Vec::with_capacity(nodes + 1);
-    xadj.push(0);
-    let mut adjncy: Vec<idx_t> = Vec::new();
-    for i in 0..nodes {
-        // the column of the node's first equation lists every neighbour's equations, sorted:
-        // each neighbour's equations are consecutive
-        let col = p.node_first[i] as usize;
-        let mut last = u32::MAX;
-        for &r in &p.row_idx[p.col_ptr[col] as usize..p.col_ptr[col + 1] as usize] {
-            let m = eq_node[r as usize];
-            if m != last && m as usize != i {
-                adjncy.push(m as idx_t);
-            }
-            last = m;
+impl NodeGraph {
+    /// None when the pattern does not know its nodes (`node_first` empty).
+    fn of(p: &Pattern) -> Option<NodeGraph> {
+        let nodes = p.node_first.len().checked_sub(1)?;
+        let mut eq_node = vec![0u32; p.n];
+        for i in 0..nodes {
+            eq_node[p.node_first[i] as usize..p.node_first[i + 1] as usize].fill(i as u32);
         }
-        xadj.push(idx_t::try_from(adjncy.len()).ok()?);
+        let mut col_ptr = Vec::with_capacity(nodes + 1);
+        col_ptr.push(0u32);
+        let mut row_idx = Vec::new();
+        for i in 0..nodes {
+            // the column of the node's first equation lists every neighbour's equations,
+            // sorted: each neighbour's equations are consecutive, and nodes are numbered in
+            // equation order, so the neighbour nodes come out sorted
+            let col = p.node_first[i] as usize;
+            let mut last = u32::MAX;
+            for &r in &p.row_idx[p.col_ptr[col] as usize..p.col_ptr[col + 1] as usize] {
+                let m = eq_node[r as usize];
+                if m != last {
+                    row_idx.push(m);
+                }
+                last = m;
+            }
+            col_ptr.push(row_idx.len() as u32);
+        }
+        Some(NodeGraph { col_ptr, row_idx })
     }
-    let mut nv = idx_t::try_from(nodes).ok()?;
-    let mut perm: Vec<idx_t> = vec![0; nodes];
-    let mut iperm: Vec<idx_t> = vec![0; nodes];
-    // SAFETY: xadj/adjncy describe a symmetric graph of nv vertices without self loops
-    // (METIS's input contract), perm/iperm hold nv entries; null vertex weights and options
-    // select METIS's defaults (a fixed seed: the same order on every run). METIS only reads
-    // the graph and writes perm/iperm.
-    let status = unsafe {
-        metis_sys::METIS_NodeND(
-            &mut nv,
-            xadj.as_mut_ptr(),
-            adjncy.as_mut_ptr(),
-            std::ptr::null_mut(),
-            std::ptr::null_mut(),
-            perm.as_mut_ptr(),
-            iperm.as_mut_ptr(),
+
+    fn n(&self) -> usize {
+        self.col_ptr.len() - 1
+    }
+
+    fn symbolic(&self) -> SymbolicSparseColMatRef<'_, u32> {
+        SymbolicSparseColMatRef::new_checked(self.n(), self.n(), &self.col_ptr, None, &self.row_idx)
+    }
+
+    /// Entries of the Cholesky factor of the node graph eliminated in `order` (node i-th
+    /// eliminated: `order[i]`): the fill of the equations' factor is about 9 times this for
+    /// 3 dofs per node, so orderings compare on the small graph.
+    fn fill(&self, order: &[u32]) -> Option<usize> {
+        let mut inv = vec![0u32; order.len()];
+        for (i, &e) in order.iter().enumerate() {
+            inv[e as usize] = i as u32;
+        }
+        factorize_symbolic_cholesky(
+            self.symbolic(),
+            Side::Lower,
+            SymmetricOrdering::Custom(PermRef::new_checked(order, &inv, self.n())),
+            CholeskySymbolicParams::default(),
         )
-    };
-    if status != metis_sys::rstatus_et_METIS_OK {
-        return None;
+        .ok()
+        .map(|s| s.len_val())
     }
-    // perm[i]: the node eliminated i-th
+
+    /// Approximate minimum degree order (faer's AMD on the node graph: 9× fewer entries than
+    /// the equations' graph, the same fill, since a node's equations are indistinguishable
+    /// to minimum degree).
+    fn amd(&self) -> Option<Vec<u32>> {
+        let n = self.n();
+        let mut perm = vec![0u32; n];
+        let mut perm_inv = vec![0u32; n];
+        let mut mem = MemBuffer::try_new(amd::order_scratch::<u32>(n, self.row_idx.len())).ok()?;
+        amd::order(
+            &mut perm,
+            &mut perm_inv,
+            self.symbolic(),
+            amd::Control::default(),
+            MemStack::new(&mut mem),
+        )
+        .ok()?;
+        Some(perm)
+    }
+
+    /// METIS's multilevel nested dissection (METIS_NodeND).
+    fn metis(&self) -> Option<Vec<u32>> {
+        use metis_sys::idx_t;
+        let n = self.n();
+        if n == 0 {
+            return Some(Vec::new());
+        }
+        let mut xadj: Vec<idx_t> = Vec::with_capacity(n + 1);
+        xadj.push(0);
+        let mut adjncy: Vec<idx_t> = Vec::with_capacity(self.row_idx.len());
+        for i in 0..n {
+            let (a, b) = (self.col_ptr[i] as usize, self.col_ptr[i + 1] as usize);
+            adjncy.extend(
+                self.row_idx[a..b]
+                    .iter()
+                    .filter(|&&m| m as usize != i)
+                    .map(|&m| m as idx_t),
+            );
+            xadj.push(idx_t::try_from(adjncy.len()).ok()?);
+        }
+        let mut nv = idx_t::try_from(n).ok()?;
+        let mut perm: Vec<idx_t> = vec![0; n];
+        let mut iperm: Vec<idx_t> = vec![0; n];
+        // SAFETY: xadj/adjncy describe a symmetric graph of nv vertices without self loops
+        // (METIS's input contract), perm/iperm hold nv entries; null vertex weights and
+        // options select METIS's defaults (a fixed seed: the same order on every run). METIS
+        // only reads the graph and writes perm/iperm.
+        let status = unsafe {
+            metis_sys::METIS_NodeND(
+                &mut nv,
+                xadj.as_mut_ptr(),
+                adjncy.as_mut_ptr(),
+                std::ptr::null_mut(),
+                std::ptr::null_mut(),
+                perm.as_mut_ptr(),
+                iperm.as_mut_ptr(),
+            )
+        };
+        // perm[i]: the node eliminated i-th
+        (status == metis_sys::rstatus_et_METIS_OK).then(|| perm.iter().map(|&v| v as u32).collect())
+    }
+}
+
+/// A node order expanded to the equations of `p`.
+fn expand_nodes(p: &Pattern, nodes: &[u32]) -> Vec<u32> {
     let mut order = Vec::with_capacity(p.n);
-    for &v in &perm {
+    for &v in nodes {
         let v = v as usize;
         order.extend(p.node_first[v]..p.node_first[v + 1]);
     }
-    Some(order)
+    order
 }
 
-/// Approximate minimum degree order of the active nodes of the node graph `adj` (faer's AMD on
-/// the graph of nodes rather than of equations: 9× fewer entries, the same fill, since the
-/// three equations of a node are indistinguishable to minimum degree). None when it fails
-/// (then nested dissection alone is used).
-fn amd_node_order(adj: &[Vec<u32>], active: &[bool]) -> Option<Vec<u32>> {
-    let nodes: Vec<u32> = (0..adj.len() as u32)
-        .filter(|&n| active[n as usize])
-        .collect();
-    let mut compact = vec![u32::MAX; adj.len()];
-    for (i, &n) in nodes.iter().enumerate() {
-        compact[n as usize] = i as u32;
-    }
-    let mut col_ptr = Vec::with_capacity(nodes.len() + 1);
-    col_ptr.push(0u32);
-    let mut row_idx = Vec::new();
-    for &n in &nodes {
-        // adj is sorted and `compact` increasing: the rows stay sorted
-        row_idx.extend(
-            adj[n as usize]
-                .iter()
-                .map(|&m| compact[m as usize])
-                .filter(|&c| c != u32::MAX),
-        );
-        col_ptr.push(row_idx.len() as u32);
-    }
-    let n = nodes.len();
-    let a = SymbolicSparseColMatRef::new_checked(n, n, &col_ptr, None, &row_idx);
-    let mut perm = vec![0u32; n];
-    let mut perm_inv = vec![0u32; n];
-    let mut mem = MemBuffer::try_new(amd::order_scratch::<u32>(n, row_idx.len())).ok()?;
-    amd::order(
-        &mut perm,
-        &mut perm_inv,
-        a,
-        amd::Control::default(),
-        MemStack::new(&mut mem),
-    )
-    .ok()?;
-    Some(perm.iter().map(|&c| nodes[c as usize]).collect())
+/// The approximate-minimum-degree order of `p`'s equations (node by node). None when the
+/// pattern does not know its nodes.
+pub fn amd_order(p: &Pattern) -> Option<Vec<u32>> {
+    let g = NodeGraph::of(p)?;
+    Some(expand_nodes(p, &g.amd()?))
+}
+
+/// METIS's nested-dissection order of `p`'s equations (node by node). None when the pattern
+/// does not know its nodes or METIS fails.
+pub fn metis_order(p: &Pattern) -> Option<Vec<u32>> {
+    let g = NodeGraph::of(p)?;
+    Some(expand_nodes(p, &g.metis()?))
 }
 
 impl Pattern {
@@ -295,14 +334,7 @@ impl Pattern {
         let free = |n: usize| used[n] as usize * (0..k).filter(|&c| !fixed[k * n + c]).count();
         let active: Vec<bool> = (0..nn).map(|n| free(n) > 0).collect();
         let n_eq: usize = (0..nn).map(free).sum();
-        let (node_order, amd_nodes) = rayon::join(
-            || nested_dissection(coords, &adj, &active),
-            || {
-                (n_eq <= AMD_LIMIT)
-                    .then(|| amd_node_order(&adj, &active))
-                    .flatten()
-            },
-        );
+        let node_order = nested_dissection(coords, &adj, &active);
         let dofs = DofMap::in_node_order(fixed, used, k, &node_order);
         debug_assert_eq!(dofs.n_eq, n_eq);
         // first free equation of each node (its free equations are consecutive)
@@ -352,19 +384,6 @@ impl Pattern {
                 col_ptr.push(row_idx.len() as u32);
             }
         }
-        let expand = |node_order: Vec<u32>| {
-            let mut order = Vec::with_capacity(n_eq);
-            for n in node_order {
-                for c in 0..k {
-                    let e = dofs.eq[k * n as usize + c];
-                    if e != FIXED {
-                        order.push(e);
-                    }
-                }
-            }
-            debug_assert_eq!(order.len(), n_eq);
-            order
-        };
         let key = |e: usize| {
             element_nodes(e)
                 .iter()
@@ -382,7 +401,6 @@ impl Pattern {
             row_idx,
             node_first,
             order: (0..n_eq as u32).collect(),
-            amd_order: amd_nodes.map(expand),
             elem_order: keyed.into_iter().map(|(_, e)| e).collect(),
         };
         Ok((dofs, pattern))
@@ -898,64 +916,68 @@ fn timing() -> bool {
     tracing::enabled!(tracing::Level::DEBUG)
 }
 
-/// The symbolic analysis of `pattern` (computed once, then reused): our nested-dissection
-/// ordering, or AMD when that gives less fill (tried up to [`AMD_LIMIT`] equations).
-fn ensure_symbolic(
+/// The symbolic analysis of `pattern` (computed once, then reused) with the elimination
+/// order that fills least among: the pattern's own (geometric nested dissection: the
+/// equations are numbered in it), AMD, and — where AMD beats bisection, i.e. the mesh is
+/// irregular (an unstructured tetrahedral part) — METIS's multilevel nested dissection (the
+/// Gmsh bracket of bench/gmsh: 1.49e8 against AMD's 2.23e8 and bisection's 2.75e8; on the
+/// structured meshes METIS matches bisection and costs more time, so it is not run there).
+/// The orders are compared on the node graph (9× smaller); one analysis of the equations
+/// follows.
+pub fn ensure_symbolic(
     pattern: &Pattern,
     symbolic: &mut Option<Symbolic>,
-) -> Result<Arc<SymbolicCholesky<u32>>, FemError> {
+) -> Result<Symbolic, FemError> {
     if symbolic.is_none() {
-        let sym_err = |e: faer::sparse::FaerError| {
-            FemError::Solver(format!("symbolic Cholesky failed: {e:?}"))
-        };
-        let analyse = |order: &[u32]| {
-            let mut inv = vec![0u32; pattern.n];
-            for (i, &e) in order.iter().enumerate() {
-                inv[e as usize] = i as u32;
+        let t0 = std::time::Instant::now();
+        let mut chosen = "nested dissection";
+        let mut order: Option<Vec<u32>> = None;
+        let mut fills = String::new();
+        if let Some(g) = NodeGraph::of(pattern) {
+            let identity: Vec<u32> = (0..g.n() as u32).collect();
+            let (nd, amd) = rayon::join(
+                || g.fill(&identity),
+                || g.amd().and_then(|o| g.fill(&o).map(|f| (o, f))),
+            );
+            fills = format!("nested dissection {nd:?}");
+            if let (Some(nd), Some((amd_nodes, amd))) = (nd, amd) {
+                fills += &format!(", AMD {amd}");
+                if amd < nd {
+                    chosen = "AMD";
+                    let mut best_nodes = amd_nodes;
+                    if let Some(m) = g.metis() {
+                        if let Some(f) = g.fill(&m) {
+                            fills += &format!(", METIS {f}");
+                            if f < amd {
+                                chosen = "METIS";
+                                best_nodes = m;
+                            }
+                        }
+                    }
+                    order = Some(expand_nodes(pattern, &best_nodes));
+                }
             }
-            factorize_symbolic_cholesky(
-                pattern.symbolic(),
-                Side::Lower,
-                SymmetricOrdering::Custom(PermRef::new_checked(order, &inv, pattern.n)),
-                CholeskySymbolicParams::default(),
-            )
-        };
-        // AMD as a safeguard for meshes where coordinate bisection is poor (computed up to
-        // AMD_LIMIT equations); both analyses are sequential, so they run side by side
-        let (nd, amd) = match &pattern.amd_order {
-            Some(amd_order) => {
-                let (nd, amd) = rayon::join(|| analyse(&pattern.order), || analyse(amd_order));
-                (nd.map_err(sym_err)?, Some(amd.map_err(sym_err)?))
-            }
-            None => (analyse(&pattern.order).map_err(sym_err)?, None),
-        };
-        // where minimum degree beats bisection, the mesh is irregular (an unstructured
-        // tetrahedral part): METIS's multilevel dissection then fills far less than either
-        // (the Gmsh bracket: 1.49e8 against AMD's 2.23e8 and bisection's 2.75e8). Not tried
-        // otherwise: on the structured meshes it matches bisection and costs more time.
-        let metis = match &amd {
-            Some(a) if a.len_val() < nd.len_val() => match metis_order(pattern) {
-                Some(order) => Some(analyse(&order).map_err(sym_err)?),
-                None => None,
-            },
-            _ => None,
-        };
+        }
+        let order = order.as_deref().unwrap_or(&pattern.order);
+        let mut inv = vec![0u32; pattern.n];
+        for (i, &e) in order.iter().enumerate() {
+            inv[e as usize] = i as u32;
+        }
+        let sym = factorize_symbolic_cholesky(
+            pattern.symbolic(),
+            Side::Lower,
+            SymmetricOrdering::Custom(PermRef::new_checked(order, &inv, pattern.n)),
+            CholeskySymbolicParams::default(),
+        )
+        .map_err(|e| FemError::Solver(format!("symbolic Cholesky failed: {e:?}")))?;
         if timing() {
             tracing::debug!(
-                "  ordering: nested dissection nnz(L) = {}, AMD nnz(L) = {:?}, METIS nnz(L) = {:?}",
-                nd.len_val(),
-                amd.as_ref().map(|a| a.len_val()),
-                metis.as_ref().map(|a| a.len_val())
+                "  ordering: {chosen}, nnz(L) = {} (node-graph fills: {fills}), {:?}",
+                sym.len_val(),
+                t0.elapsed()
             );
         }
-        let best = [amd, metis].into_iter().flatten().fold(nd, |b, c| {
-            if c.len_val() < b.len_val() {
-                c
-            } else {
-                b
-            }
-        });
-        *symbolic = Some(Arc::new(best));
+        *symbolic = Some(Arc::new(sym));
     }
     Ok(symbolic.clone().expect("set above"))
 }

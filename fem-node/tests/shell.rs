@@ -125,7 +125,6 @@ impl Shells {
             col_ptr,
             row_idx,
             order: (0..m).collect(),
-            amd_order: None,
             elem_order: Vec::new(),
             node_first: Vec::new(),
         };

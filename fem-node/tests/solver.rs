@@ -150,20 +150,21 @@ fn the_amd_safeguard_replaces_nested_dissection_where_bisection_is_poor() {
     let used = vec![true; coords.len()];
     let (_, p) =
         Pattern::for_elements(&coords, cells.len(), |e| &cells[e][..], &fixed, &used, 3).unwrap();
-    let amd = p.amd_order.clone().expect("AMD order below the limit");
+    let amd = fem::assembly::amd_order(&p).expect("AMD order");
     let mut sorted = amd.clone();
     sorted.sort_unstable();
     assert_eq!(sorted, (0..p.n as u32).collect::<Vec<_>>(), "a permutation");
     let vals = spd_values(&p);
     let b: Vec<f64> = (0..p.n).map(|i| ((i * 37) % 11) as f64 - 5.0).collect();
 
+    // a pattern without its node ranges keeps its own order (bisection)
     let nd_only = Pattern {
-        amd_order: None,
+        node_first: Vec::new(),
         ..p.clone()
     };
     let amd_only = Pattern {
         order: amd,
-        amd_order: None,
+        node_first: Vec::new(),
         ..p.clone()
     };
     let mut x_nd = b.clone();
@@ -187,7 +188,7 @@ fn the_amd_safeguard_replaces_nested_dissection_where_bisection_is_poor() {
     assert_eq!(sorted, (0..p.n as u32).collect::<Vec<_>>(), "a permutation");
     let metis_only = Pattern {
         order: metis,
-        amd_order: None,
+        node_first: Vec::new(),
         ..p.clone()
     };
     let f_metis = Factor::new(&metis_only, &vals, &mut None).unwrap();
@@ -199,9 +200,13 @@ fn the_amd_safeguard_replaces_nested_dissection_where_bisection_is_poor() {
         chosen.factor_nnz()
     );
     assert!(f_metis.factor_nnz() * 3 < f_nd.factor_nnz() * 2);
-    assert_eq!(
-        chosen.factor_nnz(),
-        f_amd.factor_nnz().min(f_metis.factor_nnz())
+    // the choice is made on the node graph, whose fill ranks the orders as the equations'
+    // does up to the supernodes' padding
+    let least = f_amd.factor_nnz().min(f_metis.factor_nnz());
+    assert!(
+        chosen.factor_nnz() * 100 <= least * 105,
+        "{}",
+        chosen.factor_nnz()
     );
     assert!(max_rel_diff(&x_amd, &x_nd) < 1e-12);
     // and A x = b
@@ -215,7 +220,7 @@ fn the_amd_safeguard_replaces_nested_dissection_where_bisection_is_poor() {
         Pattern::for_elements(&coords, cells.len(), |e| &cells[e][..], &fixed, &used, 3).unwrap();
     let vals = spd_values(&p);
     let nd_only = Pattern {
-        amd_order: None,
+        node_first: Vec::new(),
         ..p.clone()
     };
     let chosen = Factor::new(&p, &vals, &mut None).unwrap();

@@ -382,7 +382,21 @@ impl Model {
         if let Some(o) = &overlap {
             mesh.arlequin_scale = o.scale.clone();
         }
-        let mut k = assembly::assemble(&mesh, &dofs, &pattern, Operator::Stiffness, props)?;
+        // the elimination order and symbolic analysis (every analysis but the explicit one
+        // factorises on this pattern) run beside the stiffness assembly: the ordering is
+        // mostly sequential, the assembly parallel
+        let explicit = matches!(cfg.analysis, Analysis::Explicit { .. });
+        let (k, symbolic) = rayon::join(
+            || assembly::assemble(&mesh, &dofs, &pattern, Operator::Stiffness, props),
+            || {
+                let mut sym = None;
+                (!explicit)
+                    .then(|| assembly::ensure_symbolic(&pattern, &mut sym))
+                    .transpose()
+            },
+        );
+        let mut k = k?;
+        let symbolic = symbolic?;
         // the linear operator holds the penalty; the Newton path adds it itself
         if let Some(pm) = &penalty_matrix {
             for (a, b) in k.iter_mut().zip(pm) {
@@ -590,7 +604,7 @@ impl Model {
             m_consistent,
             m_lumped,
             diag_pos,
-            symbolic: None,
+            symbolic,
             k_factor: None,
             penalty_matrix,
             penalty_blocks,
