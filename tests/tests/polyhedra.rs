@@ -301,8 +301,25 @@ fn polyhedral_sleeper_chain_runs_at_ci_size() {
     let probes = std::fs::read_to_string(out.join("fem/fem_probes.csv")).unwrap();
     let settlement = -last(&probes, "probe.seat.uz");
     let sensors = std::fs::read_to_string(out.join("dem/dem_sensors.csv")).unwrap();
-    let pressure = last(&sensors, "under_seat").abs();
-    eprintln!("settlement under the seat {settlement:e} m, pressure {pressure:e} Pa");
+    // a sensor under 300 stones sees a few force chains that come and go (its reading at one
+    // instant varied from 6 to 18 kPa between round-off-different runs): compare its means
+    // over the first and last 5 ms, before the load and at its full value
+    let (times, readings) = (csv_f64(&sensors, "time"), csv_f64(&sensors, "under_seat"));
+    let mean_over = |t0: f64, t1: f64| {
+        let v: Vec<f64> = times
+            .iter()
+            .zip(&readings)
+            .filter(|(t, _)| **t > t0 && **t <= t1)
+            .map(|(_, p)| p.abs())
+            .collect();
+        v.iter().sum::<f64>() / v.len() as f64
+    };
+    let (before, pressure) = (mean_over(0.0, 0.005), mean_over(0.015, 0.02));
+    eprintln!(
+        "settlement under the seat {settlement:e} m, sensor pressure {before:e} Pa before the \
+         load, {pressure:e} Pa over its last 5 ms (last reading {:e} Pa)",
+        last(&sensors, "under_seat").abs()
+    );
     // the stones carry the load: the sleeper goes down into the loose bed (a centimetre or
     // two), but the settlement levels off while the load still grows (no failure in
     // bearing: the bed is 0.13 m deep)
@@ -318,5 +335,8 @@ fn polyhedral_sleeper_chain_runs_at_ci_size() {
         "still sinking: {} → {settlement}",
         at(0.017)
     );
-    assert!(pressure > 1e4, "the load reaches the sensor: {pressure} Pa");
+    assert!(
+        pressure > 5e3 && pressure > 4.0 * before,
+        "the load reaches the sensor: {pressure} Pa (before it: {before} Pa)"
+    );
 }
