@@ -127,6 +127,7 @@ impl Shells {
             order: (0..m).collect(),
             elem_order: Vec::new(),
             node_first: Vec::new(),
+            anchors: Vec::new(),
         };
         let factor = fem::assembly::Factor::new(&pattern, &vals, &mut None)
             .expect("the constrained stiffness is positive definite");

@@ -227,3 +227,74 @@ fn the_amd_safeguard_replaces_nested_dissection_where_bisection_is_poor() {
     let f_nd = Factor::new(&nd_only, &vals, &mut None).unwrap();
     assert!(chosen.factor_nnz() <= f_nd.factor_nnz());
 }
+
+/// Quadratic meshes: METIS orders the corners only, and every mid-side node is eliminated just
+/// before the earlier of its two ends (no fill of its own); the order is a permutation and its
+/// factor solves the system.
+#[test]
+fn metis_on_a_tet10_mesh_orders_the_corners_and_places_each_midside_node_before_its_ends() {
+    use fem::assembly::{Factor, Pattern};
+    let mesh = fem::mesh::box_mesh(
+        [0.0; 3],
+        [1.0, 0.6, 0.4],
+        [5, 3, 2],
+        fem::ElementKind::Tet10,
+    );
+    let mut fixed = vec![false; 3 * mesh.num_nodes()];
+    for (n, x) in mesh.nodes.iter().enumerate() {
+        if x[0] == 0.0 {
+            fixed[3 * n..3 * n + 3].fill(true);
+        }
+    }
+    let (_, p) = Pattern::build(&mesh, &fixed).unwrap();
+    assert_eq!(p.anchors.len(), p.node_first.len() - 1);
+    let midside = p.anchors.iter().filter(|a| a[0] != u32::MAX).count();
+    assert!(midside > 0 && midside < p.anchors.len());
+    // every free mid-side node of this mesh has both ends free, except on the fixed face
+    assert!(
+        p.anchors
+            .iter()
+            .filter(|a| a[0] != u32::MAX && a[1] != u32::MAX)
+            .count()
+            > midside / 2
+    );
+    let order = fem::assembly::metis_order(&p).expect("METIS ordering");
+    let mut sorted = order.clone();
+    sorted.sort_unstable();
+    assert_eq!(sorted, (0..p.n as u32).collect::<Vec<_>>(), "a permutation");
+    // node positions in the order (node i owns equations node_first[i]..)
+    let node_of_eq = |e: u32| p.node_first.partition_point(|&f| f <= e) - 1;
+    let mut pos = vec![usize::MAX; p.anchors.len()];
+    for (k, &e) in order.iter().enumerate() {
+        let node = node_of_eq(e);
+        if pos[node] == usize::MAX {
+            pos[node] = k;
+        }
+    }
+    for (i, a) in p.anchors.iter().enumerate() {
+        if a[0] == u32::MAX {
+            continue;
+        }
+        let ends: Vec<usize> = a
+            .iter()
+            .filter(|&&x| x != u32::MAX)
+            .map(|&x| pos[x as usize])
+            .collect();
+        let first_end = *ends.iter().min().unwrap();
+        assert!(pos[i] < first_end, "mid-side node {i} after its end");
+    }
+    // and its factor solves
+    let vals = spd_values(&p);
+    let b: Vec<f64> = (0..p.n).map(|i| ((i * 13) % 7) as f64 - 3.0).collect();
+    let metis_only = Pattern {
+        order,
+        node_first: Vec::new(),
+        ..p.clone()
+    };
+    let f = Factor::new(&metis_only, &vals, &mut None).unwrap();
+    let mut x = b.clone();
+    f.solve_in_place(&mut x);
+    let mut ax = vec![0.0; p.n];
+    p.mul(&vals, &x, &mut ax);
+    assert!(max_rel_diff(&ax, &b) < 1e-12);
+}
