@@ -222,6 +222,14 @@ fem_peer() { # h run
     record "fem$1" ccx "$2" "$W" "$W" "$CPU" "$((M / 1024))" "uz=$uz" "ccx_total=$inner"
 }
 
+# static_line <log> <prefix>: sets the caller's locals line (the static_beam line starting
+# with prefix), t (build + solve, s) and hwm (VmHWM after the solve, MB)
+static_line() {
+    line=$(grep -m1 "^$2" "$1") || die "no '$2' line in $1"
+    t=$(sed -n 's/.* total \([0-9.]*\) s,.*/\1/p' <<<"$line")
+    hwm=$(sed -n 's/.*VmHWM \([0-9]*\) MB.*/\1/p' <<<"$line")
+}
+
 fem_ours() { # h run
     local d="$WORK/fem$1" tag="ours.$2" args=("$1")
     # the bench ends with a dynamic run at its largest size: give it the 10 mm mesh after 5 mm,
@@ -230,10 +238,8 @@ fem_ours() { # h run
     run_timed "$d" "$tag" env RAYON_NUM_THREADS="$THREADS" "$STATIC_BEAM" "${args[@]}"
     timefile "$d/$tag.time"
     local line t uz hwm
-    line=$(grep -m1 "^static hex8 $1 mm:" "$d/$tag.log") || die "no 'static hex8 $1 mm' line in $d/$tag.log"
-    t=$(sed -n 's/.* total \([0-9.]*\) s,.*/\1/p' <<<"$line")
+    static_line "$d/$tag.log" "static hex8 $1 mm:"
     uz=$(sed -n 's/.*midspan uz \([-0-9.e+]*\) m.*/\1/p' <<<"$line")
-    hwm=$(sed -n 's/.*VmHWM \([0-9]*\) MB.*/\1/p' <<<"$line")
     # compared: build + assembly + factorise + solve as printed, and VmHWM right after the
     # solve (the process goes on with a re-solve and a dynamic run; its wall time is recorded)
     record "fem$1" ours "$2" "$t" "$W" "$CPU" "$hwm" "uz=$uz"
@@ -269,10 +275,8 @@ tet10_ours() { # run
     run_timed "$d" "$tag" env RAYON_NUM_THREADS="$THREADS" "$STATIC_BEAM" bracket.toml
     timefile "$d/$tag.time"
     local line t uz hwm
-    line=$(grep -m1 "^static bracket.toml:" "$d/$tag.log") || die "no 'static bracket.toml' line in $d/$tag.log"
-    t=$(sed -n 's/.* total \([0-9.]*\) s,.*/\1/p' <<<"$line")
+    static_line "$d/$tag.log" "static bracket.toml:"
     uz=$(sed -n 's/.*corner u [-0-9.e+]* [-0-9.e+]* \([-0-9.e+]*\) m.*/\1/p' <<<"$line")
-    hwm=$(sed -n 's/.*VmHWM \([0-9]*\) MB.*/\1/p' <<<"$line")
     record tet10 ours "$1" "$t" "$W" "$CPU" "$hwm" "uz=$uz"
 }
 

@@ -59,6 +59,17 @@ point = [0.5, 0.05, 0.05]
     )
 }
 
+/// Which factor the last static solve used.
+fn solver_label(m: &fem::Model) -> String {
+    match m.last_mixed_solve() {
+        Some(s) => format!(
+            "f32 factor + f64 CG, {} iterations, relative residual {:.1e}",
+            s.iterations, s.relative_residual
+        ),
+        None => "f64 factor".into(),
+    }
+}
+
 /// One static solve of the `[fem]` section of a scene file (its mesh path relative to the
 /// file), timed like the beam: the unstructured peer cases (bench/gmsh/bracket.toml).
 fn static_scene(path: &Path) {
@@ -74,13 +85,7 @@ fn static_scene(path: &Path) {
     let t1 = Instant::now();
     m.solve_static().unwrap_or_else(|e| panic!("{e}"));
     let t_solve = t1.elapsed().as_secs_f64();
-    let solver = match m.last_mixed_solve() {
-        Some(s) => format!(
-            "f32 factor + f64 CG, {} iterations, relative residual {:.1e}",
-            s.iterations, s.relative_residual
-        ),
-        None => "f64 factor".into(),
-    };
+    let solver = solver_label(&m);
     let probes: Vec<String> = cfg
         .probes
         .iter()
@@ -132,13 +137,7 @@ fn main() {
         let t2 = Instant::now();
         m.solve_static().unwrap();
         let t_resolve = t2.elapsed().as_secs_f64();
-        let solver = match m.last_mixed_solve() {
-            Some(s) => format!(
-                "f32 factor + f64 CG, {} iterations, relative residual {:.1e}",
-                s.iterations, s.relative_residual
-            ),
-            None => "f64 factor".into(),
-        };
+        let solver = solver_label(&m);
         println!(
             "static hex8 {h} mm: {} dof, build+assembly {t_build:.3} s, factorise+solve {t_solve:.3} s, total {:.3} s, \
              re-solve with cached factor {t_resolve:.3} s, midspan uz {:.7e} m, VmHWM {:.0} MB, solver: {solver}",
