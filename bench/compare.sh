@@ -251,7 +251,6 @@ tet10_prepare() {
     mkdir -p "$d"
     cp "$HERE/ccx/bracket.inp" "$HERE/gmsh/bracket.toml" "$d/"
     if [[ ! -s $d/bracket.msh ]]; then
-        have "$GMSH" || die "case tet10: Gmsh ('$GMSH') meshes the bracket and is not installed (Debian: apt-get install gmsh)"
         "$GMSH" -3 -order 2 -setnumber h "$TET10_H" -format msh41 "$HERE/gmsh/bracket.geo" \
             -o "$d/bracket.msh" >"$d/gmsh.log" 2>&1 || die "Gmsh failed (see $d/gmsh.log)"
     fi
@@ -346,6 +345,11 @@ for c in $CASES; do
         abba "$c" fem_peer fem_ours "$h"
         ;;
     tet10)
+        if [[ ! -s $WORK/tet10/bracket.msh ]] && ! have "$GMSH"; then
+            log "SKIP tet10: Gmsh ('$GMSH') meshes the bracket and is not installed (Debian: apt-get install gmsh)"
+            CASES=$(sed 's/\btet10\b//' <<<"$CASES")
+            continue
+        fi
         STATIC_BEAM=$(ours_bin static_beam)
         tet10_prepare
         PEER_OK[$c]=1
