@@ -489,13 +489,33 @@ pub fn lumped_mass(
     scale: Option<&[f64]>,
     out: &mut [f64],
 ) -> Result<(), BadJacobian> {
+    // HRZ needs the consistent mass's diagonal, m_aa = Σ_q ρ w_q det J_q N_a², and its total,
+    // Σ_ab m_ab = Σ_q ρ w_q det J_q (the N_a sum to 1): no full matrix, no gradients
     let nn = kind.num_nodes();
-    let mut m = Vec::new();
-    mass(kind, x, rho, scale, &mut m)?;
-    let total: f64 = m.iter().sum();
-    let diag: f64 = (0..nn).map(|a| m[a * nn + a]).sum();
-    for a in 0..nn {
-        out[a] = total * m[a * nn + a] / diag;
+    let tab = mass_rule(kind);
+    let tiny = 1e-10 * size_cubed(x);
+    let mut total = 0.0;
+    out[..nn].fill(0.0);
+    for q in 0..tab.weights.len() {
+        let dn = &tab.dn[q * nn..(q + 1) * nn];
+        let det = jacobian(x, dn).determinant();
+        if !(det > tiny) {
+            return Err(BadJacobian {
+                det_j: det,
+                inverted: det < 0.0,
+            });
+        }
+        let n = &tab.n[q * nn..(q + 1) * nn];
+        let arlequin = scale.map_or(1.0, |s| n.iter().zip(s).map(|(n, s)| n * s).sum());
+        let f = rho * det * tab.weights[q] * arlequin;
+        total += f;
+        for a in 0..nn {
+            out[a] += f * n[a] * n[a];
+        }
+    }
+    let diag: f64 = out[..nn].iter().sum();
+    for o in &mut out[..nn] {
+        *o *= total / diag;
     }
     Ok(())
 }
