@@ -27,25 +27,6 @@ pub struct DofMap {
 pub const FIXED: u32 = u32::MAX;
 
 impl DofMap {
-    /// Free dofs are those of nodes used by elements and not fixed.
-    pub fn new(fixed: &[bool], used: &[bool]) -> DofMap {
-        DofMap::with_stride(fixed, used, 3)
-    }
-    /// The same with `per_node` dofs per node (6 for shells).
-    pub fn with_stride(fixed: &[bool], used: &[bool], per_node: usize) -> DofMap {
-        let mut eq = vec![FIXED; fixed.len()];
-        let mut n = 0u32;
-        for d in 0..fixed.len() {
-            if !fixed[d] && used[d / per_node] {
-                eq[d] = n;
-                n += 1;
-            }
-        }
-        DofMap {
-            eq,
-            n_eq: n as usize,
-        }
-    }
     /// Free-equation vector from a full dof vector.
     pub fn gather(&self, full: &[f64]) -> Vec<f64> {
         let mut out = vec![0.0; self.n_eq];
@@ -106,8 +87,10 @@ pub struct Pattern {
     pub n: usize,
     pub col_ptr: Vec<u32>,
     pub row_idx: Vec<u32>,
-    /// Fill-reducing elimination order of the equations (geometric nested dissection; the
-    /// symbolic analysis may replace it by AMD or METIS, see [`ensure_symbolic`]).
+    /// Elimination order of the equations when no better one is found: the identity for a
+    /// pattern from [`Pattern::for_elements`] (its equations are numbered in the geometric
+    /// nested dissection); [`ensure_symbolic`] may replace it by AMD or METIS. A pattern built
+    /// by hand (or a test) sets its own.
     pub order: Vec<u32>,
     /// The elements in the order of their lowest equation: [`assemble`] visits them so, and
     /// consecutive elements then share nodes and matrix entries (cache hits) whatever the
@@ -175,18 +158,9 @@ impl NodeGraph {
     /// eliminated: `order[i]`): the fill of the equations' factor is about 9 times this for
     /// 3 dofs per node, so orderings compare on the small graph.
     fn fill(&self, order: &[u32]) -> Option<usize> {
-        let mut inv = vec![0u32; order.len()];
-        for (i, &e) in order.iter().enumerate() {
-            inv[e as usize] = i as u32;
-        }
-        factorize_symbolic_cholesky(
-            self.symbolic(),
-            Side::Lower,
-            SymmetricOrdering::Custom(PermRef::new_checked(order, &inv, self.n())),
-            CholeskySymbolicParams::default(),
-        )
-        .ok()
-        .map(|s| s.len_val())
+        analyse_in_order(self.symbolic(), order)
+            .ok()
+            .map(|s| s.len_val())
     }
 
     /// Approximate minimum degree order (faer's AMD on the node graph: 9× fewer entries than
@@ -362,6 +336,24 @@ fn corner_anchors(mesh: &Mesh, dofs: &DofMap, p: &Pattern) -> Vec<[u32; 2]> {
         }
     }
     anchors
+}
+
+/// faer's symbolic Cholesky analysis of the symmetric pattern `a` eliminated in `order`
+/// (`order[i]`: the row and column eliminated i-th).
+fn analyse_in_order(
+    a: SymbolicSparseColMatRef<'_, u32>,
+    order: &[u32],
+) -> Result<SymbolicCholesky<u32>, faer::sparse::FaerError> {
+    let mut inv = vec![0u32; order.len()];
+    for (i, &e) in order.iter().enumerate() {
+        inv[e as usize] = i as u32;
+    }
+    factorize_symbolic_cholesky(
+        a,
+        Side::Lower,
+        SymmetricOrdering::Custom(PermRef::new_checked(order, &inv, order.len())),
+        CholeskySymbolicParams::default(),
+    )
 }
 
 /// A node order expanded to the equations of `p`.
@@ -1002,27 +994,9 @@ fn leaf_order(adj: &[Vec<u32>], nodes: &[u32], local: &mut [u32], out: &mut Vec<
     for &n in nodes {
         local[n as usize] = u32::MAX;
     }
-    let k = nodes.len();
-    let a = SymbolicSparseColMatRef::new_checked(k, k, &col_ptr, None, &row_idx);
-    let mut perm = vec![0u32; k];
-    let mut perm_inv = vec![0u32; k];
-    let ok = MemBuffer::try_new(amd::order_scratch::<u32>(k, row_idx.len()))
-        .ok()
-        .and_then(|mut mem| {
-            amd::order(
-                &mut perm,
-                &mut perm_inv,
-                a,
-                amd::Control::default(),
-                MemStack::new(&mut mem),
-            )
-            .ok()
-        })
-        .is_some();
-    if ok {
-        out.extend(perm.iter().map(|&i| nodes[i as usize]));
-    } else {
-        out.extend_from_slice(nodes);
+    match (NodeGraph { col_ptr, row_idx }).amd() {
+        Some(perm) => out.extend(perm.iter().map(|&i| nodes[i as usize])),
+        None => out.extend_from_slice(nodes),
     }
 }
 
@@ -1092,17 +1066,8 @@ pub fn ensure_symbolic(
             }
         }
         let order = order.as_deref().unwrap_or(&pattern.order);
-        let mut inv = vec![0u32; pattern.n];
-        for (i, &e) in order.iter().enumerate() {
-            inv[e as usize] = i as u32;
-        }
-        let sym = factorize_symbolic_cholesky(
-            pattern.symbolic(),
-            Side::Lower,
-            SymmetricOrdering::Custom(PermRef::new_checked(order, &inv, pattern.n)),
-            CholeskySymbolicParams::default(),
-        )
-        .map_err(|e| FemError::Solver(format!("symbolic Cholesky failed: {e:?}")))?;
+        let sym = analyse_in_order(pattern.symbolic(), order)
+            .map_err(|e| FemError::Solver(format!("symbolic Cholesky failed: {e:?}")))?;
         if timing() {
             tracing::debug!(
                 "  ordering: {chosen}, nnz(L) = {} (node-graph fills: {fills}), {:?}",
