@@ -28,7 +28,7 @@ fn hello(kind: NodeKind) -> Hello {
 /// same size (the positions array, re-sent), like a coupling window's exchange.
 async fn echo(listen: u16, connect: u16, sizes: &[usize], rounds: usize) {
     let mut dem = Participant::connect(
-        &LinkConfig::loopback_peer(Some(listen), &[connect]),
+        &link(Some(listen), &[connect]),
         RUN,
         "dem",
         hello(NodeKind::Dem),
@@ -79,6 +79,15 @@ fn decls(names: &[String]) -> Vec<InterfaceDecl> {
         .collect()
 }
 
+/// A loopback peer; COSIM_BENCH_ZENOH_CONFIG names a zenoh config file to start from (e.g. one
+/// that switches shared memory off, to measure the TCP path).
+fn link(listen: Option<u16>, connect: &[u16]) -> LinkConfig {
+    LinkConfig {
+        zenoh_config: std::env::var_os("COSIM_BENCH_ZENOH_CONFIG").map(Into::into),
+        ..LinkConfig::loopback_peer(listen, connect)
+    }
+}
+
 fn median(v: &mut [f64]) -> f64 {
     v.sort_by(|a, b| a.partial_cmp(b).unwrap());
     v[v.len() / 2]
@@ -98,7 +107,13 @@ fn main() {
 }
 
 async fn bench() {
-    let sizes = [1_000usize, 10_000, 100_000];
+    let sizes: Vec<usize> = match std::env::var("COSIM_BENCH_SIZES") {
+        Ok(s) => s
+            .split(',')
+            .map(|x| x.trim().parse().expect("COSIM_BENCH_SIZES: node counts"))
+            .collect(),
+        Err(_) => vec![1_000, 10_000, 100_000],
+    };
     let rounds: usize = std::env::var("COSIM_BENCH_ROUNDS")
         .ok()
         .and_then(|s| s.parse().ok())
@@ -109,14 +124,9 @@ async fn bench() {
         return;
     }
     let (pf, pd) = (free_loopback_port().unwrap(), free_loopback_port().unwrap());
-    let mut fem = Participant::connect(
-        &LinkConfig::loopback_peer(Some(pf), &[]),
-        RUN,
-        "fem",
-        hello(NodeKind::Fem),
-    )
-    .await
-    .unwrap();
+    let mut fem = Participant::connect(&link(Some(pf), &[]), RUN, "fem", hello(NodeKind::Fem))
+        .await
+        .unwrap();
     let ifaces: Vec<String> = sizes.iter().map(|n| format!("n{n}")).collect();
     fem.open_interfaces(&decls(&ifaces)).await.unwrap();
     let mut child = std::process::Command::new(std::env::current_exe().unwrap())
@@ -126,8 +136,16 @@ async fn bench() {
     fem.wait_for_peers(Duration::from_secs(30)).await.unwrap();
     println!("interface kinematics round trip between two processes on loopback (zenoh peers, TCP), {rounds} rounds after 10 warm-up");
     println!(
-        "{:>8} {:>10} {:>12} {:>12} {:>12} {:>12} {:>12} {:>12}",
-        "nodes", "bytes", "median_us", "p90_us", "MB/s", "memcpy_us", "encode_us", "decode_us"
+        "{:>8} {:>10} {:>12} {:>12} {:>12} {:>12} {:>12} {:>12} {:>12}",
+        "nodes",
+        "bytes",
+        "median_us",
+        "p90_us",
+        "MB/s",
+        "memcpy_us",
+        "encode_us",
+        "decode_us",
+        "check_us"
     );
     for (&n, name) in sizes.iter().zip(&ifaces) {
         let bytes = 72 * n; // P, V, A as f64
@@ -206,11 +224,28 @@ async fn bench() {
             dec.push(t.elapsed().as_secs_f64() * 1e6);
             std::hint::black_box((k2, f2));
         }
+        // the finiteness checks (sender and receiver each check every value)
+        let mut chk = Vec::new();
+        for _ in 0..50 {
+            let t = Instant::now();
+            for a in [
+                &kin.positions,
+                &kin.velocities,
+                &kin.accelerations,
+                &forces.forces,
+            ] {
+                assert!(std::hint::black_box(a).first_non_finite().is_none());
+            }
+            chk.push(t.elapsed().as_secs_f64() * 1e6);
+        }
+        let chkm = median(&mut chk);
         let (encm, decm) = (median(&mut enc), median(&mut dec));
         // bytes moved per round trip: kinematics out (72 B/node) + forces back (24 B/node)
         let mbps = (96 * n) as f64 / (med * 1e-6) / 1e6;
-        println!("{n:>8} {bytes:>10} {med:>12.1} {p90:>12.1} {mbps:>12.1} {mcm:>12.1} {encm:>12.1} {decm:>12.1}");
+        println!("{n:>8} {bytes:>10} {med:>12.1} {p90:>12.1} {mbps:>12.1} {mcm:>12.1} {encm:>12.1} {decm:>12.1} {chkm:>12.1}");
     }
+    let (n, shm) = fem.data_received();
+    println!("forces received: {n}, of which in shared memory: {shm}");
     let _ = child.wait();
     fem.finish().await.ok();
 }

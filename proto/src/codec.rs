@@ -60,9 +60,112 @@ pub fn encode<M: Message>(msg: &M) -> Result<Vec<u8>, ProtoError> {
     Ok(buf)
 }
 
+/// Bytes [`encode`] would produce, without producing them (the bulk arrays are counted, not
+/// copied), so that a message can be written straight into a buffer of the right size.
+pub fn encoded_len<M: Message>(msg: &M) -> Result<usize, ProtoError> {
+    struct Count(usize);
+    impl std::io::Write for Count {
+        fn write(&mut self, b: &[u8]) -> std::io::Result<usize> {
+            self.0 += b.len();
+            Ok(b.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+    let mut count = Count(0);
+    rmp_serde::encode::write_named(&mut count, msg).map_err(|e| ProtoError::Encode {
+        what: M::WHAT,
+        reason: e.to_string(),
+    })?;
+    Ok(count.0)
+}
+
+/// Encodes `msg` into `buf`, which must be exactly [`encoded_len`] bytes long.
+pub fn encode_into<M: Message>(msg: &M, buf: &mut [u8]) -> Result<(), ProtoError> {
+    let len = buf.len();
+    let mut rest = &mut buf[..];
+    rmp_serde::encode::write_named(&mut rest, msg).map_err(|e| ProtoError::Encode {
+        what: M::WHAT,
+        reason: format!("into a buffer of {len} bytes: {e}"),
+    })?;
+    if !rest.is_empty() {
+        return Err(ProtoError::Encode {
+            what: M::WHAT,
+            reason: format!("{} of {len} bytes left unwritten", rest.len()),
+        });
+    }
+    Ok(())
+}
+
+/// [`encode_into`], checking the bulk arrays for NaN and infinity on the way (the copy and
+/// the check in one pass). Returns `true` when every bulk byte was checked and finite;
+/// `false` means "not known": the caller checks the message itself before sending it.
+pub fn encode_into_checked<M: Message>(msg: &M, buf: &mut [u8]) -> Result<bool, ProtoError> {
+    /// Writes of whole doubles of at least 64 bytes are the bulk arrays (MessagePack writes a
+    /// `bin` payload in one call): copied with the check. A field that only looks like one
+    /// (a long name) can make the count exceed the message's bulk bytes: then "not known".
+    struct Checking<'a> {
+        rest: &'a mut [u8],
+        checked: usize,
+        finite: bool,
+    }
+    impl std::io::Write for Checking<'_> {
+        fn write(&mut self, b: &[u8]) -> std::io::Result<usize> {
+            if b.len() > self.rest.len() {
+                return Err(std::io::ErrorKind::WriteZero.into());
+            }
+            let (head, tail) = std::mem::take(&mut self.rest).split_at_mut(b.len());
+            if b.len() >= 64 && b.len() % 8 == 0 {
+                self.finite &= crate::messages::copy_finite(head, b);
+                self.checked += b.len();
+            } else {
+                head.copy_from_slice(b);
+            }
+            self.rest = tail;
+            Ok(b.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+    let len = buf.len();
+    let mut w = Checking {
+        rest: buf,
+        checked: 0,
+        finite: true,
+    };
+    rmp_serde::encode::write_named(&mut w, msg).map_err(|e| ProtoError::Encode {
+        what: M::WHAT,
+        reason: format!("into a buffer of {len} bytes: {e}"),
+    })?;
+    if !w.rest.is_empty() {
+        return Err(ProtoError::Encode {
+            what: M::WHAT,
+            reason: format!("{} of {len} bytes left unwritten", w.rest.len()),
+        });
+    }
+    Ok(w.finite && w.checked == msg.bulk_bytes())
+}
+
 #[derive(Deserialize)]
 struct VersionProbe {
     version: u32,
+}
+
+/// [`decode`], checking the bulk arrays for NaN and infinity while they are copied (one pass).
+/// Returns the message and whether all its arrays are known to be finite; `false` means a
+/// non-finite value is in there, and the message's `validate` names it.
+pub fn decode_finite<M: Message>(
+    bytes: &[u8],
+    expected_run: &str,
+) -> Result<(M, bool), ProtoError> {
+    match crate::messages::finite_only(|| decode::<M>(bytes, expected_run)) {
+        Err(ProtoError::Decode { reason, .. }) if reason.contains(crate::messages::NON_FINITE) => {
+            Ok((decode::<M>(bytes, expected_run)?, false))
+        }
+        other => other.map(|m| (m, true)),
+    }
 }
 
 /// Decodes and checks a message: version, structure, run id. Never panics.
@@ -521,5 +624,106 @@ mod tests {
             mutated[i] ^= flip.1;
             decode_all(&mutated);
         }
+
+        /// The blockwise finiteness test finds the first NaN or infinity at any place, among
+        /// the values closest to the limit (largest finite, subnormals, signed zeros).
+        #[test]
+        fn first_non_finite_finds_the_first_bad_value(
+            len in 0usize..2000,
+            bad in proptest::collection::vec((0usize..2000, 0usize..3), 0..3),
+            fill in proptest::collection::vec(0usize..6, 1..8),
+        ) {
+            let edge = [f64::MAX, -f64::MAX, f64::MIN_POSITIVE / 4.0, -0.0, 0.0, 1.0];
+            let mut v: Vec<f64> = (0..len).map(|i| edge[fill[i % fill.len()]]).collect();
+            let mut expected: Option<usize> = None;
+            for &(i, kind) in &bad {
+                if i < len {
+                    v[i] = [f64::NAN, f64::INFINITY, f64::NEG_INFINITY][kind];
+                    expected = Some(expected.map_or(i, |e: usize| e.min(i)));
+                }
+            }
+            let got = F64Array(v.clone()).first_non_finite();
+            prop_assert_eq!(got.map(|(i, _)| i), expected);
+            if let Some((i, x)) = got {
+                prop_assert_eq!(x.to_bits(), v[i].to_bits());
+            }
+        }
+    }
+
+    /// The one-pass paths: encoding into a buffer with the check says "finite" only when every
+    /// bulk value is; decoding with the check gives the same message and says whether it is
+    /// finite, and `validate` then names the bad value as it always did.
+    #[test]
+    fn checked_encoding_and_decoding_find_every_non_finite_value() {
+        let (_, _, _, kin, forces) = all_messages();
+        let mut big = kin.clone();
+        for a in [
+            &mut big.positions,
+            &mut big.velocities,
+            &mut big.accelerations,
+        ] {
+            a.0 = (0..3 * 700).map(|i| i as f64 * 0.5 - 3.0).collect();
+        }
+        fn roundtrip<M: Message>(m: &M) -> (bool, bool) {
+            let mut buf = vec![0u8; encoded_len(m).unwrap()];
+            let sent_finite = encode_into_checked(m, &mut buf).unwrap();
+            assert!(buf == encode(m).unwrap(), "{} encoded differently", M::WHAT);
+            let (back, finite) = decode_finite::<M>(&buf, RUN).unwrap();
+            // bitwise the same message (NaN != NaN, so compare the encodings)
+            assert!(
+                encode(&back).unwrap() == buf,
+                "{} decoded differently",
+                M::WHAT
+            );
+            (sent_finite, finite)
+        }
+        assert_eq!(roundtrip(&big), (true, true));
+        // arrays of fewer than 8 doubles are not judged on the way out: "not known"
+        assert_eq!(roundtrip(&kin).0, kin.positions.len() >= 8);
+        assert!(roundtrip(&forces).1);
+        for (field, index) in [(0usize, 0usize), (1, 1234), (2, 2099), (2, 2096)] {
+            for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+                let mut m = big.clone();
+                let a = match field {
+                    0 => &mut m.positions,
+                    1 => &mut m.velocities,
+                    _ => &mut m.accelerations,
+                };
+                a.0[index] = bad;
+                assert_eq!(roundtrip(&m), (false, false), "field {field} index {index}");
+                let (back, _) =
+                    decode_finite::<InterfaceKinematics>(&encode(&m).unwrap(), RUN).unwrap();
+                let e = back.validate(700, back.label()).unwrap_err();
+                let name = ["positions", "velocities", "accelerations"][field];
+                assert!(
+                    matches!(&e, ProtoError::NotFinite { field: f, index: i, .. } if *f == name && *i == index),
+                    "{e}"
+                );
+            }
+        }
+    }
+
+    /// `encode_into` writes exactly the bytes of `encode` into a buffer of `encoded_len`, and
+    /// refuses a buffer of another size.
+    #[test]
+    fn encoding_into_a_sized_buffer_matches_encode() {
+        let (commands, statuses, mesh, kin, forces) = all_messages();
+        fn check<M: Message>(m: &M) {
+            let bytes = encode(m).unwrap();
+            let n = encoded_len(m).unwrap();
+            assert_eq!(n, bytes.len(), "{}", M::WHAT);
+            let mut buf = vec![0u8; n];
+            encode_into(m, &mut buf).unwrap();
+            assert_eq!(buf, bytes, "{}", M::WHAT);
+            let mut long = vec![0u8; n + 1];
+            assert!(encode_into(m, &mut long).is_err());
+            let mut short = vec![0u8; n - 1];
+            assert!(encode_into(m, &mut short).is_err());
+        }
+        commands.iter().for_each(check);
+        statuses.iter().for_each(check);
+        check(&mesh);
+        check(&kin);
+        check(&forces);
     }
 }

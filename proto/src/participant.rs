@@ -15,7 +15,7 @@ use zenoh::query::Queryable;
 use zenoh::sample::{Sample, SampleKind};
 use zenoh::Wait;
 
-use crate::codec::{decode, encode, Message};
+use crate::codec::{decode, decode_finite, encode, encode_into_checked, encoded_len, Message};
 use crate::keys::{validate_name, Keys};
 use crate::link::LinkConfig;
 use crate::messages::*;
@@ -40,6 +40,7 @@ async fn declare_data_publisher(
     session
         .declare_publisher(key)
         .congestion_control(CongestionControl::Block)
+        .express(true)
         .await
         .map_err(ProtoError::zenoh)
 }
@@ -47,6 +48,55 @@ async fn declare_data_publisher(
 async fn put<M: Message>(publisher: &Publisher<'static>, msg: &M) -> Result<(), ProtoError> {
     let bytes = encode(msg)?;
     publisher.put(bytes).await.map_err(ProtoError::zenoh)
+}
+
+/// The session's shared-memory provider (zenoh's own pool), `None` where shared memory is
+/// switched off in the zenoh configuration.
+type Shm = std::sync::Arc<zenoh::shm::ShmProvider<zenoh::shm::PosixShmProviderBackend>>;
+
+/// Interface data from this many bulk bytes on are encoded straight into shared memory.
+const SHM_FROM: usize = 4096;
+
+async fn shm_provider(session: &zenoh::Session) -> Option<Shm> {
+    session.get_shm_provider().await
+}
+
+/// Sends interface data. With a shared-memory provider the message is encoded straight into a
+/// shared buffer: a peer on the same host maps it (no copy through the link), a peer on
+/// another machine gets its bytes over the link as before. Without one, or when the pool is
+/// full, the message goes as an ordinary buffer (which zenoh may still copy into shared memory
+/// itself).
+///
+/// `check` refuses a message that must not leave (non-finite values of this node's own
+/// solver); it runs before the message is sent unless the encoding into shared memory has
+/// already checked every value on the way.
+async fn put_data<M: Message>(
+    publisher: &Publisher<'static>,
+    msg: &M,
+    shm: Option<&Shm>,
+    check: impl Fn() -> Result<(), ProtoError>,
+) -> Result<(), ProtoError> {
+    if let Some(provider) = shm.filter(|_| msg.bulk_bytes() >= SHM_FROM) {
+        let len = encoded_len(msg)?;
+        match provider
+            .alloc(len)
+            .with_policy::<zenoh::shm::GarbageCollect>()
+            .wait()
+        {
+            Ok(mut buf) => {
+                if !encode_into_checked(msg, &mut buf)? {
+                    check()?;
+                }
+                return publisher.put(buf).await.map_err(ProtoError::zenoh);
+            }
+            Err(e) => tracing::debug!(
+                "{} of {len} bytes not in shared memory ({e:?}): sent as a buffer",
+                M::WHAT
+            ),
+        }
+    }
+    check()?;
+    put(publisher, msg).await
 }
 
 /// Interface data: labelled with window and iteration.
@@ -104,6 +154,9 @@ pub struct Participant {
     /// Interfaces whose input comes from the coordinator: provided ones' forces
     /// (`relaxed_forces`), used ones' kinematics (`relaxed_kinematics`).
     relaxed: std::collections::BTreeSet<String>,
+    /// Interface data messages received, and how many of them arrived in shared memory.
+    received: [std::sync::atomic::AtomicU64; 2],
+    shm: Option<Shm>,
 }
 
 /// A node's part in an interface.
@@ -141,6 +194,7 @@ impl Participant {
         let status = session
             .declare_publisher(keys.status(node))
             .congestion_control(CongestionControl::Block)
+            .express(true)
             .await
             .map_err(ProtoError::zenoh)?;
         let coordinator_alive = session
@@ -164,7 +218,10 @@ impl Participant {
             hello: None,
             motion_start: Default::default(),
             relaxed: Default::default(),
+            received: Default::default(),
+            shm: None,
         };
+        p.shm = shm_provider(&p.session).await;
         p.report(StatusBody::Hello(hello.clone())).await?;
         p.hello = Some(hello);
         Ok(p)
@@ -448,29 +505,40 @@ impl Participant {
     /// Publishes interface kinematics (FEM side). Non-finite values are never sent: they
     /// mean this node's solver diverged ([`ProtoError::Diverged`]).
     pub async fn write_kinematics(&self, k: &InterfaceKinematics) -> Result<(), ProtoError> {
-        for (field, a) in [
-            ("positions", &k.positions),
-            ("velocities", &k.velocities),
-            ("accelerations", &k.accelerations),
-        ] {
-            own_finite(InterfaceKinematics::WHAT, &k.interface, k.window, field, a)?;
-        }
-        self.write(&self.keys.kinematics(&k.interface), k).await
+        let check = || {
+            for (field, a) in [
+                ("positions", &k.positions),
+                ("velocities", &k.velocities),
+                ("accelerations", &k.accelerations),
+            ] {
+                own_finite(InterfaceKinematics::WHAT, &k.interface, k.window, field, a)?;
+            }
+            Ok(())
+        };
+        self.write(&self.keys.kinematics(&k.interface), k, check)
+            .await
     }
 
     /// Publishes interface forces (DEM side); non-finite forces are refused as for kinematics.
     pub async fn write_forces(&self, f: &InterfaceForces) -> Result<(), ProtoError> {
-        own_finite(
-            InterfaceForces::WHAT,
-            &f.interface,
-            f.window,
-            "forces",
-            &f.forces,
-        )?;
-        self.write(&self.keys.forces(&f.interface), f).await
+        let check = || {
+            own_finite(
+                InterfaceForces::WHAT,
+                &f.interface,
+                f.window,
+                "forces",
+                &f.forces,
+            )
+        };
+        self.write(&self.keys.forces(&f.interface), f, check).await
     }
 
-    async fn write<M: Message>(&self, key: &str, msg: &M) -> Result<(), ProtoError> {
+    async fn write<M: Message>(
+        &self,
+        key: &str,
+        msg: &M,
+        check: impl Fn() -> Result<(), ProtoError>,
+    ) -> Result<(), ProtoError> {
         let publisher = self
             .publishers
             .get(key)
@@ -478,7 +546,7 @@ impl Participant {
                 what: M::WHAT,
                 reason: format!("`{key}` was not opened by open_interfaces for this node"),
             })?;
-        put(publisher, msg).await
+        put_data(publisher, msg, self.shm.as_ref(), check).await
     }
 
     /// Waits for and validates the kinematics labelled `label` (user side).
@@ -494,8 +562,12 @@ impl Participant {
         } else {
             self.keys.kinematics(interface)
         };
-        let k: InterfaceKinematics = self.read(&key, label, timeout).await?;
-        k.validate(nodes, label)?;
+        let (k, finite): (InterfaceKinematics, bool) = self.read(&key, label, timeout).await?;
+        if finite {
+            k.validate_sizes(nodes, label)?;
+        } else {
+            k.validate(nodes, label)?;
+        }
         Ok(k)
     }
 
@@ -541,19 +613,24 @@ impl Participant {
         } else {
             self.keys.forces(interface)
         };
-        let f: InterfaceForces = self.read(&key, label, timeout).await?;
-        f.validate(nodes, label)?;
+        let (f, finite): (InterfaceForces, bool) = self.read(&key, label, timeout).await?;
+        if finite {
+            f.validate_sizes(nodes, label)?;
+        } else {
+            f.validate(nodes, label)?;
+        }
         Ok(f)
     }
 
     /// Waits for data on `key`, watching the coordinator meanwhile: a `stop` command or the
-    /// coordinator's disappearance ends the wait at once instead of at the timeout.
+    /// coordinator's disappearance ends the wait at once instead of at the timeout. Returns
+    /// the message and whether its arrays are known to be finite ([`decode_finite`]).
     async fn read<M: Data>(
         &mut self,
         key: &str,
         label: Label,
         timeout: Duration,
-    ) -> Result<M, ProtoError> {
+    ) -> Result<(M, bool), ProtoError> {
         let what = format!("{} of {label} on `{key}`", M::WHAT);
         let sub = self
             .subscribers
@@ -572,7 +649,10 @@ impl Participant {
                         waited: timeout,
                     })?
                     .map_err(|_| ProtoError::Closed)?;
-                match decode::<M>(&payload(&sample), self.keys.run_id()) {
+                let in_shm = sample.payload().as_shm().is_some();
+                self.received[0].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                self.received[1].fetch_add(u64::from(in_shm), std::sync::atomic::Ordering::Relaxed);
+                match decode_finite::<M>(&payload(&sample), self.keys.run_id()) {
                     // not addressed to this run (a misconfigured or hostile publisher):
                     // refused and logged; the real message is still awaited
                     Err(e @ ProtoError::WrongRun { .. }) => {
@@ -580,7 +660,7 @@ impl Participant {
                     }
                     // data of an iteration an implicit scheme abandoned (rolled back) before
                     // it was read: obsolete, skipped (PROTOCOL.md §4, Label)
-                    Ok(m) if m.data_label().iteration < label.iteration => {
+                    Ok((m, _)) if m.data_label().iteration < label.iteration => {
                         tracing::debug!(
                             "skipped obsolete {} of {} on `{key}` (awaiting {label})",
                             M::WHAT,
@@ -595,6 +675,13 @@ impl Participant {
             Ok(message) => Ok(message),
             Err(command) => Err(self.stopped_by(&command, &what)),
         }
+    }
+
+    /// Interface data messages this node has received, and how many of them arrived in
+    /// shared memory (same host, zenoh's SHM transport) rather than as bytes over the link.
+    pub fn data_received(&self) -> (u64, u64) {
+        let get = |i: usize| self.received[i].load(std::sync::atomic::Ordering::Relaxed);
+        (get(0), get(1))
     }
 
     /// Leaves the run: withdraws the liveliness token and closes the session.
@@ -676,6 +763,7 @@ pub struct CoordinatorLink {
     commands: HashMap<String, (Publisher<'static>, u64)>,
     /// Publishers of accelerated forces, by key (implicit schemes).
     relaxed: HashMap<String, Publisher<'static>>,
+    shm: Option<Shm>,
 }
 
 impl CoordinatorLink {
@@ -699,7 +787,9 @@ impl CoordinatorLink {
             .declare_token(keys.alive(COORDINATOR))
             .await
             .map_err(ProtoError::zenoh)?;
+        let shm = shm_provider(&session).await;
         Ok(CoordinatorLink {
+            shm,
             session,
             _token: token,
             keys,
@@ -722,6 +812,7 @@ impl CoordinatorLink {
                 .session
                 .declare_publisher(self.keys.command(node))
                 .congestion_control(CongestionControl::Block)
+                .express(true)
                 .await
                 .map_err(ProtoError::zenoh)?;
             self.commands.insert(node.to_string(), (p, 0));
@@ -872,7 +963,7 @@ impl CoordinatorLink {
             }
             self.relaxed.insert(key.clone(), p);
         }
-        put(&self.relaxed[&key], msg).await
+        put_data(&self.relaxed[&key], msg, self.shm.as_ref(), || Ok(())).await
     }
 
     pub async fn close(self) -> Result<(), ProtoError> {

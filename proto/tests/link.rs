@@ -51,13 +51,25 @@ fn top() -> Vec<InterfaceDecl> {
 
 /// A FEM and a DEM participant on loopback with interface `top` open and matched.
 async fn coupled_pair(run: &str) -> (Participant, Participant) {
+    coupled_pair_with(run, None).await
+}
+
+/// The same, both sessions opened from zenoh configuration file `zenoh_config` if given.
+async fn coupled_pair_with(
+    run: &str,
+    zenoh_config: Option<&std::path::Path>,
+) -> (Participant, Participant) {
     let (pf, pd) = (free_loopback_port().unwrap(), free_loopback_port().unwrap());
     let ifaces = top();
-    let fem_link = LinkConfig::loopback_peer(Some(pf), &[]);
+    let link = |listen, connect: &[u16]| LinkConfig {
+        zenoh_config: zenoh_config.map(Into::into),
+        ..LinkConfig::loopback_peer(Some(listen), connect)
+    };
+    let fem_link = link(pf, &[]);
     let mut fem = Participant::connect(&fem_link, run, "fem", hello(NodeKind::Fem))
         .await
         .unwrap();
-    let dem_link = LinkConfig::loopback_peer(Some(pd), &[pf]);
+    let dem_link = link(pd, &[pf]);
     let mut dem = Participant::connect(&dem_link, run, "dem", hello(NodeKind::Dem))
         .await
         .unwrap();
@@ -113,6 +125,41 @@ async fn thousand_windows_of_10k_node_kinematics_arrive_in_order_none_lost_none_
     );
     fem.finish().await.unwrap();
     dem.finish().await.unwrap();
+}
+
+/// On one host, interface data travel in shared memory (encoded straight into zenoh's pool);
+/// with shared memory switched off in the zenoh configuration (as between machines) the same
+/// calls send them over the link. Both arrive intact, with small messages always over the link.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn interface_data_use_shared_memory_on_one_host_and_the_link_without_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let off = dir.path().join("no-shm.json5");
+    std::fs::write(&off, "{ transport: { shared_memory: { enabled: false } } }").unwrap();
+    for (zenoh_config, expect_shm) in [(None, true), (Some(off.as_path()), false)] {
+        let run = if expect_shm { "link-shm" } else { "link-noshm" };
+        let (fem, mut dem) = coupled_pair_with(run, zenoh_config).await;
+        // 10k nodes (720 kB), then 10 nodes (720 B, under the shared-memory threshold)
+        let sizes = [10_000, 10_000, 10_000, 10, 10];
+        for (k, &n) in sizes.iter().enumerate() {
+            fem.write_kinematics(&kinematics(run, k as u64, n))
+                .await
+                .unwrap();
+            let got = dem
+                .read_kinematics("top", Label::window(k as u64), n, Duration::from_secs(20))
+                .await
+                .unwrap();
+            assert_eq!(got, kinematics(run, k as u64, n), "window {k}");
+        }
+        let (received, in_shm) = dem.data_received();
+        assert_eq!(received, sizes.len() as u64);
+        if expect_shm {
+            assert_eq!(in_shm, 3, "the three large messages in shared memory");
+        } else {
+            assert_eq!(in_shm, 0, "shared memory is off");
+        }
+        fem.finish().await.unwrap();
+        dem.finish().await.unwrap();
+    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -199,30 +246,39 @@ async fn wrong_window_and_bad_sizes_are_refused_at_the_boundary() {
 async fn a_node_never_publishes_its_own_nan_it_reports_an_instability() {
     let run = "link-nan";
     let (fem, mut dem) = coupled_pair(run).await;
-    let mut k = kinematics(run, 0, 4);
-    k.velocities.0[7] = f64::NAN;
-    let e = fem.write_kinematics(&k).await.unwrap_err();
-    assert!(
-        matches!(
-            e,
-            ProtoError::Diverged {
-                field: "velocities",
-                index: 7,
-                ..
-            }
-        ),
-        "{e}"
-    );
-    assert!(e.to_string().contains("the solver diverged"), "{e}");
-    // the node loop reports it as an instability of this node, not as bad data of the other
-    let n = proto::node::NodeError::from(e);
-    assert_eq!(n.code, proto::ErrorCode::Unstable);
-    // nothing was sent
-    let e = dem
-        .read_kinematics("top", Label::window(0), 4, Duration::from_millis(300))
-        .await
-        .unwrap_err();
-    assert!(matches!(e, ProtoError::Timeout { .. }), "{e}");
+    // a small message (checked, then sent as a buffer) and a large one (checked while it is
+    // encoded into shared memory), the bad value early, late or in the last field
+    for (nodes, field, index, bad) in [
+        (4, "velocities", 7, f64::NAN),
+        (2000, "velocities", 4321, f64::INFINITY),
+        (2000, "accelerations", 5999, f64::NEG_INFINITY),
+        (2000, "positions", 0, -f64::NAN),
+    ] {
+        let mut k = kinematics(run, 0, nodes);
+        match field {
+            "positions" => k.positions.0[index] = bad,
+            "velocities" => k.velocities.0[index] = bad,
+            _ => k.accelerations.0[index] = bad,
+        }
+        let e = fem.write_kinematics(&k).await.unwrap_err();
+        assert!(
+            matches!(
+                &e,
+                ProtoError::Diverged { field: f, index: i, .. } if *f == field && *i == index
+            ),
+            "{e}"
+        );
+        assert!(e.to_string().contains("the solver diverged"), "{e}");
+        // the node loop reports it as an instability of this node, not as bad data of the other
+        let n = proto::node::NodeError::from(e);
+        assert_eq!(n.code, proto::ErrorCode::Unstable);
+        // nothing was sent
+        let e = dem
+            .read_kinematics("top", Label::window(0), nodes, Duration::from_millis(300))
+            .await
+            .unwrap_err();
+        assert!(matches!(e, ProtoError::Timeout { .. }), "{e}");
+    }
     fem.finish().await.unwrap();
     dem.finish().await.unwrap();
 }
