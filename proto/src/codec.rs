@@ -539,6 +539,27 @@ mod tests {
         let back: InterfaceKinematics =
             decode(&rmp_serde::to_vec_named(&plain).unwrap(), RUN).unwrap();
         assert_eq!(back, kin);
+        // ... and the one-pass check sees its values too: a NaN in a plain array is not
+        // vouched for, and `validate` names it
+        let (back, finite) =
+            decode_finite::<InterfaceKinematics>(&rmp_serde::to_vec_named(&plain).unwrap(), RUN)
+                .unwrap();
+        assert!(finite);
+        assert_eq!(back, kin);
+        let mut bad = plain;
+        bad.velocities[4] = f64::NAN;
+        let (back, finite) =
+            decode_finite::<InterfaceKinematics>(&rmp_serde::to_vec_named(&bad).unwrap(), RUN)
+                .unwrap();
+        assert!(!finite);
+        assert!(matches!(
+            back.validate(3, Label::window(5)),
+            Err(ProtoError::NotFinite {
+                field: "velocities",
+                index: 4,
+                ..
+            })
+        ));
     }
 
     #[test]

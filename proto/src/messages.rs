@@ -152,10 +152,25 @@ thread_local! {
 /// Runs `f` (a decode) with the rule that every [`F64Array`] it reads must be finite; an array
 /// that is not fails with [`NON_FINITE`] in its message.
 pub(crate) fn finite_only<R>(f: impl FnOnce() -> R) -> R {
+    /// Clears the rule however `f` ends.
+    struct Reset;
+    impl Drop for Reset {
+        fn drop(&mut self) {
+            FINITE_ONLY.with(|c| c.set(false));
+        }
+    }
     FINITE_ONLY.with(|c| c.set(true));
-    let r = f();
-    FINITE_ONLY.with(|c| c.set(false));
-    r
+    let _reset = Reset;
+    f()
+}
+
+/// The array, or under [`finite_only`] the [`NON_FINITE`] error if it holds a NaN or an
+/// infinity (the paths that do not check while they copy: plain float arrays, big-endian).
+fn finite_if_asked<E: serde::de::Error>(a: F64Array) -> Result<F64Array, E> {
+    if FINITE_ONLY.with(|c| c.get()) && a.first_non_finite().is_some() {
+        return Err(E::custom(NON_FINITE));
+    }
+    Ok(a)
 }
 
 /// Marker of the decode error [`finite_only`] raises.
@@ -229,7 +244,7 @@ impl<'de> Deserialize<'de> for F64Array {
                     }
                     return Ok(F64Array(v));
                 }
-                Ok(F64Array(
+                finite_if_asked(F64Array(
                     b.chunks_exact(8)
                         .map(|c| f64::from_le_bytes(c.try_into().expect("chunk of 8")))
                         .collect(),
@@ -246,7 +261,7 @@ impl<'de> Deserialize<'de> for F64Array {
                 while let Some(x) = seq.next_element::<f64>()? {
                     v.push(x);
                 }
-                Ok(F64Array(v))
+                finite_if_asked(F64Array(v))
             }
         }
         d.deserialize_any(V)
