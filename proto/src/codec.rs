@@ -20,6 +20,10 @@ pub trait Message: Serialize + DeserializeOwned {
     fn bulk_bytes(&self) -> usize {
         0
     }
+    /// Number of bulk arrays (each one MessagePack `bin`).
+    fn bulk_arrays(&self) -> usize {
+        0
+    }
 }
 
 macro_rules! message {
@@ -34,6 +38,9 @@ macro_rules! message {
             }
             fn bulk_bytes(&self) -> usize {
                 0 $(+ 8 * self.$array.len())*
+            }
+            fn bulk_arrays(&self) -> usize {
+                0 $(+ { let _ = &self.$array; 1 })*
             }
         }
     };
@@ -102,12 +109,16 @@ pub fn encode_into<M: Message>(msg: &M, buf: &mut [u8]) -> Result<(), ProtoError
 /// the check in one pass). Returns `true` when every bulk byte was checked and finite;
 /// `false` means "not known": the caller checks the message itself before sending it.
 pub fn encode_into_checked<M: Message>(msg: &M, buf: &mut [u8]) -> Result<bool, ProtoError> {
-    /// Writes of whole doubles of at least 64 bytes are the bulk arrays (MessagePack writes a
-    /// `bin` payload in one call): copied with the check. A field that only looks like one
-    /// (a long name) can make the count exceed the message's bulk bytes: then "not known".
+    /// Writes of whole doubles of at least 64 bytes are taken for the bulk arrays (MessagePack
+    /// writes a `bin` payload in one call): copied with the check. The verdict holds only if
+    /// exactly as many writes as the message has arrays, of exactly its bulk bytes, were
+    /// checked: a skipped short array (< 64 bytes) and a long string taken for one cannot
+    /// balance both counts (the string is longer than the array), so any such mix-up gives
+    /// "not known".
     struct Checking<'a> {
         rest: &'a mut [u8],
         checked: usize,
+        writes: usize,
         finite: bool,
     }
     impl std::io::Write for Checking<'_> {
@@ -119,6 +130,7 @@ pub fn encode_into_checked<M: Message>(msg: &M, buf: &mut [u8]) -> Result<bool, 
             if b.len() >= 64 && b.len() % 8 == 0 {
                 self.finite &= crate::messages::copy_finite(head, b);
                 self.checked += b.len();
+                self.writes += 1;
             } else {
                 head.copy_from_slice(b);
             }
@@ -133,6 +145,7 @@ pub fn encode_into_checked<M: Message>(msg: &M, buf: &mut [u8]) -> Result<bool, 
     let mut w = Checking {
         rest: buf,
         checked: 0,
+        writes: 0,
         finite: true,
     };
     rmp_serde::encode::write_named(&mut w, msg).map_err(|e| ProtoError::Encode {
@@ -145,7 +158,7 @@ pub fn encode_into_checked<M: Message>(msg: &M, buf: &mut [u8]) -> Result<bool, 
             reason: format!("{} of {len} bytes left unwritten", w.rest.len()),
         });
     }
-    Ok(w.finite && w.checked == msg.bulk_bytes())
+    Ok(w.finite && w.checked == msg.bulk_bytes() && w.writes == msg.bulk_arrays())
 }
 
 #[derive(Deserialize)]
@@ -699,9 +712,24 @@ mod tests {
             (sent_finite, finite)
         }
         assert_eq!(roundtrip(&big), (true, true));
-        // arrays of fewer than 8 doubles are not judged on the way out: "not known"
-        assert_eq!(roundtrip(&kin).0, kin.positions.len() >= 8);
         assert!(roundtrip(&forces).1);
+        // arrays of fewer than 8 doubles are not judged on the way out: "not known" (and
+        // fine on the way in)
+        let mut short = big.clone();
+        short.velocities.0.truncate(7);
+        assert_eq!(roundtrip(&short), (false, true));
+        // a long name is not taken for an array: "not known", even when it balances the
+        // bytes of a skipped short array... (8 doubles = 64 bytes, the shortest judged write)
+        let mut named = big.clone();
+        named.interface = "n".repeat(64);
+        assert_eq!(roundtrip(&named), (false, true));
+        // two skipped arrays (7 + 1 doubles = 64 bytes, one with a NaN) and a 64-byte name:
+        // the checked bytes equal the bulk bytes, the number of checked writes does not
+        let mut balanced = short.clone();
+        balanced.velocities.0[3] = f64::NAN;
+        balanced.accelerations.0.truncate(1);
+        balanced.interface = "n".repeat(64);
+        assert_eq!(roundtrip(&balanced), (false, false));
         for (field, index) in [(0usize, 0usize), (1, 1234), (2, 2099), (2, 2096)] {
             for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
                 let mut m = big.clone();

@@ -55,9 +55,11 @@ fn any_non_finite(c: &[f64]) -> bool {
     any_non_finite_portable(c)
 }
 
+/// # Safety
+/// The CPU must have AVX2.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn any_non_finite_avx2(c: &[f64]) -> bool {
+unsafe fn any_non_finite_avx2(c: &[f64]) -> bool {
     any_non_finite_portable(c)
 }
 
@@ -102,6 +104,8 @@ pub(crate) unsafe fn copy_finite_raw(dst: *mut u8, src: &[u8]) -> bool {
     unsafe { copy_finite_portable(dst, src) }
 }
 
+/// # Safety
+/// The CPU must have AVX2; `dst` as for [`copy_finite_raw`].
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 unsafe fn copy_finite_avx2(dst: *mut u8, src: &[u8]) -> bool {

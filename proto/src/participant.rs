@@ -57,8 +57,34 @@ type Shm = std::sync::Arc<zenoh::shm::ShmProvider<zenoh::shm::PosixShmProviderBa
 /// Interface data from this many bulk bytes on are encoded straight into shared memory.
 const SHM_FROM: usize = 4096;
 
-async fn shm_provider(session: &zenoh::Session) -> Option<Shm> {
-    session.get_shm_provider().await
+/// The shared-memory side of sending interface data: the session's provider, taken on the
+/// first large message (zenoh creates its pool lazily, so a process that sends none — the
+/// coordinator of an explicit scheme — never maps it), and the count of data messages sent
+/// and of those sent from shared memory.
+#[derive(Default)]
+struct ShmSend {
+    provider: tokio::sync::OnceCell<Option<Shm>>,
+    sent: [std::sync::atomic::AtomicU64; 2],
+}
+
+impl ShmSend {
+    async fn provider(&self, session: &zenoh::Session) -> Option<&Shm> {
+        self.provider
+            .get_or_init(|| async { session.get_shm_provider().await })
+            .await
+            .as_ref()
+    }
+
+    fn count(&self, in_shm: bool) {
+        use std::sync::atomic::Ordering::Relaxed;
+        self.sent[0].fetch_add(1, Relaxed);
+        self.sent[1].fetch_add(u64::from(in_shm), Relaxed);
+    }
+
+    fn counts(&self) -> (u64, u64) {
+        use std::sync::atomic::Ordering::Relaxed;
+        (self.sent[0].load(Relaxed), self.sent[1].load(Relaxed))
+    }
 }
 
 /// Sends interface data. With a shared-memory provider the message is encoded straight into a
@@ -73,10 +99,15 @@ async fn shm_provider(session: &zenoh::Session) -> Option<Shm> {
 async fn put_data<M: Message>(
     publisher: &Publisher<'static>,
     msg: &M,
-    shm: Option<&Shm>,
+    session: &zenoh::Session,
+    shm: &ShmSend,
     check: impl Fn() -> Result<(), ProtoError>,
 ) -> Result<(), ProtoError> {
-    if let Some(provider) = shm.filter(|_| msg.bulk_bytes() >= SHM_FROM) {
+    let provider = match msg.bulk_bytes() >= SHM_FROM {
+        true => shm.provider(session).await,
+        false => None,
+    };
+    if let Some(provider) = provider {
         let len = encoded_len(msg)?;
         match provider
             .alloc(len)
@@ -87,7 +118,9 @@ async fn put_data<M: Message>(
                 if !encode_into_checked(msg, &mut buf)? {
                     check()?;
                 }
-                return publisher.put(buf).await.map_err(ProtoError::zenoh);
+                publisher.put(buf).await.map_err(ProtoError::zenoh)?;
+                shm.count(true);
+                return Ok(());
             }
             Err(e) => tracing::debug!(
                 "{} of {len} bytes not in shared memory ({e:?}): sent as a buffer",
@@ -96,7 +129,9 @@ async fn put_data<M: Message>(
         }
     }
     check()?;
-    put(publisher, msg).await
+    put(publisher, msg).await?;
+    shm.count(false);
+    Ok(())
 }
 
 /// Interface data: labelled with window and iteration.
@@ -156,7 +191,7 @@ pub struct Participant {
     relaxed: std::collections::BTreeSet<String>,
     /// Interface data messages received, and how many of them arrived in shared memory.
     received: [std::sync::atomic::AtomicU64; 2],
-    shm: Option<Shm>,
+    shm: ShmSend,
 }
 
 /// A node's part in an interface.
@@ -219,9 +254,8 @@ impl Participant {
             motion_start: Default::default(),
             relaxed: Default::default(),
             received: Default::default(),
-            shm: None,
+            shm: ShmSend::default(),
         };
-        p.shm = shm_provider(&p.session).await;
         p.report(StatusBody::Hello(hello.clone())).await?;
         p.hello = Some(hello);
         Ok(p)
@@ -546,7 +580,7 @@ impl Participant {
                 what: M::WHAT,
                 reason: format!("`{key}` was not opened by open_interfaces for this node"),
             })?;
-        put_data(publisher, msg, self.shm.as_ref(), check).await
+        put_data(publisher, msg, &self.session, &self.shm, check).await
     }
 
     /// Waits for and validates the kinematics labelled `label` (user side).
@@ -684,6 +718,12 @@ impl Participant {
         (get(0), get(1))
     }
 
+    /// Interface data messages this node has sent, and how many of them it encoded straight
+    /// into shared memory (the rest went as ordinary buffers: small, or no shared memory).
+    pub fn data_sent(&self) -> (u64, u64) {
+        self.shm.counts()
+    }
+
     /// Leaves the run: withdraws the liveliness token and closes the session.
     pub async fn finish(self) -> Result<(), ProtoError> {
         if let Some(token) = self.token {
@@ -763,7 +803,7 @@ pub struct CoordinatorLink {
     commands: HashMap<String, (Publisher<'static>, u64)>,
     /// Publishers of accelerated forces, by key (implicit schemes).
     relaxed: HashMap<String, Publisher<'static>>,
-    shm: Option<Shm>,
+    shm: ShmSend,
 }
 
 impl CoordinatorLink {
@@ -787,9 +827,8 @@ impl CoordinatorLink {
             .declare_token(keys.alive(COORDINATOR))
             .await
             .map_err(ProtoError::zenoh)?;
-        let shm = shm_provider(&session).await;
         Ok(CoordinatorLink {
-            shm,
+            shm: ShmSend::default(),
             session,
             _token: token,
             keys,
@@ -963,7 +1002,14 @@ impl CoordinatorLink {
             }
             self.relaxed.insert(key.clone(), p);
         }
-        put_data(&self.relaxed[&key], msg, self.shm.as_ref(), || Ok(())).await
+        put_data(
+            &self.relaxed[&key],
+            msg,
+            &self.session,
+            &self.shm,
+            || Ok(()),
+        )
+        .await
     }
 
     pub async fn close(self) -> Result<(), ProtoError> {

@@ -152,10 +152,16 @@ async fn interface_data_use_shared_memory_on_one_host_and_the_link_without_it() 
         }
         let (received, in_shm) = dem.data_received();
         assert_eq!(received, sizes.len() as u64);
+        // the sender's own count: encoded straight into shared memory (zenoh would also copy
+        // a large ordinary buffer into its pool, so the receiver's count alone does not tell)
+        let (sent, sent_in_shm) = fem.data_sent();
+        assert_eq!(sent, sizes.len() as u64);
         if expect_shm {
             assert_eq!(in_shm, 3, "the three large messages in shared memory");
+            assert_eq!(sent_in_shm, 3, "encoded into shared memory by the sender");
         } else {
             assert_eq!(in_shm, 0, "shared memory is off");
+            assert_eq!(sent_in_shm, 0, "shared memory is off");
         }
         fem.finish().await.unwrap();
         dem.finish().await.unwrap();
@@ -260,7 +266,9 @@ async fn a_node_never_publishes_its_own_nan_it_reports_an_instability() {
             "velocities" => k.velocities.0[index] = bad,
             _ => k.accelerations.0[index] = bad,
         }
+        let sent_before = fem.data_sent();
         let e = fem.write_kinematics(&k).await.unwrap_err();
+        assert_eq!(fem.data_sent(), sent_before, "nothing was sent");
         assert!(
             matches!(
                 &e,
