@@ -250,14 +250,7 @@ pub(crate) fn gradients(
     let tiny = 1e-10 * size_cubed(x);
     for q in 0..tab.weights.len() {
         let dn = &tab.dn[q * nn..(q + 1) * nn];
-        let j = jacobian(x, dn);
-        let det = j.determinant();
-        if !(det > tiny) {
-            return Err(BadJacobian {
-                det_j: det,
-                inverted: det < 0.0,
-            });
-        }
+        let (j, det) = checked_jacobian(x, dn, tiny)?;
         let jinv = j.try_inverse().ok_or(BadJacobian {
             det_j: det,
             inverted: false,
@@ -270,6 +263,37 @@ pub(crate) fn gradients(
             }
             grads.push(g);
         }
+        wdet.push(det * tab.weights[q]);
+    }
+    Ok(())
+}
+
+/// The Jacobian at a point with shape derivatives `dn` and its determinant, refused when it
+/// is not above `tiny` (inverted or degenerate).
+fn checked_jacobian(
+    x: &[[f64; 3]],
+    dn: &[[f64; 3]],
+    tiny: f64,
+) -> Result<(Matrix3<f64>, f64), BadJacobian> {
+    let j = jacobian(x, dn);
+    let det = j.determinant();
+    if !(det > tiny) {
+        return Err(BadJacobian {
+            det_j: det,
+            inverted: det < 0.0,
+        });
+    }
+    Ok((j, det))
+}
+
+/// det J · w at every point of `tab` (what [`gradients`] gives besides the gradients, checked
+/// the same way), for integrals without derivatives (masses).
+fn point_weights(tab: &Tabulated, x: &[[f64; 3]], wdet: &mut Vec<f64>) -> Result<(), BadJacobian> {
+    let nn = tab.nn;
+    let tiny = 1e-10 * size_cubed(x);
+    wdet.clear();
+    for q in 0..tab.weights.len() {
+        let (_, det) = checked_jacobian(x, &tab.dn[q * nn..(q + 1) * nn], tiny)?;
         wdet.push(det * tab.weights[q]);
     }
     Ok(())
@@ -465,9 +489,8 @@ pub fn mass(
     m.clear();
     m.resize(nn * nn, 0.0);
     let tab = mass_rule(kind);
-    let mut g = Vec::new();
     let mut w = Vec::new();
-    gradients(tab, x, &mut g, &mut w)?;
+    point_weights(tab, x, &mut w)?;
     scale_weights(tab, scale, &mut w);
     for q in 0..w.len() {
         let n = &tab.n[q * nn..(q + 1) * nn];
@@ -493,21 +516,14 @@ pub fn lumped_mass(
     // Σ_ab m_ab = Σ_q ρ w_q det J_q (the N_a sum to 1): no full matrix, no gradients
     let nn = kind.num_nodes();
     let tab = mass_rule(kind);
-    let tiny = 1e-10 * size_cubed(x);
+    let mut w = Vec::new();
+    point_weights(tab, x, &mut w)?;
+    scale_weights(tab, scale, &mut w);
     let mut total = 0.0;
     out[..nn].fill(0.0);
-    for q in 0..tab.weights.len() {
-        let dn = &tab.dn[q * nn..(q + 1) * nn];
-        let det = jacobian(x, dn).determinant();
-        if !(det > tiny) {
-            return Err(BadJacobian {
-                det_j: det,
-                inverted: det < 0.0,
-            });
-        }
+    for (q, wq) in w.iter().enumerate() {
         let n = &tab.n[q * nn..(q + 1) * nn];
-        let arlequin = scale.map_or(1.0, |s| n.iter().zip(s).map(|(n, s)| n * s).sum());
-        let f = rho * det * tab.weights[q] * arlequin;
+        let f = rho * wq;
         total += f;
         for a in 0..nn {
             out[a] += f * n[a] * n[a];
@@ -522,9 +538,8 @@ pub fn lumped_mass(
 
 /// Element volume.
 pub fn volume(kind: ElementKind, x: &[[f64; 3]]) -> Result<f64, BadJacobian> {
-    let mut g = Vec::new();
     let mut w = Vec::new();
-    gradients(mass_rule(kind), x, &mut g, &mut w)?;
+    point_weights(mass_rule(kind), x, &mut w)?;
     Ok(w.iter().sum())
 }
 

@@ -88,26 +88,10 @@ pub fn encoded_len<M: Message>(msg: &M) -> Result<usize, ProtoError> {
     Ok(count.0)
 }
 
-/// Encodes `msg` into `buf`, which must be exactly [`encoded_len`] bytes long.
-pub fn encode_into<M: Message>(msg: &M, buf: &mut [u8]) -> Result<(), ProtoError> {
-    let len = buf.len();
-    let mut rest = &mut buf[..];
-    rmp_serde::encode::write_named(&mut rest, msg).map_err(|e| ProtoError::Encode {
-        what: M::WHAT,
-        reason: format!("into a buffer of {len} bytes: {e}"),
-    })?;
-    if !rest.is_empty() {
-        return Err(ProtoError::Encode {
-            what: M::WHAT,
-            reason: format!("{} of {len} bytes left unwritten", rest.len()),
-        });
-    }
-    Ok(())
-}
-
-/// [`encode_into`], checking the bulk arrays for NaN and infinity on the way (the copy and
-/// the check in one pass). Returns `true` when every bulk byte was checked and finite;
-/// `false` means "not known": the caller checks the message itself before sending it.
+/// Encodes `msg` into `buf`, which must be exactly [`encoded_len`] bytes long, checking the
+/// bulk arrays for NaN and infinity on the way (the copy and the check in one pass). Returns
+/// `true` when every bulk byte was checked and finite; `false` means "not known": the caller
+/// checks the message itself before sending it.
 pub fn encode_into_checked<M: Message>(msg: &M, buf: &mut [u8]) -> Result<bool, ProtoError> {
     /// Writes of whole doubles of at least 64 bytes are taken for the bulk arrays (MessagePack
     /// writes a `bin` payload in one call): copied with the check. The verdict holds only if
@@ -752,7 +736,7 @@ mod tests {
         }
     }
 
-    /// `encode_into` writes exactly the bytes of `encode` into a buffer of `encoded_len`, and
+    /// `encode_into_checked` writes exactly the bytes of `encode` into a buffer of `encoded_len`, and
     /// refuses a buffer of another size.
     #[test]
     fn encoding_into_a_sized_buffer_matches_encode() {
@@ -762,12 +746,12 @@ mod tests {
             let n = encoded_len(m).unwrap();
             assert_eq!(n, bytes.len(), "{}", M::WHAT);
             let mut buf = vec![0u8; n];
-            encode_into(m, &mut buf).unwrap();
+            encode_into_checked(m, &mut buf).unwrap();
             assert_eq!(buf, bytes, "{}", M::WHAT);
             let mut long = vec![0u8; n + 1];
-            assert!(encode_into(m, &mut long).is_err());
+            assert!(encode_into_checked(m, &mut long).is_err());
             let mut short = vec![0u8; n - 1];
-            assert!(encode_into(m, &mut short).is_err());
+            assert!(encode_into_checked(m, &mut short).is_err());
         }
         commands.iter().for_each(check);
         statuses.iter().for_each(check);

@@ -64,7 +64,24 @@ const SHM_FROM: usize = 4096;
 #[derive(Default)]
 struct ShmSend {
     provider: tokio::sync::OnceCell<Option<Shm>>,
-    sent: [std::sync::atomic::AtomicU64; 2],
+    sent: DataCounts,
+}
+
+/// Interface data messages, and how many of them travelled in shared memory.
+#[derive(Default)]
+struct DataCounts([std::sync::atomic::AtomicU64; 2]);
+
+impl DataCounts {
+    fn add(&self, in_shm: bool) {
+        use std::sync::atomic::Ordering::Relaxed;
+        self.0[0].fetch_add(1, Relaxed);
+        self.0[1].fetch_add(u64::from(in_shm), Relaxed);
+    }
+
+    fn get(&self) -> (u64, u64) {
+        use std::sync::atomic::Ordering::Relaxed;
+        (self.0[0].load(Relaxed), self.0[1].load(Relaxed))
+    }
 }
 
 impl ShmSend {
@@ -73,17 +90,6 @@ impl ShmSend {
             .get_or_init(|| async { session.get_shm_provider().await })
             .await
             .as_ref()
-    }
-
-    fn count(&self, in_shm: bool) {
-        use std::sync::atomic::Ordering::Relaxed;
-        self.sent[0].fetch_add(1, Relaxed);
-        self.sent[1].fetch_add(u64::from(in_shm), Relaxed);
-    }
-
-    fn counts(&self) -> (u64, u64) {
-        use std::sync::atomic::Ordering::Relaxed;
-        (self.sent[0].load(Relaxed), self.sent[1].load(Relaxed))
     }
 }
 
@@ -119,7 +125,7 @@ async fn put_data<M: Message>(
                     check()?;
                 }
                 publisher.put(buf).await.map_err(ProtoError::zenoh)?;
-                shm.count(true);
+                shm.sent.add(true);
                 return Ok(());
             }
             Err(e) => tracing::debug!(
@@ -130,7 +136,7 @@ async fn put_data<M: Message>(
     }
     check()?;
     put(publisher, msg).await?;
-    shm.count(false);
+    shm.sent.add(false);
     Ok(())
 }
 
@@ -190,7 +196,7 @@ pub struct Participant {
     /// (`relaxed_forces`), used ones' kinematics (`relaxed_kinematics`).
     relaxed: std::collections::BTreeSet<String>,
     /// Interface data messages received, and how many of them arrived in shared memory.
-    received: [std::sync::atomic::AtomicU64; 2],
+    received: DataCounts,
     shm: ShmSend,
 }
 
@@ -683,9 +689,7 @@ impl Participant {
                         waited: timeout,
                     })?
                     .map_err(|_| ProtoError::Closed)?;
-                let in_shm = sample.payload().as_shm().is_some();
-                self.received[0].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                self.received[1].fetch_add(u64::from(in_shm), std::sync::atomic::Ordering::Relaxed);
+                self.received.add(sample.payload().as_shm().is_some());
                 match decode_finite::<M>(&payload(&sample), self.keys.run_id()) {
                     // not addressed to this run (a misconfigured or hostile publisher):
                     // refused and logged; the real message is still awaited
@@ -714,14 +718,13 @@ impl Participant {
     /// Interface data messages this node has received, and how many of them arrived in
     /// shared memory (same host, zenoh's SHM transport) rather than as bytes over the link.
     pub fn data_received(&self) -> (u64, u64) {
-        let get = |i: usize| self.received[i].load(std::sync::atomic::Ordering::Relaxed);
-        (get(0), get(1))
+        self.received.get()
     }
 
     /// Interface data messages this node has sent, and how many of them it encoded straight
     /// into shared memory (the rest went as ordinary buffers: small, or no shared memory).
     pub fn data_sent(&self) -> (u64, u64) {
-        self.shm.counts()
+        self.shm.sent.get()
     }
 
     /// Leaves the run: withdraws the liveliness token and closes the session.
