@@ -70,6 +70,10 @@ pub struct NodeSummary {
     pub compute_s: f64,
     pub wait_s: f64,
     pub software: String,
+    /// The features its `hello` named (e.g. `queued_commands`: it accepts windows announced
+    /// ahead).
+    #[serde(default)]
+    pub capabilities: Vec<String>,
 }
 
 /// Wall time split like Ullrich's tables 5.3/6.2.
@@ -137,6 +141,10 @@ pub struct Summary {
     /// changed (each change is in the log; windows.csv has every window's `window_s`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub adaptive_windows: Option<AdaptiveWindows>,
+    /// Windows the coordinator announced beyond the running one (`coupling.lookahead`, or 0
+    /// where the schedule, a node or the DEM's programme needs lockstep).
+    #[serde(default)]
+    pub lookahead: u64,
 }
 
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
@@ -422,11 +430,9 @@ impl Run<'_> {
                     }
                     tracing::info!(node = %st.node, "hello from {} (pid {})", h.software, h.pid);
                     self.greeted.insert(st.node.clone());
-                    self.summary
-                        .nodes
-                        .entry(st.node.clone())
-                        .or_default()
-                        .software = h.software.clone();
+                    let ns = self.summary.nodes.entry(st.node.clone()).or_default();
+                    ns.software = h.software.clone();
+                    ns.capabilities = h.capabilities.clone();
                     waiting.retain(|n| n != &st.node);
                 }
             }
@@ -571,6 +577,49 @@ impl Run<'_> {
             .copied()
     }
 
+    /// Windows to announce ahead: the scene's `coupling.lookahead`, unless a node does not
+    /// queue commands (its `hello` lacks `queued_commands`: e.g. an older external solver) or
+    /// the DEM runs a programme that ends the run by itself (the nodes would run past its
+    /// end). The scheduler further allows it only for explicit schedules with fixed windows.
+    fn lookahead(&self) -> u64 {
+        let wanted = self.scene.lookahead;
+        if wanted == 0 {
+            return 0;
+        }
+        let lacking: Vec<&str> = self
+            .nodes
+            .iter()
+            .map(|n| n.name.as_str())
+            .filter(|n| {
+                self.summary.nodes.get(*n).is_none_or(|s| {
+                    !s.capabilities
+                        .iter()
+                        .any(|c| c == proto::CAPABILITY_QUEUED_COMMANDS)
+                })
+            })
+            .collect();
+        if !lacking.is_empty() {
+            tracing::info!(
+                "windows one at a time: node(s) {} do not accept commands ahead (no `{}` in their hello)",
+                lacking.join(", "),
+                proto::CAPABILITY_QUEUED_COMMANDS
+            );
+            return 0;
+        }
+        let programme = self
+            .scene
+            .dem_node()
+            .and_then(|d| self.limit(d, "programme_stages"))
+            .is_some_and(|n| n > 0.0);
+        if programme {
+            tracing::info!(
+                "windows one at a time: the DEM's programme ends the run after the window it finishes in"
+            );
+            return 0;
+        }
+        wanted
+    }
+
     async fn windows(
         &mut self,
         monitor: &Monitor,
@@ -613,6 +662,8 @@ impl Run<'_> {
             };
             (settings, limits, scene.end_time)
         });
+        let lookahead = self.lookahead();
+        self.summary.lookahead = lookahead;
         let scheduler = Scheduler::new(SchedulerConfig {
             kind: scene.schedule,
             window: scene.window,
@@ -627,6 +678,8 @@ impl Run<'_> {
                 .collect(),
             positions,
             adaptive,
+            lookahead,
+            checkpoint_every: scene.checkpoint_every,
         })
         .map_err(|e| anyhow!(e))?;
         let implicit = scene.implicit.is_some();
@@ -749,6 +802,9 @@ impl Run<'_> {
         let (mut row_iterations, mut row_residual) = (0u32, 0.0f64);
         // adaptive: this window's length
         let mut row_length = scheduler.window_span().1;
+        // `window_done` of windows announced ahead that arrived before the running window
+        // was complete: taken in window order
+        let mut early: std::collections::VecDeque<proto::Status> = Default::default();
         loop {
             for a in std::mem::take(&mut actions) {
                 match a {
@@ -836,7 +892,13 @@ impl Run<'_> {
                 "window {k} from {}",
                 scheduler.pending().collect::<Vec<_>>().join(", ")
             );
-            let ev = self.next(Instant::now() + timeout, &what, Some(k)).await?;
+            let buffered = early.iter().position(
+                |s| matches!(&s.body, StatusBody::WindowDone { window, .. } if *window == k),
+            );
+            let ev = match buffered.and_then(|i| early.remove(i)) {
+                Some(st) => Event::Status(st),
+                None => self.next(Instant::now() + timeout, &what, Some(k)).await?,
+            };
             for d in monitor.drain() {
                 match d {
                     Ok(d) => {
@@ -868,6 +930,10 @@ impl Run<'_> {
                 }
             }
             let Event::Status(st) = ev else { continue };
+            if matches!(&st.body, StatusBody::WindowDone { window, .. } if *window > k) {
+                early.push_back(st);
+                continue;
+            }
             let StatusBody::WindowDone {
                 window,
                 t_end,
@@ -1054,6 +1120,18 @@ impl Run<'_> {
                 bar.set_message(format!("t = {t_end:.4e} s"));
                 let finishing = actions.iter().any(|a| matches!(a, Action::Finish { .. }));
                 let due = scene.checkpoint_every > 0 && (window + 1) % scene.checkpoint_every == 0;
+                // a checkpoint is of this window's end only if no node has a later command
+                // (the scheduler does not announce past a due checkpoint; an interrupt first
+                // lets the windows already announced finish)
+                let ahead = scheduler.announced_ahead();
+                if self.pending_interrupt.is_some() && ahead && !finishing {
+                    scheduler.hold();
+                    window_start = Instant::now();
+                    continue;
+                }
+                if due && ahead && !finishing {
+                    bail!("internal: window {window}'s checkpoint is due, but later windows were announced");
+                }
                 if let Some(sig) = self.pending_interrupt.filter(|_| !finishing) {
                     // a second signal now stops at once, without the checkpoint
                     self.defer_interrupt = false;

@@ -106,6 +106,11 @@ pub struct CouplingSection {
     /// Longest wait for one window's messages before the run is stopped (s).
     #[serde(default = "default_timeout")]
     pub window_timeout: Seconds,
+    /// Explicit schedules with fixed windows: how many windows the coordinator announces
+    /// beyond the one running, so that its round trip leaves the window's critical path
+    /// (0: lockstep, one window at a time). Results do not depend on it.
+    #[serde(default = "default_lookahead")]
+    pub lookahead: u64,
     /// One-way: the DEM is steady when its kinetic energy falls below this (J).
     pub steady_kinetic_energy: Option<Spanned<Joules>>,
     /// One-way: ... for this many consecutive windows.
@@ -123,6 +128,14 @@ pub struct CouplingSection {
     pub implicit: Option<Spanned<crate::schedule::implicit::ImplicitSettings>>,
     /// Adaptive windows (`window` is then the first one).
     pub adaptive: Option<Spanned<AdaptiveSection>>,
+}
+
+/// The most windows `coupling.lookahead` may announce ahead (zenoh's subscriber queue holds
+/// 256 samples; the nodes' command queues stay far below it).
+pub const MAX_LOOKAHEAD: u64 = 64;
+
+fn default_lookahead() -> u64 {
+    2
 }
 
 fn default_adaptive_tolerance() -> f64 {
@@ -157,6 +170,7 @@ impl Default for CouplingSection {
             force_averaging: false,
             interfaces: Vec::new(),
             window_timeout: default_timeout(),
+            lookahead: default_lookahead(),
             steady_kinetic_energy: None,
             steady_windows: default_steady_windows(),
             max_force_growth: default_growth(),
@@ -240,6 +254,8 @@ pub struct Scene {
     /// The coupled interfaces with provider and users (empty for a single solver).
     pub interfaces: Vec<InterfaceDecl>,
     pub window_timeout: f64,
+    /// Windows announced ahead (`coupling.lookahead`).
+    pub lookahead: u64,
     pub steady_kinetic_energy: Option<f64>,
     pub steady_windows: u32,
     pub max_force_growth: f64,
@@ -562,6 +578,16 @@ impl Scene {
                 "must be at least 1 (consecutive windows below steady_kinetic_energy)".into(),
             ));
         }
+        if c.lookahead > MAX_LOOKAHEAD {
+            return Err(err_at(
+                text.find("lookahead").unwrap_or(0),
+                "coupling.lookahead",
+                format!(
+                    "at most {MAX_LOOKAHEAD} windows ahead (got {}): a node holds the commands announced to it in a bounded queue; 2 hides the coordinator's round trip",
+                    c.lookahead
+                ),
+            ));
+        }
         if c.window_timeout.0 <= 0.0 {
             return Err(err_at(
                 text.find("window_timeout").unwrap_or(0),
@@ -672,6 +698,7 @@ impl Scene {
             force_averaging: c.force_averaging,
             interfaces,
             window_timeout: c.window_timeout.0,
+            lookahead: c.lookahead,
             steady_kinetic_energy: steady,
             steady_windows: c.steady_windows,
             max_force_growth: c.max_force_growth,
@@ -943,6 +970,7 @@ mod tests {
             ("steady_kinetic_energy = nan", "not a finite"),
             ("window_timeout = -1", "must be positive"),
             ("window_timeout = inf", "not a finite"),
+            ("lookahead = 65", "at most 64"),
         ] {
             let e = parse(&format!(
                 "[scene]\nend_time = 1\n[coupling]\nwindow = 0.1\n{line}\n[dem]\n"

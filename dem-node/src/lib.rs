@@ -2692,6 +2692,10 @@ impl Engine {
             ("rayleigh_time_step".to_string(), self.rayleigh_time_step()),
             ("particles".to_string(), self.num_particles() as f64),
         ];
+        if let Some(servo) = &self.servo {
+            // a programme ends the run by itself: the coordinator keeps windows in lockstep
+            l.push(("programme_stages".to_string(), servo.stages.len() as f64));
+        }
         let interface = self
             .cfg
             .interface_material

@@ -85,6 +85,9 @@ class Participant:
         self.run_id = args.run_id
         self.events = queue.Queue()
         self.forces_queue = deque()  # forces that arrived before the node asked for them
+        # advance_window commands that arrived while the node waited for forces: the
+        # coordinator announces windows ahead to nodes that say `queued_commands` (PROTOCOL.md §6)
+        self.commands_queue = deque()
         self.next_seq = 0
         self.publishers = {}
         self.entities = []
@@ -121,6 +124,8 @@ class Participant:
         return kind, value
 
     def next_command(self):
+        if self.commands_queue:
+            return self.commands_queue.popleft()
         while True:
             kind, value = self._event(None, "its next command")
             if kind == "cmd":
@@ -175,6 +180,9 @@ class Participant:
                     body = self._accept_command(value)
                     if body["type"] == "stop":
                         raise Stopped(body["reason"])
+                    if body["type"] == "advance_window":
+                        self.commands_queue.append(body)
+                        continue
                     raise ProtocolError(f"received {body['type']} while waiting for {what}")
             try:
                 return wire.decode_forces(self.forces_queue.popleft(), self.run_id, name, label, nodes)
@@ -502,7 +510,7 @@ def main(argv=None):
     node = FemNode(p, max(args.data_timeout, 0.001))
     try:
         p.report({"type": "hello", "software": SOFTWARE, "kind": "fem",
-                  "capabilities": ["snapshot", "static", "dynamic"], "pid": os.getpid()})
+                  "capabilities": ["snapshot", "static", "dynamic", "queued_commands"], "pid": os.getpid()})
         node.serve()
     except Exception as e:
         code = error_code(e)

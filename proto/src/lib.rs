@@ -27,3 +27,8 @@ pub use participant::Participant;
 /// Version of the wire protocol. Every message carries it; a peer speaking another version is
 /// refused with an error naming both (PROTOCOL.md, "Versioning").
 pub const PROTOCOL_VERSION: u32 = 2;
+
+/// A `hello` capability: the node accepts `advance_window` commands that arrive while it is
+/// still busy with an earlier window (or waiting for its data) and serves them in order, so
+/// the coordinator may announce windows ahead (PROTOCOL.md §6, `coupling.lookahead`).
+pub const CAPABILITY_QUEUED_COMMANDS: &str = "queued_commands";

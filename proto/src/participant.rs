@@ -198,6 +198,10 @@ pub struct Participant {
     /// Interface data messages received, and how many of them arrived in shared memory.
     received: DataCounts,
     shm: ShmSend,
+    /// `advance_window` commands that arrived while the node waited for interface data (the
+    /// coordinator announces windows ahead: PROTOCOL.md §6), served in order by
+    /// [`Self::next_command`].
+    queued: std::collections::VecDeque<CommandBody>,
 }
 
 /// A node's part in an interface.
@@ -216,9 +220,19 @@ impl Participant {
         link: &LinkConfig,
         run_id: &str,
         node: &str,
-        hello: Hello,
+        mut hello: Hello,
     ) -> Result<Participant, ProtoError> {
         validate_name("node", node)?;
+        // this participant queues the windows announced ahead (Self::read)
+        if !hello
+            .capabilities
+            .iter()
+            .any(|c| c == crate::CAPABILITY_QUEUED_COMMANDS)
+        {
+            hello
+                .capabilities
+                .push(crate::CAPABILITY_QUEUED_COMMANDS.to_string());
+        }
         if node == COORDINATOR {
             return Err(ProtoError::Name {
                 what: "node (reserved for the coordinator)",
@@ -261,6 +275,7 @@ impl Participant {
             relaxed: Default::default(),
             received: Default::default(),
             shm: ShmSend::default(),
+            queued: Default::default(),
         };
         p.report(StatusBody::Hello(hello.clone())).await?;
         p.hello = Some(hello);
@@ -281,6 +296,9 @@ impl Participant {
         &mut self,
         timeout: Option<Duration>,
     ) -> Result<CommandBody, ProtoError> {
+        if let Some(c) = self.queued.pop_front() {
+            return Ok(c);
+        }
         let deadline = timeout.map(|t| tokio::time::Instant::now() + t);
         let sample = loop {
             let sleep = async {
@@ -709,10 +727,51 @@ impl Participant {
                 }
             }
         };
-        match self.unless_stopped(&what, receive).await? {
-            Ok(message) => Ok(message),
-            Err(command) => Err(self.stopped_by(&command, &what)),
+        // commands that arrive meanwhile: windows announced ahead are kept for later, `stop`
+        // (or anything out of turn) ends the wait
+        let mut held: Vec<Sample> = Vec::new();
+        let outcome = {
+            tokio::pin!(receive);
+            loop {
+                match self.unless_stopped(&what, &mut receive).await? {
+                    Ok(message) => break Some(message),
+                    Err(command) => {
+                        let ahead = matches!(
+                            decode::<Command>(&payload(&command), self.keys.run_id()),
+                            Ok(Command {
+                                body: CommandBody::AdvanceWindow(_),
+                                ..
+                            })
+                        );
+                        held.push(command);
+                        if !ahead {
+                            break None;
+                        }
+                    }
+                }
+            }
+        };
+        for command in &held {
+            match self.accept_command(command)? {
+                CommandBody::AdvanceWindow(w) => {
+                    self.queued.push_back(CommandBody::AdvanceWindow(w))
+                }
+                CommandBody::Stop { reason } => return Err(ProtoError::Stopped { reason }),
+                other => {
+                    return Err(ProtoError::Invalid {
+                        what: "command",
+                        reason: format!(
+                            "received {} while waiting for {what}",
+                            command_name(&other)
+                        ),
+                    })
+                }
+            }
         }
+        outcome.ok_or_else(|| ProtoError::Invalid {
+            what: "command",
+            reason: format!("a command out of turn while waiting for {what}"),
+        })
     }
 
     /// Interface data messages this node has received, and how many of them arrived in

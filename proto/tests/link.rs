@@ -290,3 +290,124 @@ async fn a_node_never_publishes_its_own_nan_it_reports_an_instability() {
     fem.finish().await.unwrap();
     dem.finish().await.unwrap();
 }
+
+fn advance(window: u64) -> proto::CommandBody {
+    proto::CommandBody::AdvanceWindow(proto::AdvanceWindow {
+        window,
+        iteration: 0,
+        t_start: window as f64 * 1e-4,
+        dt: 1e-4,
+        motion: proto::MotionRule::Quadratic,
+        input: Some(Label::window(window)),
+        output: None,
+        static_solve: false,
+    })
+}
+
+/// The coordinator announces windows ahead (`coupling.lookahead`): `advance_window`
+/// commands that arrive while a node waits for its data are kept and served in order after
+/// it; a `stop` still ends the wait at once, behind announced windows too.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn windows_announced_while_a_node_waits_for_data_are_served_in_order() {
+    let run = "link-ahead";
+    let (pc, pf, pd) = (
+        free_loopback_port().unwrap(),
+        free_loopback_port().unwrap(),
+        free_loopback_port().unwrap(),
+    );
+    let mut coordinator =
+        proto::participant::CoordinatorLink::open(&LinkConfig::loopback_peer(Some(pc), &[]), run)
+            .await
+            .unwrap();
+    let mut fem = Participant::connect(
+        &LinkConfig::loopback_peer(Some(pf), &[pc]),
+        run,
+        "fem",
+        hello(NodeKind::Fem),
+    )
+    .await
+    .unwrap();
+    let mut dem = Participant::connect(
+        &LinkConfig::loopback_peer(Some(pd), &[pf, pc]),
+        run,
+        "dem",
+        hello(NodeKind::Dem),
+    )
+    .await
+    .unwrap();
+    // the DEM's hello says it queues commands (the participant adds it)
+    loop {
+        let ev = coordinator
+            .next_event(Duration::from_secs(10), "hello from dem")
+            .await
+            .unwrap();
+        if let proto::participant::Event::Status(st) = ev {
+            if let proto::StatusBody::Hello(h) = &st.body {
+                if st.node == "dem" {
+                    assert!(
+                        h.capabilities
+                            .iter()
+                            .any(|c| c == proto::CAPABILITY_QUEUED_COMMANDS),
+                        "{h:?}"
+                    );
+                    break;
+                }
+            }
+        }
+    }
+    fem.open_interfaces(&top()).await.unwrap();
+    dem.open_interfaces(&top()).await.unwrap();
+    fem.wait_for_peers(Duration::from_secs(10)).await.unwrap();
+    dem.wait_for_peers(Duration::from_secs(10)).await.unwrap();
+
+    coordinator.send("dem", advance(0)).await.unwrap();
+    assert_eq!(
+        dem.next_command(Some(Duration::from_secs(10)))
+            .await
+            .unwrap(),
+        advance(0)
+    );
+    // windows 1 and 2 announced while the DEM waits for window 0's kinematics
+    coordinator.send("dem", advance(1)).await.unwrap();
+    coordinator.send("dem", advance(2)).await.unwrap();
+    let writer = tokio::spawn(async move {
+        tokio::time::sleep(Duration::from_millis(300)).await;
+        fem.write_kinematics(&kinematics(run, 0, 10)).await.unwrap();
+        fem
+    });
+    let k = dem
+        .read_kinematics("top", Label::window(0), 10, Duration::from_secs(10))
+        .await
+        .unwrap();
+    assert_eq!(k, kinematics(run, 0, 10));
+    let fem = writer.await.unwrap();
+    for w in [1, 2] {
+        let c = dem
+            .next_command(Some(Duration::from_millis(1)))
+            .await
+            .unwrap();
+        assert_eq!(c, advance(w), "served in order, without waiting");
+    }
+    // a stop behind another announced window ends the next wait
+    coordinator.send("dem", advance(3)).await.unwrap();
+    coordinator
+        .send(
+            "dem",
+            proto::CommandBody::Stop {
+                reason: "test".into(),
+            },
+        )
+        .await
+        .unwrap();
+    let e = dem
+        .read_kinematics("top", Label::window(1), 10, Duration::from_secs(10))
+        .await
+        .unwrap_err();
+    assert!(
+        matches!(&e, ProtoError::Stopped { reason } if reason == "test"),
+        "{e}"
+    );
+    dem.finish().await.unwrap();
+    fem.finish().await.unwrap();
+    coordinator.close().await.unwrap();
+}

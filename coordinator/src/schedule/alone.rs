@@ -8,6 +8,10 @@ use super::{Scheme, Sends, Topology, Windows};
 pub struct Alone;
 
 impl Scheme for Alone {
+    fn pipelines(&self) -> bool {
+        true
+    }
+
     fn window(&self, t: &Topology, w: &Windows, k: u64) -> Sends {
         t.all()
             .map(|n| {

@@ -15,6 +15,10 @@ use super::{Scheme, Sends, Topology, Windows};
 pub struct Concurrent;
 
 impl Scheme for Concurrent {
+    fn pipelines(&self) -> bool {
+        true
+    }
+
     fn prologue(&self, t: &Topology) -> Sends {
         // every FEM node's initial state is kinematics 0
         publish(t.fems.iter(), 0)

@@ -11,6 +11,10 @@ use super::{Scheme, Sends, Topology, Windows};
 pub struct Jit;
 
 impl Scheme for Jit {
+    fn pipelines(&self) -> bool {
+        true
+    }
+
     fn prologue(&self, t: &Topology) -> Sends {
         // every FEM node's initial state is kinematics 0
         self.replay(t, 0)

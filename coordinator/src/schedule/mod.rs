@@ -208,6 +208,11 @@ pub trait Scheme {
             "outputs of window {k} given to a schedule that does not iterate"
         ))
     }
+    /// Window k's commands depend on nothing the nodes report, so the coordinator may send
+    /// them before earlier windows are done (lookahead): explicit schemes with a fixed end.
+    fn pipelines(&self) -> bool {
+        false
+    }
     /// The iterations since the last call.
     fn take_iterations(&mut self) -> Vec<implicit::IterationRecord> {
         Vec::new()
@@ -276,7 +281,7 @@ pub enum Action {
         label: Label,
         positions: bool,
     },
-    /// The schedule is complete.
+    /// The schedule is complete (every window announced ahead has been reported done).
     Finish {
         reason: String,
     },
@@ -301,6 +306,12 @@ pub struct SchedulerConfig {
     /// Adaptive windows: the settings, the limits the nodes reported, and the end time (s);
     /// `window` is then the first window's length.
     pub adaptive: Option<(adaptive::AdaptiveSettings, adaptive::Limits, f64)>,
+    /// Windows the coordinator may announce beyond the one running (0: lockstep). Used only
+    /// by schemes that [`Scheme::pipelines`], with fixed windows.
+    pub lookahead: u64,
+    /// The run loop checkpoints after every window w with (w + 1) % checkpoint_every == 0
+    /// (0: never): no command of a later window may be sent before that checkpoint.
+    pub checkpoint_every: u64,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -332,6 +343,18 @@ pub struct Scheduler {
     /// ends after the current window.
     #[serde(default)]
     programme_finished: bool,
+    /// Lookahead: windows beyond the running one whose commands may be out (see
+    /// [`SchedulerConfig::lookahead`]), the checkpoint period, and the first window whose
+    /// commands have not been issued yet.
+    #[serde(default)]
+    lookahead: u64,
+    #[serde(default)]
+    checkpoint_every: u64,
+    #[serde(default)]
+    issued: u64,
+    /// `issued` when the running window began (its commands went out ahead if greater).
+    #[serde(default)]
+    issued_before: u64,
 }
 
 impl Scheduler {
@@ -443,6 +466,10 @@ impl Scheduler {
             window_kinetic_energy: None,
             final_reason: String::new(),
             programme_finished: false,
+            lookahead: cfg.lookahead,
+            checkpoint_every: cfg.checkpoint_every,
+            issued: 0,
+            issued_before: 0,
         })
     }
 
@@ -555,7 +582,8 @@ impl Scheduler {
         sends.into_iter().map(|(n, b)| Action::Send(n, b)).collect()
     }
 
-    /// Commands of window k.
+    /// Commands of window k (unless they went out ahead), then those of the windows that may
+    /// be announced ahead of it.
     fn window_actions(&mut self, k: u64) -> Vec<Action> {
         self.phase = Phase::Window;
         self.window = k;
@@ -566,8 +594,62 @@ impl Scheduler {
             .scheme
             .scheme()
             .window(&self.topology, &self.windows, k);
-        out.extend(self.issue(sends));
+        self.issued_before = self.issued;
+        if k < self.issued {
+            // sent ahead: only the replies are awaited now
+            for (node, body) in &sends {
+                if matches!(body, CommandBody::AdvanceWindow(_)) {
+                    self.pending.insert(node.clone());
+                }
+            }
+        } else {
+            out.extend(self.issue(sends));
+            self.issued = k + 1;
+        }
+        out.extend(self.ahead());
         out
+    }
+
+    /// How many windows beyond the running one may be announced: the configured lookahead
+    /// for a scheme whose commands do not depend on the nodes' reports and fixed windows.
+    fn effective_lookahead(&self) -> u64 {
+        if self.windows.adaptive.is_some() || !self.scheme.scheme_ref().pipelines() {
+            0
+        } else {
+            self.lookahead
+        }
+    }
+
+    /// Commands of the windows after the running one, up to the lookahead, the last window,
+    /// and the next checkpoint (its snapshot must be taken before any later command).
+    fn ahead(&mut self) -> Vec<Action> {
+        let limit = (self.window + 1 + self.effective_lookahead()).min(self.windows.count);
+        let mut out = Vec::new();
+        while self.issued < limit {
+            let j = self.issued;
+            if self.checkpoint_every > 0 && j % self.checkpoint_every == 0 {
+                break;
+            }
+            let sends = self
+                .scheme
+                .scheme()
+                .window(&self.topology, &self.windows, j);
+            out.extend(sends.into_iter().map(|(n, b)| Action::Send(n, b)));
+            self.issued = j + 1;
+        }
+        out
+    }
+
+    /// No more windows announced ahead (e.g. an interrupt: the run stops, after a
+    /// checkpoint, once the windows already announced are done).
+    pub fn hold(&mut self) {
+        self.lookahead = 0;
+    }
+
+    /// The running window's commands went out before the window before it was complete:
+    /// the nodes may be computing it already, so a checkpoint now would not be of its start.
+    pub fn announced_ahead(&self) -> bool {
+        self.issued_before > self.window
     }
 
     /// The first commands of the run.
@@ -591,6 +673,8 @@ impl Scheduler {
         }
         let k = self.window;
         self.pending.clear();
+        // the restored nodes have received nothing of window k yet
+        self.issued = k;
         let replay = self.scheme.scheme().replay(&self.topology, k);
         let mut out = self.issue(replay);
         out.extend(self.window_actions(k));
@@ -734,6 +818,8 @@ mod tests {
             interfaces: Vec::new(),
             positions: Vec::new(),
             adaptive: None,
+            lookahead: 0,
+            checkpoint_every: 0,
         }
     }
 
@@ -1427,5 +1513,163 @@ mod tests {
                 "{x:?} {p:?}"
             );
         }
+    }
+
+    /// The (node, window) of every `advance_window` among the actions, in order.
+    fn advances(a: &[Action]) -> Vec<(String, u64)> {
+        a.iter()
+            .filter_map(|a| match a {
+                Action::Send(n, CommandBody::AdvanceWindow(w)) => Some((n.clone(), w.window)),
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// Every node reports window k; the actions that follow.
+    fn finish_window(s: &mut Scheduler, k: u64) -> Vec<Action> {
+        let mut out = s.on_window_done(DEM, k, None).unwrap();
+        out.extend(s.on_window_done(FEM, k, None).unwrap());
+        out
+    }
+
+    fn sends(a: &[Action]) -> Vec<(String, CommandBody)> {
+        a.iter()
+            .filter_map(|a| match a {
+                Action::Send(n, b) => Some((n.clone(), b.clone())),
+                _ => None,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn lookahead_announces_windows_ahead_but_not_past_a_checkpoint_or_the_last_window() {
+        for kind in [
+            ScheduleKind::Jit,
+            ScheduleKind::Predictive,
+            ScheduleKind::Concurrent,
+        ] {
+            let mut c = cfg(kind, 6);
+            c.lookahead = 2;
+            c.checkpoint_every = 4;
+            let mut s = Scheduler::new(c).unwrap();
+            let mut all = s.start();
+            let w = |a: &[Action]| -> Vec<u64> {
+                let mut v: Vec<u64> = advances(a).into_iter().map(|(_, k)| k).collect();
+                v.dedup();
+                v
+            };
+            assert_eq!(w(&all), [0, 1, 2], "{kind:?}");
+            assert!(!s.announced_ahead());
+            // window 1 went out with window 0; now window 3 goes, window 4 waits for the
+            // checkpoint after window 3
+            let a = finish_window(&mut s, 0);
+            assert_eq!(w(&a), [3], "{kind:?}");
+            assert!(s.announced_ahead());
+            assert_eq!(s.window(), 1);
+            assert_eq!(
+                s.pending().count(),
+                2,
+                "the replies of window 1 are awaited"
+            );
+            all.extend(a.clone());
+            for k in [1, 2] {
+                let a = finish_window(&mut s, k);
+                assert!(advances(&a).is_empty(), "{kind:?} after window {k}: {a:?}");
+                assert!(s.announced_ahead());
+            }
+            // the checkpoint after window 3 sees window 4's commands still unsent
+            let a = finish_window(&mut s, 3);
+            assert_eq!(w(&a), [4, 5], "{kind:?}");
+            assert!(
+                !s.announced_ahead(),
+                "{kind:?}: a checkpoint now is of window 4's start"
+            );
+            all.extend(a);
+            let a = finish_window(&mut s, 4);
+            assert!(advances(&a).is_empty());
+            let a = finish_window(&mut s, 5);
+            assert!(matches!(a.as_slice(), [Action::Finish { .. }]), "{a:?}");
+
+            // the same commands, in the same order per node, as windows one at a time
+            let mut lockstep = Scheduler::new(cfg(kind, 6)).unwrap();
+            let mut one = lockstep.start();
+            for k in 0..6 {
+                one.extend(finish_window(&mut lockstep, k));
+            }
+            for node in [DEM, FEM] {
+                let of = |a: &[Action]| -> Vec<CommandBody> {
+                    sends(a)
+                        .into_iter()
+                        .filter(|(n, _)| n == node)
+                        .map(|(_, b)| b)
+                        .collect()
+                };
+                assert_eq!(of(&all), of(&one), "{kind:?}, node {node}");
+            }
+        }
+    }
+
+    #[test]
+    fn held_lookahead_lets_the_announced_windows_finish_then_runs_one_at_a_time() {
+        let mut c = cfg(ScheduleKind::Jit, 8);
+        c.lookahead = 2;
+        let mut s = Scheduler::new(c).unwrap();
+        s.start();
+        assert_eq!(advances(&finish_window(&mut s, 0)).len(), 2);
+        s.hold();
+        for k in [1, 2] {
+            assert!(advances(&finish_window(&mut s, k)).is_empty());
+            assert!(s.announced_ahead(), "window {} went out earlier", k + 1);
+        }
+        let a = finish_window(&mut s, 3);
+        let expected: Vec<(String, u64)> = vec![(DEM.into(), 4), (FEM.into(), 4)];
+        assert_eq!(advances(&a), expected);
+        assert!(!s.announced_ahead());
+        // a checkpoint here restores to window 4 with nothing announced
+        let mut restored: Scheduler =
+            serde_json::from_str(&serde_json::to_string(&s).unwrap()).unwrap();
+        let a = restored.replay_actions().unwrap();
+        assert_eq!(advances(&a), expected);
+        assert!(!restored.announced_ahead());
+    }
+
+    #[test]
+    fn lookahead_is_lockstep_where_the_next_window_depends_on_the_reports() {
+        let mut c = cfg(ScheduleKind::OneWay, 6);
+        c.lookahead = 3;
+        let mut s = Scheduler::new(c).unwrap();
+        let a = s.start();
+        assert!(
+            !a.is_empty() && advances(&a).iter().all(|(_, k)| *k == 0),
+            "one-way waits for the kinetic energy: {a:?}"
+        );
+        let mut c = implicit_cfg(implicit::Acceleration::Aitken, 5, false);
+        c.lookahead = 3;
+        let mut s = Scheduler::new(c).unwrap();
+        assert!(
+            advances(&s.start()).iter().all(|(_, k)| *k == 0),
+            "implicit"
+        );
+        let mut c = cfg(ScheduleKind::Predictive, 32);
+        c.lookahead = 3;
+        c.window = 1e-5;
+        c.adaptive = Some((
+            ladder(1e-5, 8e-5, 4),
+            adaptive::Limits {
+                loaded: None,
+                radius_min: None,
+            },
+            3.2e-4,
+        ));
+        let mut s = Scheduler::new(c).unwrap();
+        assert!(
+            advances(&s.start()).iter().all(|(_, k)| *k == 0),
+            "adaptive"
+        );
+        // a single solver's windows need nothing from each other
+        let mut c = cfg(ScheduleKind::None, 6);
+        c.lookahead = 3;
+        let mut s = Scheduler::new(c).unwrap();
+        assert_eq!(advances(&s.start()).len(), 4);
     }
 }

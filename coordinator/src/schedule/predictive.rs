@@ -12,6 +12,10 @@ use super::{Scheme, Sends, Topology, Windows};
 pub struct Predictive;
 
 impl Scheme for Predictive {
+    fn pipelines(&self) -> bool {
+        true
+    }
+
     fn window(&self, t: &Topology, w: &Windows, k: u64) -> Sends {
         let mut out = Vec::new();
         for f in &t.fems {
