@@ -101,4 +101,81 @@ fn an_rve_of_superquadric_sand_consolidates_shears_and_fits_a_mohr_coulomb_mater
     ] {
         assert!(out.join(png).metadata().unwrap().len() > 1000, "{png}");
     }
+
+    // the fitted single element (scenes/rve-triaxial-element.toml) through the same drained
+    // test in the FEM, with this fit and this run's lateral stress
+    let lateral = -shear.iter().map(|&k| sxx[k]).sum::<f64>() / shear.len() as f64;
+    let template =
+        std::fs::read_to_string(root().join("scenes/rve-triaxial-element.toml")).unwrap();
+    let cut = template.find("# the fit of out/rve-triaxial").unwrap();
+    let (e_mod, nu, c) = (get("youngs_modulus"), nu, get("cohesion"));
+    // the axial face follows the isotropic elastic strain while the lateral stress comes on
+    let u_iso = -0.01 * lateral * (1.0 - 2.0 * nu) / e_mod;
+    let scene = template[..cut]
+        .replace("value = 25e3", &format!("value = {lateral:e}"))
+        .replace(
+            "points = [[0.0, 0.0], [0.001, -2.958333e-6], [0.021, -2.002958333e-3]]",
+            &format!(
+                "points = [[0.0, 0.0], [0.001, {u_iso:e}], [0.021, {:e}]]",
+                u_iso - 0.002
+            ),
+        )
+        + &std::fs::read_to_string(out.join("mohr_coulomb.toml")).unwrap();
+    assert!(
+        scene.contains(&format!("{u_iso:e}")),
+        "the template's history changed"
+    );
+    let s = run_scene(&dir, "element.toml", &scene);
+    assert_eq!(s["status"], "completed", "{s}");
+    let probes = std::fs::read_to_string(dir.join("out-element.toml/fem/fem_probes.csv")).unwrap();
+    let time = column(&probes, "time");
+    let (ux, uy, uz) = (
+        column(&probes, "probe.corner.ux"),
+        column(&probes, "probe.corner.uy"),
+        column(&probes, "probe.corner.uz"),
+    );
+    let rz = column(&probes, "reaction.top.z");
+    let l = 0.01;
+    let start = time.iter().position(|t| (t - 1e-3).abs() < 1e-9).unwrap();
+    let ev = |k: usize| -(ux[k] + uy[k] + uz[k]) / l; // compaction positive
+                                                      // the closed form of the fitted element (W §5.4): σa from p with E to N_φ p + 2c√N_φ,
+                                                      // then perfectly plastic, dilating at 2 sin ψ / (1 − sin ψ)
+    let (sp, spsi) = (
+        phi_fit.to_radians().sin(),
+        get("dilation_angle").to_radians().sin(),
+    );
+    let n_phi = (1.0 + sp) / (1.0 - sp);
+    let yield_sa = lateral * n_phi + 2.0 * c * n_phi.sqrt();
+    let sa0 = lateral;
+    let e_yield = (yield_sa - sa0) / e_mod;
+    let rate = 2.0 * spsi / (1.0 - spsi);
+    let (mut worst_sa, mut worst_ev) = (0.0f64, 0.0f64);
+    for k in start..time.len() {
+        let e = -(uz[k] - uz[start]) / l;
+        let (sa, dv) = if e <= e_yield {
+            (sa0 + e_mod * e, (1.0 - 2.0 * nu) * e)
+        } else {
+            (yield_sa, (1.0 - 2.0 * nu) * e_yield - rate * (e - e_yield))
+        };
+        worst_sa = worst_sa.max((-rz[k] / (l * l) / sa - 1.0).abs());
+        worst_ev = worst_ev.max((ev(k) - ev(start) - dv).abs());
+    }
+    let last = time.len() - 1;
+    let element_ratio = -rz[last] / (l * l) / lateral;
+    eprintln!(
+        "fitted element: σa/σl {element_ratio:.4} (RVE peak {:.4}), dilation rate {:.4} (fit {rate:.4}); against the closed form: σa within {worst_sa:.1e}, εV within {worst_ev:.1e}",
+        ratio[peak],
+        (ev(last - 20) - ev(last)) / (uz[last - 20] - uz[last]) * l,
+    );
+    assert!(worst_sa < 1e-8 && worst_ev < 1e-8, "{worst_sa} {worst_ev}");
+    // it carries the RVE's peak ratio (the fit's φ) and dilates at the fitted rate
+    assert!(
+        (element_ratio / ratio[peak] - 1.0).abs() < 0.05,
+        "{element_ratio}"
+    );
+    let element_rate = (ev(last - 20) - ev(last)) / (uz[last - 20] - uz[last]) * l;
+    assert!(
+        (element_rate / rate - 1.0).abs() < 1e-3,
+        "{element_rate} vs {rate}"
+    );
 }
