@@ -145,6 +145,9 @@ pub struct Summary {
     /// where the schedule, a node or the DEM's programme needs lockstep).
     #[serde(default)]
     pub lookahead: u64,
+    /// Windows whose commands went out before the window before them was complete.
+    #[serde(default)]
+    pub windows_announced_ahead: u64,
 }
 
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
@@ -262,7 +265,7 @@ impl Run<'_> {
             if let Some(sig) = self.signals.poll() {
                 if self.defer_interrupt && self.pending_interrupt.is_none() {
                     eprintln!(
-                        "\n{}: stopping at the end of this window{} (again to stop at once)",
+                        "\n{}: stopping after the windows already announced{} (again to stop at once)",
                         crate::interrupt::signal_name(sig),
                         if self.scene.checkpoint_every > 0 {
                             ", after a checkpoint"
@@ -663,7 +666,6 @@ impl Run<'_> {
             (settings, limits, scene.end_time)
         });
         let lookahead = self.lookahead();
-        self.summary.lookahead = lookahead;
         let scheduler = Scheduler::new(SchedulerConfig {
             kind: scene.schedule,
             window: scene.window,
@@ -766,6 +768,8 @@ impl Run<'_> {
                 .await?;
                 // ... the coordinator too; the data that was in flight is published again
                 let mut scheduler = state.scheduler;
+                // this run's nodes and scene decide how far ahead it goes
+                scheduler.set_lookahead(lookahead, scene.checkpoint_every);
                 let actions = scheduler.replay_actions().map_err(|e| anyhow!(e))?;
                 let kept: String = std::fs::read_to_string(&csv_path)
                     .unwrap_or_default()
@@ -782,6 +786,8 @@ impl Run<'_> {
                 (scheduler, state.stability, actions, kept)
             }
         };
+        // what the scheduler allows for this schedule (0 where its windows depend on the reports)
+        self.summary.lookahead = scheduler.effective_lookahead();
         self.defer_interrupt = true;
         let bar = progress_bar(progress, scene.windows, scene.adaptive.is_some());
         bar.set_position(self.summary.windows_done);
@@ -889,8 +895,12 @@ impl Run<'_> {
             }
             let k = scheduler.window();
             let what = format!(
-                "window {k} from {}",
-                scheduler.pending().collect::<Vec<_>>().join(", ")
+                "window {k} from {}{}",
+                scheduler.pending().collect::<Vec<_>>().join(", "),
+                match scheduler.last_issued() {
+                    Some(last) if last > k => format!(" (windows up to {last} announced)"),
+                    _ => String::new(),
+                }
             );
             let buffered = early.iter().position(
                 |s| matches!(&s.body, StatusBody::WindowDone { window, .. } if *window == k),
@@ -924,7 +934,7 @@ impl Run<'_> {
                         tracing::warn!("refused a message on `{key}`: {e}")
                     }
                     Err((key, e)) => bail!(
-                        "invalid interface data from the {} node on `{key}` at window {k}: {e}",
+                        "invalid interface data from the {} node on `{key}` (the coordinator at window {k}): {e}",
                         self.sender_of_key(&key)
                     ),
                 }
@@ -1111,6 +1121,7 @@ impl Run<'_> {
                 row_t_end = None;
                 csv.flush()?;
                 self.summary.windows_done = window + 1;
+                self.summary.windows_announced_ahead = scheduler.windows_announced_ahead();
                 self.summary.simulated_time_s = t_end;
                 bar.set_position(if scene.adaptive.is_some() {
                     (t_end / scene.end_time * scene.windows as f64).round() as u64

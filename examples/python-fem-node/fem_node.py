@@ -125,6 +125,23 @@ class Participant:
 
     def next_command(self):
         if self.commands_queue:
+            # a `stop` that came in meanwhile goes before the windows kept
+            while True:
+                try:
+                    kind, value = self.events.get_nowait()
+                except queue.Empty:
+                    break
+                if kind == "cmd":
+                    body = self._accept_command(value)
+                    if body["type"] == "stop":
+                        self.commands_queue.clear()
+                        return body
+                    self.commands_queue.append(body)
+                elif kind == "forces":
+                    self.forces_queue.append(value)
+                elif kind == "coordinator" and value == zenoh.SampleKind.DELETE:
+                    raise NodeError("protocol", f"the coordinator left (its liveliness token is gone) "
+                                                f"while node `{self.node}` had windows to run")
             return self.commands_queue.popleft()
         while True:
             kind, value = self._event(None, "its next command")

@@ -296,8 +296,21 @@ impl Participant {
         &mut self,
         timeout: Option<Duration>,
     ) -> Result<CommandBody, ProtoError> {
-        if let Some(c) = self.queued.pop_front() {
-            return Ok(c);
+        if !self.queued.is_empty() {
+            // a `stop` that came in meanwhile goes before the windows kept (the run is over:
+            // computing them would only write outputs past its end)
+            while let Ok(Some(sample)) = self.commands.try_recv() {
+                match self.accept_command(&sample)? {
+                    stop @ CommandBody::Stop { .. } => {
+                        self.queued.clear();
+                        return Ok(stop);
+                    }
+                    other => self.queued.push_back(other),
+                }
+            }
+            if let Some(c) = self.queued.pop_front() {
+                return Ok(c);
+            }
         }
         let deadline = timeout.map(|t| tokio::time::Instant::now() + t);
         let sample = loop {

@@ -304,12 +304,15 @@ fn advance(window: u64) -> proto::CommandBody {
     })
 }
 
-/// The coordinator announces windows ahead (`coupling.lookahead`): `advance_window`
-/// commands that arrive while a node waits for its data are kept and served in order after
-/// it; a `stop` still ends the wait at once, behind announced windows too.
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn windows_announced_while_a_node_waits_for_data_are_served_in_order() {
-    let run = "link-ahead";
+/// A coordinator link and a FEM and a DEM participant with interface `top` open; the DEM's
+/// hello has said it queues commands.
+async fn coordinated_pair(
+    run: &str,
+) -> (
+    proto::participant::CoordinatorLink,
+    Participant,
+    Participant,
+) {
     let (pc, pf, pd) = (
         free_loopback_port().unwrap(),
         free_loopback_port().unwrap(),
@@ -360,6 +363,16 @@ async fn windows_announced_while_a_node_waits_for_data_are_served_in_order() {
     fem.wait_for_peers(Duration::from_secs(10)).await.unwrap();
     dem.wait_for_peers(Duration::from_secs(10)).await.unwrap();
 
+    (coordinator, fem, dem)
+}
+
+/// The coordinator announces windows ahead (`coupling.lookahead`): `advance_window`
+/// commands that arrive while a node waits for its data are kept and served in order after
+/// it; a `stop` that arrives meanwhile goes before them.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn windows_announced_while_a_node_waits_for_data_are_served_in_order() {
+    let run = "link-ahead";
+    let (mut coordinator, mut fem, mut dem) = coordinated_pair(run).await;
     coordinator.send("dem", advance(0)).await.unwrap();
     assert_eq!(
         dem.next_command(Some(Duration::from_secs(10)))
@@ -388,8 +401,19 @@ async fn windows_announced_while_a_node_waits_for_data_are_served_in_order() {
             .unwrap();
         assert_eq!(c, advance(w), "served in order, without waiting");
     }
-    // a stop behind another announced window ends the next wait
+    // windows 3 and 4 announced during the next wait, then a stop while the node would
+    // compute: the stop goes before the windows kept
     coordinator.send("dem", advance(3)).await.unwrap();
+    coordinator.send("dem", advance(4)).await.unwrap();
+    let writer = tokio::spawn(async move {
+        tokio::time::sleep(Duration::from_millis(300)).await;
+        fem.write_kinematics(&kinematics(run, 1, 10)).await.unwrap();
+        fem
+    });
+    dem.read_kinematics("top", Label::window(1), 10, Duration::from_secs(10))
+        .await
+        .unwrap();
+    let fem = writer.await.unwrap();
     coordinator
         .send(
             "dem",
@@ -399,14 +423,52 @@ async fn windows_announced_while_a_node_waits_for_data_are_served_in_order() {
         )
         .await
         .unwrap();
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    assert_eq!(
+        dem.next_command(Some(Duration::from_secs(10)))
+            .await
+            .unwrap(),
+        proto::CommandBody::Stop {
+            reason: "test".into()
+        }
+    );
+    dem.finish().await.unwrap();
+    fem.finish().await.unwrap();
+    coordinator.close().await.unwrap();
+}
+
+/// A `stop` behind an announced window ends a data wait at once.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stop_behind_announced_windows_ends_the_wait_for_data() {
+    let run = "link-ahead-stop";
+    let (mut coordinator, fem, mut dem) = coordinated_pair(run).await;
+    coordinator.send("dem", advance(0)).await.unwrap();
+    assert_eq!(
+        dem.next_command(Some(Duration::from_secs(10)))
+            .await
+            .unwrap(),
+        advance(0)
+    );
+    coordinator.send("dem", advance(1)).await.unwrap();
+    coordinator
+        .send(
+            "dem",
+            proto::CommandBody::Stop {
+                reason: "test".into(),
+            },
+        )
+        .await
+        .unwrap();
+    let t0 = Instant::now();
     let e = dem
-        .read_kinematics("top", Label::window(1), 10, Duration::from_secs(10))
+        .read_kinematics("top", Label::window(0), 10, Duration::from_secs(10))
         .await
         .unwrap_err();
     assert!(
         matches!(&e, ProtoError::Stopped { reason } if reason == "test"),
         "{e}"
     );
+    assert!(t0.elapsed() < Duration::from_secs(5));
     dem.finish().await.unwrap();
     fem.finish().await.unwrap();
     coordinator.close().await.unwrap();

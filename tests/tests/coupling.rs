@@ -371,6 +371,13 @@ fn windows_announced_ahead_give_the_same_results_bit_for_bit_as_lockstep() {
         }
         assert_eq!(lockstep["lookahead"], 0, "{schedule}");
         assert_eq!(ahead["lookahead"], 2, "{schedule}: the default");
+        // the windows really went out ahead (else this compares lockstep with lockstep)
+        assert_eq!(lockstep["windows_announced_ahead"], 0, "{schedule}");
+        let announced = ahead["windows_announced_ahead"].as_u64().unwrap();
+        assert!(
+            announced >= 40,
+            "{schedule}: {announced} of 50 windows announced ahead"
+        );
         let a = outputs(&dir.path().join("out-lockstep.toml"));
         let b = outputs(&dir.path().join("out-ahead.toml"));
         assert!(
@@ -386,9 +393,17 @@ fn windows_announced_ahead_give_the_same_results_bit_for_bit_as_lockstep() {
         for (name, bytes) in &a {
             assert!(bytes == &b[name], "{schedule}: {name} differs");
         }
-        // the checkpoints of the run ahead are of their windows' ends: resuming from one
-        // is tested in resume.rs; here they exist
-        let ckpt = dir.path().join("out-ahead.toml").join("checkpoints");
-        assert!(ckpt.join("latest.json").exists(), "{schedule}");
+        // the run ahead checkpointed after every 7th window (resuming from such a checkpoint
+        // is tested in resume.rs, at the default lookahead)
+        let latest: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(
+                dir.path()
+                    .join("out-ahead.toml")
+                    .join("checkpoints/latest.json"),
+            )
+            .unwrap(),
+        )
+        .unwrap();
+        assert_eq!(latest["window"], 48, "{schedule}: {latest}");
     }
 }

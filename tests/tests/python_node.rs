@@ -134,6 +134,7 @@ fn python_fem_node_matches_rust_fem_node_on_the_predictive_plate() {
     assert_eq!(py["status"], "completed", "{py}");
     // the Python node queues windows announced ahead (PROTOCOL.md §6)
     assert_eq!(py["lookahead"], 2, "{py}");
+    assert!(py["windows_announced_ahead"].as_u64().unwrap() > 0, "{py}");
     assert_eq!(py["windows_done"], WINDOWS as u64);
     let software = py["nodes"]["fem"]["software"].as_str().unwrap_or_default();
     assert!(software.contains("python"), "the FEM node was {software:?}");

@@ -355,6 +355,13 @@ pub struct Scheduler {
     /// `issued` when the running window began (its commands went out ahead if greater).
     #[serde(default)]
     issued_before: u64,
+    /// Windows whose commands went out before the window before them was complete.
+    #[serde(default)]
+    announced: u64,
+    /// No more windows announced ahead in this process (an interrupt); not kept in
+    /// checkpoints: a resumed run announces ahead again.
+    #[serde(skip)]
+    held: bool,
 }
 
 impl Scheduler {
@@ -470,6 +477,8 @@ impl Scheduler {
             checkpoint_every: cfg.checkpoint_every,
             issued: 0,
             issued_before: 0,
+            announced: 0,
+            held: false,
         })
     }
 
@@ -611,13 +620,35 @@ impl Scheduler {
     }
 
     /// How many windows beyond the running one may be announced: the configured lookahead
-    /// for a scheme whose commands do not depend on the nodes' reports and fixed windows.
-    fn effective_lookahead(&self) -> u64 {
-        if self.windows.adaptive.is_some() || !self.scheme.scheme_ref().pipelines() {
+    /// for a scheme whose commands do not depend on the nodes' reports and fixed windows
+    /// (none once held, or once the DEM's programme has finished).
+    pub fn effective_lookahead(&self) -> u64 {
+        if self.windows.adaptive.is_some()
+            || !self.scheme.scheme_ref().pipelines()
+            || self.held
+            || self.programme_finished
+        {
             0
         } else {
             self.lookahead
         }
+    }
+
+    /// A resumed run's lookahead and checkpoint period (those of the scene and nodes now,
+    /// not of the run that wrote the checkpoint).
+    pub fn set_lookahead(&mut self, lookahead: u64, checkpoint_every: u64) {
+        self.lookahead = lookahead;
+        self.checkpoint_every = checkpoint_every;
+    }
+
+    /// How many windows went out before the window before them was complete.
+    pub fn windows_announced_ahead(&self) -> u64 {
+        self.announced
+    }
+
+    /// The last window whose commands have gone out.
+    pub fn last_issued(&self) -> Option<u64> {
+        self.issued.checked_sub(1)
     }
 
     /// Commands of the windows after the running one, up to the lookahead, the last window,
@@ -636,6 +667,7 @@ impl Scheduler {
                 .window(&self.topology, &self.windows, j);
             out.extend(sends.into_iter().map(|(n, b)| Action::Send(n, b)));
             self.issued = j + 1;
+            self.announced += 1;
         }
         out
     }
@@ -643,7 +675,7 @@ impl Scheduler {
     /// No more windows announced ahead (e.g. an interrupt: the run stops, after a
     /// checkpoint, once the windows already announced are done).
     pub fn hold(&mut self) {
-        self.lookahead = 0;
+        self.held = true;
     }
 
     /// The running window's commands went out before the window before it was complete:
@@ -765,7 +797,9 @@ impl Scheduler {
                     reason: format!("end time reached after {} windows", window + 1),
                 }])
             }
-            Next::Continue if self.programme_finished => {
+            // windows already announced run first (the run loop keeps a DEM programme in
+            // lockstep; this is the guard if one reports its end without saying it has one)
+            Next::Continue if self.programme_finished && self.issued <= window + 1 => {
                 self.phase = Phase::Done;
                 Ok(vec![Action::Finish {
                     reason: format!(
@@ -1625,12 +1659,36 @@ mod tests {
         let expected: Vec<(String, u64)> = vec![(DEM.into(), 4), (FEM.into(), 4)];
         assert_eq!(advances(&a), expected);
         assert!(!s.announced_ahead());
-        // a checkpoint here restores to window 4 with nothing announced
+        // a checkpoint here restores to window 4 with nothing announced; the resumed run
+        // announces ahead again
         let mut restored: Scheduler =
             serde_json::from_str(&serde_json::to_string(&s).unwrap()).unwrap();
         let a = restored.replay_actions().unwrap();
-        assert_eq!(advances(&a), expected);
+        let resumed: Vec<(String, u64)> = [4, 5, 6]
+            .into_iter()
+            .flat_map(|k| [(DEM.to_string(), k), (FEM.to_string(), k)])
+            .collect();
+        assert_eq!(advances(&a), resumed);
         assert!(!restored.announced_ahead());
+        assert_eq!(restored.effective_lookahead(), 2);
+    }
+
+    #[test]
+    fn a_finished_programme_ends_the_run_after_the_windows_already_announced() {
+        let mut c = cfg(ScheduleKind::None, 10);
+        c.lookahead = 2;
+        let mut s = Scheduler::new(c).unwrap();
+        assert_eq!(advances(&s.start()).len(), 3);
+        let finished = BTreeMap::from([("programme_finished".to_string(), 1.0)]);
+        s.observe(DEM, true, &finished);
+        assert_eq!(s.effective_lookahead(), 0);
+        // windows 1 and 2 went out with window 0: they run, nothing more goes out
+        for k in [0, 1] {
+            let a = s.on_window_done(DEM, k, None).unwrap();
+            assert!(a.is_empty(), "after window {k}: {a:?}");
+        }
+        let a = s.on_window_done(DEM, 2, None).unwrap();
+        assert!(matches!(a.as_slice(), [Action::Finish { .. }]), "{a:?}");
     }
 
     #[test]
@@ -1639,16 +1697,18 @@ mod tests {
         c.lookahead = 3;
         let mut s = Scheduler::new(c).unwrap();
         let a = s.start();
-        assert!(
-            !a.is_empty() && advances(&a).iter().all(|(_, k)| *k == 0),
+        assert_eq!(
+            advances(&a),
+            [(DEM.to_string(), 0)],
             "one-way waits for the kinetic energy: {a:?}"
         );
         let mut c = implicit_cfg(implicit::Acceleration::Aitken, 5, false);
         c.lookahead = 3;
         let mut s = Scheduler::new(c).unwrap();
+        let a = advances(&s.start());
         assert!(
-            advances(&s.start()).iter().all(|(_, k)| *k == 0),
-            "implicit"
+            a.len() == 2 && a.iter().all(|(_, k)| *k == 0),
+            "implicit: {a:?}"
         );
         let mut c = cfg(ScheduleKind::Predictive, 32);
         c.lookahead = 3;
@@ -1662,9 +1722,10 @@ mod tests {
             3.2e-4,
         ));
         let mut s = Scheduler::new(c).unwrap();
+        let a = advances(&s.start());
         assert!(
-            advances(&s.start()).iter().all(|(_, k)| *k == 0),
-            "adaptive"
+            a.len() == 2 && a.iter().all(|(_, k)| *k == 0),
+            "adaptive: {a:?}"
         );
         // a single solver's windows need nothing from each other
         let mut c = cfg(ScheduleKind::None, 6);
