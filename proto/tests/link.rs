@@ -318,7 +318,7 @@ async fn coordinated_pair(
         free_loopback_port().unwrap(),
         free_loopback_port().unwrap(),
     );
-    let mut coordinator =
+    let coordinator =
         proto::participant::CoordinatorLink::open(&LinkConfig::loopback_peer(Some(pc), &[]), run)
             .await
             .unwrap();
@@ -372,7 +372,7 @@ async fn coordinated_pair(
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn windows_announced_while_a_node_waits_for_data_are_served_in_order() {
     let run = "link-ahead";
-    let (mut coordinator, mut fem, mut dem) = coordinated_pair(run).await;
+    let (mut coordinator, fem, mut dem) = coordinated_pair(run).await;
     coordinator.send("dem", advance(0)).await.unwrap();
     assert_eq!(
         dem.next_command(Some(Duration::from_secs(10)))
