@@ -18,9 +18,11 @@
 #              particle-step
 #   fem10      static beam, hex8 10 mm (36,663 dof): build + assembly + factorise + solve, s
 #   transport  10k-node kinematics round trip on loopback: median µs
+#   window     the coupling overhead per window of scenes/sheet-ci.toml (7,000 windows of a
+#              predictive DEM-FEM run, release binaries, ~30 s): (wall − DEM − FEM) / windows, µs
 #
 # Environment: N [3] runs per case; TOLERANCE [10] percent; THREADS [2] cores per benchmark;
-# GUARD_CASES ["dense pour polyhedra fem10 transport"]; GUARD_FILE [bench/guard.tsv];
+# GUARD_CASES ["dense pour polyhedra fem10 transport window"]; GUARD_FILE [bench/guard.tsv];
 # GUARD_CACHE [~/.cache/cosim-guard] (settled states, the pour's start file, logs);
 # GUARD_NO_BUILD [0] (1: use the newest bench executables found, see bench/lib.sh).
 #
@@ -34,7 +36,7 @@ ROOT=$(dirname "$HERE")
 N=${N:-3}
 TOLERANCE=${TOLERANCE:-10}
 THREADS=${THREADS:-2}
-GUARD_CASES=${GUARD_CASES:-"dense pour polyhedra fem10 transport"}
+GUARD_CASES=${GUARD_CASES:-"dense pour polyhedra fem10 transport window"}
 GUARD_FILE=${GUARD_FILE:-$HERE/guard.tsv}
 CACHE=${GUARD_CACHE:-$HOME/.cache/cosim-guard}
 RECORD=0
@@ -54,13 +56,13 @@ done
 mkdir -p "$CACHE"
 source "$HERE/lib.sh"
 
-bench_of() { case $1 in dense) echo dense_bed ;; pour) echo pour ;; polyhedra) echo polyhedron_bed ;; fem10) echo static_beam ;; transport) echo transport ;; *) die "unknown case '$1' (dense pour polyhedra fem10 transport)" ;; esac; }
-unit_of() { case $1 in dense | pour) echo ns/particle-step ;; polyhedra) echo core-µs/particle-step ;; fem10) echo s ;; transport) echo µs ;; esac; }
+bench_of() { case $1 in dense) echo dense_bed ;; pour) echo pour ;; polyhedra) echo polyhedron_bed ;; fem10) echo static_beam ;; transport) echo transport ;; window) echo cosim ;; *) die "unknown case '$1' (dense pour polyhedra fem10 transport window)" ;; esac; }
+unit_of() { case $1 in dense | pour) echo ns/particle-step ;; polyhedra) echo core-µs/particle-step ;; fem10) echo s ;; transport | window) echo µs ;; esac; }
 
 # one run of a case: prints its figure (stdout), log in $CACHE/<case>.<run>.log
 measure() { # case run
     local c=$1 log="$CACHE/$1.$2.log" bin
-    bin=$(find_bench "$(bench_of "$c")")
+    if [[ $c == window ]]; then bin=$(find_release_bin cosim); else bin=$(find_bench "$(bench_of "$c")"); fi
     [[ -n $bin ]] || die "no $(bench_of "$c") bench executable; run without GUARD_NO_BUILD"
     case $c in
     dense)
@@ -87,6 +89,13 @@ measure() { # case run
         COSIM_BENCH_ROUNDS=200 "$bin" >"$log" 2>&1 || die "transport failed: $log"
         awk '$1 == 10000 && NF >= 6 {print $3}' "$log"
         ;;
+    window)
+        "$bin" run "$ROOT/scenes/sheet-ci.toml" --out "$CACHE/window" --overwrite --no-progress \
+            >"$log" 2>&1 || die "sheet-ci failed: $log"
+        python3 -c 'import json, sys
+s = json.load(open(sys.argv[1]))
+print("%.1f" % (1e6 * s["timing"]["coupling_overhead_s"] / s["windows_done"]))' "$CACHE/window/summary.json"
+        ;;
     esac
 }
 
@@ -94,7 +103,7 @@ if [[ ${GUARD_NO_BUILD:-0} != 1 ]]; then
     command -v cargo >/dev/null || die "cargo is needed to build the benches (or GUARD_NO_BUILD=1)"
     for c in $GUARD_CASES; do
         b=$(bench_of "$c")
-        log "building $b (cargo bench --no-run)"
+        log "building $b"
         build_bench "$b" >/dev/null 2>"$CACHE/build.$b.log" || die "building $b failed: $CACHE/build.$b.log"
     done
 fi

@@ -22,9 +22,22 @@ find_bench() {
     echo "$best"
 }
 
-# bench name -> cargo package and flags (static_beam builds without the node feature)
+# newest release executable <name> (a binary, not a bench) in the candidate target folders
+find_release_bin() {
+    local name=$1 best="" t bt=0 d
+    while read -r d; do
+        [[ -f $d/release/$name && -x $d/release/$name ]] || continue
+        t=$(stat -c %Y "$d/release/$name")
+        if ((t > bt)); then bt=$t; best=$d/release/$name; fi
+    done < <(target_dirs)
+    echo "$best"
+}
+
+# bench name -> cargo package and flags (static_beam builds without the node feature; `cosim`
+# is the release binaries of a run)
 build_bench() {
     case $1 in
+    cosim) (cd "$ROOT" && cargo build --release -p coordinator -p dem-node -p fem-node --bins) ;;
     dense_bed) (cd "$ROOT" && cargo bench --no-run -p dem-node --bench dense_bed) ;;
     pour) (cd "$ROOT" && cargo bench --no-run -p dem-node --bench pour) ;;
     polyhedron_bed) (cd "$ROOT" && cargo bench --no-run -p dem-node --bench polyhedron_bed) ;;
