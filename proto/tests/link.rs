@@ -305,7 +305,7 @@ fn advance(window: u64) -> proto::CommandBody {
 }
 
 /// A coordinator link and a FEM and a DEM participant with interface `top` open; the DEM's
-/// hello has said it queues commands.
+/// hello has said it queues commands, and it has taken window 0's `advance_window`.
 async fn coordinated_pair(
     run: &str,
 ) -> (
@@ -318,7 +318,7 @@ async fn coordinated_pair(
         free_loopback_port().unwrap(),
         free_loopback_port().unwrap(),
     );
-    let coordinator =
+    let mut coordinator =
         proto::participant::CoordinatorLink::open(&LinkConfig::loopback_peer(Some(pc), &[]), run)
             .await
             .unwrap();
@@ -363,7 +363,35 @@ async fn coordinated_pair(
     fem.wait_for_peers(Duration::from_secs(10)).await.unwrap();
     dem.wait_for_peers(Duration::from_secs(10)).await.unwrap();
 
+    coordinator.send("dem", advance(0)).await.unwrap();
+    assert_eq!(
+        dem.next_command(Some(Duration::from_secs(10)))
+            .await
+            .unwrap(),
+        advance(0)
+    );
     (coordinator, fem, dem)
+}
+
+/// The FEM publishes the kinematics of `window` after 300 ms (while the DEM waits).
+fn write_later(
+    fem: Participant,
+    run: &'static str,
+    window: u64,
+) -> tokio::task::JoinHandle<Participant> {
+    tokio::spawn(async move {
+        tokio::time::sleep(Duration::from_millis(300)).await;
+        fem.write_kinematics(&kinematics(run, window, 10))
+            .await
+            .unwrap();
+        fem
+    })
+}
+
+fn stop() -> proto::CommandBody {
+    proto::CommandBody::Stop {
+        reason: "test".into(),
+    }
 }
 
 /// The coordinator announces windows ahead (`coupling.lookahead`): `advance_window`
@@ -373,21 +401,10 @@ async fn coordinated_pair(
 async fn windows_announced_while_a_node_waits_for_data_are_served_in_order() {
     let run = "link-ahead";
     let (mut coordinator, fem, mut dem) = coordinated_pair(run).await;
-    coordinator.send("dem", advance(0)).await.unwrap();
-    assert_eq!(
-        dem.next_command(Some(Duration::from_secs(10)))
-            .await
-            .unwrap(),
-        advance(0)
-    );
     // windows 1 and 2 announced while the DEM waits for window 0's kinematics
     coordinator.send("dem", advance(1)).await.unwrap();
     coordinator.send("dem", advance(2)).await.unwrap();
-    let writer = tokio::spawn(async move {
-        tokio::time::sleep(Duration::from_millis(300)).await;
-        fem.write_kinematics(&kinematics(run, 0, 10)).await.unwrap();
-        fem
-    });
+    let writer = write_later(fem, run, 0);
     let k = dem
         .read_kinematics("top", Label::window(0), 10, Duration::from_secs(10))
         .await
@@ -405,32 +422,18 @@ async fn windows_announced_while_a_node_waits_for_data_are_served_in_order() {
     // compute: the stop goes before the windows kept
     coordinator.send("dem", advance(3)).await.unwrap();
     coordinator.send("dem", advance(4)).await.unwrap();
-    let writer = tokio::spawn(async move {
-        tokio::time::sleep(Duration::from_millis(300)).await;
-        fem.write_kinematics(&kinematics(run, 1, 10)).await.unwrap();
-        fem
-    });
+    let writer = write_later(fem, run, 1);
     dem.read_kinematics("top", Label::window(1), 10, Duration::from_secs(10))
         .await
         .unwrap();
     let fem = writer.await.unwrap();
-    coordinator
-        .send(
-            "dem",
-            proto::CommandBody::Stop {
-                reason: "test".into(),
-            },
-        )
-        .await
-        .unwrap();
+    coordinator.send("dem", stop()).await.unwrap();
     tokio::time::sleep(Duration::from_millis(300)).await;
     assert_eq!(
         dem.next_command(Some(Duration::from_secs(10)))
             .await
             .unwrap(),
-        proto::CommandBody::Stop {
-            reason: "test".into()
-        }
+        stop()
     );
     dem.finish().await.unwrap();
     fem.finish().await.unwrap();
@@ -442,23 +445,8 @@ async fn windows_announced_while_a_node_waits_for_data_are_served_in_order() {
 async fn a_stop_behind_announced_windows_ends_the_wait_for_data() {
     let run = "link-ahead-stop";
     let (mut coordinator, fem, mut dem) = coordinated_pair(run).await;
-    coordinator.send("dem", advance(0)).await.unwrap();
-    assert_eq!(
-        dem.next_command(Some(Duration::from_secs(10)))
-            .await
-            .unwrap(),
-        advance(0)
-    );
     coordinator.send("dem", advance(1)).await.unwrap();
-    coordinator
-        .send(
-            "dem",
-            proto::CommandBody::Stop {
-                reason: "test".into(),
-            },
-        )
-        .await
-        .unwrap();
+    coordinator.send("dem", stop()).await.unwrap();
     let t0 = Instant::now();
     let e = dem
         .read_kinematics("top", Label::window(0), 10, Duration::from_secs(10))
