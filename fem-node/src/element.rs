@@ -287,30 +287,38 @@ fn checked_jacobian(
 }
 
 /// det J · w at every point of `tab` (what [`gradients`] gives besides the gradients, checked
-/// the same way), for integrals without derivatives (masses).
-fn point_weights(tab: &Tabulated, x: &[[f64; 3]], wdet: &mut Vec<f64>) -> Result<(), BadJacobian> {
+/// the same way), times the Arlequin factor with `scale`, for integrals without derivatives
+/// (masses, volume); computed point by point, nothing allocated.
+fn point_weights<'a>(
+    tab: &'a Tabulated,
+    x: &'a [[f64; 3]],
+    scale: Option<&'a [f64]>,
+) -> impl Iterator<Item = Result<f64, BadJacobian>> + 'a {
     let nn = tab.nn;
     let tiny = 1e-10 * size_cubed(x);
-    wdet.clear();
-    for q in 0..tab.weights.len() {
+    (0..tab.weights.len()).map(move |q| {
         let (_, det) = checked_jacobian(x, &tab.dn[q * nn..(q + 1) * nn], tiny)?;
-        wdet.push(det * tab.weights[q]);
-    }
-    Ok(())
+        Ok(det * tab.weights[q] * scale.map_or(1.0, |s| arlequin_factor(tab, s, q)))
+    })
+}
+
+/// The Arlequin factor 1 − w at point `q` of `tab`, interpolated from its nodal values `s`
+/// (Wellmann (6.3), (6.27)).
+fn arlequin_factor(tab: &Tabulated, s: &[f64], q: usize) -> f64 {
+    let nn = tab.nn;
+    tab.n[q * nn..(q + 1) * nn]
+        .iter()
+        .zip(s)
+        .map(|(n, s)| n * s)
+        .sum()
 }
 
 /// Multiplies the integration weights `wdet` of the points of `tab` by the Arlequin factor
-/// 1 − w interpolated from its nodal values `scale` (Wellmann (6.3), (6.27)); no-op for `None`.
+/// (see [`arlequin_factor`]); no-op for `None`.
 pub(crate) fn scale_weights(tab: &Tabulated, scale: Option<&[f64]>, wdet: &mut [f64]) {
     let Some(s) = scale else { return };
-    let nn = tab.nn;
     for (q, w) in wdet.iter_mut().enumerate() {
-        let f: f64 = tab.n[q * nn..(q + 1) * nn]
-            .iter()
-            .zip(s)
-            .map(|(n, s)| n * s)
-            .sum();
-        *w *= f;
+        *w *= arlequin_factor(tab, s, q);
     }
 }
 
@@ -489,12 +497,9 @@ pub fn mass(
     m.clear();
     m.resize(nn * nn, 0.0);
     let tab = mass_rule(kind);
-    let mut w = Vec::new();
-    point_weights(tab, x, &mut w)?;
-    scale_weights(tab, scale, &mut w);
-    for q in 0..w.len() {
+    for (q, wq) in point_weights(tab, x, scale).enumerate() {
         let n = &tab.n[q * nn..(q + 1) * nn];
-        let f = rho * w[q];
+        let f = rho * wq?;
         for a in 0..nn {
             for b in 0..nn {
                 m[a * nn + b] += f * n[a] * n[b];
@@ -516,14 +521,11 @@ pub fn lumped_mass(
     // Σ_ab m_ab = Σ_q ρ w_q det J_q (the N_a sum to 1): no full matrix, no gradients
     let nn = kind.num_nodes();
     let tab = mass_rule(kind);
-    let mut w = Vec::new();
-    point_weights(tab, x, &mut w)?;
-    scale_weights(tab, scale, &mut w);
     let mut total = 0.0;
     out[..nn].fill(0.0);
-    for (q, wq) in w.iter().enumerate() {
+    for (q, wq) in point_weights(tab, x, scale).enumerate() {
         let n = &tab.n[q * nn..(q + 1) * nn];
-        let f = rho * wq;
+        let f = rho * wq?;
         total += f;
         for a in 0..nn {
             out[a] += f * n[a] * n[a];
@@ -538,9 +540,7 @@ pub fn lumped_mass(
 
 /// Element volume.
 pub fn volume(kind: ElementKind, x: &[[f64; 3]]) -> Result<f64, BadJacobian> {
-    let mut w = Vec::new();
-    point_weights(mass_rule(kind), x, &mut w)?;
-    Ok(w.iter().sum())
+    point_weights(mass_rule(kind), x, None).sum()
 }
 
 /// Displacement gradients at the integration points and their weights w_q det J_q.

@@ -742,49 +742,34 @@ impl Participant {
         };
         // commands that arrive meanwhile: windows announced ahead are kept for later, `stop`
         // (or anything out of turn) ends the wait
-        let mut held: Vec<Sample> = Vec::new();
+        let mut ahead: Vec<Sample> = Vec::new();
         let outcome = {
             tokio::pin!(receive);
             loop {
                 match self.unless_stopped(&what, &mut receive).await? {
-                    Ok(message) => break Some(message),
+                    Ok(message) => break Ok(message),
                     Err(command) => {
-                        let ahead = matches!(
+                        let is_window = matches!(
                             decode::<Command>(&payload(&command), self.keys.run_id()),
                             Ok(Command {
                                 body: CommandBody::AdvanceWindow(_),
                                 ..
                             })
                         );
-                        held.push(command);
-                        if !ahead {
-                            break None;
+                        if !is_window {
+                            break Err(command);
                         }
+                        ahead.push(command);
                     }
                 }
             }
         };
-        for command in &held {
-            match self.accept_command(command)? {
-                CommandBody::AdvanceWindow(w) => {
-                    self.queued.push_back(CommandBody::AdvanceWindow(w))
-                }
-                CommandBody::Stop { reason } => return Err(ProtoError::Stopped { reason }),
-                other => {
-                    return Err(ProtoError::Invalid {
-                        what: "command",
-                        reason: format!(
-                            "received {} while waiting for {what}",
-                            command_name(&other)
-                        ),
-                    })
-                }
-            }
+        // accepted in their order (sequence numbers), before the one that ended the wait
+        for command in &ahead {
+            let body = self.accept_command(command)?;
+            self.queued.push_back(body);
         }
-        outcome.ok_or_else(|| ProtoError::Invalid {
-            what: "command",
-            reason: format!("a command out of turn while waiting for {what}"),
-        })
+        outcome.map_err(|command| self.stopped_by(&command, &what))
     }
 
     /// Interface data messages this node has received, and how many of them arrived in
