@@ -5,6 +5,7 @@
 //! |---|---|---|
 //! | DEM Rayleigh step (Ullrich 2.27) | `dem.time_step`, `dem.rayleigh_time_step` | the DEM node refuses Δt^D above its `rayleigh_fraction` itself; here only reported |
 //! | impact resolution (Ullrich fig. 2.5) | `dem.contact_duration_min` | a 1 m/s impact of the smallest, stiffest particle must last ≥ [`MIN_STEPS_PER_CONTACT`] steps (warn below [`GOOD_STEPS_PER_CONTACT`]) |
+//! | DEM damped contact step | `dem.damped_step_limit`, `_mode`, `_zeta` | the dashpots of sphere contacts (Z = 6 packing, reference overlap) keep velocity Verlet stable only below h = −τ + √(τ² + 4/ω²): warn above [`DAMPED_STEP_WARN_FACTOR`] times it, naming the mode, its ζ and the remedies |
 //! | dilated polyhedra (Ullrich §6.1) | `dem.dilation_impact_velocity_max`, `dem.dilation_force_max` | the cores must not meet: warn when an impact slower than [`DILATION_IMPACT_VELOCITY_MIN`] can drive them together (the run stops naming the pair if they do) |
 //! | 2-D discs: critical step (Madan 2.14–2.16) | `dem.critical_time_step`, `dem.discs` | refused above Δt_cr = 2/ν_max (Lanczos on the initial contacts) |
 //! | DDEM convergence (Madan 3.13–3.14) | `dem.ddem_spectral_radius`, `dem.ddem_kn_over_ep`, `dem.ddem_poisson_ratio` | refused at ρ(B) ≥ 1 of the initial packing, naming k_n/E_p, ν_p and the limit |
@@ -37,6 +38,14 @@ use crate::scene::{Scene, ScheduleKind};
 pub const MIN_STEPS_PER_CONTACT: f64 = 3.0;
 /// ... and by fewer than this gives a rebound error above ~2e-3 (A2 sweep): warn.
 pub const GOOD_STEPS_PER_CONTACT: f64 = 10.0;
+
+/// Steps up to this multiple of the DEM's `damped_step_limit` pass. The estimate assumes six
+/// neighbours counter-rotating at 1 % overlap, which a random packing (its loops of three
+/// frustrate counter-rotation) and smaller overlaps do not reach. Measured with
+/// scenes/glass-beads-rve.toml at e = 0.05 (overlaps ≤ 0.2 % at 100 kPa; limit 1.05e-7 s): 1.9×
+/// sheared stably (stress noise ±9 % early), 2.4× began to heat at the end of consolidation,
+/// 3.8× and 4.75× turned the packing into a gas (coordination 4 instead of 5, ±50 % stress).
+pub const DAMPED_STEP_WARN_FACTOR: f64 = 1.5;
 
 /// Dilated polyhedra whose cores meet in an elastic impact slower than this (m/s) are warned
 /// about: the dilation (or the stiffness) is too small for ordinary impacts (Ullrich needed
@@ -213,6 +222,26 @@ pub fn assess(
                     "a 1 m/s impact of the smallest, stiffest particle lasts only {steps:.1} DEM steps ({tc:.3e} s): rebound velocities err by ~{:.1e} (faster impacts: more); use Δt^D ≤ {good:.3e} s for 1e-4", impact_error(steps)
                 ));
             }
+        }
+    }
+    // the dashpots of sphere contacts: strong damping shortens the stable step
+    if let (Some(&dt), Some(&h)) = (d.get("time_step"), d.get("damped_step_limit")) {
+        let mode = match d.get("damped_step_mode") {
+            Some(1.0) => "tangential–rotational (neighbours turning in opposite senses)",
+            _ => "normal",
+        };
+        let zeta = d.get("damped_step_zeta").copied().unwrap_or(f64::NAN);
+        let what = format!(
+            "Δt^D = {dt:.3e} s = {:.3} of the damped limit {h:.3e} s of sphere contacts (its {mode} mode, ζ = {zeta:.2}, in a packing of coordination 6 at 1 % overlap)",
+            dt / h
+        );
+        if dt > DAMPED_STEP_WARN_FACTOR * h {
+            push(Level::Warn, "DEM damped contact step", format!(
+                "{what}, beyond {DAMPED_STEP_WARN_FACTOR}× of which the dashpots make the explicit update diverge in a dense packing — it heats up, contacts flicker and it loses strength, while the Rayleigh check passes. Use dem.time_step ≤ {:.3e} s, a larger restitution, or `damping_ratio` in [[dem.interactions]] (Wellmann's normal-only dashpot, W 3.29)",
+                DAMPED_STEP_WARN_FACTOR * h
+            ));
+        } else {
+            push(Level::Info, "DEM damped contact step", what);
         }
     }
     // 2-D discs (Madan): the critical step of central differences and the DDEM's ρ(B) < 1
@@ -625,5 +654,43 @@ mod tests {
         assert!(assess(&s, Some(&m(&[])), None)
             .iter()
             .all(|x| x.limit != "dilated polyhedra"));
+    }
+
+    #[test]
+    fn steps_beyond_the_damped_limit_of_sphere_contacts_are_warned_with_the_mode() {
+        let s = dem_only();
+        let found = |dt: f64, mode: f64| {
+            assess(
+                &s,
+                Some(&m(&[
+                    ("time_step", dt),
+                    ("rayleigh_time_step", 1.8e-6),
+                    ("damped_step_limit", 1.05e-7),
+                    ("damped_step_mode", mode),
+                    ("damped_step_zeta", 5.6),
+                ])),
+                None,
+            )
+            .into_iter()
+            .find(|x| x.limit == "DEM damped contact step")
+            .unwrap()
+        };
+        let over = found(5e-7, 1.0);
+        assert_eq!(over.level, Level::Warn);
+        assert!(
+            over.message.contains("tangential–rotational")
+                && over.message.contains("ζ = 5.60")
+                && over.message.contains("dem.time_step ≤ 1.575e-7 s")
+                && over.message.contains("damping_ratio"),
+            "{over}"
+        );
+        assert!(found(5e-7, 0.0).message.contains("its normal mode"));
+        assert_eq!(found(1e-7, 1.0).level, Level::Info);
+        assert_eq!(found(1.5e-7, 1.0).level, Level::Info);
+        assert_eq!(found(1.6e-7, 1.0).level, Level::Warn);
+        // no spheres: no such finding
+        assert!(assess(&s, Some(&m(&[("time_step", 1e-6)])), None)
+            .iter()
+            .all(|x| x.limit != "DEM damped contact step"));
     }
 }

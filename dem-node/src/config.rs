@@ -166,12 +166,14 @@ pub struct InteractionConfig {
     pub restitution: Option<f64>,
     #[serde(default)]
     pub rolling_friction: Option<f64>,
-    /// Superquadric contacts of this pair: Wellmann's quasi-static dashpot ζ·2√(c_N m*) δ̇
-    /// (W 3.29; ζ = 1 critical, W uses 0.9) instead of the restitution-calibrated one.
+    /// Contacts of this pair (any shape): Wellmann's quasi-static dashpot ζ·2√(c_N m*) δ̇
+    /// (W 3.29; ζ = 1 critical, W uses 0.9), normal only, instead of the
+    /// restitution-calibrated normal and tangential dashpots.
     #[serde(default)]
     pub damping_ratio: Option<f64>,
-    /// Superquadric contacts of this pair: Brilliantov's viscoelastic dashpot
-    /// (3/2)γE*A√δ δ̇ with A in s (W 3.30) instead of the restitution-calibrated one.
+    /// Contacts of this pair (any shape): Brilliantov's viscoelastic dashpot
+    /// (3/2)γE*A√δ δ̇ = c_N A δ̇ with A in s (W 3.30), normal only, instead of the
+    /// restitution-calibrated ones.
     #[serde(default)]
     pub viscoelastic_time: Option<f64>,
 }

@@ -21,6 +21,16 @@
 //!   t_c = 2.87 (m*²/(R* E*² v))^{1/5}, over the same pairs with the smallest radii (and
 //!   masses) of each material; m* = m for a wall.
 //!
+//! - `damped_step_limit` (with spheres): the largest explicit step at which the dashpots of
+//!   sphere contacts keep the update stable, over the pairs of sphere materials (smallest
+//!   spheres, reference overlap) — see [`damped_step`] and [`sphere_pair_damped_step`];
+//!   `damped_step_mode` says which mode sets it (0 normal, 1 tangential–rotational) and
+//!   `damped_step_zeta` its damping ratio. A strong restitution-calibrated dashpot (e ≲ 0.1)
+//!   damps the tangential–rotational mode of a sphere contact beyond critical (its mass is
+//!   2/7 of m*), and a damping force taken at the half-step velocity then diverges at steps
+//!   far below the Rayleigh step: rigid glass beads at e = 0.05 and Δt = 0.28 Δt_R turned
+//!   into a gas at 100 kPa (docs/full-size.md, "Glass beads").
+//!
 //! With the linear contact law (materials' `normal_stiffness`) the stiffnesses are the pairs'
 //! springs k_n and the duration is half the undamped period, π√(m*/k_n).
 //!
@@ -52,6 +62,44 @@ pub fn hertz_stiffness(e_star: f64, r_eff: f64, overlap: f64) -> f64 {
 /// t_c = 2.87 (m*²/(R* E*² v))^{1/5} (2.87 ≈ 2 (15/16)^{2/5} ∫₀¹ dx/√(1 − x^{5/2})).
 pub fn hertz_contact_duration(m_eff: f64, r_eff: f64, e_star: f64, v: f64) -> f64 {
     2.87 * (m_eff * m_eff / (r_eff * e_star * e_star * v)).powf(0.2)
+}
+
+/// Coordination of the reference packing of [`sphere_pair_damped_step`] (a dense packing's).
+pub const REFERENCE_COORDINATION: f64 = 6.0;
+
+/// Largest stable step of velocity Verlet for ẍ = −ω² x − τω² ẋ, the damping force taken at
+/// the half-step velocity as in the DEM's drift → forces → kick: with ζ = ωτ/2 the update is
+/// stable for ωh ≤ 2(√(1 + ζ²) − ζ), i.e. h ≤ −τ + √(τ² + 4/ω²) (a dashpot proportional to its
+/// spring, c = τk, damps every mode of a network of such contacts with the same τ).
+pub fn damped_step(omega: f64, tau: f64) -> f64 {
+    -tau + (tau * tau + 4.0 / (omega * omega)).sqrt()
+}
+
+/// [`damped_step`] of the two stiffest modes of a packing of spheres a, b of coordination
+/// [`REFERENCE_COORDINATION`] Z with isotropic fabric, contact springs `k_n`, `k_t` and
+/// dashpots `c_n`, `c_t`: neighbours moving apart along their normals, ω² = (Z/3) k_n/m*,
+/// and neighbours rotating in opposite senses, ω² = (2Z/3) k_t r(r_a + r_b)/I for the sphere
+/// (of the two) with the larger r(r_a + r_b)/I — its tangential mode, whose mass
+/// (1/m_a + 1/m_b + r_a²/I_a + r_b²/I_b)⁻¹ is 2/7 of m* for solid spheres, is the stiffer and
+/// the more damped one. Returns (step, mode 0 normal / 1 tangential, ζ of that mode).
+pub fn sphere_pair_damped_step(
+    (ra, ma, ia): (f64, f64, f64),
+    (rb, mb, ib): (f64, f64, f64),
+    (k_n, c_n): (f64, f64),
+    (k_t, c_t): (f64, f64),
+) -> (f64, u8, f64) {
+    let z = REFERENCE_COORDINATION;
+    let m_eff = ma * mb / (ma + mb);
+    let w_n = (z / 3.0 * k_n / m_eff).sqrt();
+    let lever = (ra * (ra + rb) / ia).max(rb * (ra + rb) / ib);
+    let w_t = (2.0 * z / 3.0 * k_t * lever).sqrt();
+    let (tau_n, tau_t) = (c_n / k_n, if k_t > 0.0 { c_t / k_t } else { 0.0 });
+    let (h_n, h_t) = (damped_step(w_n, tau_n), damped_step(w_t, tau_t));
+    if h_t < h_n {
+        (h_t, 1, 0.5 * w_t * tau_t)
+    } else {
+        (h_n, 0, 0.5 * w_n * tau_n)
+    }
 }
 
 /// Smallest, largest and summed radius, count and masses of the particles of one material.
@@ -110,6 +158,15 @@ pub fn contact_limits(
         }
         if r > e.r_max {
             (e.r_max, e.m_of_r_max) = (r, m);
+        }
+    }
+    // per material, its smallest sphere: (r, m, I)
+    let mut spheres: Vec<Option<(f64, f64, f64)>> = vec![None; materials.materials.len()];
+    for k in (0..p.len()).filter(|&k| p.template(k).is_none()) {
+        let small =
+            spheres[p.material[k] as usize].get_or_insert((p.radius[k], p.mass[k], p.inertia[k]));
+        if p.radius[k] < small.0 {
+            *small = (p.radius[k], p.mass[k], p.inertia[k]);
         }
     }
     let radii: Vec<f64> = (0..p.len()).map(contact_radius).collect();
@@ -179,6 +236,41 @@ pub fn contact_limits(
     ];
     if interface_material.is_some() {
         out.push(("interface_contact_stiffness_typical".into(), k_interface));
+    }
+    // the dashpots' stability limit of sphere contacts
+    let present: Vec<(u16, (f64, f64, f64))> = spheres
+        .iter()
+        .enumerate()
+        .filter_map(|(m, s)| s.map(|s| (m as u16, s)))
+        .collect();
+    let mut damped = (f64::INFINITY, 0u8, 0.0);
+    for (x, &(a, sa)) in present.iter().enumerate() {
+        for &(b, sb) in &present[x..] {
+            let pp = materials.pair(a, b);
+            let k_n = pair_k(pp, sa.0, sb.0);
+            let k_t = k_n * pp.sqrt_stiffness_ratio.powi(2);
+            let m_eff = sa.1 * sb.1 / (sa.1 + sb.1);
+            // the dashpots of `hertz_mindlin::contact_force` at that stiffness
+            let c_n = if pp.viscoelastic_time > 0.0 {
+                k_n * pp.viscoelastic_time
+            } else {
+                pp.damping_factor * (k_n * m_eff).sqrt()
+            };
+            let c_t = if pp.no_tangential_dashpot {
+                0.0
+            } else {
+                c_n * pp.sqrt_stiffness_ratio
+            };
+            let h = sphere_pair_damped_step(sa, sb, (k_n, c_n), (k_t, c_t));
+            if h.0 < damped.0 {
+                damped = h;
+            }
+        }
+    }
+    if damped.0.is_finite() {
+        out.push(("damped_step_limit".into(), damped.0));
+        out.push(("damped_step_mode".into(), damped.1 as f64));
+        out.push(("damped_step_zeta".into(), damped.2));
     }
     // the dilated-polyhedron validity limit
     let (mut v_max, mut f_max) = (f64::INFINITY, f64::INFINITY);
@@ -339,6 +431,115 @@ spheres = [
             &l,
             "contact_stiffness_typical",
             2.0 * e_gg * (0.001f64 * 2e-5).sqrt(),
+        );
+    }
+
+    /// Amplitude after `n` steps of ẍ = −ω² x − τω² ẋ from x = 1 by the DEM's scheme: half
+    /// kick, drift, force at the half-step velocity, half kick.
+    fn damped_run(omega: f64, tau: f64, h: f64, n: usize) -> f64 {
+        let (mut x, mut v) = (1.0f64, 0.0f64);
+        let force = |x: f64, v: f64| -omega * omega * (x + tau * v);
+        let mut a = force(x, v);
+        for _ in 0..n {
+            v += 0.5 * h * a;
+            x += h * v;
+            a = force(x, v);
+            v += 0.5 * h * a;
+        }
+        x.abs().max((v / omega).abs())
+    }
+
+    #[test]
+    fn damped_step_is_where_velocity_verlet_with_a_dashpot_diverges() {
+        for (omega, zeta) in [(1.0, 0.0), (1.0, 0.3), (2e6, 1.0), (2e6, 5.6)] {
+            let tau = 2.0 * zeta / omega;
+            let h = damped_step(omega, tau);
+            if zeta == 0.0 {
+                assert!((h - 2.0 / omega).abs() < 1e-12 / omega);
+            }
+            let (below, above) = (
+                damped_run(omega, tau, 0.99 * h, 20_000),
+                damped_run(omega, tau, 1.01 * h, 20_000),
+            );
+            println!(
+                "ω = {omega:e}, ζ = {zeta}: h = {h:e}, amplitude {below:e} below, {above:e} above"
+            );
+            // near the limit leapfrog's velocity amplitude exceeds ω x₀ (by 1/√(1 − (ωh/2)²)
+            // undamped), but it stays bounded; above it grows without bound
+            assert!(below < 50.0, "stable below: {below}");
+            assert!(above.is_nan() || above > 1e6, "diverges above: {above}");
+        }
+    }
+
+    #[test]
+    fn damped_step_of_equal_spheres_by_hand() {
+        // equal solid spheres: the opposite rotation of Z = 6 neighbours, ω² = (2Z/3) k_t 2r²/I
+        // = 20 k_t/m; the normal mode ω² = (Z/3) k_n/m* = 4 k_n/m
+        let (r, m) = (1e-3, 4e-6);
+        let i = 0.4 * m * r * r;
+        let (k_n, k_t) = (1e6, 0.85e6);
+        let (c_n, c_t) = (0.5, 0.4);
+        let (h, mode, zeta) = sphere_pair_damped_step((r, m, i), (r, m, i), (k_n, c_n), (k_t, c_t));
+        let w_t = (20.0 * k_t / m).sqrt();
+        let w_n = (4.0 * k_n / m).sqrt();
+        let h_t = damped_step(w_t, c_t / k_t);
+        assert!(h_t < damped_step(w_n, c_n / k_n));
+        assert_eq!(mode, 1);
+        assert!((h - h_t).abs() < 1e-15, "{h} vs {h_t}");
+        assert!((zeta - 0.5 * w_t * c_t / k_t).abs() < 1e-12);
+        // without a tangential dashpot a weakly damped normal mode can set it
+        let (h0, mode0, _) = sphere_pair_damped_step((r, m, i), (r, m, i), (k_n, 5.0), (k_t, 0.0));
+        assert_eq!(mode0, 0);
+        assert!((h0 - damped_step(w_n, 5.0 / k_n)).abs() < 1e-15);
+    }
+
+    #[test]
+    fn glass_beads_report_the_damped_step_of_their_restitution_dashpot() {
+        // 1 mm glass beads: e = 0.05 (an overdamped dashpot) against e = 0.5 and Wellmann's
+        // normal-only ζ = 0.9
+        let scene = |extra: &str, e: f64| {
+            format!(
+                "[dem]\ntime_step = 1e-7\n[dem.materials.glass]\nyoungs_modulus = 63e9\npoisson_ratio = 0.23\ndensity = 2550.0\nrestitution = {e}\nfriction = 0.16\n{extra}[[dem.particles]]\nkind = \"list\"\nmaterial = \"glass\"\nspheres = [{{ position = [0.0, 0.0, 0.0], radius = 0.001 }}, {{ position = [1.0, 0.0, 0.0], radius = 0.0012 }}]\n"
+            )
+        };
+        let limit = |s: String| {
+            let cfg = parse_scene_section(&s).unwrap().unwrap();
+            let engine = crate::Engine::from_config(&cfg, std::path::Path::new(".")).unwrap();
+            let l: std::collections::BTreeMap<String, f64> = engine.limits().into_iter().collect();
+            (
+                l["damped_step_limit"],
+                l["damped_step_mode"],
+                l["damped_step_zeta"],
+            )
+        };
+        let strong = limit(scene("", 0.05));
+        let weak = limit(scene("", 0.5));
+        let zeta = limit(scene(
+            "[[dem.interactions]]\nmaterials = [\"glass\", \"glass\"]\ndamping_ratio = 0.9\n",
+            0.05,
+        ));
+        println!("e = 0.05 {strong:?}, e = 0.5 {weak:?}, ζ = 0.9 {zeta:?}");
+        assert_eq!(strong.1, 1.0);
+        assert!(strong.2 > 1.0, "overdamped tangential mode {strong:?}");
+        assert!(weak.0 > 4.0 * strong.0, "{weak:?} {strong:?}");
+        // normal only: ζ of the normal mode is ζ √(Z/3)
+        assert_eq!(zeta.1, 0.0);
+        assert!((zeta.2 - 0.9 * 2f64.sqrt()).abs() < 1e-9, "{zeta:?}");
+        // by hand for the smallest bead pair at 1 % overlap
+        let pairs = crate::materials::MaterialTable::from_config(
+            &parse_scene_section(&scene("", 0.05)).unwrap().unwrap(),
+        );
+        let pp = pairs.pair(0, 0);
+        let (r, rho) = (1e-3, 2550.0);
+        let m = rho * 4.0 / 3.0 * std::f64::consts::PI * r * r * r;
+        let k_n = hertz_stiffness(pp.e_star, r / 2.0, 0.01 * r);
+        let k_t = 8.0 * pp.g_star * (r / 2.0 * 0.01 * r).sqrt();
+        let tau_t = pp.damping_factor * (k_n * m / 2.0).sqrt() * pp.sqrt_stiffness_ratio / k_t;
+        let want = damped_step((20.0 * k_t / m).sqrt(), tau_t);
+        assert!(
+            (strong.0 - want).abs() < 1e-9 * want,
+            "{} vs {want}",
+            strong.0
         );
     }
 }

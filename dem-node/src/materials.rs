@@ -59,9 +59,18 @@ pub struct PairParams {
     /// Its tangential spring k_t = k_n · 4G*/E*, N/m.
     #[serde(default)]
     pub linear_tangential: f64,
+    /// A of Brilliantov's viscoelastic dashpot γ_n = S_n A (W 3.30) where the pair has
+    /// `viscoelastic_time`; 0 otherwise (γ_n = `damping_factor` √(S_n m*)).
+    #[serde(default)]
+    pub viscoelastic_time: f64,
+    /// The pair's law has no tangential dashpot (Wellmann's laws (3.29)/(3.30) damp the normal
+    /// direction only); the restitution-calibrated law (Ullrich 2.18, LIGGGHTS) has one.
+    #[serde(default)]
+    pub no_tangential_dashpot: bool,
 }
 
-/// The normal dashpot of a superquadric contact (Wellmann 3.27–3.30).
+/// The dashpot of a material pair's contacts (Wellmann 3.27–3.30), for every shape: spheres
+/// and dilated polyhedra take the same choice in `hertz_mindlin::contact_force`.
 #[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Default)]
 pub enum ShapedDamping {
     /// −2√(5/6)β√(c_N m*) δ̇ with β from the pair's restitution, as for spheres.
@@ -138,11 +147,19 @@ impl MaterialTable {
                 };
                 // F_d = −γ v, γ = damping_factor √(S_n m*): −2√(5/6)β for Hertz (Tsuji), −2β
                 // = 2ζ for the linear spring (exact restitution of the unclamped law)
-                let damping_factor = if linear_normal > 0.0 {
+                let restitution_factor = if linear_normal > 0.0 {
                     -2.0 * beta
                 } else {
                     -2.0 * crate::hertz_mindlin::SQRT_5_6 * beta
                 };
+                // Wellmann's dashpots act on the normal direction only (W 3.29–3.31): ζ of
+                // the critical 2√(S_n m*), or S_n A
+                let (damping_factor, viscoelastic_time, no_tangential_dashpot) =
+                    match shaped_damping {
+                        ShapedDamping::Restitution => (restitution_factor, 0.0, false),
+                        ShapedDamping::QuasiStatic(zeta) => (2.0 * zeta, 0.0, true),
+                        ShapedDamping::Viscoelastic(a) => (0.0, a, true),
+                    };
                 let mindlin = crate::elliptic_hertz::MindlinConstants::new(
                     a.youngs_modulus,
                     a.poisson_ratio,
@@ -166,6 +183,8 @@ impl MaterialTable {
                     shaped_damping,
                     linear_normal,
                     linear_tangential: linear_normal * sqrt_stiffness_ratio.powi(2),
+                    viscoelastic_time,
+                    no_tangential_dashpot,
                 });
             }
         }

@@ -838,3 +838,115 @@ fn linearised_tracking_matches_exact_tracking() {
         }
     }
 }
+
+/// Velocity after a tip-first drop at `v0` m/s (no gravity) of one body onto a plane with the
+/// interaction table `extra`, the body a sphere of radius 1 mm (`sphere`) or the superquadric
+/// of the same radius with ε = 1; returns the rebound's restitution.
+fn drop_on_plane(extra: &str, v0: f64, sphere: bool) -> f64 {
+    let scene = format!(
+        "{}[[dem.walls]]\nkind = \"plane\"\nmaterial = \"grain\"\npoint = [0.0, 0.0, 0.0]\nnormal = [0.0, 0.0, 1.0]\n{extra}",
+        ELASTIC
+            .replace("restitution = 1.0", "restitution = 0.6")
+    );
+    let (x, v, w) = (
+        V3::new(0.0, 0.0, 1.05e-3),
+        V3::new(0.0, 0.0, -v0),
+        V3::zeros(),
+    );
+    let mut e = common::engine(&scene);
+    if sphere {
+        e.particles_mut().push(x, v, w, 1e-3, 1000.0, 0);
+        e.refresh_forces();
+    } else {
+        e = engine_with(
+            &scene,
+            &[(x, v, w, Orientation::identity(), sq([1e-3; 3], 1.0, 1.0))],
+        );
+    }
+    let mut touched = false;
+    for _ in 0..100_000 {
+        e.step().unwrap();
+        touched |= e.num_wall_contacts() > 0;
+        if touched && e.num_wall_contacts() == 0 {
+            break;
+        }
+    }
+    assert!(touched);
+    e.particles().velocity[0].z / v0
+}
+
+/// `damping_ratio` and `viscoelastic_time` are Wellmann's normal-only dashpots (W 3.29, 3.30)
+/// for every shape: a sphere rebounds from them as the superquadric sphere of the same radius
+/// does (the two laws then agree), and differently from the restitution-calibrated law; and
+/// the sphere law then has no tangential dashpot either.
+#[test]
+fn spheres_take_wellmanns_dashpots_as_superquadrics_do() {
+    let table =
+        |key: &str| format!("[[dem.interactions]]\nmaterials = [\"grain\", \"grain\"]\n{key}\n");
+    let cases = [
+        ("", 0.3),
+        ("damping_ratio = 0.9", 0.3),
+        ("damping_ratio = 0.2", 0.3),
+        ("viscoelastic_time = 2e-5", 0.05),
+        ("viscoelastic_time = 2e-5", 0.5),
+    ];
+    let mut seen = Vec::new();
+    for (key, v0) in cases {
+        let extra = if key.is_empty() {
+            String::new()
+        } else {
+            table(key)
+        };
+        let (s, q) = (
+            drop_on_plane(&extra, v0, true),
+            drop_on_plane(&extra, v0, false),
+        );
+        println!("{key:>26} at {v0} m/s: sphere e = {s:.6}, superquadric e = {q:.6}");
+        assert!((s - q).abs() < 2e-3, "{key}: {s} vs {q}");
+        seen.push(s);
+    }
+    assert!((seen[0] - 0.6).abs() < 0.01, "{}", seen[0]);
+    assert!(
+        seen[1] < 0.2 && seen[2] > seen[1] && seen[2] < seen[0],
+        "{seen:?}"
+    );
+    assert!(
+        seen[4] < seen[3],
+        "viscoelastic: slower impacts rebound more {seen:?}"
+    );
+    // the tangential dashpot: a touching pair sliding at 1 cm/s, evaluated without history
+    // (dt = 0, no spring): the restitution law damps it, Wellmann's laws do not
+    for (key, damped) in [
+        ("", true),
+        ("damping_ratio = 0.9", false),
+        ("viscoelastic_time = 2e-5", false),
+    ] {
+        let cfg = dem::config::parse_scene_section(&format!(
+            "{}[[dem.particles]]\nkind = \"list\"\nmaterial = \"grain\"\nspheres = []\n{}",
+            ELASTIC
+                .replace("friction = 0.0", "friction = 0.5")
+                .replace("restitution = 1.0", "restitution = 0.6"),
+            if key.is_empty() {
+                String::new()
+            } else {
+                table(key)
+            }
+        ))
+        .unwrap()
+        .unwrap();
+        let pairs = dem::materials::MaterialTable::from_config(&cfg);
+        let mut shear = V3::zeros();
+        let cf = dem::hertz_mindlin::contact_force(
+            pairs.pair(0, 0),
+            1e-6,
+            5e-4,
+            2e-6,
+            &V3::z(),
+            &V3::new(0.01, 0.0, 0.0),
+            &mut shear,
+            0.0,
+        );
+        println!("{key:>26}: tangential {:?}", cf.tangential);
+        assert_eq!(cf.tangential.norm() > 0.0, damped, "{key}");
+    }
+}
