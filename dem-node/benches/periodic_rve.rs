@@ -7,8 +7,8 @@
 //!
 //! RVE_SCENE (default ../scenes/rve-triaxial.toml, the L = 10 mm cell of 1,642 superquadrics),
 //! RVE_CACHE (file: the state at the start of the stage is restored from it when it holds a
-//! snapshot of this engine and scene, else written there — the first run pays the
-//! generation, minutes for the L = 10 mm cell), RVE_THREADS (default: all), RVE_WARMUP
+//! snapshot of this engine with the scene's particle count at that stage, else written there — the first run pays the
+//! generation, minutes for the L = 10 mm cell), RVE_THREADS (default: the scene's, else all), RVE_WARMUP
 //! (untimed steps in the stage first, default 200).
 //!
 //! `cargo bench -p dem-node --bench periodic_rve`
@@ -22,26 +22,23 @@ fn main() {
     let path = std::env::var("RVE_SCENE").unwrap_or_else(|_| "../scenes/rve-triaxial.toml".into());
     let text = std::fs::read_to_string(&path)
         .unwrap_or_else(|e| panic!("RVE_SCENE {path}: {e} (run from dem-node/ or set RVE_SCENE)"));
-    let threads = std::env::var("RVE_THREADS").ok();
-    let text = match &threads {
-        Some(n) => text.replacen("[dem]\n", &format!("[dem]\nthreads = {n}\n"), 1),
-        None => text,
+    let parse = |text: &str| {
+        parse_scene_section(text)
+            .unwrap_or_else(|e| panic!("{path}: {e}"))
+            .unwrap_or_else(|| panic!("{path}: no [dem] section"))
     };
-    let cfg = parse_scene_section(&text)
-        .unwrap_or_else(|e| panic!("{path}: {e}"))
-        .unwrap_or_else(|| panic!("{path}: no [dem] section"));
-    let cores = threads
-        .and_then(|n| n.parse().ok())
-        .unwrap_or_else(rayon::current_num_threads);
+    let mut cfg = parse(&text);
+    if let Ok(n) = std::env::var("RVE_THREADS") {
+        cfg.threads = Some(n.parse().expect("RVE_THREADS: a number of threads"));
+    }
+    let cores = cfg.threads.unwrap_or_else(rayon::current_num_threads);
     let base = std::path::Path::new(&path)
         .parent()
         .unwrap_or(std::path::Path::new("."));
-    let mut e = Engine::from_config(&cfg, base).expect("engine");
-    let stages = cfg
-        .periodic
-        .as_ref()
-        .map(|p| p.stages.len())
-        .expect("RVE_SCENE has no [dem.periodic] programme");
+    let engine = || Engine::from_config(&cfg, base).expect("engine");
+    let mut e = engine();
+    let stages = cfg.periodic.as_ref().map_or(0, |p| p.stages.len());
+    assert!(stages > 0, "{path}: no [[dem.periodic.stages]] programme");
     let stage = env("RVE_STAGE", stages - 1);
     assert!(
         stage < stages,
@@ -53,11 +50,18 @@ fn main() {
         e.time_step()
     );
     let cache = std::env::var("RVE_CACHE").ok();
+    // a cache of another scene or stage (the engine checks only the snapshot's structure) is
+    // not used: generated again and overwritten
+    let n0 = e.num_particles();
     let restored = cache
         .as_ref()
         .and_then(|p| std::fs::read(p).ok())
         .is_some_and(|bytes| e.restore(&bytes).is_ok())
+        && e.num_particles() == n0
         && e.cell().is_some_and(|c| c.stage == stage);
+    if !restored {
+        e = engine();
+    }
     if restored {
         println!(
             "  state at the stage's start restored from {}",
@@ -66,9 +70,10 @@ fn main() {
     } else {
         let (t, c) = (Instant::now(), cpu_seconds());
         let mut steps = 0usize;
+        // in steps of 100: the timing starts at most 99 + RVE_WARMUP steps into the stage
         while e.cell().expect("a periodic cell").stage < stage {
-            e.advance(1000).expect("generation");
-            steps += 1000;
+            e.advance(100).expect("generation");
+            steps += 100;
             assert!(
                 !e.programme_finished(),
                 "the programme ended before stage {stage}"

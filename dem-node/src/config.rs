@@ -1136,6 +1136,16 @@ impl DemConfig {
             if let Some(v) = ia.rolling_friction {
                 c.non_negative(pi(&["dem", "interactions"], k, &["rolling_friction"]), v);
             }
+            if ia.restitution.is_some()
+                && (ia.damping_ratio.is_some() || ia.viscoelastic_time.is_some())
+            {
+                c.fail(
+                    pi(&["dem", "interactions"], k, &["restitution"]),
+                    "`restitution` calibrates the dashpot that `damping_ratio` / \
+                     `viscoelastic_time` replace: give one of them"
+                        .into(),
+                );
+            }
             match (ia.damping_ratio, ia.viscoelastic_time) {
                 (Some(_), Some(_)) => c.fail(
                     pi(&["dem", "interactions"], k, &["viscoelastic_time"]),

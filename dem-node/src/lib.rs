@@ -2705,6 +2705,7 @@ impl Engine {
             &self.state.particles,
             &self.materials,
             interface,
+            self.cfg.rotation,
         ));
         if !self.volumes.is_empty() {
             let p = &self.state.particles;

@@ -22,8 +22,9 @@
 //!   masses) of each material; m* = m for a wall.
 //!
 //! - `damped_step_limit` (with spheres): the largest explicit step at which the dashpots of
-//!   sphere contacts keep the update stable, over the pairs of sphere materials (smallest
-//!   spheres, reference overlap) — see [`damped_step`] and [`sphere_pair_damped_step`];
+//!   sphere contacts keep the update stable, over the pairs of sphere materials (the smallest
+//!   sphere of each against the smallest and the largest of the other, reference overlap;
+//!   with `rotation = false` only the normal mode) — see [`damped_step`] and [`sphere_pair_damped_step`];
 //!   `damped_step_mode` says which mode sets it (0 normal, 1 tangential–rotational) and
 //!   `damped_step_zeta` its damping ratio. A strong restitution-calibrated dashpot (e ≲ 0.1)
 //!   damps the tangential–rotational mode of a sphere contact beyond critical (its mass is
@@ -124,6 +125,7 @@ pub fn contact_limits(
     p: &Particles,
     materials: &MaterialTable,
     interface_material: Option<u16>,
+    rotation: bool,
 ) -> Vec<(String, f64)> {
     if p.is_empty() {
         return Vec::new();
@@ -160,13 +162,17 @@ pub fn contact_limits(
             (e.r_max, e.m_of_r_max) = (r, m);
         }
     }
-    // per material, its smallest sphere: (r, m, I)
-    let mut spheres: Vec<Option<(f64, f64, f64)>> = vec![None; materials.materials.len()];
+    // per material, its smallest and largest sphere: (r, m, I) each
+    type Sphere = (f64, f64, f64);
+    let mut spheres: Vec<Option<(Sphere, Sphere)>> = vec![None; materials.materials.len()];
     for k in (0..p.len()).filter(|&k| p.template(k).is_none()) {
-        let small =
-            spheres[p.material[k] as usize].get_or_insert((p.radius[k], p.mass[k], p.inertia[k]));
-        if p.radius[k] < small.0 {
-            *small = (p.radius[k], p.mass[k], p.inertia[k]);
+        let this = (p.radius[k], p.mass[k], p.inertia[k]);
+        let (small, large) = spheres[p.material[k] as usize].get_or_insert((this, this));
+        if this.0 < small.0 {
+            *small = this;
+        }
+        if this.0 > large.0 {
+            *large = this;
         }
     }
     let radii: Vec<f64> = (0..p.len()).map(contact_radius).collect();
@@ -238,17 +244,34 @@ pub fn contact_limits(
         out.push(("interface_contact_stiffness_typical".into(), k_interface));
     }
     // the dashpots' stability limit of sphere contacts
-    let present: Vec<(u16, (f64, f64, f64))> = spheres
+    let present: Vec<(u16, (Sphere, Sphere))> = spheres
         .iter()
         .enumerate()
         .filter_map(|(m, s)| s.map(|s| (m as u16, s)))
         .collect();
     let mut damped = (f64::INFINITY, 0u8, 0.0);
-    for (x, &(a, sa)) in present.iter().enumerate() {
-        for &(b, sb) in &present[x..] {
+    // the smallest sphere of one material against the smallest and the largest of the other
+    // (a larger partner stiffens the contact and lengthens the small sphere's lever)
+    let mut size_pairs = Vec::new();
+    for (x, &(a, (small_a, large_a))) in present.iter().enumerate() {
+        for &(b, (small_b, large_b)) in &present[x..] {
+            size_pairs.extend([
+                (a, b, small_a, small_b),
+                (a, b, small_a, large_b),
+                (a, b, large_a, small_b),
+            ]);
+        }
+    }
+    for (a, b, sa, sb) in size_pairs {
+        {
             let pp = materials.pair(a, b);
             let k_n = pair_k(pp, sa.0, sb.0);
-            let k_t = k_n * pp.sqrt_stiffness_ratio.powi(2);
+            // with rotation locked there is no counter-rotation mode
+            let k_t = if rotation {
+                k_n * pp.sqrt_stiffness_ratio.powi(2)
+            } else {
+                0.0
+            };
             let m_eff = sa.1 * sb.1 / (sa.1 + sb.1);
             // the dashpots of `hertz_mindlin::contact_force` at that stiffness
             let c_n = if pp.viscoelastic_time > 0.0 {
@@ -525,21 +548,31 @@ spheres = [
         // normal only: ζ of the normal mode is ζ √(Z/3)
         assert_eq!(zeta.1, 0.0);
         assert!((zeta.2 - 0.9 * 2f64.sqrt()).abs() < 1e-9, "{zeta:?}");
-        // by hand for the smallest bead pair at 1 % overlap
+        // by hand: the 1 mm bead against the 1.2 mm one (stiffer than two 1 mm beads, and a
+        // longer lever for the small one) at 1 % overlap of the smaller
         let pairs = crate::materials::MaterialTable::from_config(
             &parse_scene_section(&scene("", 0.05)).unwrap().unwrap(),
         );
         let pp = pairs.pair(0, 0);
-        let (r, rho) = (1e-3, 2550.0);
-        let m = rho * 4.0 / 3.0 * std::f64::consts::PI * r * r * r;
-        let k_n = hertz_stiffness(pp.e_star, r / 2.0, 0.01 * r);
-        let k_t = 8.0 * pp.g_star * (r / 2.0 * 0.01 * r).sqrt();
-        let tau_t = pp.damping_factor * (k_n * m / 2.0).sqrt() * pp.sqrt_stiffness_ratio / k_t;
-        let want = damped_step((20.0 * k_t / m).sqrt(), tau_t);
+        let (ra, rb, rho) = (1e-3, 1.2e-3, 2550.0);
+        let mass = |r: f64| rho * 4.0 / 3.0 * std::f64::consts::PI * r * r * r;
+        let (ma, mb) = (mass(ra), mass(rb));
+        let r_eff = ra * rb / (ra + rb);
+        let k_n = hertz_stiffness(pp.e_star, r_eff, 0.01 * ra);
+        let k_t = 8.0 * pp.g_star * (r_eff * 0.01 * ra).sqrt();
+        let m_eff = ma * mb / (ma + mb);
+        let tau_t = pp.damping_factor * (k_n * m_eff).sqrt() * pp.sqrt_stiffness_ratio / k_t;
+        // ω² = (2Z/3) k_t r_a (r_a + r_b) / I_a, I_a = 2/5 m_a r_a²
+        let w_t = (4.0 * k_t * ra * (ra + rb) / (0.4 * ma * ra * ra)).sqrt();
+        let want = damped_step(w_t, tau_t);
         assert!(
             (strong.0 - want).abs() < 1e-9 * want,
             "{} vs {want}",
             strong.0
         );
+        // with rotation locked only the normal mode is left
+        let locked = limit(scene("", 0.05).replace("[dem]\n", "[dem]\nrotation = false\n"));
+        assert_eq!(locked.1, 0.0, "{locked:?}");
+        assert!(locked.0 > strong.0, "{locked:?}");
     }
 }

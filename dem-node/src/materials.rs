@@ -39,7 +39,9 @@ pub struct PairParams {
     pub beta: f64,
     /// √(S_t/S_n) = √(4G*/E*) (eqs. 2.12, 2.16): ratio of the tangential to the normal damping.
     pub sqrt_stiffness_ratio: f64,
-    /// Constant factors of `hertz_mindlin::contact_force`: 2E*, 8G*, 4/3 E*, −2√(5/6)β.
+    /// Constant factors of `hertz_mindlin::contact_force`: 2E*, 8G*, 4/3 E*, and the dashpot's
+    /// γ_n/√(S_n m*): −2√(5/6)β (restitution-calibrated), 2ζ (a pair's `damping_ratio`,
+    /// W 3.29), 0 with `viscoelastic_time`.
     pub two_e_star: f64,
     pub eight_g_star: f64,
     pub four_thirds_e_star: f64,
@@ -49,7 +51,8 @@ pub struct PairParams {
     pub mindlin_lambda1: f64,
     #[serde(default)]
     pub mindlin_lambda2: f64,
-    /// Dashpot of superquadric contacts.
+    /// The pair's dashpot (every shape; the superquadric law reads it here, the sphere kernel
+    /// through `damping_factor`, `viscoelastic_time` and `no_tangential_dashpot`).
     #[serde(default)]
     pub shaped_damping: ShapedDamping,
     /// Linear spring-dashpot law (both materials' `normal_stiffness` in series), N/m; 0 for

@@ -949,4 +949,15 @@ fn spheres_take_wellmanns_dashpots_as_superquadrics_do() {
         println!("{key:>26}: tangential {:?}", cf.tangential);
         assert_eq!(cf.tangential.norm() > 0.0, damped, "{key}");
     }
+    // a restitution beside them would calibrate the dashpot they replace: refused, named
+    let err = dem::config::parse_scene_section(&format!(
+        "{ELASTIC}{}",
+        table("damping_ratio = 0.9\nrestitution = 0.5")
+    ))
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("dem.interactions[0].restitution") && err.contains("give one of them"),
+        "{err}"
+    );
 }
