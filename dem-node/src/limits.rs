@@ -78,11 +78,13 @@ pub fn damped_step(omega: f64, tau: f64) -> f64 {
 
 /// [`damped_step`] of the two stiffest modes of a packing of spheres a, b of coordination
 /// [`REFERENCE_COORDINATION`] Z with isotropic fabric, contact springs `k_n`, `k_t` and
-/// dashpots `c_n`, `c_t`: neighbours moving apart along their normals, ω² = (Z/3) k_n/m*,
-/// and neighbours rotating in opposite senses, ω² = (2Z/3) k_t r(r_a + r_b)/I for the sphere
-/// (of the two) with the larger r(r_a + r_b)/I — its tangential mode, whose mass
+/// dashpots `c_n`, `c_t`, in a packing where every a touches Z b and every b Z a (the
+/// staggered modes of such a two-sphere lattice, its fabric isotropic): neighbours moving
+/// apart along their normals, ω² = (Z/3) k_n (1/m_a + 1/m_b), and neighbours rotating in
+/// opposite senses, ω² = (2Z/3) k_t (r_a²/I_a + r_b²/I_b) — the tangential mode, whose mass
 /// (1/m_a + 1/m_b + r_a²/I_a + r_b²/I_b)⁻¹ is 2/7 of m* for solid spheres, is the stiffer and
-/// the more damped one. Returns (step, mode 0 normal / 1 tangential, ζ of that mode).
+/// the more damped one. (A small sphere among large ones turns almost alone: its r²/I
+/// dominates.) Returns (step, mode 0 normal / 1 tangential, ζ of that mode).
 pub fn sphere_pair_damped_step(
     (ra, ma, ia): (f64, f64, f64),
     (rb, mb, ib): (f64, f64, f64),
@@ -92,8 +94,7 @@ pub fn sphere_pair_damped_step(
     let z = REFERENCE_COORDINATION;
     let m_eff = ma * mb / (ma + mb);
     let w_n = (z / 3.0 * k_n / m_eff).sqrt();
-    let lever = (ra * (ra + rb) / ia).max(rb * (ra + rb) / ib);
-    let w_t = (2.0 * z / 3.0 * k_t * lever).sqrt();
+    let w_t = (2.0 * z / 3.0 * k_t * (ra * ra / ia + rb * rb / ib)).sqrt();
     let (tau_n, tau_t) = (c_n / k_n, if k_t > 0.0 { c_t / k_t } else { 0.0 });
     let (h_n, h_t) = (damped_step(w_n, tau_n), damped_step(w_t, tau_t));
     if h_t < h_n {
@@ -251,7 +252,7 @@ pub fn contact_limits(
         .collect();
     let mut damped = (f64::INFINITY, 0u8, 0.0);
     // the smallest sphere of one material against the smallest and the largest of the other
-    // (a larger partner stiffens the contact and lengthens the small sphere's lever)
+    // (a larger partner stiffens the contact)
     let mut size_pairs = Vec::new();
     for (x, &(a, (small_a, large_a))) in present.iter().enumerate() {
         for &(b, (small_b, large_b)) in &present[x..] {
@@ -548,23 +549,26 @@ spheres = [
         // normal only: ζ of the normal mode is ζ √(Z/3)
         assert_eq!(zeta.1, 0.0);
         assert!((zeta.2 - 0.9 * 2f64.sqrt()).abs() < 1e-9, "{zeta:?}");
-        // by hand: the 1 mm bead against the 1.2 mm one (stiffer than two 1 mm beads, and a
-        // longer lever for the small one) at 1 % overlap of the smaller
+        // by hand: two 1 mm beads at 1 % overlap (the 1 mm bead against the 1.2 mm one is
+        // stiffer, but the larger bead turns less: (2Z/3) k_t (r_a²/I_a + r_b²/I_b) is lower)
         let pairs = crate::materials::MaterialTable::from_config(
             &parse_scene_section(&scene("", 0.05)).unwrap().unwrap(),
         );
         let pp = pairs.pair(0, 0);
-        let (ra, rb, rho) = (1e-3, 1.2e-3, 2550.0);
+        let rho = 2550.0;
         let mass = |r: f64| rho * 4.0 / 3.0 * std::f64::consts::PI * r * r * r;
-        let (ma, mb) = (mass(ra), mass(rb));
-        let r_eff = ra * rb / (ra + rb);
-        let k_n = hertz_stiffness(pp.e_star, r_eff, 0.01 * ra);
-        let k_t = 8.0 * pp.g_star * (r_eff * 0.01 * ra).sqrt();
-        let m_eff = ma * mb / (ma + mb);
-        let tau_t = pp.damping_factor * (k_n * m_eff).sqrt() * pp.sqrt_stiffness_ratio / k_t;
-        // ω² = (2Z/3) k_t r_a (r_a + r_b) / I_a, I_a = 2/5 m_a r_a²
-        let w_t = (4.0 * k_t * ra * (ra + rb) / (0.4 * ma * ra * ra)).sqrt();
-        let want = damped_step(w_t, tau_t);
+        let by_hand = |ra: f64, rb: f64| {
+            let (ma, mb) = (mass(ra), mass(rb));
+            let r_eff = ra * rb / (ra + rb);
+            let k_n = hertz_stiffness(pp.e_star, r_eff, 0.01 * ra.min(rb));
+            let k_t = 8.0 * pp.g_star * (r_eff * 0.01 * ra.min(rb)).sqrt();
+            let m_eff = ma * mb / (ma + mb);
+            let tau_t = pp.damping_factor * (k_n * m_eff).sqrt() * pp.sqrt_stiffness_ratio / k_t;
+            // I = 2/5 m r²: r²/I = 2.5/m
+            damped_step((4.0 * k_t * (2.5 / ma + 2.5 / mb)).sqrt(), tau_t)
+        };
+        let want = by_hand(1e-3, 1e-3);
+        assert!(by_hand(1e-3, 1.2e-3) > want);
         assert!(
             (strong.0 - want).abs() < 1e-9 * want,
             "{} vs {want}",
