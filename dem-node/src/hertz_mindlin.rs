@@ -54,19 +54,7 @@ pub fn contact_force(
         )
     };
     let v_n = v_c.dot(n);
-    // Tsuji/LIGGGHTS damping (replaces the schematic eq. 2.10); √(S_t m*) = √(S_n m*) √(S_t/S_n).
-    // A pair with Wellmann's dashpot: ζ 2√(S_n m*) (W 3.29, `damping_factor` = 2ζ) or S_n A
-    // (W 3.30), normal only.
-    let gamma_n = if p.viscoelastic_time > 0.0 {
-        s_n * p.viscoelastic_time
-    } else {
-        p.damping_factor * (s_n * m_eff).sqrt()
-    };
-    let gamma_t = if p.no_tangential_dashpot {
-        0.0
-    } else {
-        gamma_n * p.sqrt_stiffness_ratio
-    };
+    let (gamma_n, gamma_t) = p.dashpots(s_n, m_eff);
     // (2.13), no attraction: the total normal force is clamped at zero.
     let normal = (f_elastic - gamma_n * v_n).max(0.0);
     let v_t = v_c - n * v_n;

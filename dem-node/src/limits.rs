@@ -275,16 +275,7 @@ pub fn contact_limits(
             };
             let m_eff = sa.1 * sb.1 / (sa.1 + sb.1);
             // the dashpots of `hertz_mindlin::contact_force` at that stiffness
-            let c_n = if pp.viscoelastic_time > 0.0 {
-                k_n * pp.viscoelastic_time
-            } else {
-                pp.damping_factor * (k_n * m_eff).sqrt()
-            };
-            let c_t = if pp.no_tangential_dashpot {
-                0.0
-            } else {
-                c_n * pp.sqrt_stiffness_ratio
-            };
+            let (c_n, c_t) = pp.dashpots(k_n, m_eff);
             let h = sphere_pair_damped_step(sa, sb, (k_n, c_n), (k_t, c_t));
             if h.0 < damped.0 {
                 damped = h;

@@ -92,6 +92,28 @@ pub struct MaterialTable {
     pub pairs: Vec<PairParams>,
 }
 
+impl PairParams {
+    /// The normal and tangential dashpot coefficients γ_n, γ_t (N s/m) of a contact of normal
+    /// stiffness `s_n` and effective mass `m_eff`: Tsuji/LIGGGHTS (replacing the schematic
+    /// U 2.10), γ_n = `damping_factor` √(S_n m*) and γ_t = γ_n √(S_t/S_n); a pair
+    /// with Wellmann's dashpot: ζ 2√(S_n m*) (W 3.29, `damping_factor` = 2ζ) or S_n A (W 3.30),
+    /// and no tangential one.
+    #[inline(always)]
+    pub fn dashpots(&self, s_n: f64, m_eff: f64) -> (f64, f64) {
+        let gamma_n = if self.viscoelastic_time > 0.0 {
+            s_n * self.viscoelastic_time
+        } else {
+            self.damping_factor * (s_n * m_eff).sqrt()
+        };
+        let gamma_t = if self.no_tangential_dashpot {
+            0.0
+        } else {
+            gamma_n * self.sqrt_stiffness_ratio
+        };
+        (gamma_n, gamma_t)
+    }
+}
+
 impl MaterialTable {
     pub fn from_config(cfg: &DemConfig) -> MaterialTable {
         let materials: Vec<Material> = cfg

@@ -664,13 +664,32 @@ fn superquadric_impacts_on_box_edges_conserve_energy() {
     }
 }
 
+/// The elastic grain (restitution 0.6) above a plane, with the interaction table `extra`.
+fn plane_scene(extra: &str) -> String {
+    format!(
+        "{}[[dem.walls]]\nkind = \"plane\"\nmaterial = \"grain\"\npoint = [0.0, 0.0, 0.0]\nnormal = [0.0, 0.0, 1.0]\n{extra}",
+        ELASTIC.replace("restitution = 1.0", "restitution = 0.6")
+    )
+}
+
+/// Steps until body 0 has touched the walls and left them again; its vertical velocity then.
+fn until_rebound(e: &mut Engine) -> f64 {
+    let mut touched = false;
+    for _ in 0..100_000 {
+        e.step().unwrap();
+        touched |= e.num_wall_contacts() > 0;
+        if touched && e.num_wall_contacts() == 0 {
+            break;
+        }
+    }
+    assert!(touched, "no impact");
+    e.particles().velocity[0].z
+}
+
 /// Rebound velocity of an ellipsoid dropped tip-first onto a plane at `v0` m/s with the
 /// interaction table `extra` (no gravity).
 fn rebound(extra: &str, v0: f64) -> f64 {
-    let scene = format!(
-        "{}[[dem.walls]]\nkind = \"plane\"\nmaterial = \"grain\"\npoint = [0.0, 0.0, 0.0]\nnormal = [0.0, 0.0, 1.0]\n{extra}",
-        ELASTIC.replace("restitution = 1.0", "restitution = 0.6")
-    );
+    let scene = plane_scene(extra);
     let body = sq([1e-3, 1.2e-3, 2e-3], 1.0, 1.0);
     let mut e = engine_with(
         &scene,
@@ -682,16 +701,7 @@ fn rebound(extra: &str, v0: f64) -> f64 {
             body,
         )],
     );
-    let mut touched = false;
-    for _ in 0..100_000 {
-        e.step().unwrap();
-        touched |= e.num_wall_contacts() > 0;
-        if touched && e.num_wall_contacts() == 0 {
-            break;
-        }
-    }
-    assert!(touched);
-    e.particles().velocity[0].z / v0
+    until_rebound(&mut e) / v0
 }
 
 /// The three dashpots of superquadric contacts: restitution-calibrated (default; e = 0.6
@@ -843,11 +853,7 @@ fn linearised_tracking_matches_exact_tracking() {
 /// interaction table `extra`, the body a sphere of radius 1 mm (`sphere`) or the superquadric
 /// of the same radius with ε = 1; returns the rebound's restitution.
 fn drop_on_plane(extra: &str, v0: f64, sphere: bool) -> f64 {
-    let scene = format!(
-        "{}[[dem.walls]]\nkind = \"plane\"\nmaterial = \"grain\"\npoint = [0.0, 0.0, 0.0]\nnormal = [0.0, 0.0, 1.0]\n{extra}",
-        ELASTIC
-            .replace("restitution = 1.0", "restitution = 0.6")
-    );
+    let scene = plane_scene(extra);
     let (x, v, w) = (
         V3::new(0.0, 0.0, 1.05e-3),
         V3::new(0.0, 0.0, -v0),
@@ -863,16 +869,7 @@ fn drop_on_plane(extra: &str, v0: f64, sphere: bool) -> f64 {
             &[(x, v, w, Orientation::identity(), sq([1e-3; 3], 1.0, 1.0))],
         );
     }
-    let mut touched = false;
-    for _ in 0..100_000 {
-        e.step().unwrap();
-        touched |= e.num_wall_contacts() > 0;
-        if touched && e.num_wall_contacts() == 0 {
-            break;
-        }
-    }
-    assert!(touched);
-    e.particles().velocity[0].z / v0
+    until_rebound(&mut e) / v0
 }
 
 /// `damping_ratio` and `viscoelastic_time` are Wellmann's normal-only dashpots (W 3.29, 3.30)
