@@ -116,6 +116,26 @@ struct Extent {
 }
 
 impl Extent {
+    /// Counts a particle of contact radius `r` and mass `m` into a material's extent.
+    fn add(slot: &mut Option<Extent>, r: f64, m: f64) {
+        let e = slot.get_or_insert(Extent {
+            r_min: r,
+            r_max: r,
+            r_sum: 0.0,
+            count: 0,
+            m_of_r_min: m,
+            m_of_r_max: m,
+        });
+        e.r_sum += r;
+        e.count += 1;
+        if r < e.r_min {
+            (e.r_min, e.m_of_r_min) = (r, m);
+        }
+        if r > e.r_max {
+            (e.r_max, e.m_of_r_max) = (r, m);
+        }
+    }
+
     fn r_mean(&self) -> f64 {
         self.r_sum / self.count as f64
     }
@@ -146,35 +166,12 @@ pub fn contact_limits(
                 *worst = (r, m);
             }
         }
-        let e = ext[p.material[k] as usize].get_or_insert(Extent {
-            r_min: r,
-            r_max: r,
-            r_sum: 0.0,
-            count: 0,
-            m_of_r_min: m,
-            m_of_r_max: m,
-        });
-        e.r_sum += r;
-        e.count += 1;
-        if r < e.r_min {
-            (e.r_min, e.m_of_r_min) = (r, m);
-        }
-        if r > e.r_max {
-            (e.r_max, e.m_of_r_max) = (r, m);
-        }
+        Extent::add(&mut ext[p.material[k] as usize], r, m);
     }
-    // per material, its smallest and largest sphere: (r, m, I) each
-    type Sphere = (f64, f64, f64);
-    let mut spheres: Vec<Option<(Sphere, Sphere)>> = vec![None; materials.materials.len()];
+    // the same over the spheres alone
+    let mut spheres: Vec<Option<Extent>> = vec![None; materials.materials.len()];
     for k in (0..p.len()).filter(|&k| p.template(k).is_none()) {
-        let this = (p.radius[k], p.mass[k], p.inertia[k]);
-        let (small, large) = spheres[p.material[k] as usize].get_or_insert((this, this));
-        if this.0 < small.0 {
-            *small = this;
-        }
-        if this.0 > large.0 {
-            *large = this;
-        }
+        Extent::add(&mut spheres[p.material[k] as usize], p.radius[k], p.mass[k]);
     }
     let radii: Vec<f64> = (0..p.len()).map(contact_radius).collect();
     let masses = &p.mass;
@@ -245,40 +242,42 @@ pub fn contact_limits(
         out.push(("interface_contact_stiffness_typical".into(), k_interface));
     }
     // the dashpots' stability limit of sphere contacts
-    let present: Vec<(u16, (Sphere, Sphere))> = spheres
+    let present: Vec<(u16, Extent)> = spheres
         .iter()
         .enumerate()
-        .filter_map(|(m, s)| s.map(|s| (m as u16, s)))
+        .filter_map(|(m, e)| e.map(|e| (m as u16, e)))
         .collect();
     let mut damped = (f64::INFINITY, 0u8, 0.0);
-    // the smallest sphere of one material against the smallest and the largest of the other
-    // (a larger partner stiffens the contact)
-    let mut size_pairs = Vec::new();
-    for (x, &(a, (small_a, large_a))) in present.iter().enumerate() {
-        for &(b, (small_b, large_b)) in &present[x..] {
-            size_pairs.extend([
-                (a, b, small_a, small_b),
-                (a, b, small_a, large_b),
-                (a, b, large_a, small_b),
-            ]);
-        }
-    }
-    for (a, b, sa, sb) in size_pairs {
-        {
+    // (r, m, I) of a solid sphere (`Particles::push`)
+    let solid = |r: f64, m: f64| (r, m, 0.4 * m * r * r);
+    for (x, &(a, ea)) in present.iter().enumerate() {
+        for &(b, eb) in &present[x..] {
             let pp = materials.pair(a, b);
-            let k_n = pair_k(pp, sa.0, sb.0);
-            // with rotation locked there is no counter-rotation mode
-            let k_t = if rotation {
-                k_n * pp.sqrt_stiffness_ratio.powi(2)
-            } else {
-                0.0
-            };
-            let m_eff = sa.1 * sb.1 / (sa.1 + sb.1);
-            // the dashpots of `hertz_mindlin::contact_force` at that stiffness
-            let (c_n, c_t) = pp.dashpots(k_n, m_eff);
-            let h = sphere_pair_damped_step(sa, sb, (k_n, c_n), (k_t, c_t));
-            if h.0 < damped.0 {
-                damped = h;
+            // the smallest sphere of one material against the smallest and the largest of the
+            // other (a larger partner stiffens the contact)
+            let (small_a, small_b) = (
+                solid(ea.r_min, ea.m_of_r_min),
+                solid(eb.r_min, eb.m_of_r_min),
+            );
+            let (large_a, large_b) = (
+                solid(ea.r_max, ea.m_of_r_max),
+                solid(eb.r_max, eb.m_of_r_max),
+            );
+            for (sa, sb) in [(small_a, small_b), (small_a, large_b), (large_a, small_b)] {
+                let k_n = pair_k(pp, sa.0, sb.0);
+                // with rotation locked there is no counter-rotation mode
+                let k_t = if rotation {
+                    k_n * pp.sqrt_stiffness_ratio.powi(2)
+                } else {
+                    0.0
+                };
+                let m_eff = sa.1 * sb.1 / (sa.1 + sb.1);
+                // the dashpots of `hertz_mindlin::contact_force` at that stiffness
+                let (c_n, c_t) = pp.dashpots(k_n, m_eff);
+                let h = sphere_pair_damped_step(sa, sb, (k_n, c_n), (k_t, c_t));
+                if h.0 < damped.0 {
+                    damped = h;
+                }
             }
         }
     }
