@@ -5,7 +5,7 @@
 //! |---|---|---|
 //! | DEM Rayleigh step (Ullrich 2.27) | `dem.time_step`, `dem.rayleigh_time_step` | the DEM node refuses Δt^D above its `rayleigh_fraction` itself; here only reported |
 //! | impact resolution (Ullrich fig. 2.5) | `dem.contact_duration_min` | a 1 m/s impact of the smallest, stiffest particle must last ≥ [`MIN_STEPS_PER_CONTACT`] steps (warn below [`GOOD_STEPS_PER_CONTACT`]) |
-//! | DEM damped contact step | `dem.damped_step_limit`, `_mode`, `_zeta` | the dashpots of sphere contacts (Z = 6 packing, reference overlap) keep velocity Verlet stable only below h = −τ + √(τ² + 4/ω²): warn above [`DAMPED_STEP_WARN_FACTOR`] times it, naming the mode, its ζ and the remedies |
+//! | DEM damped contact step | `dem.damped_step_limit`, `_mode`, `_zeta` | the dashpots of the contacts of spheres and dilated polyhedra (Z = 6 packing, reference overlap) keep velocity Verlet stable only below h = −τ + √(τ² + 4/ω²): warn above [`DAMPED_STEP_WARN_FACTOR`] times it, naming the mode, its ζ and the remedies |
 //! | dilated polyhedra (Ullrich §6.1) | `dem.dilation_impact_velocity_max`, `dem.dilation_force_max` | the cores must not meet: warn when an impact slower than [`DILATION_IMPACT_VELOCITY_MIN`] can drive them together (the run stops naming the pair if they do) |
 //! | 2-D discs: critical step (Madan 2.14–2.16) | `dem.critical_time_step`, `dem.discs` | refused above Δt_cr = 2/ν_max (Lanczos on the initial contacts) |
 //! | DDEM convergence (Madan 3.13–3.14) | `dem.ddem_spectral_radius`, `dem.ddem_kn_over_ep`, `dem.ddem_poisson_ratio` | refused at ρ(B) ≥ 1 of the initial packing, naming k_n/E_p, ν_p and the limit |
@@ -45,6 +45,8 @@ pub const GOOD_STEPS_PER_CONTACT: f64 = 10.0;
 /// scenes/glass-beads-rve.toml at e = 0.05 (overlaps ≤ 0.2 % at 100 kPa; limit 1.05e-7 s): 1.9×
 /// sheared stably (stress noise ±9 % early), 2.4× began to heat at the end of consolidation,
 /// 3.8× and 4.75× turned the packing into a gas (coordination 4 instead of 5, ±50 % stress).
+/// The same on 300 dilated polyhedra under a loaded plate (dem-node/DEM.md, "Limits" of the
+/// polyhedra): stable at 1.9×, diverging at 2.4–2.5× (e = 0.2 and 0.05).
 pub const DAMPED_STEP_WARN_FACTOR: f64 = 1.5;
 
 /// Dilated polyhedra whose cores meet in an elastic impact slower than this (m/s) are warned
@@ -224,15 +226,21 @@ pub fn assess(
             }
         }
     }
-    // the dashpots of sphere contacts: strong damping shortens the stable step
+    // the dashpots of sphere and stone contacts: strong damping shortens the stable step
     if let (Some(&dt), Some(&h)) = (d.get("time_step"), d.get("damped_step_limit")) {
         let mode = match d.get("damped_step_mode") {
             Some(1.0) => "tangential–rotational (neighbours turning in opposite senses)",
             _ => "normal",
         };
         let zeta = d.get("damped_step_zeta").copied().unwrap_or(f64::NAN);
+        // the DEM reports the dilation limit only with dilated polyhedra
+        let bodies = if d.contains_key("dilation_impact_velocity_max") {
+            "sphere and stone"
+        } else {
+            "sphere"
+        };
         let what = format!(
-            "Δt^D = {dt:.3e} s = {:.3} of the damped limit {h:.3e} s of sphere contacts (its {mode} mode, ζ = {zeta:.2}, in a packing of coordination 6 at 1 % overlap)",
+            "Δt^D = {dt:.3e} s = {:.3} of the damped limit {h:.3e} s of {bodies} contacts (its {mode} mode, ζ = {zeta:.2}, in a packing of coordination 6 at 1 % overlap)",
             dt / h
         );
         if dt > DAMPED_STEP_WARN_FACTOR * h {

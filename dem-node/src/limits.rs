@@ -21,10 +21,13 @@
 //!   t_c = 2.87 (m*²/(R* E*² v))^{1/5}, over the same pairs with the smallest radii (and
 //!   masses) of each material; m* = m for a wall.
 //!
-//! - `damped_step_limit` (with spheres): the largest explicit step at which the dashpots of
-//!   sphere contacts keep the update stable, over the pairs of sphere materials (the smallest
-//!   sphere of each against the smallest and the largest of the other, reference overlap;
-//!   with `rotation = false` only the normal mode) — see [`damped_step`] and [`sphere_pair_damped_step`];
+//! - `damped_step_limit` (with spheres or dilated polyhedra, whose contacts have the sphere
+//!   law's dashpots): the largest explicit step at which those dashpots keep the update
+//!   stable, over the pairs of their materials (the smallest body of each against the
+//!   smallest and the largest of the other, reference overlap; with `rotation = false` only
+//!   the normal mode) — see [`damped_step`] and [`pair_damped_step`]; a stone counts with its
+//!   bounding radius as the lever arm and its smallest principal moment, a bound of the
+//!   rotational compliance of its contacts;
 //!   `damped_step_mode` says which mode sets it (0 normal, 1 tangential–rotational) and
 //!   `damped_step_zeta` its damping ratio. A strong restitution-calibrated dashpot (e ≲ 0.1)
 //!   damps the tangential–rotational mode of a sphere contact beyond critical (its mass is
@@ -65,7 +68,7 @@ pub fn hertz_contact_duration(m_eff: f64, r_eff: f64, e_star: f64, v: f64) -> f6
     2.87 * (m_eff * m_eff / (r_eff * e_star * e_star * v)).powf(0.2)
 }
 
-/// Coordination of the reference packing of [`sphere_pair_damped_step`] (a dense packing's).
+/// Coordination of the reference packing of [`pair_damped_step`] (a dense packing's).
 pub const REFERENCE_COORDINATION: f64 = 6.0;
 
 /// Largest stable step of velocity Verlet for ẍ = −ω² x − τω² ẋ, the damping force taken at
@@ -76,16 +79,17 @@ pub fn damped_step(omega: f64, tau: f64) -> f64 {
     -tau + (tau * tau + 4.0 / (omega * omega)).sqrt()
 }
 
-/// [`damped_step`] of the two stiffest modes of a packing of spheres a, b of coordination
+/// [`damped_step`] of the two stiffest modes of a packing of bodies a, b — (lever arm r to
+/// the contact point, mass m, moment of inertia I) — of coordination
 /// [`REFERENCE_COORDINATION`] Z with isotropic fabric, contact springs `k_n`, `k_t` and
 /// dashpots `c_n`, `c_t`, in a packing where every a touches Z b and every b Z a (the
-/// staggered modes of such a two-sphere lattice, its fabric isotropic): neighbours moving
+/// staggered modes of such a two-body lattice, its fabric isotropic): neighbours moving
 /// apart along their normals, ω² = (Z/3) k_n (1/m_a + 1/m_b), and neighbours rotating in
 /// opposite senses, ω² = (2Z/3) k_t (r_a²/I_a + r_b²/I_b) — the tangential mode, whose mass
 /// (1/m_a + 1/m_b + r_a²/I_a + r_b²/I_b)⁻¹ is 2/7 of m* for solid spheres, is the stiffer and
 /// the more damped one. (A small sphere among large ones turns almost alone: its r²/I
 /// dominates.) Returns (step, mode 0 normal / 1 tangential, ζ of that mode).
-pub fn sphere_pair_damped_step(
+pub fn pair_damped_step(
     (ra, ma, ia): (f64, f64, f64),
     (rb, mb, ib): (f64, f64, f64),
     (k_n, c_n): (f64, f64),
@@ -104,35 +108,44 @@ pub fn sphere_pair_damped_step(
     }
 }
 
-/// Smallest, largest and summed radius, count and masses of the particles of one material.
+/// A body as the limits see it: the radius that enters Hertz, its mass, and for the
+/// counter-rotation mode a lever arm to its contact points and a moment of inertia — a
+/// sphere's radius and 2/5 m r²; for a dilated polyhedron its bounding radius and its smallest
+/// principal moment, the largest rotational compliance |l × t|²/I a contact on it can see.
+#[derive(Debug, Clone, Copy)]
+struct Body {
+    r: f64,
+    m: f64,
+    lever: f64,
+    inertia: f64,
+}
+
+/// The particles of one material: the bodies of the smallest and the largest contact radius,
+/// and the summed radius and count.
 #[derive(Debug, Clone, Copy)]
 struct Extent {
-    r_min: f64,
-    r_max: f64,
+    small: Body,
+    large: Body,
     r_sum: f64,
     count: usize,
-    m_of_r_min: f64,
-    m_of_r_max: f64,
 }
 
 impl Extent {
-    /// Counts a particle of contact radius `r` and mass `m` into a material's extent.
-    fn add(slot: &mut Option<Extent>, r: f64, m: f64) {
+    /// Counts body `b` into a material's extent.
+    fn add(slot: &mut Option<Extent>, b: Body) {
         let e = slot.get_or_insert(Extent {
-            r_min: r,
-            r_max: r,
+            small: b,
+            large: b,
             r_sum: 0.0,
             count: 0,
-            m_of_r_min: m,
-            m_of_r_max: m,
         });
-        e.r_sum += r;
+        e.r_sum += b.r;
         e.count += 1;
-        if r < e.r_min {
-            (e.r_min, e.m_of_r_min) = (r, m);
+        if b.r < e.small.r {
+            e.small = b;
         }
-        if r > e.r_max {
-            (e.r_max, e.m_of_r_max) = (r, m);
+        if b.r > e.large.r {
+            e.large = b;
         }
     }
 
@@ -154,26 +167,39 @@ pub fn contact_limits(
     let mut ext: Vec<Option<Extent>> = vec![None; materials.materials.len()];
     // per material, the stone with the smallest r_ds³/m: (r_ds, m)
     let mut stones: Vec<Option<(f64, f64)>> = vec![None; materials.materials.len()];
-    let contact_radius = |k: usize| match p.polyhedron(k) {
-        Some((s, scale)) => s.dilation * scale,
-        None => p.radius[k],
+    // the same as `ext` over the bodies with the sphere law's dashpots: spheres and polyhedra
+    let mut damped_bodies: Vec<Option<Extent>> = vec![None; materials.materials.len()];
+    let body = |k: usize| {
+        let (r, m) = (p.radius[k], p.mass[k]);
+        match (p.polyhedron(k), p.template(k)) {
+            (Some((s, scale)), Some(t)) => Body {
+                r: s.dilation * scale,
+                m,
+                lever: r,
+                inertia: t.principal_inertia.min(),
+            },
+            (_, t) => Body {
+                r,
+                m,
+                lever: r,
+                inertia: t.map_or(p.inertia[k], |t| t.principal_inertia.min()),
+            },
+        }
     };
     for k in 0..p.len() {
-        let (r, m) = (contact_radius(k), p.mass[k]);
+        let (b, slot) = (body(k), p.material[k] as usize);
         if p.polyhedron(k).is_some() {
-            let worst = stones[p.material[k] as usize].get_or_insert((r, m));
-            if r.powi(3) / m < worst.0.powi(3) / worst.1 {
-                *worst = (r, m);
+            let worst = stones[slot].get_or_insert((b.r, b.m));
+            if b.r.powi(3) / b.m < worst.0.powi(3) / worst.1 {
+                *worst = (b.r, b.m);
             }
         }
-        Extent::add(&mut ext[p.material[k] as usize], r, m);
+        Extent::add(&mut ext[slot], b);
+        if p.template(k).is_none() || p.polyhedron(k).is_some() {
+            Extent::add(&mut damped_bodies[slot], b);
+        }
     }
-    // the same over the spheres alone
-    let mut spheres: Vec<Option<Extent>> = vec![None; materials.materials.len()];
-    for k in (0..p.len()).filter(|&k| p.template(k).is_none()) {
-        Extent::add(&mut spheres[p.material[k] as usize], p.radius[k], p.mass[k]);
-    }
-    let radii: Vec<f64> = (0..p.len()).map(contact_radius).collect();
+    let radii: Vec<f64> = (0..p.len()).map(|k| body(k).r).collect();
     let masses = &p.mass;
     let min = |v: &[f64]| v.iter().cloned().fold(f64::INFINITY, f64::min);
     let max = |v: &[f64]| v.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
@@ -216,17 +242,17 @@ pub fn contact_limits(
     for (x, &(a, ea)) in present.iter().enumerate() {
         for &(b, eb) in &present[x..] {
             let pp = materials.pair(a, b);
-            k_max = k_max.max(pair_k(pp, ea.r_max, eb.r_max));
+            k_max = k_max.max(pair_k(pp, ea.large.r, eb.large.r));
             k_typical = k_typical.max(pair_k(pp, ea.r_mean(), eb.r_mean()));
-            let (ra, rb, ma, mb) = (ea.r_min, eb.r_min, ea.m_of_r_min, eb.m_of_r_min);
+            let (ra, rb, ma, mb) = (ea.small.r, eb.small.r, ea.small.m, eb.small.m);
             t_min = t_min.min(duration(pp, ma * mb / (ma + mb), ra * rb / (ra + rb)));
         }
         if let Some(w) = interface_material {
             let pp = materials.pair(a, w);
-            k_max = k_max.max(wall_k(pp, ea.r_max));
+            k_max = k_max.max(wall_k(pp, ea.large.r));
             k_typical = k_typical.max(wall_k(pp, ea.r_mean()));
             k_interface = k_interface.max(wall_k(pp, ea.r_mean()));
-            t_min = t_min.min(duration(pp, ea.m_of_r_min, ea.r_min));
+            t_min = t_min.min(duration(pp, ea.small.m, ea.small.r));
         }
     }
     let mut out: Vec<(String, f64)> = vec![
@@ -241,40 +267,39 @@ pub fn contact_limits(
     if interface_material.is_some() {
         out.push(("interface_contact_stiffness_typical".into(), k_interface));
     }
-    // the dashpots' stability limit of sphere contacts
-    let present: Vec<(u16, Extent)> = spheres
+    // the dashpots' stability limit of the contacts of spheres and dilated polyhedra
+    let present: Vec<(u16, Extent)> = damped_bodies
         .iter()
         .enumerate()
         .filter_map(|(m, e)| e.map(|e| (m as u16, e)))
         .collect();
     let mut damped = (f64::INFINITY, 0u8, 0.0);
-    // (r, m, I) of a solid sphere (`Particles::push`)
-    let solid = |r: f64, m: f64| (r, m, 0.4 * m * r * r);
     for (x, &(a, ea)) in present.iter().enumerate() {
         for &(b, eb) in &present[x..] {
             let pp = materials.pair(a, b);
-            // the smallest sphere of one material against the smallest and the largest of the
+            // the smallest body of one material against the smallest and the largest of the
             // other (a larger partner stiffens the contact)
-            let (small_a, small_b) = (
-                solid(ea.r_min, ea.m_of_r_min),
-                solid(eb.r_min, eb.m_of_r_min),
-            );
-            let (large_a, large_b) = (
-                solid(ea.r_max, ea.m_of_r_max),
-                solid(eb.r_max, eb.m_of_r_max),
-            );
-            for (sa, sb) in [(small_a, small_b), (small_a, large_b), (large_a, small_b)] {
-                let k_n = pair_k(pp, sa.0, sb.0);
+            for (sa, sb) in [
+                (ea.small, eb.small),
+                (ea.small, eb.large),
+                (ea.large, eb.small),
+            ] {
+                let k_n = pair_k(pp, sa.r, sb.r);
                 // with rotation locked there is no counter-rotation mode
                 let k_t = if rotation {
                     k_n * pp.sqrt_stiffness_ratio.powi(2)
                 } else {
                     0.0
                 };
-                let m_eff = sa.1 * sb.1 / (sa.1 + sb.1);
+                let m_eff = sa.m * sb.m / (sa.m + sb.m);
                 // the dashpots of `hertz_mindlin::contact_force` at that stiffness
                 let (c_n, c_t) = pp.dashpots(k_n, m_eff);
-                let h = sphere_pair_damped_step(sa, sb, (k_n, c_n), (k_t, c_t));
+                let h = pair_damped_step(
+                    (sa.lever, sa.m, sa.inertia),
+                    (sb.lever, sb.m, sb.inertia),
+                    (k_n, c_n),
+                    (k_t, c_t),
+                );
                 if h.0 < damped.0 {
                     damped = h;
                 }
@@ -493,7 +518,7 @@ spheres = [
         let i = 0.4 * m * r * r;
         let (k_n, k_t) = (1e6, 0.85e6);
         let (c_n, c_t) = (0.5, 0.4);
-        let (h, mode, zeta) = sphere_pair_damped_step((r, m, i), (r, m, i), (k_n, c_n), (k_t, c_t));
+        let (h, mode, zeta) = pair_damped_step((r, m, i), (r, m, i), (k_n, c_n), (k_t, c_t));
         let w_t = (20.0 * k_t / m).sqrt();
         let w_n = (4.0 * k_n / m).sqrt();
         let h_t = damped_step(w_t, c_t / k_t);
@@ -502,7 +527,7 @@ spheres = [
         assert!((h - h_t).abs() < 1e-15, "{h} vs {h_t}");
         assert!((zeta - 0.5 * w_t * c_t / k_t).abs() < 1e-12);
         // without a tangential dashpot a weakly damped normal mode can set it
-        let (h0, mode0, _) = sphere_pair_damped_step((r, m, i), (r, m, i), (k_n, 5.0), (k_t, 0.0));
+        let (h0, mode0, _) = pair_damped_step((r, m, i), (r, m, i), (k_n, 5.0), (k_t, 0.0));
         assert_eq!(mode0, 0);
         assert!((h0 - damped_step(w_n, 5.0 / k_n)).abs() < 1e-15);
     }

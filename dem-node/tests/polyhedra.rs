@@ -817,3 +817,103 @@ fn the_force_has_no_jump_between_face_edge_and_vertex() {
         "{a} {b} {scale}"
     );
 }
+
+/// Stones have the sphere law's restitution dashpots (U Table 6.1's e = 0.2), and with them
+/// its damped step (`damped_step_limit`, dem-node/src/limits.rs): by hand for a small and a
+/// large stone of one material — Hertz between the dilation spheres at 1 % of the smaller
+/// r_ds, Mindlin's k_t, the dashpots γ_n = 2√(5/6)|β|√(k_n m*) (β calibrated to e), γ_t = γ_n √(k_t/k_n), and the
+/// counter-rotation of six neighbours with each stone's bounding radius as the lever arm and
+/// its smallest principal moment. A stone turns more easily than its volume-equal sphere
+/// (r²/I above 2.5/m), so that mode sets the limit; without rotation the normal mode does.
+#[test]
+fn stones_report_the_damped_step_of_their_restitution_dashpot() {
+    let scene = ELASTIC.replace("restitution = 1.0", "restitution = 0.2");
+    let stone = stones()[1].clone();
+    let (small, large) = (3e-3, 5e-3);
+    let bodies = [small, large].map(|size| {
+        (
+            V3::new(size * 100.0, 0.0, 0.0),
+            V3::zeros(),
+            V3::zeros(),
+            Orientation::identity(),
+            &stone,
+            size,
+        )
+    });
+    let limits = |scene: &str| -> std::collections::BTreeMap<String, f64> {
+        engine_with(scene, &bodies).limits().into_iter().collect()
+    };
+    let l = limits(&scene);
+    // by hand
+    let (e, nu, rho) = (1e7, 0.3, 1000.0);
+    let e_star = e / (2.0 * (1.0 - nu * nu));
+    let stiffness_ratio = 2.0 * (1.0 - nu) / (2.0 - nu); // k_t / k_n, Mindlin over Hertz
+                                                         // |β| of the Tsuji dashpot calibrated to e = 0.2 on the Hertz impact
+    let beta = -dem::hertz_mindlin::damping_beta(0.2);
+    // (r_ds, m, lever, I) of the stone at `size`
+    let body = |size: f64| {
+        (
+            stone.dilation * size,
+            rho * stone.volume * size.powi(3),
+            stone.circumradius * size,
+            rho * stone.inertia.min() * size.powi(5),
+        )
+    };
+    let mut want = (f64::INFINITY, 0.0, 0.0);
+    for (a, b) in [(small, small), (small, large), (large, small)] {
+        let ((ra, ma, la, ia), (rb, mb, lb, ib)) = (body(a), body(b));
+        let k_n = 2.0 * e_star * (ra * rb / (ra + rb) * 0.01 * ra.min(rb)).sqrt();
+        let k_t = stiffness_ratio * k_n;
+        let m_eff = ma * mb / (ma + mb);
+        let gamma_n = 2.0 * (5.0f64 / 6.0).sqrt() * beta * (k_n * m_eff).sqrt();
+        let gamma_t = gamma_n * stiffness_ratio.sqrt();
+        let w_n = (2.0 * k_n / m_eff).sqrt();
+        let w_t = (4.0 * k_t * (la * la / ia + lb * lb / ib)).sqrt();
+        for (h, mode, zeta) in [
+            (
+                dem::limits::damped_step(w_n, gamma_n / k_n),
+                0.0,
+                0.5 * w_n * gamma_n / k_n,
+            ),
+            (
+                dem::limits::damped_step(w_t, gamma_t / k_t),
+                1.0,
+                0.5 * w_t * gamma_t / k_t,
+            ),
+        ] {
+            if h < want.0 {
+                want = (h, mode, zeta);
+            }
+        }
+    }
+    let (_, m, l_arm, i) = body(small);
+    println!(
+        "stone r²/I = {:.3} / m (a sphere's 2.5 / m); damped step {:?}, by hand {want:?}",
+        l_arm * l_arm / i * m,
+        (
+            l["damped_step_limit"],
+            l["damped_step_mode"],
+            l["damped_step_zeta"]
+        )
+    );
+    assert!(l_arm * l_arm / i > 2.5 / m);
+    assert_eq!(want.1, 1.0, "the counter-rotation mode sets it");
+    for (key, value) in [
+        ("damped_step_limit", want.0),
+        ("damped_step_mode", want.1),
+        ("damped_step_zeta", want.2),
+    ] {
+        assert!(
+            (l[key] - value).abs() <= 1e-9 * value.abs(),
+            "{key}: {} vs {value}",
+            l[key]
+        );
+    }
+    // rotation locked: the normal mode alone, a longer step
+    let locked = limits(&scene.replace("[dem]\n", "[dem]\nrotation = false\n"));
+    assert_eq!(locked["damped_step_mode"], 0.0);
+    assert!(locked["damped_step_limit"] > l["damped_step_limit"]);
+    // no dashpot (e = 1): no limit below the undamped one, 2/ω
+    let elastic = limits(ELASTIC);
+    assert_eq!(elastic["damped_step_zeta"], 0.0);
+}
