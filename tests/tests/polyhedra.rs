@@ -5,7 +5,9 @@
 //! (`particles_final.csv` with its stone library). `POLY_CHAIN_DIR=<dir>` keeps the scenes
 //! and outputs there (the window study of docs/full-size.md ran on its `sleeper.toml`);
 //! `POLY_CHAIN_TRIANGLES` (default 30) and `POLY_CHAIN_SEED` (default 7) change the stones
-//! and the bed for the resolution comparison there.
+//! and the bed for the resolution comparison there, `POLY_CHAIN_FILL_TOP` (default 0.55 m)
+//! the top of the region the stones are placed in (10-triangle stones, flatter, need more
+//! room) and `POLY_CHAIN_LOAD` (default 55e3 N) the rail-seat load.
 
 use cosim_tests::{csv_column, csv_f64, run_scene};
 use std::path::Path;
@@ -26,21 +28,28 @@ restitution = 0.2
 friction = 0.6
 "#;
 
+/// A number from the environment variable `name`, else `default`.
+fn env<T: std::str::FromStr>(name: &str, default: T) -> T {
+    std::env::var(name)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
+}
+
 /// Step 1: 300 stones of 30 triangles (size normal 40 ± 10 mm in [30, 60] mm, dilation 10 %)
 /// fall into a 0.6 × 0.28 m box and settle.
 fn bed_scene() -> String {
-    let env = |name: &str, default: u64| {
-        std::env::var(name)
-            .ok()
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(default)
-    };
-    let (triangles, seed) = (env("POLY_CHAIN_TRIANGLES", 30), env("POLY_CHAIN_SEED", 7));
+    let (triangles, seed) = (env("POLY_CHAIN_TRIANGLES", 30u64), env("POLY_CHAIN_SEED", 7u64));
+    let fill_top = env("POLY_CHAIN_FILL_TOP", 0.55);
+    // a higher start falls longer: settle as long after the fall (written so that the default
+    // gives 0.45 s and 0.7 m exactly: the chain is chaotic, a wall 1e-16 m higher grows a
+    // different bed)
+    let (end, box_top) = (0.45 + 0.5 * (fill_top - 0.55), 0.7 + (fill_top - 0.55));
     format!(
         r#"
 [scene]
 name = "sleeper-poly-ci-bed"
-end_time = "0.45 s"
+end_time = "{end} s"
 
 [coupling]
 window = "15 ms"
@@ -53,7 +62,7 @@ gravity = [0.0, 0.0, -9.81]
 kind = "fill"
 material = "ballast"
 min = [0.0, 0.0, 0.0]
-max = [0.6, 0.28, 0.55]
+max = [0.6, 0.28, {fill_top}]
 count = 300
 seed = {seed}
 distribution = {{ kind = "normal", mean = 0.02, std_dev = 0.005, min = 0.015, max = 0.03 }}
@@ -63,7 +72,7 @@ shape = {{ kind = "polyhedron", triangles = {triangles}, dilation = 0.1, stones 
 kind = "box"
 material = "steel"
 min = [0.0, 0.0, 0.0]
-max = [0.6, 0.28, 0.7]
+max = [0.6, 0.28, {box_top}]
 open = ["+z"]
 
 [dem.output]
@@ -179,7 +188,7 @@ points = [[0.0, 0.0], [0.01, 0.0], [0.02, 1.0]]
 [[fem.loads]]
 type = "force"
 on = {{ box = {{ min = [0.225, 0.04, {}], max = [0.375, 0.24, {}] }} }}
-total = [0.0, 0.0, -55e3]
+total = [0.0, 0.0, {}]
 history = "ramp"
 
 [[fem.loads]]
@@ -203,6 +212,7 @@ vtu_every = 0
         level - 0.05,
         top - 0.001,
         top + 0.001,
+        -env("POLY_CHAIN_LOAD", 55e3),
     )
 }
 
