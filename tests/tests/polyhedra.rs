@@ -39,17 +39,26 @@ fn env<T: std::str::FromStr>(name: &str, default: T) -> T {
 /// Step 1: 300 stones of 30 triangles (size normal 40 ± 10 mm in [30, 60] mm, dilation 10 %)
 /// fall into a 0.6 × 0.28 m box and settle.
 fn bed_scene() -> String {
-    let (triangles, seed) = (env("POLY_CHAIN_TRIANGLES", 30u64), env("POLY_CHAIN_SEED", 7u64));
-    let fill_top = env("POLY_CHAIN_FILL_TOP", 0.55);
-    // a higher start falls longer: settle as long after the fall (written so that the default
-    // gives 0.45 s and 0.7 m exactly: the chain is chaotic, a wall 1e-16 m higher grows a
-    // different bed)
-    let (end, box_top) = (0.45 + 0.5 * (fill_top - 0.55), 0.7 + (fill_top - 0.55));
+    let (triangles, seed) = (
+        env("POLY_CHAIN_TRIANGLES", 30u64),
+        env("POLY_CHAIN_SEED", 7u64),
+    );
+    let fill_top = env("POLY_CHAIN_FILL_TOP", 0.55f64);
+    // a higher start falls longer: settle as long after the fall, in whole 15 ms windows
+    // (written so that the default gives 0.45 s and 0.7 m exactly: the chain is chaotic, a
+    // wall 1e-16 m higher grows a different bed)
+    let end = if fill_top == 0.55 {
+        "0.45 s".to_string()
+    } else {
+        let windows = ((0.45 + 0.5 * (fill_top - 0.55)) / 0.015).ceil() as u64;
+        format!("{} ms", 15 * windows)
+    };
+    let box_top = 0.7 + (fill_top - 0.55);
     format!(
         r#"
 [scene]
 name = "sleeper-poly-ci-bed"
-end_time = "{end} s"
+end_time = "{end}"
 
 [coupling]
 window = "15 ms"
