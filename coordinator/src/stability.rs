@@ -141,8 +141,8 @@ impl StabilityMonitor {
                 let peak = self.peak_force.get(&d.interface).copied().unwrap_or(0.0);
                 if last > 0.0 && f > self.max_growth * last && f > 10.0 * peak {
                     return fail(format!(
-                        "the largest interface nodal force on `{}` grew from {last:.3e} N to {f:.3e} N in one window (more than {}×): the coupling diverges; reduce the coupling window or use the predictive schedule",
-                        d.interface, self.max_growth
+                        "the largest interface nodal force on `{}` grew from {last:.3e} N to {f:.3e} N in one window (more than {}×; now on its node {}): the coupling diverges; reduce the coupling window or use the predictive schedule",
+                        d.interface, self.max_growth, d.max_node
                     ));
                 }
                 self.last_force.insert(d.interface.clone(), f);
@@ -156,9 +156,12 @@ impl StabilityMonitor {
                 if let Some((window, radius)) = self.step_limit {
                     let step = d.max_norm * window;
                     if step > 0.5 * radius {
+                        let at = d.max_position.map_or(String::new(), |x| {
+                            format!(" at ({:.4}, {:.4}, {:.4}) m", x[0], x[1], x[2])
+                        });
                         return fail(format!(
-                            "a node of interface `{}` moves at {:.3e} m/s: {step:.3e} m in one window of {window:.3e} s, more than half the smallest particle contact radius ({radius:.3e} m: a sphere's radius, a stone's dilation); the coupling diverges — reduce the coupling window or use the predictive schedule",
-                            d.interface, d.max_norm
+                            "node {} of interface `{}`{at} moves at {:.3e} m/s: {step:.3e} m in one window of {window:.3e} s, more than half the smallest particle contact radius ({radius:.3e} m: a sphere's radius, a stone's dilation); the coupling diverges — reduce the coupling window or use the predictive schedule",
+                            d.max_node, d.interface, d.max_norm
                         ));
                     }
                 }
@@ -192,6 +195,8 @@ mod tests {
             time: window as f64 * 1e-4,
             kind: "forces",
             max_norm: f,
+            max_node: 3,
+            max_position: None,
             total: [0.0, 0.0, f],
             non_finite: None,
         }
@@ -207,6 +212,8 @@ mod tests {
             time: 7e-4,
             kind: "kinematics",
             max_norm: speed,
+            max_node: 5,
+            max_position: Some([0.1, 0.2, 0.3]),
             total: [0.0; 3],
             non_finite: None,
         };
@@ -215,6 +222,12 @@ mod tests {
         assert!(
             e.cause
                 .contains("half the smallest particle contact radius"),
+            "{e}"
+        );
+        // the node is named, with where it is
+        assert!(
+            e.cause
+                .contains("node 5 of interface `bottom` at (0.1000, 0.2000, 0.3000) m"),
             "{e}"
         );
     }
@@ -294,6 +307,8 @@ mod tests {
             time: 0.0,
             kind: "kinematics",
             max_norm: 0.0,
+            max_node: 0,
+            max_position: None,
             total: [0.1, 0.1, z],
             non_finite: None,
         };

@@ -1191,22 +1191,30 @@ pub struct Digest {
     pub kind: &'static str,
     /// Largest nodal force norm (forces) or largest nodal speed (kinematics).
     pub max_norm: f64,
+    /// The interface node (in the interface's node order) where `max_norm` is, and with
+    /// kinematics its position: what names the node when the monitor stops a run.
+    pub max_node: usize,
+    pub max_position: Option<[f64; 3]>,
     /// Sum of nodal forces (forces) or mean position (kinematics).
     pub total: [f64; 3],
     /// First non-finite value, if any.
     pub non_finite: Option<(&'static str, usize)>,
 }
 
-fn digest_arrays(a: &[f64]) -> (f64, [f64; 3]) {
-    let mut max: f64 = 0.0;
+/// The largest norm of the 3-vectors in `a`, the (first) vector that has it, and their sum.
+fn digest_arrays(a: &[f64]) -> (f64, usize, [f64; 3]) {
+    let (mut max, mut at): (f64, usize) = (0.0, 0);
     let mut total = [0.0; 3];
-    for v in a.chunks_exact(3) {
-        max = max.max((v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt());
+    for (k, v) in a.chunks_exact(3).enumerate() {
+        let norm = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        if norm > max {
+            (max, at) = (norm, k);
+        }
         for i in 0..3 {
             total[i] += v[i];
         }
     }
-    (max, total)
+    (max, at, total)
 }
 
 /// The coordinator's tap on interface data.
@@ -1224,28 +1232,35 @@ impl Monitor {
             let bytes = payload(&sample);
             let d = if key.ends_with("/forces") {
                 decode::<InterfaceForces>(&bytes, &self.run_id).map(|f| {
-                    let (max_norm, total) = digest_arrays(f.forces.as_slice());
+                    let (max_norm, max_node, total) = digest_arrays(f.forces.as_slice());
                     Digest {
                         interface: f.interface.clone(),
                         window: f.window,
                         time: f.time,
                         kind: "forces",
                         max_norm,
+                        max_node,
+                        max_position: None,
                         total,
                         non_finite: f.forces.first_non_finite().map(|(i, _)| ("forces", i)),
                     }
                 })
             } else if key.ends_with("/kinematics") {
                 decode::<InterfaceKinematics>(&bytes, &self.run_id).map(|k| {
-                    let (max_norm, _) = digest_arrays(k.velocities.as_slice());
-                    let (_, sum) = digest_arrays(k.positions.as_slice());
+                    let (max_norm, max_node, _) = digest_arrays(k.velocities.as_slice());
+                    let (_, _, sum) = digest_arrays(k.positions.as_slice());
                     let n = (k.positions.len() / 3).max(1) as f64;
+                    let p = k.positions.as_slice();
                     Digest {
                         interface: k.interface.clone(),
                         window: k.window,
                         time: k.time,
                         kind: "kinematics",
                         max_norm,
+                        max_node,
+                        max_position: p
+                            .get(3 * max_node..3 * max_node + 3)
+                            .map(|x| [x[0], x[1], x[2]]),
                         total: sum.map(|s| s / n),
                         non_finite: k
                             .positions
