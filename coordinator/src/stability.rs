@@ -245,6 +245,8 @@ mod tests {
             e.to_string().starts_with("unstable at window 3 (t = 3.0"),
             "{e}"
         );
+        // the node of the largest force is named (`forces` puts it at node 3)
+        assert!(e.cause.contains("now on its node 3"), "{e}");
     }
 
     #[test]

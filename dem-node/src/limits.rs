@@ -27,7 +27,8 @@
 //!   smallest and the largest of the other, reference overlap; with `rotation = false` only
 //!   the normal mode) — see [`damped_step`] and [`pair_damped_step`]; a stone counts with its
 //!   bounding radius as the lever arm and its smallest principal moment, a bound of the
-//!   rotational compliance of its contacts;
+//!   rotational compliance of its contacts, in the counter-rotation mode and (its normals can
+//!   miss its centre) in the normal mode;
 //!   `damped_step_mode` says which mode sets it (0 normal, 1 tangential–rotational) and
 //!   `damped_step_zeta` its damping ratio. A strong restitution-calibrated dashpot (e ≲ 0.1)
 //!   damps the tangential–rotational mode of a sphere contact beyond critical (its mass is
@@ -88,16 +89,18 @@ pub fn damped_step(omega: f64, tau: f64) -> f64 {
 /// opposite senses, ω² = (2Z/3) k_t (r_a²/I_a + r_b²/I_b) — the tangential mode, whose mass
 /// (1/m_a + 1/m_b + r_a²/I_a + r_b²/I_b)⁻¹ is 2/7 of m* for solid spheres, is the stiffer and
 /// the more damped one. (A small sphere among large ones turns almost alone: its r²/I
-/// dominates.) Returns (step, mode 0 normal / 1 tangential, ζ of that mode).
+/// dominates.) `normal_rotation` adds the rotational compliance of a normal that misses the
+/// centres, |l × n|²/I summed over both bodies, to the normal mode's 1/m_a + 1/m_b (0 for
+/// spheres). Returns (step, mode 0 normal / 1 tangential, ζ of that mode).
 pub fn pair_damped_step(
     (ra, ma, ia): (f64, f64, f64),
     (rb, mb, ib): (f64, f64, f64),
     (k_n, c_n): (f64, f64),
     (k_t, c_t): (f64, f64),
+    normal_rotation: f64,
 ) -> (f64, u8, f64) {
     let z = REFERENCE_COORDINATION;
-    let m_eff = ma * mb / (ma + mb);
-    let w_n = (z / 3.0 * k_n / m_eff).sqrt();
+    let w_n = (z / 3.0 * k_n * (1.0 / ma + 1.0 / mb + normal_rotation)).sqrt();
     let w_t = (2.0 * z / 3.0 * k_t * (ra * ra / ia + rb * rb / ib)).sqrt();
     let (tau_n, tau_t) = (c_n / k_n, if k_t > 0.0 { c_t / k_t } else { 0.0 });
     let (h_n, h_t) = (damped_step(w_n, tau_n), damped_step(w_t, tau_t));
@@ -112,11 +115,14 @@ pub fn pair_damped_step(
 /// counter-rotation mode a lever arm to its contact points and a moment of inertia — a
 /// sphere's radius and 2/5 m r²; for a dilated polyhedron its bounding radius and its smallest
 /// principal moment, the largest rotational compliance |l × t|²/I a contact on it can see.
+/// `normal_lever` bounds how far a contact normal passes from the centre: 0 for a sphere, the
+/// bounding radius for a stone.
 #[derive(Debug, Clone, Copy)]
 struct Body {
     r: f64,
     m: f64,
     lever: f64,
+    normal_lever: f64,
     inertia: f64,
 }
 
@@ -172,17 +178,19 @@ pub fn contact_limits(
     let body = |k: usize| {
         let (r, m) = (p.radius[k], p.mass[k]);
         match (p.polyhedron(k), p.template(k)) {
-            (Some((s, scale)), Some(t)) => Body {
+            (Some((s, scale)), Some(_)) => Body {
                 r: s.dilation * scale,
                 m,
                 lever: r,
-                inertia: t.principal_inertia.min(),
+                normal_lever: r,
+                inertia: p.inertia[k],
             },
-            (_, t) => Body {
+            _ => Body {
                 r,
                 m,
                 lever: r,
-                inertia: t.map_or(p.inertia[k], |t| t.principal_inertia.min()),
+                normal_lever: 0.0,
+                inertia: p.inertia[k],
             },
         }
     };
@@ -294,11 +302,18 @@ pub fn contact_limits(
                 let m_eff = sa.m * sb.m / (sa.m + sb.m);
                 // the dashpots of `hertz_mindlin::contact_force` at that stiffness
                 let (c_n, c_t) = pp.dashpots(k_n, m_eff);
+                // a stone's normal can miss its centre and turn it (not with rotation locked)
+                let normal_rotation = if rotation {
+                    sa.normal_lever.powi(2) / sa.inertia + sb.normal_lever.powi(2) / sb.inertia
+                } else {
+                    0.0
+                };
                 let h = pair_damped_step(
                     (sa.lever, sa.m, sa.inertia),
                     (sb.lever, sb.m, sb.inertia),
                     (k_n, c_n),
                     (k_t, c_t),
+                    normal_rotation,
                 );
                 if h.0 < damped.0 {
                     damped = h;
@@ -518,7 +533,7 @@ spheres = [
         let i = 0.4 * m * r * r;
         let (k_n, k_t) = (1e6, 0.85e6);
         let (c_n, c_t) = (0.5, 0.4);
-        let (h, mode, zeta) = pair_damped_step((r, m, i), (r, m, i), (k_n, c_n), (k_t, c_t));
+        let (h, mode, zeta) = pair_damped_step((r, m, i), (r, m, i), (k_n, c_n), (k_t, c_t), 0.0);
         let w_t = (20.0 * k_t / m).sqrt();
         let w_n = (4.0 * k_n / m).sqrt();
         let h_t = damped_step(w_t, c_t / k_t);
@@ -527,7 +542,7 @@ spheres = [
         assert!((h - h_t).abs() < 1e-15, "{h} vs {h_t}");
         assert!((zeta - 0.5 * w_t * c_t / k_t).abs() < 1e-12);
         // without a tangential dashpot a weakly damped normal mode can set it
-        let (h0, mode0, _) = pair_damped_step((r, m, i), (r, m, i), (k_n, 5.0), (k_t, 0.0));
+        let (h0, mode0, _) = pair_damped_step((r, m, i), (r, m, i), (k_n, 5.0), (k_t, 0.0), 0.0);
         assert_eq!(mode0, 0);
         assert!((h0 - damped_step(w_n, 5.0 / k_n)).abs() < 1e-15);
     }

@@ -847,9 +847,8 @@ fn stones_report_the_damped_step_of_their_restitution_dashpot() {
     // by hand
     let (e, nu, rho) = (1e7, 0.3, 1000.0);
     let e_star = e / (2.0 * (1.0 - nu * nu));
-    let stiffness_ratio = 2.0 * (1.0 - nu) / (2.0 - nu); // k_t / k_n, Mindlin over Hertz
-                                                         // |β| of the Tsuji dashpot calibrated to e = 0.2 on the Hertz impact
-    let beta = -dem::hertz_mindlin::damping_beta(0.2);
+    // k_t / k_n, Mindlin over Hertz
+    let stiffness_ratio = 2.0 * (1.0 - nu) / (2.0 - nu);
     // (r_ds, m, lever, I) of the stone at `size`
     let body = |size: f64| {
         (
@@ -859,33 +858,56 @@ fn stones_report_the_damped_step_of_their_restitution_dashpot() {
             rho * stone.inertia.min() * size.powi(5),
         )
     };
-    let mut want = (f64::INFINITY, 0.0, 0.0);
-    for (a, b) in [(small, small), (small, large), (large, small)] {
-        let ((ra, ma, la, ia), (rb, mb, lb, ib)) = (body(a), body(b));
-        let k_n = 2.0 * e_star * (ra * rb / (ra + rb) * 0.01 * ra.min(rb)).sqrt();
-        let k_t = stiffness_ratio * k_n;
-        let m_eff = ma * mb / (ma + mb);
-        let gamma_n = 2.0 * (5.0f64 / 6.0).sqrt() * beta * (k_n * m_eff).sqrt();
-        let gamma_t = gamma_n * stiffness_ratio.sqrt();
-        let w_n = (2.0 * k_n / m_eff).sqrt();
-        let w_t = (4.0 * k_t * (la * la / ia + lb * lb / ib)).sqrt();
-        for (h, mode, zeta) in [
-            (
+    // (step, mode, ζ) with the dashpot of |β|; with rotation, the normal mode's compliance
+    // also has the turn of an off-centre normal, l²/I per stone
+    let by_hand = |beta: f64, rotation: bool| {
+        let mut want = (f64::INFINITY, 0.0, 0.0);
+        for (a, b) in [(small, small), (small, large), (large, small)] {
+            let ((ra, ma, la, ia), (rb, mb, lb, ib)) = (body(a), body(b));
+            let k_n = 2.0 * e_star * (ra * rb / (ra + rb) * 0.01 * ra.min(rb)).sqrt();
+            let k_t = stiffness_ratio * k_n;
+            let m_eff = ma * mb / (ma + mb);
+            let gamma_n = 2.0 * (5.0f64 / 6.0).sqrt() * beta * (k_n * m_eff).sqrt();
+            let gamma_t = gamma_n * stiffness_ratio.sqrt();
+            let turn = la * la / ia + lb * lb / ib;
+            let w_n = (2.0 * k_n * (1.0 / m_eff + if rotation { turn } else { 0.0 })).sqrt();
+            let w_t = (4.0 * k_t * turn).sqrt();
+            let mut modes = vec![(
                 dem::limits::damped_step(w_n, gamma_n / k_n),
                 0.0,
                 0.5 * w_n * gamma_n / k_n,
-            ),
-            (
-                dem::limits::damped_step(w_t, gamma_t / k_t),
-                1.0,
-                0.5 * w_t * gamma_t / k_t,
-            ),
-        ] {
-            if h < want.0 {
-                want = (h, mode, zeta);
+            )];
+            if rotation {
+                modes.push((
+                    dem::limits::damped_step(w_t, gamma_t / k_t),
+                    1.0,
+                    0.5 * w_t * gamma_t / k_t,
+                ));
+            }
+            for (h, mode, zeta) in modes {
+                if h < want.0 {
+                    want = (h, mode, zeta);
+                }
             }
         }
-    }
+        want
+    };
+    let matches = |l: &std::collections::BTreeMap<String, f64>, want: (f64, f64, f64)| {
+        for (key, value) in [
+            ("damped_step_limit", want.0),
+            ("damped_step_mode", want.1),
+            ("damped_step_zeta", want.2),
+        ] {
+            assert!(
+                (l[key] - value).abs() <= 1e-9 * value.abs(),
+                "{key}: {} vs {value}",
+                l[key]
+            );
+        }
+    };
+    // |β| of the Tsuji dashpot calibrated to e = 0.2 on the Hertz impact
+    let beta = -dem::hertz_mindlin::damping_beta(0.2);
+    let want = by_hand(beta, true);
     let (_, m, l_arm, i) = body(small);
     println!(
         "stone r²/I = {:.3} / m (a sphere's 2.5 / m); damped step {:?}, by hand {want:?}",
@@ -898,22 +920,14 @@ fn stones_report_the_damped_step_of_their_restitution_dashpot() {
     );
     assert!(l_arm * l_arm / i > 2.5 / m);
     assert_eq!(want.1, 1.0, "the counter-rotation mode sets it");
-    for (key, value) in [
-        ("damped_step_limit", want.0),
-        ("damped_step_mode", want.1),
-        ("damped_step_zeta", want.2),
-    ] {
-        assert!(
-            (l[key] - value).abs() <= 1e-9 * value.abs(),
-            "{key}: {} vs {value}",
-            l[key]
-        );
-    }
-    // rotation locked: the normal mode alone, a longer step
+    matches(&l, want);
+    // rotation locked: the normal mode alone, of the masses alone, a longer step
     let locked = limits(&scene.replace("[dem]\n", "[dem]\nrotation = false\n"));
-    assert_eq!(locked["damped_step_mode"], 0.0);
+    matches(&locked, by_hand(beta, false));
     assert!(locked["damped_step_limit"] > l["damped_step_limit"]);
-    // no dashpot (e = 1): no limit below the undamped one, 2/ω
+    // no dashpot (e = 1): the undamped limit 2/ω of the stiffest mode
     let elastic = limits(ELASTIC);
-    assert_eq!(elastic["damped_step_zeta"], 0.0);
+    let undamped = by_hand(0.0, true);
+    assert_eq!(undamped.2, 0.0);
+    matches(&elastic, undamped);
 }
