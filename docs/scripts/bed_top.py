@@ -12,8 +12,9 @@ particles_final.stones.json) and prints, over the particles whose centre lies at
 `--xy xmin xmax ymin ymax`, the highest point of their surfaces: z + r for a sphere,
 z + size (max over the rotated core vertices of their z + dilation) for a stone — the same
 rule as `bed_top` in tests/tests/polyhedra.rs. Also prints the 95th percentile of the
-particle tops and the count. Superquadrics count with their bounding radius. Standard
-library only.
+particle tops and the count, and with `--cell 0.1` how flat the surface is: the highest top
+in each 10 × 10 cm cell of the box, 10th–90th percentile over the cells. Superquadrics count
+with their bounding radius. Standard library only.
 """
 
 import argparse
@@ -24,7 +25,7 @@ from pathlib import Path
 
 
 def tops(path, below, xy):
-    """The top z of every particle selected (centre ≤ below, inside xy)."""
+    """(x, y, top z) of every particle selected (centre ≤ below, inside xy)."""
     stones = None
     out = []
     with open(path, newline="") as f:
@@ -37,7 +38,7 @@ def tops(path, below, xy):
                 continue
             stone = (row.get("stone") or "").strip()
             if not stone:
-                out.append(z + float(row["radius"]))
+                out.append((x, y, z + float(row["radius"])))
                 continue
             if stones is None:
                 lib = Path(path).with_name(Path(path).stem + ".stones.json")
@@ -57,7 +58,7 @@ def tops(path, below, xy):
                 + (w * w - a * a - b * b + c * c) * v[2]
                 for v in s["vertices"]
             )
-            out.append(z + size * (highest + s["dilation"]))
+            out.append((x, y, z + size * (highest + s["dilation"])))
     return out
 
 
@@ -69,13 +70,24 @@ def main():
     ap.add_argument("--xy", type=float, nargs=4, metavar=("XMIN", "XMAX", "YMIN", "YMAX"),
                     default=[-float("inf"), float("inf")] * 2,
                     help="only particles whose centre lies in this x-y box (m)")
+    ap.add_argument("--cell", type=float, help="also the surface's flatness over square cells of this size (m)")
     args = ap.parse_args()
-    t = sorted(tops(args.particles, args.below, args.xy))
+    selected = tops(args.particles, args.below, args.xy)
+    t = sorted(z for _, _, z in selected)
     if not t:
         sys.exit(f"{args.particles}: no particle below z = {args.below} in the box {args.xy}")
     p95 = t[min(len(t) - 1, int(0.95 * len(t)))]
     print(f"highest surface point {t[-1]:.4f} m; 95 % of the tops below {p95:.4f} m; "
           f"{len(t)} particles")
+    if args.cell:
+        cells = {}
+        for x, y, z in selected:
+            key = (int(x // args.cell), int(y // args.cell))
+            cells[key] = max(cells.get(key, z), z)
+        c = sorted(cells.values())
+        pick = lambda q: c[min(len(c) - 1, int(q * len(c)))]
+        print(f"highest top per {args.cell} m cell: 10th-90th percentile {pick(0.1):.4f}-"
+              f"{pick(0.9):.4f} m over {len(c)} cells")
 
 
 if __name__ == "__main__":
