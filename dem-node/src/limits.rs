@@ -175,39 +175,30 @@ pub fn contact_limits(
     let mut stones: Vec<Option<(f64, f64)>> = vec![None; materials.materials.len()];
     // the same as `ext` over the bodies with the sphere law's dashpots: spheres and polyhedra
     let mut damped_bodies: Vec<Option<Extent>> = vec![None; materials.materials.len()];
-    let body = |k: usize| {
-        let (r, m) = (p.radius[k], p.mass[k]);
-        match (p.polyhedron(k), p.template(k)) {
-            (Some((s, scale)), Some(_)) => Body {
-                r: s.dilation * scale,
-                m,
-                lever: r,
-                normal_lever: r,
-                inertia: p.inertia[k],
-            },
-            _ => Body {
-                r,
-                m,
-                lever: r,
-                normal_lever: 0.0,
-                inertia: p.inertia[k],
-            },
-        }
-    };
+    // the smallest and largest contact radius
+    let (mut r_min, mut r_max) = (f64::INFINITY, f64::NEG_INFINITY);
     for k in 0..p.len() {
-        let (b, slot) = (body(k), p.material[k] as usize);
-        if p.polyhedron(k).is_some() {
+        let (r, slot) = (p.radius[k], p.material[k] as usize);
+        let stone = p.polyhedron(k);
+        let b = Body {
+            r: stone.map_or(r, |(s, scale)| s.dilation * scale),
+            m: p.mass[k],
+            lever: r,
+            normal_lever: if stone.is_some() { r } else { 0.0 },
+            inertia: p.inertia[k],
+        };
+        (r_min, r_max) = (r_min.min(b.r), r_max.max(b.r));
+        if stone.is_some() {
             let worst = stones[slot].get_or_insert((b.r, b.m));
             if b.r.powi(3) / b.m < worst.0.powi(3) / worst.1 {
                 *worst = (b.r, b.m);
             }
         }
         Extent::add(&mut ext[slot], b);
-        if p.template(k).is_none() || p.polyhedron(k).is_some() {
+        if stone.is_some() || p.template(k).is_none() {
             Extent::add(&mut damped_bodies[slot], b);
         }
     }
-    let radii: Vec<f64> = (0..p.len()).map(|k| body(k).r).collect();
     let masses = &p.mass;
     let min = |v: &[f64]| v.iter().cloned().fold(f64::INFINITY, f64::min);
     let max = |v: &[f64]| v.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
@@ -266,8 +257,8 @@ pub fn contact_limits(
     let mut out: Vec<(String, f64)> = vec![
         ("particle_mass_min".into(), min(masses)),
         ("particle_mass_max".into(), max(masses)),
-        ("particle_radius_min".into(), min(&radii)),
-        ("particle_radius_max".into(), max(&radii)),
+        ("particle_radius_min".into(), r_min),
+        ("particle_radius_max".into(), r_max),
         ("contact_stiffness_max".into(), k_max),
         ("contact_stiffness_typical".into(), k_typical),
         ("contact_duration_min".into(), t_min),
