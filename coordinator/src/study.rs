@@ -2,7 +2,8 @@
 //! (coupling window, DEM time step, schedule, force averaging, mesh size, …); every run's wall
 //! time, cost split, error against a reference run and whether it stayed stable, in a CSV and
 //! two plots (error vs wall time, one colour per schedule; stability map). A half-done sweep
-//! resumes: runs whose summary exists are not run again.
+//! resumes: runs that ended are not run again, a run that was stopped half-way continues
+//! from its newest checkpoint (scenes with `[output] checkpoint_every`) or starts again.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -563,11 +564,20 @@ pub async fn run_study(
                 let s = Scene::parse(&path, v.text.clone())?;
                 std::fs::write(&path, &v.text)
                     .with_context(|| format!("writing {}", path.display()))?;
+                // a run that was interrupted or died half-way continues from its newest
+                // checkpoint when the scene writes them (the same variant's, checked), else
+                // it starts again
+                let resume = crate::checkpoint::latest(&dir).ok().filter(|(d, st)| {
+                    crate::checkpoint::check_belongs(d, st, &s.name, &s.text).is_ok()
+                });
+                if let Some((_, st)) = &resume {
+                    tracing::info!("{label}: resuming after window {}", st.window);
+                }
                 let opts = RunOptions {
                     out_dir: Some(dir.clone()),
                     progress: false,
-                    // a run that was interrupted or died half-way starts again
-                    overwrite: true,
+                    overwrite: resume.is_none(),
+                    resume,
                     ..Default::default()
                 };
                 let r = run_scene(&s, &opts).await;

@@ -32,7 +32,7 @@ fn every_shipped_scene_checks() {
             "out/sleeper-bed-poly/dem/particles_final.csv",
             "dem.particles[0].path",
         )),
-        "sleeper-poly.toml" => Some((
+        "sleeper-poly.toml" | "sleeper-poly-window.toml" => Some((
             "out/sleeper-compact-poly/dem/particles_final.csv",
             "dem.particles[0].path",
         )),

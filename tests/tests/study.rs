@@ -199,3 +199,79 @@ fn a_second_study_into_the_same_folder_is_refused() {
     );
     first.0[0].kill().unwrap();
 }
+
+/// A study killed half-way (a session's end, a crash) continues each unfinished run from its
+/// newest checkpoint when the scene writes them, and ends as an uninterrupted study would,
+/// bit for bit.
+#[test]
+fn a_study_stopped_half_way_continues_its_run_from_the_checkpoint() {
+    let dir = tempfile::tempdir().unwrap();
+    // a name of its own: its nodes are found by it after the study is killed
+    let name = format!("study-resume-{}", std::process::id());
+    let text = std::fs::read_to_string(cosim_tests::root().join("scenes/plate.toml"))
+        .unwrap()
+        .replace("name = \"plate\"", &format!("name = \"{name}\""))
+        .replace(
+            "end_time = \"30 ms\"",
+            "end_time = \"12 ms\"\n[output]\ncheckpoint_every = 10\nfinal_state = true",
+        );
+    assert!(text.contains(&name) && text.contains("checkpoint_every"));
+    let scene = cosim_tests::write_scene(dir.path(), "plate.toml", &text);
+    let study = |out: &Path| {
+        let mut c = cosim();
+        c.arg("study")
+            .arg(&scene)
+            .args([
+                "--vary",
+                "coupling.window=1e-4",
+                "--metric",
+                "fem.probe.centre.uz",
+                "--out",
+            ])
+            .arg(out);
+        c
+    };
+    let whole = dir.path().join("whole");
+    let o = run(study(&whole));
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+
+    let broken = dir.path().join("broken");
+    let mut c = study(&broken);
+    c.stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null());
+    let mut child = c.spawn().unwrap();
+    cosim_tests::wait_for_checkpoint(&broken.join("run000"), 49, &mut child);
+    cosim_tests::kill(child.id());
+    let _ = child.wait();
+    // its nodes notice that their coordinator is gone and leave
+    let t0 = std::time::Instant::now();
+    while cosim_tests::pid_of(&["-node", &name]).is_some() {
+        assert!(
+            t0.elapsed() < std::time::Duration::from_secs(10),
+            "nodes still running without a coordinator"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let s = cosim_tests::summary(&broken.join("run000"));
+    assert_ne!(s["status"], "completed", "{s}");
+
+    let o = run(study(&broken));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("resuming after window"), "{err}");
+    let s = cosim_tests::summary(&broken.join("run000"));
+    assert_eq!(s["status"], "completed", "{s}");
+    assert!(s["resumed_after_window"].as_u64().unwrap() >= 49, "{s}");
+    assert_eq!(s["windows_done"], 120);
+    for node in ["dem", "fem"] {
+        let a = std::fs::read(whole.join(format!("run000/final/{node}.state"))).unwrap();
+        let b = std::fs::read(broken.join(format!("run000/final/{node}.state"))).unwrap();
+        assert!(a == b, "{node}: the resumed run's final state differs");
+    }
+    let a = std::fs::read_to_string(whole.join("run000/fem/fem_probes.csv")).unwrap();
+    let b = std::fs::read_to_string(broken.join("run000/fem/fem_probes.csv")).unwrap();
+    assert_eq!(a, b, "the probes' rows continue from the checkpoint");
+    let csv = std::fs::read_to_string(broken.join("study.csv")).unwrap();
+    assert_eq!(rows(&csv).len(), 1);
+    assert_eq!(rows(&csv)[0][2], "completed", "{csv}");
+}
