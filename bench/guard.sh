@@ -19,7 +19,7 @@
 #   fem10      static beam, hex8 10 mm (36,663 dof): build + assembly + factorise + solve, s
 #   transport  10k-node kinematics round trip on loopback: median µs
 #   window     the coupling overhead per window of scenes/sheet-ci.toml (7,000 windows of a
-#              predictive DEM-FEM run, release binaries, ~30 s): (wall − DEM − FEM) / windows, µs
+#              predictive DEM-FEM run, release binaries, ~30 s): (wall − critical path) / windows, µs
 #
 # Environment: N [3] runs per case; TOLERANCE [10] percent; THREADS [2] cores per benchmark;
 # GUARD_CASES ["dense pour polyhedra fem10 transport window"]; GUARD_FILE [bench/guard.tsv];

@@ -69,6 +69,10 @@ pub struct NodeSummary {
     pub results: BTreeMap<String, f64>,
     pub compute_s: f64,
     pub wait_s: f64,
+    /// Of `compute_s`, the time after the node's interface data left in each window (its
+    /// outputs and monitor values: off the critical path, PROTOCOL.md `window_done`).
+    #[serde(default)]
+    pub after_output_s: f64,
     pub software: String,
     /// The features its `hello` named (e.g. `queued_commands`: it accepts windows announced
     /// ahead).
@@ -88,7 +92,9 @@ pub struct Timing {
     pub fem_compute_s: f64,
     /// The windows' compute on the critical path, summed per window: DEM + the slowest FEM
     /// node (the FEM nodes of several structures compute at the same time), or the larger of
-    /// the two when the schedule runs them concurrently.
+    /// the two when the schedule runs them concurrently; each node's compute up to its
+    /// interface data message (`after_output_s` of PROTOCOL.md: its outputs and monitor
+    /// values after it overlap the partner's compute).
     #[serde(default)]
     pub critical_path_s: f64,
     /// Windows wall time − the critical path: transport, waiting, coordinator.
@@ -800,6 +806,7 @@ impl Run<'_> {
         let mut window_start = Instant::now();
         // this window's compute time per node, end time and DEM kinetic energy
         let mut computed: BTreeMap<String, f64> = BTreeMap::new();
+        let mut on_path: BTreeMap<String, f64> = BTreeMap::new();
         let mut row_t_end: Option<f64> = None;
         let mut row_ke: Option<f64> = None;
         // the audit's values of this window: (`dem` | `fem` | `received`, interface) → J
@@ -950,6 +957,7 @@ impl Run<'_> {
                 compute_s,
                 wait_s,
                 monitor: values,
+                after_output_s,
             } = st.body
             else {
                 tracing::debug!(node = %st.node, "ignoring {:?}", st.body);
@@ -965,7 +973,12 @@ impl Run<'_> {
             let ns = self.summary.nodes.entry(st.node.clone()).or_default();
             ns.compute_s += compute_s;
             ns.wait_s += wait_s;
+            ns.after_output_s += after_output_s.clamp(0.0, compute_s);
             *computed.entry(st.node.clone()).or_default() += compute_s;
+            // what the partner waits for: the compute up to the node's data message (the
+            // bookkeeping after it overlaps the partner's compute)
+            *on_path.entry(st.node.clone()).or_default() +=
+                (compute_s - after_output_s.clamp(0.0, compute_s)).max(0.0);
             // a static solve does not advance the FEM clock: the window ends at the latest time
             let t_end = row_t_end.unwrap_or(t_end).max(t_end);
             row_t_end = Some(t_end);
@@ -1043,12 +1056,15 @@ impl Run<'_> {
                     line.push_str(&format!(",{:.6e}", of(n)));
                 }
                 // the FEM nodes compute at the same time: the critical path is the DEM's time
-                // plus the slowest structure's (concurrent schedules: the larger of the two)
-                let slowest = fem_ids.iter().map(|f| of(f)).fold(0.0f64, f64::max);
+                // plus the slowest structure's (concurrent schedules: the larger of the two),
+                // each up to its data message (what comes after overlaps the partner)
+                let path = |n: &str| on_path.get(n).copied().unwrap_or(0.0);
+                let dem_path = scene.dem_node().map(path).unwrap_or(0.0);
+                let slowest = fem_ids.iter().map(|f| path(f)).fold(0.0f64, f64::max);
                 let critical = if scene.concurrent() {
-                    dem.max(slowest)
+                    dem_path.max(slowest)
                 } else {
-                    dem + slowest
+                    dem_path + slowest
                 };
                 self.summary.timing.critical_path_s += critical;
                 let mut audit = String::new();
@@ -1118,6 +1134,7 @@ impl Run<'_> {
                         .unwrap_or_default()
                 )?;
                 computed.clear();
+                on_path.clear();
                 row_t_end = None;
                 csv.flush()?;
                 self.summary.windows_done = window + 1;

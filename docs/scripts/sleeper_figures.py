@@ -6,8 +6,8 @@ ballast's kinetic energy and the run's cost.
     python3 docs/scripts/sleeper_figures.py out/sleeper-poly [--shift 0.0]
 
 prints the tables and writes, into the run folder, `settlement.csv` (mm, downward positive)
-and `pressure_distribution.csv` (the sensors' x against the pressure in kPa at each load
-level), which `cosim plot` draws:
+and `pressure_distribution.csv` / `_deep.csv` (the sensors' x against the pressure in kPa at
+each load level, 0.13 / 0.26 m deep), which `cosim plot` draws:
 
     cosim plot out/sleeper-poly/settlement.csv --ylabel 'settlement (mm)'
     cosim plot out/sleeper-poly/pressure_distribution.csv --ylabel 'pressure (kPa)'
@@ -69,6 +69,7 @@ def main():
     with open(os.path.join(run, "settlement.csv"), "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["time", "middle", "seat"])
+        w.writerow(["0", "0", "0"])  # the start (also keeps `cosim plot` on a linear axis)
         for t, m, s in zip(probes["time"], probes["probe.middle.uz"], probes["probe.seat.uz"]):
             w.writerow([f"{t:.6e}", f"{-1e3 * m:.6e}", f"{-1e3 * s:.6e}"])
     st = probes["time"]
@@ -112,12 +113,16 @@ def main():
             if vals:
                 print(f"  during the cycles ({c0:.3f}-{min(c1, t_end):.3f} s): {1e-3 * min(vals):.0f}-{1e-3 * max(vals):.0f} kPa")
 
-    with open(os.path.join(run, "pressure_distribution.csv"), "w", newline="") as f:
-        w = csv.writer(f)
-        keys = [k for k in dist if "peak" not in k]
-        w.writerow(["x"] + keys)
-        for i, x in enumerate(SENSOR_X):
-            w.writerow([f"{x:.3f}"] + [f"{dist[k][i]:.3f}" for k in keys])
+    # one file per depth (four curves each: a plot stays readable)
+    for depth, name in [("0.13 m", "pressure_distribution.csv"), ("0.26 m", "pressure_distribution_deep.csv")]:
+        keys = [k for k in dist if "peak" not in k and depth in k]
+        if not keys:
+            continue
+        with open(os.path.join(run, name), "w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(["x"] + [k.replace(f" ({depth})", "") for k in keys])
+            for i, x in enumerate(SENSOR_X):
+                w.writerow([f"{x:.3f}"] + [f"{dist[k][i]:.3f}" for k in keys])
 
     # strains and the ballast
     for col, what in [("strain.sleeper.max_principal", "largest"), ("strain.sleeper.min_principal", "smallest")]:

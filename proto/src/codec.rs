@@ -280,6 +280,7 @@ mod tests {
                 compute_s: 0.1,
                 wait_s: 0.01,
                 monitor: limits.clone(),
+                after_output_s: 0.02,
             },
             StatusBody::SnapshotDone {
                 window: 7,
@@ -351,6 +352,47 @@ mod tests {
         mesh.validate().unwrap();
         kin.validate(3, Label::window(5)).unwrap();
         forces.validate(3, Label::window(5)).unwrap();
+    }
+
+    #[test]
+    fn a_window_done_without_after_output_s_reads_as_zero() {
+        // what a node written before the field (or one that does not measure it) sends
+        #[derive(serde::Serialize)]
+        #[serde(tag = "type", rename_all = "snake_case")]
+        enum OldBody {
+            WindowDone {
+                window: u64,
+                t_end: f64,
+                compute_s: f64,
+                wait_s: f64,
+                monitor: BTreeMap<String, f64>,
+            },
+        }
+        #[derive(serde::Serialize)]
+        struct OldStatus {
+            version: u32,
+            run_id: String,
+            node: String,
+            body: OldBody,
+        }
+        let old = OldStatus {
+            version: PROTOCOL_VERSION,
+            run_id: RUN.into(),
+            node: "fem".into(),
+            body: OldBody::WindowDone {
+                window: 3,
+                t_end: 4e-4,
+                compute_s: 0.1,
+                wait_s: 0.01,
+                monitor: BTreeMap::new(),
+            },
+        };
+        let bytes = rmp_serde::to_vec_named(&old).unwrap();
+        let s: Status = decode(&bytes, RUN).unwrap();
+        assert!(
+            matches!(s.body, StatusBody::WindowDone { window: 3, compute_s, after_output_s, .. } if compute_s == 0.1 && after_output_s == 0.0),
+            "{s:?}"
+        );
     }
 
     #[test]

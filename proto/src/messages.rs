@@ -502,13 +502,18 @@ pub enum StatusBody {
         limits: BTreeMap<String, f64>,
         warnings: Vec<String>,
     },
-    /// The window is done. `compute_s` is the wall time spent computing (not waiting).
+    /// The window is done. `compute_s` is the wall time spent computing (not waiting);
+    /// `after_output_s` the part of it after the node's last interface data message of the
+    /// window (outputs, monitor values: its partner does not wait for them, so they are off
+    /// the window's critical path); 0 when it sent none, or from a node that does not say.
     WindowDone {
         window: u64,
         t_end: f64,
         compute_s: f64,
         wait_s: f64,
         monitor: BTreeMap<String, f64>,
+        #[serde(default)]
+        after_output_s: f64,
     },
     SnapshotDone {
         window: u64,

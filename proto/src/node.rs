@@ -235,8 +235,16 @@ pub async fn serve<S: Solver>(
                     window = Some(w.window);
                     let t = Instant::now();
                     let r = solver.advance(&mut p, &w).await?;
-                    let total = t.elapsed().as_secs_f64();
+                    let end = Instant::now();
+                    let total = (end - t).as_secs_f64();
                     let compute = (total - r.wait_s).max(0.0);
+                    // the bookkeeping after this window's data left (its partner computes
+                    // meanwhile)
+                    let after_output = p
+                        .last_data_sent()
+                        .filter(|&s| s >= t)
+                        .map_or(0.0, |s| (end - s).as_secs_f64())
+                        .min(compute);
                     compute_s += compute;
                     wait_s += r.wait_s;
                     p.report(StatusBody::WindowDone {
@@ -245,6 +253,7 @@ pub async fn serve<S: Solver>(
                         compute_s: compute,
                         wait_s: r.wait_s,
                         monitor: r.monitor,
+                        after_output_s: after_output,
                     })
                     .await?;
                 }

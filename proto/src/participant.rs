@@ -202,6 +202,9 @@ pub struct Participant {
     /// coordinator announces windows ahead: PROTOCOL.md §6), served in order by
     /// [`Self::next_command`].
     queued: std::collections::VecDeque<CommandBody>,
+    /// When this node last sent interface data: what it computes after that in a window is
+    /// bookkeeping its partner does not wait for ([`Self::last_data_sent`]).
+    last_data_sent: std::sync::Mutex<Option<std::time::Instant>>,
 }
 
 /// A node's part in an interface.
@@ -276,6 +279,7 @@ impl Participant {
             received: Default::default(),
             shm: ShmSend::default(),
             queued: Default::default(),
+            last_data_sent: Default::default(),
         };
         p.report(StatusBody::Hello(hello.clone())).await?;
         p.hello = Some(hello);
@@ -617,7 +621,20 @@ impl Participant {
                 what: M::WHAT,
                 reason: format!("`{key}` was not opened by open_interfaces for this node"),
             })?;
-        put_data(publisher, msg, &self.session, &self.shm, check).await
+        put_data(publisher, msg, &self.session, &self.shm, check).await?;
+        *self
+            .last_data_sent
+            .lock()
+            .unwrap_or_else(|e| e.into_inner()) = Some(std::time::Instant::now());
+        Ok(())
+    }
+
+    /// When this node last sent interface data (forces or kinematics), if ever.
+    pub fn last_data_sent(&self) -> Option<std::time::Instant> {
+        *self
+            .last_data_sent
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
     }
 
     /// Waits for and validates the kinematics labelled `label` (user side).

@@ -202,6 +202,34 @@ fn predictive_mesh_lands_on_fem_position_at_every_window_end() {
     assert!(worst <= 1e-12, "{worst}");
 }
 
+/// Both nodes publish their interface data before writing their outputs and say how long
+/// the writing took; the coordinator's critical path counts only the compute up to the data.
+#[test]
+fn the_critical_path_leaves_out_what_the_nodes_do_after_their_data_left() {
+    let (_dir, s) = plate("predictive", false);
+    let at = |p: &str| {
+        s.pointer(p)
+            .and_then(|v| v.as_f64())
+            .unwrap_or_else(|| panic!("{p} missing in {s}"))
+    };
+    let node = |n: &str, k: &str| at(&format!("/nodes/{n}/{k}"));
+    let (dem, fem) = (node("dem", "compute_s"), node("fem", "compute_s"));
+    let (dem_after, fem_after) = (node("dem", "after_output_s"), node("fem", "after_output_s"));
+    // the DEM appends its time series and sums its monitor values after the forces left, the
+    // FEM its probes and the energy audit after the kinematics (every window: traces on)
+    assert!(dem_after > 0.0 && dem_after < dem, "{dem_after} of {dem}");
+    assert!(fem_after > 0.0 && fem_after < fem, "{fem_after} of {fem}");
+    let critical = at("/timing/critical_path_s");
+    let expected = (dem - dem_after) + (fem - fem_after);
+    assert!(
+        (critical - expected).abs() <= 1e-9 * expected,
+        "critical path {critical} s, compute up to the data {expected} s"
+    );
+    let wall = at("/timing/windows_wall_s");
+    let overhead = at("/timing/coupling_overhead_s");
+    assert!((overhead - (wall - critical).max(0.0)).abs() <= 1e-9 * wall);
+}
+
 #[test]
 fn jit_moves_the_dem_mesh_by_the_last_fem_kinematics() {
     let (dir, s) = plate("jit", false);

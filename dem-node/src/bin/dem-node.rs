@@ -353,6 +353,14 @@ impl Solver for DemNode {
         } else {
             engine.advance(substeps as usize).map_err(unstable)?;
         }
+        // the interface forces leave first: the partner waits for them, for the outputs and
+        // the monitor below nobody waits (they were on every window's critical path)
+        if let Some(label) = w.output {
+            self.write_forces(p, label).await?;
+        }
+        let engine = self.engine.as_mut().ok_or_else(|| {
+            NodeError::new(ErrorCode::Protocol, "a window command came before `init`")
+        })?;
         engine
             .write_outputs(&out_dir)
             .map_err(|e| NodeError::new(ErrorCode::Io, e.to_string()))?;
@@ -393,9 +401,6 @@ impl Solver for DemNode {
             {
                 monitor.insert(format!("interface_approach_time.{}", c.name), t);
             }
-        }
-        if let Some(label) = w.output {
-            self.write_forces(p, label).await?;
         }
         Ok(WindowReport {
             wait_s,

@@ -296,12 +296,21 @@ impl Solver for FemNode {
                 .advance(w.dt)
                 .map_err(|e| fem_error(ErrorCode::Unstable, format!("window {}: {e}", w.window)))?;
         }
+        let t_end = model.time();
+        let (pos, vel, acc) = model.interface_kinematics();
+        // the kinematics leave first: the partner waits for them, for the outputs and the
+        // audit below nobody waits (they were on every window's critical path)
+        if let Some(label) = w.output {
+            self.write_kinematics(p, label, t_end, (pos.clone(), vel.clone(), acc.clone()))
+                .await?;
+        }
+        let model = self.model.as_mut().ok_or_else(|| {
+            NodeError::new(ErrorCode::Protocol, "a window command came before `init`")
+        })?;
         model
             .write_outputs(&out_dir)
             .map_err(|e| fem_error(ErrorCode::Io, e))?;
-        let t_end = model.time();
         self.last_output_time = Some(t_end);
-        let (pos, vel, acc) = model.interface_kinematics();
         // the interface energy audit: the work of the interface loads over this step (they are
         // held constant through it), f · Δx; and the work of the forces just received over
         // the displacement of the window they were computed in (this one for just-in-time,
@@ -344,10 +353,6 @@ impl Solver for FemNode {
                 .fold(0.0, f64::max),
         )]);
         monitor.extend(audit);
-        if let Some(label) = w.output {
-            self.write_kinematics(p, label, t_end, (pos, vel, acc))
-                .await?;
-        }
         Ok(WindowReport {
             wait_s,
             t_end,
