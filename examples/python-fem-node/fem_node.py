@@ -277,6 +277,7 @@ class FemNode:
         self.out_dir = None
         self.kept = None  # (window, model state) of the last `checkpoint`
         self.trace = None
+        self.sent_at = None
         self.compute_s = 0.0
         self.wait_s = 0.0
         self.window = None
@@ -364,18 +365,21 @@ class FemNode:
             model.solve_static()
         else:
             model.advance(w["dt"])
-        model.write_outputs(self.out_dir)
         t_end = model.time
         pos, vel, acc = model.interface_kinematics()
+        self.sent_at = None
+        if w["output"] is not None:
+            # always the state at the end of the window, whatever `motion` says: the users
+            # compute the predictive motion (`linear`) from it themselves (PROTOCOL.md §4);
+            # first, so that the partner need not wait for the outputs below
+            self._publish(w["output"], t_end, (pos, vel, acc))
+            self.sent_at = time.monotonic()
+        model.write_outputs(self.out_dir)
         if self.trace is not None and self.interface is not None:
             path = os.path.join(self.out_dir, f"trace_{self.interface[0]}_mesh.csv")
             self.trace.row(path, "window,t_end,positions...,velocities...,accelerations...",
                            [str(w["window"])], np.concatenate([[t_end], pos, vel, acc]))
         speed = float(np.linalg.norm(vel.reshape(-1, 3), axis=1).max()) if vel.size else 0.0
-        if w["output"] is not None:
-            # always the state at the end of the window, whatever `motion` says: the users
-            # compute the predictive motion (`linear`) from it themselves (PROTOCOL.md §4)
-            self._publish(w["output"], t_end, (pos, vel, acc))
         return wait_s, t_end, {"max_interface_speed": speed}
 
     def serve(self):
@@ -394,12 +398,15 @@ class FemNode:
                     log.info("stop while waiting for interface data: %s", s.reason)
                     self.p.report(self.stopped())
                     return
-                compute = max(0.0, time.monotonic() - t - wait_s)
+                end = time.monotonic()
+                compute = max(0.0, end - t - wait_s)
+                # the outputs written after the kinematics left: off the critical path
+                after = min(compute, end - self.sent_at) if self.sent_at is not None else 0.0
                 self.compute_s += compute
                 self.wait_s += wait_s
                 self.p.report({"type": "window_done", "window": c["window"], "t_end": float(t_end),
                                "compute_s": compute, "wait_s": wait_s,
-                               "monitor": wire.floats(monitor)})
+                               "monitor": wire.floats(monitor), "after_output_s": after})
             elif kind == "publish":
                 model = self._model()
                 self._publish(c["label"], model.time, model.interface_kinematics())
