@@ -25,7 +25,9 @@
 //! measured with `cosim study` on the sleeper scene's CI variant (docs/speed-accuracy.md):
 //! the largest stable window was [`JIT_WINDOW_FRACTION`] · T_c for JIT and
 //! [`PREDICTIVE_WINDOW_FRACTION`] · T_c for predictive, [`CONCURRENT_WINDOW_FRACTION`] · T_c for
-//! concurrent. Above the limit the run starts
+//! concurrent; on dilated polyhedra the tighter predictive fraction measured on the polyhedral
+//! sleeper ([`window_fraction`]) and a warning for JIT ([`JIT_ON_STONES`]). Above the limit
+//! the run starts
 //! with a warning (the stability monitor stops it if it diverges), and refused beyond
 //! [`REFUSE_BEYOND`] times the limit; `coupling.allow_beyond_limits = true` turns refusals into
 //! warnings.
@@ -77,6 +79,40 @@ pub const PREDICTIVE_WINDOW_FRACTION: f64 = 0.7;
 pub const CONCURRENT_WINDOW_FRACTION: f64 = 0.025;
 // the concurrent schedule lags on both sides: its limit is the tightest
 const _: () = assert!(CONCURRENT_WINDOW_FRACTION < JIT_WINDOW_FRACTION);
+/// On dilated polyhedra (the DEM reports `dilation_force_max`) the predictive schedule's limit
+/// is tighter than on spheres: the bottom face's corner and edge nodes of a structure resting
+/// on stones ring under single stones (docs/full-size.md, "Sleeper on polyhedral ballast").
+/// Measured with `cosim study` on the polyhedral sleeper, its CI piece (T_c = 3.2e-4 s) and
+/// the full-size scene (T_c = 3.26e-4 s): stable at 100 µs = 0.31 T_c (both) and 200 µs =
+/// 0.61 T_c (full size), diverging at 200 µs = 0.62 T_c (CI) and 500 µs (both).
+pub const PREDICTIVE_WINDOW_FRACTION_STONES: f64 = 0.32;
+
+/// What `cosim check` says about the JIT schedule on dilated polyhedra: on the full-size
+/// polyhedral sleeper JIT diverged at every window tried (5, 10 and 20 µs = 0.015–0.06 T_c),
+/// the 5 and 10 µs runs at the same bottom corner node at the same moment (28 and 27 ms): a
+/// shorter window did not help (on the CI piece 10 µs was stable, 20 µs not).
+pub const JIT_ON_STONES: &str = "on dilated polyhedra the just-in-time schedule diverged at every window tried on the full-size sleeper (5, 10 and 20 µs = 0.015–0.06 T_c; the structure's bottom corner nodes under single stones, a shorter window did not help): prefer the predictive schedule";
+
+/// Whether the DEM's bed holds dilated polyhedra (their validity limit is reported).
+fn has_stones(dem: &BTreeMap<String, f64>) -> bool {
+    dem.contains_key("dilation_force_max")
+}
+
+/// The stable window of an explicit schedule as a fraction of T_c, for the DEM's particles.
+pub fn window_fraction(schedule: ScheduleKind, dem: &BTreeMap<String, f64>) -> Option<f64> {
+    let stones = has_stones(dem);
+    // JIT on stones: see JIT_ON_STONES (no window was stable at full size)
+    Some(match (schedule, stones) {
+        (ScheduleKind::Jit, _) => JIT_WINDOW_FRACTION,
+        (ScheduleKind::Predictive, false) => PREDICTIVE_WINDOW_FRACTION,
+        (ScheduleKind::Predictive, true) => PREDICTIVE_WINDOW_FRACTION_STONES,
+        (ScheduleKind::Concurrent, _) => CONCURRENT_WINDOW_FRACTION,
+        // implicit: iterated to a fixed point, no window limit of the explicit kind is known
+        // (measured in docs/speed-accuracy.md)
+        (ScheduleKind::None | ScheduleKind::OneWay | ScheduleKind::Implicit, _) => return None,
+    })
+}
+
 /// The longest implicit window measured stable, as a fraction of T_c (sleeper-ci: 1 ms =
 /// 6.8 T_c, serial and concurrent; no limit found).
 pub const IMPLICIT_STABLE_TESTED: f64 = 6.8;
@@ -174,14 +210,7 @@ pub fn window_limit(
     dem: &BTreeMap<String, f64>,
     fem: &BTreeMap<String, f64>,
 ) -> Option<f64> {
-    let fraction = match schedule {
-        ScheduleKind::Jit => JIT_WINDOW_FRACTION,
-        ScheduleKind::Predictive => PREDICTIVE_WINDOW_FRACTION,
-        // implicit: iterated to a fixed point, no window limit of the explicit kind is known
-        // (measured in docs/speed-accuracy.md)
-        ScheduleKind::Concurrent => CONCURRENT_WINDOW_FRACTION,
-        ScheduleKind::None | ScheduleKind::OneWay | ScheduleKind::Implicit => return None,
-    };
+    let fraction = window_fraction(schedule, dem)?;
     contact_period(dem, fem).map(|t| fraction * t)
 }
 
@@ -391,8 +420,16 @@ pub fn assess(
             match window_limit(scene.schedule, d, f) {
                 Some(limit) => {
                     let w = scene.window;
+                    if scene.schedule == ScheduleKind::Jit && has_stones(d) {
+                        push(Level::Warn, "coupling window", JIT_ON_STONES.to_string());
+                    }
                     let basis = format!(
-                        "interface contact period T_c = 2π√(M/k) = {tc:.3e} s (lightest interface node M = {m:.3e} kg, {which} k = {k:.3e} N/m)"
+                        "interface contact period T_c = 2π√(M/k) = {tc:.3e} s (lightest interface node M = {m:.3e} kg, {which} k = {k:.3e} N/m){}",
+                        if has_stones(d) && scene.schedule == ScheduleKind::Predictive {
+                            "; the fraction measured on dilated polyhedra, tighter than on spheres (a structure's corner nodes ring under single stones)"
+                        } else {
+                            ""
+                        }
                     );
                     if w > limit {
                         let level = if w > REFUSE_BEYOND * limit {
@@ -403,10 +440,9 @@ pub fn assess(
                         push(level, "coupling window", format!(
                             "Δt^C = {w:.3e} s exceeds the {name} limit {limit:.3e} s = {:.3} T_c; {basis}; use Δt^C ≤ {limit:.3e} s{}",
                             limit / tc,
-                            if scene.schedule == ScheduleKind::Jit {
-                                format!(" (the predictive schedule allows {:.3e} s)", PREDICTIVE_WINDOW_FRACTION * tc)
-                            } else {
-                                String::new()
+                            match (scene.schedule, window_limit(ScheduleKind::Predictive, d, f)) {
+                                (ScheduleKind::Jit, Some(p)) => format!(" (the predictive schedule allows {p:.3e} s)"),
+                                _ => String::new(),
                             }
                         ));
                     } else {
@@ -611,6 +647,35 @@ mod tests {
             }
             assert!(l.message.contains("implicit: none known"), "{l}");
         }
+    }
+
+    #[test]
+    fn stones_get_the_predictive_fraction_and_the_jit_warning_measured_on_polyhedral_ballast() {
+        let spheres = m(&[("contact_stiffness_max", 4e6)]);
+        let stones = m(&[("contact_stiffness_max", 4e6), ("dilation_force_max", 1e5)]);
+        let f = m(&[("interface_node_mass_min", 1.0)]);
+        let tc = 2.0 * std::f64::consts::PI / 2000.0;
+        let a = window_limit(ScheduleKind::Predictive, &spheres, &f).unwrap();
+        let b = window_limit(ScheduleKind::Predictive, &stones, &f).unwrap();
+        assert!((a - PREDICTIVE_WINDOW_FRACTION * tc).abs() < 1e-15);
+        assert!((b - PREDICTIVE_WINDOW_FRACTION_STONES * tc).abs() < 1e-15);
+        let findings = |d: &BTreeMap<String, f64>, k, w| {
+            assess(&facts(k, w), Some(d), Some(&f))
+                .into_iter()
+                .filter(|x| x.level != Level::Info && x.limit == "coupling window")
+                .map(|x| x.message)
+                .collect::<Vec<_>>()
+        };
+        // predictive: the measured stable 0.31 T_c passes on stones, the diverging 0.62 is
+        // warned, naming the stones; on spheres 0.62 T_c passes
+        assert!(findings(&stones, ScheduleKind::Predictive, 0.31 * tc).is_empty());
+        let w = findings(&stones, ScheduleKind::Predictive, 0.62 * tc);
+        assert!(w.len() == 1 && w[0].contains("dilated polyhedra"), "{w:?}");
+        assert!(findings(&spheres, ScheduleKind::Predictive, 0.62 * tc).is_empty());
+        // JIT on stones is warned at any window, on spheres not below its limit
+        let w = findings(&stones, ScheduleKind::Jit, 0.015 * tc);
+        assert!(w.len() == 1 && w[0] == JIT_ON_STONES, "{w:?}");
+        assert!(findings(&spheres, ScheduleKind::Jit, 0.015 * tc).is_empty());
     }
 
     #[test]
