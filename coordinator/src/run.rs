@@ -92,9 +92,10 @@ pub struct Timing {
     pub fem_compute_s: f64,
     /// The windows' compute on the critical path, summed per window: DEM + the slowest FEM
     /// node (the FEM nodes of several structures compute at the same time), or the larger of
-    /// the two when the schedule runs them concurrently; each node's compute up to its
-    /// interface data message (`after_output_s` of PROTOCOL.md: its outputs and monitor
-    /// values after it overlap the partner's compute).
+    /// the two when the schedule runs them concurrently). In serial schedules the nodes'
+    /// bookkeeping after their data (`after_output_s` of PROTOCOL.md) overlaps the partner's
+    /// compute: with windows announced ahead both tails are off the path (never below either
+    /// node's whole compute), in lockstep only the smaller of the two.
     #[serde(default)]
     pub critical_path_s: f64,
     /// Windows wall time − the critical path: transport, waiting, coordinator.
@@ -973,12 +974,22 @@ impl Run<'_> {
             let ns = self.summary.nodes.entry(st.node.clone()).or_default();
             ns.compute_s += compute_s;
             ns.wait_s += wait_s;
-            ns.after_output_s += after_output_s.clamp(0.0, compute_s);
+            // an external node's numbers: negative or not finite counts as none
+            let compute_ok = if compute_s.is_finite() {
+                compute_s.max(0.0)
+            } else {
+                0.0
+            };
+            let after = if after_output_s.is_finite() {
+                after_output_s.clamp(0.0, compute_ok)
+            } else {
+                0.0
+            };
+            ns.after_output_s += after;
             *computed.entry(st.node.clone()).or_default() += compute_s;
-            // what the partner waits for: the compute up to the node's data message (the
-            // bookkeeping after it overlaps the partner's compute)
-            *on_path.entry(st.node.clone()).or_default() +=
-                (compute_s - after_output_s.clamp(0.0, compute_s)).max(0.0);
+            // the compute up to the node's data message (the bookkeeping after it can overlap
+            // the partner's compute)
+            *on_path.entry(st.node.clone()).or_default() += compute_ok - after;
             // a static solve does not advance the FEM clock: the window ends at the latest time
             let t_end = row_t_end.unwrap_or(t_end).max(t_end);
             row_t_end = Some(t_end);
@@ -1056,15 +1067,30 @@ impl Run<'_> {
                     line.push_str(&format!(",{:.6e}", of(n)));
                 }
                 // the FEM nodes compute at the same time: the critical path is the DEM's time
-                // plus the slowest structure's (concurrent schedules: the larger of the two),
-                // each up to its data message (what comes after overlaps the partner)
-                let path = |n: &str| on_path.get(n).copied().unwrap_or(0.0);
-                let dem_path = scene.dem_node().map(path).unwrap_or(0.0);
-                let slowest = fem_ids.iter().map(|f| path(f)).fold(0.0f64, f64::max);
+                // plus the slowest structure's (concurrent schedules: the larger of the two,
+                // each node's next window waiting for its own outputs). In a serial schedule
+                // with windows announced ahead both nodes' bookkeeping after their data
+                // overlaps the partner's compute (but not their own next window); in lockstep
+                // only the first solver's does, and which went first is not known here, so
+                // only the smaller of the two tails is taken off (an upper bound of the path)
+                let slowest = fem_ids.iter().map(|f| of(f)).fold(0.0f64, f64::max);
                 let critical = if scene.concurrent() {
-                    dem_path.max(slowest)
+                    dem.max(slowest)
+                } else if scheduler.effective_lookahead() > 0 {
+                    let path = |n: &str| on_path.get(n).copied().unwrap_or(0.0);
+                    let dem_path = scene.dem_node().map(path).unwrap_or(0.0);
+                    let fem_path = fem_ids.iter().map(|f| path(f)).fold(0.0f64, f64::max);
+                    (dem_path + fem_path).max(dem).max(slowest)
                 } else {
-                    dem_path + slowest
+                    let tail = |n: &str| (of(n) - on_path.get(n).copied().unwrap_or(0.0)).max(0.0);
+                    let dem_tail = scene.dem_node().map(tail).unwrap_or(0.0);
+                    let fem_tail = fem_ids
+                        .iter()
+                        .filter(|f| of(f) == slowest)
+                        .map(|f| tail(f))
+                        .fold(f64::INFINITY, f64::min);
+                    let hidden = dem_tail.min(if fem_tail.is_finite() { fem_tail } else { 0.0 });
+                    (dem + slowest - hidden).max(dem).max(slowest)
                 };
                 self.summary.timing.critical_path_s += critical;
                 let mut audit = String::new();

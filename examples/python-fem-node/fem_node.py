@@ -341,10 +341,11 @@ class FemNode:
         """Publishes the interface's state (P, V, A at `time_`) labelled `label`. How the
         users move their meshes from it (`motion`) is theirs to compute (PROTOCOL.md §4)."""
         if self.interface is None:
-            return
+            return False
         name = self.interface[0]
         self.p.write_kinematics(name, wire.interface_kinematics(
             self.p.run_id, name, label, time_, *kin))
+        return True
 
     def advance(self, w):
         model = self._model()
@@ -372,8 +373,8 @@ class FemNode:
             # always the state at the end of the window, whatever `motion` says: the users
             # compute the predictive motion (`linear`) from it themselves (PROTOCOL.md §4);
             # first, so that the partner need not wait for the outputs below
-            self._publish(w["output"], t_end, (pos, vel, acc))
-            self.sent_at = time.monotonic()
+            if self._publish(w["output"], t_end, (pos, vel, acc)):
+                self.sent_at = time.monotonic()
         model.write_outputs(self.out_dir)
         if self.trace is not None and self.interface is not None:
             path = os.path.join(self.out_dir, f"trace_{self.interface[0]}_mesh.csv")

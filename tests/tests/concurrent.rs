@@ -28,25 +28,18 @@ fn concurrent_plate_runs_with_the_critical_path_of_the_slower_solver() {
     assert_eq!(s["windows_done"], 3000);
     let warnings = s["warnings"].to_string();
     assert!(warnings.contains("concurrent limit"), "{warnings}");
-    // a window's critical path is the slower solver's compute (each up to its data message:
-    // the outputs after it are off the path), not the sum of both
+    // a window's critical path is the slower solver's compute, not the sum of both (each
+    // node's next window waits for its own outputs too: the whole compute counts)
     let csv = std::fs::read_to_string(dir.path().join("out-plate.toml/windows.csv")).unwrap();
     let (dem, fem) = (column(&csv, "dem_compute_s"), column(&csv, "fem_compute_s"));
-    let slower: f64 = dem.iter().zip(&fem).map(|(d, f)| d.max(*f)).sum();
+    let critical: f64 = dem.iter().zip(&fem).map(|(d, f)| d.max(*f)).sum();
     let t = &s["timing"];
     let recorded = t["critical_path_s"].as_f64().unwrap();
-    let node = |n: &str, k: &str| s["nodes"][n][k].as_f64().unwrap();
-    let up_to_data = (node("dem", "compute_s") - node("dem", "after_output_s"))
-        + (node("fem", "compute_s") - node("fem", "after_output_s"));
-    eprintln!("critical path {recorded:.4} s, slower solver {slower:.4} s, both up to their data {up_to_data:.4} s");
     assert!(
-        recorded <= slower * (1.0 + 1e-6) + 1e-5,
-        "{recorded} vs {slower}"
+        (recorded - critical).abs() <= 1e-6 * critical + 1e-5,
+        "{recorded} vs {critical}"
     );
-    assert!(
-        recorded < up_to_data * (1.0 - 1e-3),
-        "{recorded}: the sum of both solvers' compute up to their data is {up_to_data}"
-    );
+    assert!(recorded < t["dem_compute_s"].as_f64().unwrap() + t["fem_compute_s"].as_f64().unwrap());
     // the energy audit sees both solvers' lag: the DEM's work and the FEM's differ
     let w = &s["interface_work"]["top"];
     let (d, f) = (w["dem_j"].as_f64().unwrap(), w["fem_j"].as_f64().unwrap());
