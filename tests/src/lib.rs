@@ -172,6 +172,19 @@ pub fn pid_of(needles: &[&str]) -> Option<u32> {
     process_args(needles).map(|(pid, _)| pid)
 }
 
+/// Waits until no node process whose command line names `run` is left (nodes leave by
+/// themselves when their coordinator is gone); fails after 10 s.
+pub fn wait_for_nodes_to_leave(run: &str) {
+    let t0 = std::time::Instant::now();
+    while pid_of(&["-node", run]).is_some() {
+        assert!(
+            t0.elapsed() < std::time::Duration::from_secs(10),
+            "nodes still running without a coordinator"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+}
+
 /// SIGKILL.
 pub fn kill(pid: u32) {
     let ok = Command::new("kill")

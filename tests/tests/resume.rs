@@ -2,7 +2,6 @@
 //! bit for bit, as a run that was never interrupted.
 
 use std::path::Path;
-use std::time::{Duration, Instant};
 
 use cosim_tests::{cosim, kill, pid_of, root, run, summary, write_scene};
 
@@ -68,14 +67,7 @@ fn killed_and_resumed_equals_uninterrupted_with(schedule: &str, tables: &str, vi
     assert!(!status.success(), "the interrupted run must fail");
     if victim == "cosim" {
         // the nodes notice that the coordinator is gone and leave by themselves
-        let t = Instant::now();
-        while pid_of(&["-node", &run_id]).is_some() {
-            assert!(
-                t.elapsed() < Duration::from_secs(10),
-                "nodes still running without a coordinator"
-            );
-            std::thread::sleep(Duration::from_millis(50));
-        }
+        cosim_tests::wait_for_nodes_to_leave(&run_id);
     }
     assert!(!broken.join("final").exists());
 

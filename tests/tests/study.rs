@@ -244,14 +244,7 @@ fn a_study_stopped_half_way_continues_its_run_from_the_checkpoint() {
     cosim_tests::kill(child.id());
     let _ = child.wait();
     // its nodes notice that their coordinator is gone and leave
-    let t0 = std::time::Instant::now();
-    while cosim_tests::pid_of(&["-node", &name]).is_some() {
-        assert!(
-            t0.elapsed() < std::time::Duration::from_secs(10),
-            "nodes still running without a coordinator"
-        );
-        std::thread::sleep(std::time::Duration::from_millis(50));
-    }
+    cosim_tests::wait_for_nodes_to_leave(&name);
     let s = cosim_tests::summary(&broken.join("run000"));
     assert_ne!(s["status"], "completed", "{s}");
 
