@@ -133,7 +133,51 @@ impl LinkConfig {
             )?;
             set(&mut config, "transport/link/tx/keep_alive", "4".into())?;
         }
+        if self.lowlatency() {
+            set(&mut config, "transport/unicast/lowlatency", "true".into())?;
+            set(&mut config, "transport/unicast/qos/enabled", "false".into())?;
+            set(
+                &mut config,
+                "transport/shared_memory/enabled",
+                "true".into(),
+            )?;
+            set(
+                &mut config,
+                "transport/shared_memory/transport_optimization/pool_size",
+                LOWLATENCY_POOL_BYTES.to_string(),
+            )?;
+        }
         Ok(config)
+    }
+
+    /// Whether this session asks for zenoh's low-latency links: each message is written to the
+    /// socket by the thread that sends it (no batching task to wake), which takes about 10 µs
+    /// off each hop and 60 % off a coupling window's coordination (docs/performance.md).
+    ///
+    /// A low-latency link carries at most one batch (64 kB) per message outside shared memory,
+    /// so it is asked for only where every partner shares this host's memory and the pool has
+    /// room: without a zenoh config file, in peer mode, with every endpoint on loopback, and
+    /// with [`LOWLATENCY_POOL_BYTES`] twice over free in `/dev/shm`. Larger messages then go
+    /// through the pool explicitly (the participant waits for room rather than send them
+    /// inline). A link whose other end does not ask for it (the Python node, an external
+    /// solver) is an ordinary link: zenoh negotiates it per link. `COSIM_LOWLATENCY=0` in the
+    /// environment switches it off.
+    pub fn lowlatency(&self) -> bool {
+        self.lowlatency_given(
+            std::env::var("COSIM_LOWLATENCY").ok().as_deref(),
+            shm_free_bytes("/dev/shm"),
+        )
+    }
+
+    /// [`Self::lowlatency`] for a given `COSIM_LOWLATENCY` and free space in `/dev/shm`.
+    fn lowlatency_given(&self, env: Option<&str>, shm_free: Option<u64>) -> bool {
+        let endpoints: Vec<&String> = self.listen.iter().chain(&self.connect).collect();
+        self.zenoh_config.is_none()
+            && self.mode == LinkMode::Peer
+            && !endpoints.is_empty()
+            && endpoints.iter().all(|e| is_loopback_endpoint(e))
+            && env.is_none_or(|v| v.trim() != "0")
+            && shm_free.is_some_and(|free| free >= 2 * LOWLATENCY_POOL_BYTES as u64)
     }
 
     /// Opens the session.
@@ -141,6 +185,50 @@ impl LinkConfig {
         let config = self.to_zenoh_config()?;
         zenoh::open(config).await.map_err(ProtoError::zenoh)
     }
+}
+
+/// The shared-memory pool of a session on low-latency links (zenoh's transport pool, which
+/// the participant's large messages are allocated from): a message larger than this cannot be
+/// sent on them.
+pub const LOWLATENCY_POOL_BYTES: usize = 256 << 20;
+
+/// The largest message sent inline on a low-latency link: one batch is 64 kB with zenoh's
+/// headers; anything larger must travel in shared memory.
+pub const LOWLATENCY_INLINE_MAX: usize = 48 << 10;
+
+/// A `tcp/` or `unixsock-stream/` endpoint on this host (127.0.0.0/8, `localhost`, `[::1]`).
+pub fn is_loopback_endpoint(endpoint: &str) -> bool {
+    let Some((proto, rest)) = endpoint.split_once('/') else {
+        return false;
+    };
+    // locator metadata and configuration follow `?` and `#`
+    let address = rest.split(['?', '#']).next().unwrap_or("");
+    match proto {
+        "unixsock-stream" => true,
+        "tcp" => {
+            let host = match address.rsplit_once(':') {
+                Some((host, _port)) => host,
+                None => return false,
+            };
+            let host = host.trim_start_matches('[').trim_end_matches(']');
+            host == "localhost"
+                || host
+                    .parse::<std::net::IpAddr>()
+                    .is_ok_and(|ip| ip.is_loopback())
+        }
+        _ => false,
+    }
+}
+
+/// Bytes free to an unprivileged writer on the file system holding `path`.
+fn shm_free_bytes(path: &str) -> Option<u64> {
+    let c = std::ffi::CString::new(path).ok()?;
+    let mut st: libc::statvfs = unsafe { std::mem::zeroed() };
+    // SAFETY: `c` is a NUL-terminated path and `st` a valid, writable statvfs.
+    if unsafe { libc::statvfs(c.as_ptr(), &mut st) } != 0 {
+        return None;
+    }
+    Some(st.f_bavail as u64 * st.f_frsize as u64)
 }
 
 /// A free TCP port on 127.0.0.1 for a process started next to listen on.
@@ -237,6 +325,77 @@ mod tests {
             // the port is really free: it can be bound (and is kept bound, so the next pick
             // must skip it)
             held.push(std::net::TcpListener::bind(("127.0.0.1", p)).unwrap());
+        }
+    }
+
+    #[test]
+    fn loopback_endpoints_are_told_from_others() {
+        for e in [
+            "tcp/127.0.0.1:7447",
+            "tcp/127.3.2.1:1",
+            "tcp/localhost:7000",
+            "tcp/[::1]:7000",
+            "tcp/127.0.0.1:7447#iface=lo",
+            "unixsock-stream//tmp/cosim.sock",
+        ] {
+            assert!(is_loopback_endpoint(e), "{e}");
+        }
+        for e in [
+            "tcp/10.0.0.2:7447",
+            "tcp/0.0.0.0:7447",
+            "tcp/[::]:7447",
+            "tcp/example.org:7447",
+            "tls/127.0.0.1:7447",
+            "udp/127.0.0.1:7447",
+            "tcp/127.0.0.1",
+            "127.0.0.1:7447",
+        ] {
+            assert!(!is_loopback_endpoint(e), "{e}");
+        }
+    }
+
+    #[test]
+    fn low_latency_links_only_between_loopback_peers_with_shared_memory() {
+        let room = Some(4 * LOWLATENCY_POOL_BYTES as u64);
+        let local = LinkConfig::loopback_peer(Some(7000), &[7001]);
+        assert!(local.lowlatency_given(None, room));
+        assert!(local.lowlatency_given(Some("1"), room));
+        // switched off, no /dev/shm, or too little room in it
+        assert!(!local.lowlatency_given(Some("0"), room));
+        assert!(!local.lowlatency_given(None, None));
+        assert!(!local.lowlatency_given(None, Some(LOWLATENCY_POOL_BYTES as u64)));
+        // one endpoint off this host, a router, a configuration file, no endpoint at all
+        let mut remote = local.clone();
+        remote.connect.push("tcp/10.0.0.2:7447".into());
+        assert!(!remote.lowlatency_given(None, room));
+        let client = LinkConfig {
+            mode: LinkMode::Client,
+            ..local.clone()
+        };
+        assert!(!client.lowlatency_given(None, room));
+        let file = LinkConfig {
+            zenoh_config: Some("zenoh.json5".into()),
+            ..local.clone()
+        };
+        assert!(!file.lowlatency_given(None, room));
+        assert!(!LinkConfig::default().lowlatency_given(None, room));
+    }
+
+    #[test]
+    fn a_low_latency_config_switches_qos_off_and_sizes_the_pool() {
+        let link = LinkConfig::loopback_peer(Some(7000), &[]);
+        let v: serde_json::Value =
+            serde_json::from_str(&format!("{}", link.to_zenoh_config().unwrap())).unwrap();
+        let unicast = &v["transport"]["unicast"];
+        if link.lowlatency() {
+            assert_eq!(unicast["lowlatency"], true);
+            assert_eq!(unicast["qos"]["enabled"], false);
+            assert_eq!(
+                v["transport"]["shared_memory"]["transport_optimization"]["pool_size"],
+                LOWLATENCY_POOL_BYTES
+            );
+        } else {
+            assert_eq!(unicast["lowlatency"], false);
         }
     }
 

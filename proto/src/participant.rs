@@ -17,7 +17,7 @@ use zenoh::Wait;
 
 use crate::codec::{decode, decode_finite, encode, encode_into_checked, encoded_len, Message};
 use crate::keys::{validate_name, Keys};
-use crate::link::LinkConfig;
+use crate::link::{LinkConfig, LOWLATENCY_INLINE_MAX, LOWLATENCY_POOL_BYTES};
 use crate::messages::*;
 use crate::ProtoError;
 
@@ -45,8 +45,20 @@ async fn declare_data_publisher(
         .map_err(ProtoError::zenoh)
 }
 
-async fn put<M: Message>(publisher: &Publisher<'static>, msg: &M) -> Result<(), ProtoError> {
+/// Sends a message as an ordinary buffer — unless it is too large for a low-latency link, in
+/// which case it goes through the session's shared-memory pool ([`ShmSend::alloc_required`]).
+async fn put<M: Message>(
+    publisher: &Publisher<'static>,
+    msg: &M,
+    session: &zenoh::Session,
+    shm: &ShmSend,
+) -> Result<(), ProtoError> {
     let bytes = encode(msg)?;
+    if shm.lowlatency && bytes.len() > LOWLATENCY_INLINE_MAX {
+        let mut buf = shm.alloc_required(session, bytes.len(), M::WHAT).await?;
+        buf.copy_from_slice(&bytes);
+        return publisher.put(buf).await.map_err(ProtoError::zenoh);
+    }
     publisher.put(bytes).await.map_err(ProtoError::zenoh)
 }
 
@@ -57,6 +69,10 @@ type Shm = std::sync::Arc<zenoh::shm::ShmProvider<zenoh::shm::PosixShmProviderBa
 /// Interface data from this many bulk bytes on are encoded straight into shared memory.
 const SHM_FROM: usize = 4096;
 
+/// How long a message a low-latency link cannot carry inline waits for room in the pool
+/// (the partner frees its buffers as it decodes them: normally microseconds).
+const SHM_WAIT: Duration = Duration::from_secs(30);
+
 /// The shared-memory side of sending interface data: the session's provider, taken on the
 /// first large message (zenoh creates its pool lazily, so a process that sends none — the
 /// coordinator of an explicit scheme — never maps it), and the count of data messages sent
@@ -65,6 +81,9 @@ const SHM_FROM: usize = 4096;
 struct ShmSend {
     provider: tokio::sync::OnceCell<Option<Shm>>,
     sent: DataCounts,
+    /// The session asked for low-latency links ([`LinkConfig::lowlatency`]): a message larger
+    /// than [`LOWLATENCY_INLINE_MAX`] must travel in shared memory.
+    lowlatency: bool,
 }
 
 /// Interface data messages, and how many of them travelled in shared memory.
@@ -85,11 +104,56 @@ impl DataCounts {
 }
 
 impl ShmSend {
+    fn new(link: &LinkConfig) -> ShmSend {
+        ShmSend {
+            lowlatency: link.lowlatency(),
+            ..Default::default()
+        }
+    }
+
     async fn provider(&self, session: &zenoh::Session) -> Option<&Shm> {
         self.provider
             .get_or_init(|| async { session.get_shm_provider().await })
             .await
             .as_ref()
+    }
+
+    /// A shared-memory buffer of `len` bytes for a message (`what`) that a low-latency link
+    /// cannot carry inline: waits (up to [`SHM_WAIT`]) for the partner to free room in the
+    /// pool rather than send it as a buffer, and fails with an error naming the message when
+    /// there is no pool or no room.
+    async fn alloc_required(
+        &self,
+        session: &zenoh::Session,
+        len: usize,
+        what: &str,
+    ) -> Result<zenoh::shm::ZShmMut, ProtoError> {
+        let advice = "this host's links run zenoh's low-latency transport, which carries at most \
+                      64 kB per message outside shared memory; COSIM_LOWLATENCY=0 switches it off";
+        let transport = |reason: String| ProtoError::Zenoh(format!("{what}: {reason} ({advice})"));
+        if len > LOWLATENCY_POOL_BYTES {
+            return Err(transport(format!(
+                "{len} bytes do not fit the shared-memory pool of {LOWLATENCY_POOL_BYTES} bytes"
+            )));
+        }
+        let provider = self
+            .provider(session)
+            .await
+            .ok_or_else(|| transport(format!("{len} bytes and no shared-memory pool")))?;
+        let alloc = provider
+            .alloc(len)
+            .with_policy::<zenoh::shm::BlockOn<zenoh::shm::Defragment<zenoh::shm::GarbageCollect>>>(
+            );
+        match tokio::time::timeout(SHM_WAIT, std::future::IntoFuture::into_future(alloc)).await {
+            Ok(Ok(buf)) => Ok(buf),
+            Ok(Err(e)) => Err(transport(format!(
+                "{len} bytes not allocated in shared memory: {e:?}"
+            ))),
+            Err(_) => Err(transport(format!(
+                "no room for {len} bytes in the shared-memory pool after {} s",
+                SHM_WAIT.as_secs()
+            ))),
+        }
     }
 }
 
@@ -115,12 +179,25 @@ async fn put_data<M: Message>(
     };
     if let Some(provider) = provider {
         let len = encoded_len(msg)?;
+        // take back what the partners have released first, so that the pool's warm front is
+        // reused instead of fresh pages further on (each first touch is a page fault)
+        provider.garbage_collect();
         match provider
             .alloc(len)
             .with_policy::<zenoh::shm::GarbageCollect>()
             .wait()
         {
             Ok(mut buf) => {
+                if !encode_into_checked(msg, &mut buf)? {
+                    check()?;
+                }
+                publisher.put(buf).await.map_err(ProtoError::zenoh)?;
+                shm.sent.add(true);
+                return Ok(());
+            }
+            Err(e) if shm.lowlatency && len > LOWLATENCY_INLINE_MAX => {
+                tracing::debug!("{} of {len} bytes waits for the pool ({e:?})", M::WHAT);
+                let mut buf = shm.alloc_required(session, len, M::WHAT).await?;
                 if !encode_into_checked(msg, &mut buf)? {
                     check()?;
                 }
@@ -135,7 +212,7 @@ async fn put_data<M: Message>(
         }
     }
     check()?;
-    put(publisher, msg).await?;
+    put(publisher, msg, session, shm).await?;
     shm.sent.add(false);
     Ok(())
 }
@@ -277,7 +354,7 @@ impl Participant {
             motion_start: Default::default(),
             relaxed: Default::default(),
             received: Default::default(),
-            shm: ShmSend::default(),
+            shm: ShmSend::new(link),
             queued: Default::default(),
             last_data_sent: Default::default(),
         };
@@ -392,6 +469,8 @@ impl Participant {
         put(
             &self.status,
             &Status::new(self.keys.run_id(), &self.node, body),
+            &self.session,
+            &self.shm,
         )
         .await
     }
@@ -484,7 +563,19 @@ impl Participant {
     /// FEM side: serve the interface mesh to whoever asks (the DEM node, the coordinator).
     pub async fn provide_mesh(&mut self, mesh: &InterfaceMesh) -> Result<(), ProtoError> {
         mesh.validate()?;
-        let bytes = encode(mesh)?;
+        let encoded = encode(mesh)?;
+        // every reply shares this one payload (on low-latency links a large mesh is placed in
+        // shared memory once)
+        let bytes = if self.shm.lowlatency && encoded.len() > LOWLATENCY_INLINE_MAX {
+            let mut buf = self
+                .shm
+                .alloc_required(&self.session, encoded.len(), InterfaceMesh::WHAT)
+                .await?;
+            buf.copy_from_slice(&encoded);
+            zenoh::bytes::ZBytes::from(buf)
+        } else {
+            zenoh::bytes::ZBytes::from(encoded)
+        };
         let key = self.keys.mesh(&mesh.interface);
         let reply_key = key.clone();
         let q = self
@@ -905,7 +996,7 @@ impl CoordinatorLink {
             .await
             .map_err(ProtoError::zenoh)?;
         Ok(CoordinatorLink {
-            shm: ShmSend::default(),
+            shm: ShmSend::new(link),
             session,
             _token: token,
             keys,
@@ -936,7 +1027,7 @@ impl CoordinatorLink {
         let (publisher, seq) = self.commands.get_mut(node).expect("inserted above");
         let cmd = Command::new(self.keys.run_id(), *seq, body);
         *seq += 1;
-        put(publisher, &cmd).await
+        put(publisher, &cmd, &self.session, &self.shm).await
     }
 
     /// The next event, or a timeout error naming `waiting_for`.

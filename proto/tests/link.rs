@@ -461,3 +461,137 @@ async fn a_stop_behind_announced_windows_ends_the_wait_for_data() {
     fem.finish().await.unwrap();
     coordinator.close().await.unwrap();
 }
+
+/// A flat `n × n` grid of interface nodes with two triangles per cell.
+fn grid_mesh(run: &str, n: usize) -> proto::InterfaceMesh {
+    let mut positions = Vec::with_capacity(3 * n * n);
+    for j in 0..n {
+        for i in 0..n {
+            positions.extend([i as f64 * 1e-3, j as f64 * 1e-3, 0.0]);
+        }
+    }
+    let mut triangles = Vec::new();
+    for j in 0..n - 1 {
+        for i in 0..n - 1 {
+            let a = (j * n + i) as u32;
+            let (b, c, d) = (a + 1, a + n as u32, a + n as u32 + 1);
+            triangles.extend([a, b, d, a, d, c]);
+        }
+    }
+    proto::InterfaceMesh {
+        version: PROTOCOL_VERSION,
+        run_id: run.into(),
+        interface: "top".into(),
+        node_ids: (1..=(n * n) as u64).collect(),
+        positions: positions.into(),
+        triangles,
+        volume: None,
+    }
+}
+
+/// On one host the run's links are zenoh's low-latency links (LinkConfig::lowlatency), which
+/// carry at most one 64 kB batch per message outside shared memory: a command, a mesh and
+/// interface data far larger than that still arrive whole and in order (the participant puts
+/// them in the pool explicitly). A partner that does not ask for low-latency links (here:
+/// one opened from a zenoh configuration file, like the Python node or another machine) gets
+/// an ordinary link and the same messages.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn messages_larger_than_a_low_latency_batch_arrive_whole() {
+    let lowlatency = LinkConfig::loopback_peer(Some(1), &[]).lowlatency();
+    if !lowlatency {
+        eprintln!("this host has too little room in /dev/shm: ordinary links only");
+    }
+    // coordinator → node: an `init` whose scene is 300 kB
+    let run = "link-big";
+    let (mut coordinator, fem, mut dem) = coordinated_pair(run).await;
+    let scene: String = (0..20_000).map(|i| format!("# line {i:08}\n")).collect();
+    assert!(scene.len() > 250_000);
+    let init = proto::CommandBody::Init(proto::Init {
+        scene_path: "big.toml".into(),
+        scene_toml: scene,
+        table: "dem".into(),
+        out_dir: "out".into(),
+        interfaces: top(),
+        check_only: false,
+        trace: false,
+    });
+    coordinator.send("dem", init.clone()).await.unwrap();
+    assert_eq!(
+        dem.next_command(Some(Duration::from_secs(10)))
+            .await
+            .unwrap(),
+        init
+    );
+    // FEM → DEM: a 40,000-node mesh (about 2.3 MB) and 100,000-node kinematics (7.2 MB each),
+    // sent four at a time before the reader takes any
+    let (mut fem, mut dem) = (fem, dem);
+    let mesh = grid_mesh(run, 200);
+    fem.provide_mesh(&mesh).await.unwrap();
+    assert_eq!(
+        dem.read_mesh("top", Duration::from_secs(20)).await.unwrap(),
+        mesh
+    );
+    const NODES: usize = 100_000;
+    let sender = tokio::spawn(async move {
+        for k in 1..=4 {
+            fem.write_kinematics(&kinematics(run, k, NODES))
+                .await
+                .unwrap();
+        }
+        fem
+    });
+    for k in 1..=4 {
+        let got = dem
+            .read_kinematics("top", Label::window(k), NODES, Duration::from_secs(30))
+            .await
+            .unwrap();
+        assert_eq!(got, kinematics(run, k, NODES), "window {k}");
+    }
+    let fem = sender.await.unwrap();
+    assert_eq!(fem.data_sent(), (4, 4), "all four in shared memory");
+    fem.finish().await.unwrap();
+    dem.finish().await.unwrap();
+    coordinator.close().await.unwrap();
+
+    // a low-latency FEM and a DEM opened from a configuration file: an ordinary link
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("zenoh.json5");
+    std::fs::write(&file, "{ }").unwrap();
+    let run = "link-mixed";
+    let (pf, pd) = (free_loopback_port().unwrap(), free_loopback_port().unwrap());
+    let fem_link = LinkConfig::loopback_peer(Some(pf), &[]);
+    let dem_link = LinkConfig {
+        zenoh_config: Some(file),
+        ..LinkConfig::loopback_peer(Some(pd), &[pf])
+    };
+    assert_eq!(fem_link.lowlatency(), lowlatency);
+    assert!(!dem_link.lowlatency());
+    let mut fem = Participant::connect(&fem_link, run, "fem", hello(NodeKind::Fem))
+        .await
+        .unwrap();
+    let mut dem = Participant::connect(&dem_link, run, "dem", hello(NodeKind::Dem))
+        .await
+        .unwrap();
+    fem.open_interfaces(&top()).await.unwrap();
+    dem.open_interfaces(&top()).await.unwrap();
+    fem.wait_for_peers(Duration::from_secs(10)).await.unwrap();
+    dem.wait_for_peers(Duration::from_secs(10)).await.unwrap();
+    let mesh = grid_mesh(run, 200);
+    fem.provide_mesh(&mesh).await.unwrap();
+    assert_eq!(
+        dem.read_mesh("top", Duration::from_secs(20)).await.unwrap(),
+        mesh
+    );
+    for k in 0..3 {
+        fem.write_kinematics(&kinematics(run, k, NODES))
+            .await
+            .unwrap();
+        let got = dem
+            .read_kinematics("top", Label::window(k), NODES, Duration::from_secs(30))
+            .await
+            .unwrap();
+        assert_eq!(got, kinematics(run, k, NODES), "window {k}");
+    }
+    fem.finish().await.unwrap();
+    dem.finish().await.unwrap();
+}
