@@ -94,6 +94,11 @@ impl LinkConfig {
 
     /// The zenoh configuration this link opens with.
     pub fn to_zenoh_config(&self) -> Result<Config, ProtoError> {
+        self.zenoh_config_for(self.lowlatency())
+    }
+
+    /// The zenoh configuration, with low-latency links asked for or not.
+    fn zenoh_config_for(&self, lowlatency: bool) -> Result<Config, ProtoError> {
         let mut config = match &self.zenoh_config {
             Some(path) => Config::from_file(path).map_err(|e| {
                 ProtoError::Config(format!("zenoh config file {}: {e}", path.display()))
@@ -133,7 +138,7 @@ impl LinkConfig {
             )?;
             set(&mut config, "transport/link/tx/keep_alive", "4".into())?;
         }
-        if self.lowlatency() {
+        if lowlatency {
             set(&mut config, "transport/unicast/lowlatency", "true".into())?;
             set(&mut config, "transport/unicast/qos/enabled", "false".into())?;
             set(
@@ -155,42 +160,73 @@ impl LinkConfig {
     /// off each hop and 60 % off a coupling window's coordination (docs/performance.md).
     ///
     /// A low-latency link carries at most one batch (64 kB) per message outside shared memory,
-    /// so it is asked for only where every partner shares this host's memory and the pool has
-    /// room: without a zenoh config file, in peer mode, with every endpoint on loopback, and
-    /// with [`LOWLATENCY_POOL_BYTES`] twice over free in `/dev/shm`. Larger messages then go
-    /// through the pool explicitly (the participant waits for room rather than send them
-    /// inline). A link whose other end does not ask for it (the Python node, an external
-    /// solver) is an ordinary link: zenoh negotiates it per link. `COSIM_LOWLATENCY=0` in the
-    /// environment switches it off.
+    /// so it is asked for only where the partners can share this host's memory: without a
+    /// zenoh config file, in peer mode, with every endpoint on loopback, with room for
+    /// [`SHM_SEGMENTS`] pools in `/dev/shm`, and allowed to lock them in memory (zenoh
+    /// `mlock`s its own pool and every partner's it maps: root, or `ulimit -l` large enough).
+    /// Larger messages then go through the pool explicitly (the participant waits for room
+    /// rather than send them inline). A link whose other end does not ask for it (the Python
+    /// node, an external solver) is an ordinary link: zenoh negotiates it per link.
+    /// `COSIM_LOWLATENCY=0` (or `off`, `false`, `no`) in the environment switches it off.
     pub fn lowlatency(&self) -> bool {
         self.lowlatency_given(
             std::env::var("COSIM_LOWLATENCY").ok().as_deref(),
             shm_free_bytes("/dev/shm"),
+            lockable_bytes(),
         )
     }
 
-    /// [`Self::lowlatency`] for a given `COSIM_LOWLATENCY` and free space in `/dev/shm`.
-    fn lowlatency_given(&self, env: Option<&str>, shm_free: Option<u64>) -> bool {
+    /// [`Self::lowlatency`] for a given `COSIM_LOWLATENCY`, free space in `/dev/shm` and
+    /// lockable memory (`None`: unlimited).
+    fn lowlatency_given(
+        &self,
+        env: Option<&str>,
+        shm_free: Option<u64>,
+        lockable: Option<u64>,
+    ) -> bool {
         let endpoints: Vec<&String> = self.listen.iter().chain(&self.connect).collect();
+        let needed = SHM_SEGMENTS * LOWLATENCY_POOL_BYTES as u64;
+        let switched_off = env.is_some_and(|v| {
+            matches!(
+                v.trim().to_ascii_lowercase().as_str(),
+                "0" | "off" | "false" | "no"
+            )
+        });
         self.zenoh_config.is_none()
             && self.mode == LinkMode::Peer
             && !endpoints.is_empty()
             && endpoints.iter().all(|e| is_loopback_endpoint(e))
-            && env.is_none_or(|v| v.trim() != "0")
-            && shm_free.is_some_and(|free| free >= 2 * LOWLATENCY_POOL_BYTES as u64)
+            && !switched_off
+            && shm_free.is_some_and(|free| free >= needed)
+            && lockable.is_none_or(|l| l >= needed)
     }
 
     /// Opens the session.
     pub async fn open(&self) -> Result<zenoh::Session, ProtoError> {
-        let config = self.to_zenoh_config()?;
-        zenoh::open(config).await.map_err(ProtoError::zenoh)
+        Ok(self.open_with_mode().await?.0)
+    }
+
+    /// Opens the session; also says whether it asked for low-latency links (decided once, so
+    /// that the session and its sender agree on it).
+    pub async fn open_with_mode(&self) -> Result<(zenoh::Session, bool), ProtoError> {
+        let config = self.zenoh_config_for(self.lowlatency())?;
+        // read back: a configuration file may ask for low-latency links itself
+        let lowlatency = config
+            .get_json("transport/unicast/lowlatency")
+            .is_ok_and(|v| v.trim() == "true");
+        let session = zenoh::open(config).await.map_err(ProtoError::zenoh)?;
+        Ok((session, lowlatency))
     }
 }
 
 /// The shared-memory pool of a session on low-latency links (zenoh's transport pool, which
 /// the participant's large messages are allocated from): a message larger than this cannot be
 /// sent on them.
-pub const LOWLATENCY_POOL_BYTES: usize = 256 << 20;
+pub const LOWLATENCY_POOL_BYTES: usize = 64 << 20;
+
+/// Shared-memory segments a process of a run may lock (its own pool and the partners' it
+/// maps): the room [`LinkConfig::lowlatency`] asks for in `/dev/shm` and in `ulimit -l`.
+pub const SHM_SEGMENTS: u64 = 4;
 
 /// The largest message sent inline on a low-latency link: one batch is 64 kB with zenoh's
 /// headers; anything larger must travel in shared memory.
@@ -220,6 +256,24 @@ pub fn is_loopback_endpoint(endpoint: &str) -> bool {
     }
 }
 
+/// Bytes this process may lock in memory (`RLIMIT_MEMLOCK`); `None` when unlimited (root, or
+/// `ulimit -l unlimited`).
+fn lockable_bytes() -> Option<u64> {
+    // SAFETY: geteuid has no preconditions.
+    if unsafe { libc::geteuid() } == 0 {
+        return None;
+    }
+    let mut lim = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: `lim` is a valid, writable rlimit.
+    if unsafe { libc::getrlimit(libc::RLIMIT_MEMLOCK, &mut lim) } != 0 {
+        return Some(0);
+    }
+    (lim.rlim_cur != libc::RLIM_INFINITY).then_some(lim.rlim_cur)
+}
+
 /// Bytes free to an unprivileged writer on the file system holding `path`.
 fn shm_free_bytes(path: &str) -> Option<u64> {
     let c = std::ffi::CString::new(path).ok()?;
@@ -228,7 +282,7 @@ fn shm_free_bytes(path: &str) -> Option<u64> {
     if unsafe { libc::statvfs(c.as_ptr(), &mut st) } != 0 {
         return None;
     }
-    Some(st.f_bavail as u64 * st.f_frsize as u64)
+    Some((st.f_bavail as u64).saturating_mul(st.f_frsize as u64))
 }
 
 /// A free TCP port on 127.0.0.1 for a process started next to listen on.
@@ -356,29 +410,33 @@ mod tests {
 
     #[test]
     fn low_latency_links_only_between_loopback_peers_with_shared_memory() {
-        let room = Some(4 * LOWLATENCY_POOL_BYTES as u64);
+        let room = Some(SHM_SEGMENTS * LOWLATENCY_POOL_BYTES as u64);
         let local = LinkConfig::loopback_peer(Some(7000), &[7001]);
-        assert!(local.lowlatency_given(None, room));
-        assert!(local.lowlatency_given(Some("1"), room));
-        // switched off, no /dev/shm, or too little room in it
-        assert!(!local.lowlatency_given(Some("0"), room));
-        assert!(!local.lowlatency_given(None, None));
-        assert!(!local.lowlatency_given(None, Some(LOWLATENCY_POOL_BYTES as u64)));
+        assert!(local.lowlatency_given(None, room, None));
+        assert!(local.lowlatency_given(Some("1"), room, room));
+        // switched off, no /dev/shm, too little room in it or too little lockable memory
+        // (an ordinary user's default `ulimit -l` of 8 MB)
+        for off in ["0", " off", "FALSE", "no"] {
+            assert!(!local.lowlatency_given(Some(off), room, None), "{off}");
+        }
+        assert!(!local.lowlatency_given(None, None, None));
+        assert!(!local.lowlatency_given(None, Some(LOWLATENCY_POOL_BYTES as u64), None));
+        assert!(!local.lowlatency_given(None, room, Some(8 << 20)));
         // one endpoint off this host, a router, a configuration file, no endpoint at all
         let mut remote = local.clone();
         remote.connect.push("tcp/10.0.0.2:7447".into());
-        assert!(!remote.lowlatency_given(None, room));
+        assert!(!remote.lowlatency_given(None, room, None));
         let client = LinkConfig {
             mode: LinkMode::Client,
             ..local.clone()
         };
-        assert!(!client.lowlatency_given(None, room));
+        assert!(!client.lowlatency_given(None, room, None));
         let file = LinkConfig {
             zenoh_config: Some("zenoh.json5".into()),
             ..local.clone()
         };
-        assert!(!file.lowlatency_given(None, room));
-        assert!(!LinkConfig::default().lowlatency_given(None, room));
+        assert!(!file.lowlatency_given(None, room, None));
+        assert!(!LinkConfig::default().lowlatency_given(None, room, None));
     }
 
     #[test]
@@ -387,6 +445,13 @@ mod tests {
         let v: serde_json::Value =
             serde_json::from_str(&format!("{}", link.to_zenoh_config().unwrap())).unwrap();
         let unicast = &v["transport"]["unicast"];
+        assert_eq!(
+            link.zenoh_config_for(true)
+                .unwrap()
+                .get_json("transport/unicast/lowlatency")
+                .unwrap(),
+            "true"
+        );
         if link.lowlatency() {
             assert_eq!(unicast["lowlatency"], true);
             assert_eq!(unicast["qos"]["enabled"], false);

@@ -53,13 +53,17 @@ async fn put<M: Message>(
     session: &zenoh::Session,
     shm: &ShmSend,
 ) -> Result<(), ProtoError> {
-    let bytes = encode(msg)?;
-    if shm.lowlatency && bytes.len() > LOWLATENCY_INLINE_MAX {
-        let mut buf = shm.alloc_required(session, bytes.len(), M::WHAT).await?;
-        buf.copy_from_slice(&bytes);
-        return publisher.put(buf).await.map_err(ProtoError::zenoh);
+    if shm.lowlatency {
+        let len = encoded_len(msg)?;
+        if len > LOWLATENCY_INLINE_MAX {
+            let mut buf = shm.alloc_required(session, len, M::WHAT).await?;
+            // the message is encoded straight into the buffer; the finiteness verdict is for
+            // interface data (put_data), not needed here
+            encode_into_checked(msg, &mut buf)?;
+            return publisher.put(buf).await.map_err(ProtoError::zenoh);
+        }
     }
-    publisher.put(bytes).await.map_err(ProtoError::zenoh)
+    publisher.put(encode(msg)?).await.map_err(ProtoError::zenoh)
 }
 
 /// The session's shared-memory provider (zenoh's own pool), `None` where shared memory is
@@ -104,9 +108,9 @@ impl DataCounts {
 }
 
 impl ShmSend {
-    fn new(link: &LinkConfig) -> ShmSend {
+    fn new(lowlatency: bool) -> ShmSend {
         ShmSend {
-            lowlatency: link.lowlatency(),
+            lowlatency,
             ..Default::default()
         }
     }
@@ -320,7 +324,7 @@ impl Participant {
             });
         }
         let keys = Keys::new(run_id)?;
-        let session = link.open().await?;
+        let (session, lowlatency) = link.open_with_mode().await?;
         let commands = session
             .declare_subscriber(keys.command(node))
             .with(zenoh::handlers::FifoChannel::new(CONTROL_QUEUE))
@@ -354,7 +358,7 @@ impl Participant {
             motion_start: Default::default(),
             relaxed: Default::default(),
             received: Default::default(),
-            shm: ShmSend::new(link),
+            shm: ShmSend::new(lowlatency),
             queued: Default::default(),
             last_data_sent: Default::default(),
         };
@@ -977,7 +981,7 @@ pub struct CoordinatorLink {
 impl CoordinatorLink {
     pub async fn open(link: &LinkConfig, run_id: &str) -> Result<CoordinatorLink, ProtoError> {
         let keys = Keys::new(run_id)?;
-        let session = link.open().await?;
+        let (session, lowlatency) = link.open_with_mode().await?;
         let status = session
             .declare_subscriber(keys.status_all())
             .with(zenoh::handlers::FifoChannel::new(CONTROL_QUEUE))
@@ -996,7 +1000,7 @@ impl CoordinatorLink {
             .await
             .map_err(ProtoError::zenoh)?;
         Ok(CoordinatorLink {
-            shm: ShmSend::new(link),
+            shm: ShmSend::new(lowlatency),
             session,
             _token: token,
             keys,
@@ -1078,7 +1082,10 @@ impl CoordinatorLink {
 
     /// Subscribes to all interface data of the run (monitoring). Declare only after every
     /// node is ready, so that nodes' publishers wait for each other, not for the monitor.
-    /// A ring buffer: a slow monitor loses old samples, it never slows the solvers down.
+    /// A ring buffer: a slow monitor loses old samples rather than slow the solvers down — but
+    /// each sample it holds keeps its sender's shared-memory buffer, which a sender on a
+    /// low-latency link waits for when its pool is full: drain it every window, as the
+    /// coordinator does.
     pub async fn monitor(&self) -> Result<Monitor, ProtoError> {
         let sub = self
             .session

@@ -548,7 +548,9 @@ async fn messages_larger_than_a_low_latency_batch_arrive_whole() {
         assert_eq!(got, kinematics(run, k, NODES), "window {k}");
     }
     let fem = sender.await.unwrap();
-    assert_eq!(fem.data_sent(), (4, 4), "all four in shared memory");
+    if lowlatency {
+        assert_eq!(fem.data_sent(), (4, 4), "all four in shared memory");
+    }
     fem.finish().await.unwrap();
     dem.finish().await.unwrap();
     coordinator.close().await.unwrap();
