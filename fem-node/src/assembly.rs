@@ -1080,6 +1080,23 @@ pub fn ensure_symbolic(
     Ok(symbolic.clone().expect("set above"))
 }
 
+/// Factors with fewer entries than this are factorised and solved on one thread: faer
+/// parallelises inside the dense blocks of the supernodes, which are too small here to pay for
+/// the hand-offs. The 10 mm beam (1.55e7 entries; docs/performance.md) factorises in 217–230 ms
+/// on one thread against 251–273 ms on two on a quiet 2-core machine; the 5 mm beam and the
+/// tet10 bracket (1.6–2.5e8) keep both threads. Also makes the small factors' round-off
+/// independent of the thread count.
+const PARALLEL_FACTOR_FROM: usize = 40_000_000;
+
+/// The parallelism of faer's numeric factorisation and solves for a factor of `nnz` entries.
+fn factor_par(nnz: usize) -> faer::Par {
+    if nnz < PARALLEL_FACTOR_FROM {
+        faer::Par::Seq
+    } else {
+        faer::get_global_parallelism()
+    }
+}
+
 /// Numeric LLᵀ factorisation of (`pattern`, `vals`) on the symbolic analysis `sym`, in the
 /// precision of `T` (f64 for [`Factor`], f32 for [`MixedFactor`]). The error says what failed;
 /// the caller says why it may have.
@@ -1088,7 +1105,7 @@ fn numeric_llt<T: faer::traits::ComplexField + Copy>(
     pattern: &Pattern,
     vals: &[T],
 ) -> Result<Vec<T>, String> {
-    let par = faer::get_global_parallelism();
+    let par = factor_par(sym.len_val());
     let mut values = Vec::new();
     values
         .try_reserve_exact(sym.len_val())
@@ -1150,7 +1167,7 @@ impl Factor {
 
     /// Solves A x = b in place.
     pub fn solve_in_place(&self, b: &mut [f64]) {
-        let par = faer::get_global_parallelism();
+        let par = factor_par(self.symbolic.len_val());
         let mut buf = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(1, par));
         let n = b.len();
         let rhs = faer::MatMut::from_column_major_slice_mut(b, n, 1);
@@ -1260,7 +1277,7 @@ impl MixedFactor {
         LltRef::new(&self.symbolic, &self.values).solve_in_place_with_conj(
             Conj::No,
             rhs,
-            faer::get_global_parallelism(),
+            factor_par(self.symbolic.len_val()),
             MemStack::new(buf),
         );
         for ((zi, &w), &s) in z.iter_mut().zip(work.iter()).zip(&self.scale) {
@@ -1293,7 +1310,7 @@ impl MixedFactor {
         }
         let mut buf = MemBuffer::new(
             self.symbolic
-                .solve_in_place_scratch::<f32>(1, faer::get_global_parallelism()),
+                .solve_in_place_scratch::<f32>(1, factor_par(self.symbolic.len_val())),
         );
         let mut work = vec![0.0f32; n];
         let mut x = vec![0.0; n];
