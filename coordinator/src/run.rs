@@ -155,6 +155,10 @@ pub struct Summary {
     /// Windows whose commands went out before the window before them was complete.
     #[serde(default)]
     pub windows_announced_ahead: u64,
+    /// The coordinator asked for zenoh's low-latency links (one host, shared memory:
+    /// proto/PROTOCOL.md §1); the nodes it starts decide the same way.
+    #[serde(default)]
+    pub lowlatency_links: bool,
 }
 
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
@@ -1427,8 +1431,16 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
         schedule: schedule_name(scene.schedule),
         coupling_window_s: scene.window,
         windows_planned: scene.windows,
+        lowlatency_links: link.lowlatency(),
         ..Default::default()
     };
+    tracing::debug!(
+        "links: {}",
+        match summary.lowlatency_links {
+            true => "zenoh low-latency, large messages in shared memory",
+            false => "zenoh ordinary (COSIM_LOWLATENCY=0, a config file, endpoints off this host, or no room to lock shared memory)",
+        }
+    );
     let mut nodes = Vec::new();
     let scene_dir = scene
         .path

@@ -1015,6 +1015,11 @@ impl CoordinatorLink {
         &self.keys
     }
 
+    /// Whether this session asked for low-latency links ([`LinkConfig::lowlatency`]).
+    pub fn lowlatency(&self) -> bool {
+        self.shm.lowlatency
+    }
+
     /// Sends a command to `node` (sequence numbers are kept per node).
     pub async fn send(&mut self, node: &str, body: CommandBody) -> Result<(), ProtoError> {
         validate_name("node", node)?;

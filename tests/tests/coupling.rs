@@ -373,6 +373,45 @@ fn outputs(dir: &Path) -> std::collections::BTreeMap<String, Vec<u8>> {
     out
 }
 
+/// On one host the processes talk over zenoh's low-latency links (proto/PROTOCOL.md §1):
+/// the same run over ordinary links (`COSIM_LOWLATENCY=0`) gives every output bit for bit,
+/// and `summary.json` says which links the run used.
+#[test]
+fn low_latency_and_ordinary_links_give_the_same_results_bit_for_bit() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = scene_text("plate.toml").replace(
+        "end_time = \"30 ms\"",
+        "end_time = \"5 ms\"\n[output]\ntrace_interfaces = true",
+    );
+    let fast = run_scene(dir.path(), "fast.toml", &text);
+    let scene = write_scene(dir.path(), "plain.toml", &text);
+    let out = dir.path().join("out-plain.toml");
+    let mut c = cosim();
+    c.env("COSIM_LOWLATENCY", "off")
+        .arg("run")
+        .arg(&scene)
+        .arg("--no-progress")
+        .arg("--out")
+        .arg(&out);
+    let o = run(c);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let plain = cosim_tests::summary(&out);
+    for s in [&fast, &plain] {
+        assert_eq!(s["status"], "completed");
+        assert_eq!(s["windows_done"], 50);
+    }
+    let host_allows = proto::LinkConfig::loopback_peer(Some(7000), &[]).lowlatency();
+    assert_eq!(fast["lowlatency_links"], host_allows, "{fast}");
+    assert_eq!(plain["lowlatency_links"], false, "{plain}");
+    let a = outputs(&dir.path().join("out-fast.toml"));
+    let b = outputs(&out);
+    assert!(a.keys().any(|k| k.contains("trace")), "{:?}", a.keys());
+    assert_eq!(a.keys().collect::<Vec<_>>(), b.keys().collect::<Vec<_>>());
+    for (name, bytes) in &a {
+        assert!(bytes == &b[name], "{name} differs");
+    }
+}
+
 /// The coordinator announces windows ahead (`coupling.lookahead`, default 2) in the explicit
 /// schedules: the nodes compute the same windows with the same data, so every output is the
 /// same bit for bit as in lockstep, checkpoints included (none is announced past).
