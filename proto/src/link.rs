@@ -184,7 +184,7 @@ impl LinkConfig {
         shm_free: Option<u64>,
         lockable: Option<u64>,
     ) -> bool {
-        let endpoints: Vec<&String> = self.listen.iter().chain(&self.connect).collect();
+        let mut endpoints = self.listen.iter().chain(&self.connect).peekable();
         let needed = SHM_SEGMENTS * LOWLATENCY_POOL_BYTES as u64;
         let switched_off = env.is_some_and(|v| {
             matches!(
@@ -194,8 +194,8 @@ impl LinkConfig {
         });
         self.zenoh_config.is_none()
             && self.mode == LinkMode::Peer
-            && !endpoints.is_empty()
-            && endpoints.iter().all(|e| is_loopback_endpoint(e))
+            && endpoints.peek().is_some()
+            && endpoints.all(|e| is_loopback_endpoint(e))
             && !switched_off
             && shm_free.is_some_and(|free| free >= needed)
             && lockable.is_none_or(|l| l >= needed)
@@ -396,8 +396,8 @@ mod tests {
         }
         for e in [
             "tcp/10.0.0.2:7447",
-            "tcp/0.0.0.0:7447",
-            "tcp/[::]:7447",
+            "tcp/192.0.2.7:7447",
+            "tcp/[2001:db8::7]:7447",
             "tcp/example.org:7447",
             "tls/127.0.0.1:7447",
             "udp/127.0.0.1:7447",

@@ -53,17 +53,8 @@ async fn put<M: Message>(
     session: &zenoh::Session,
     shm: &ShmSend,
 ) -> Result<(), ProtoError> {
-    if shm.lowlatency {
-        let len = encoded_len(msg)?;
-        if len > LOWLATENCY_INLINE_MAX {
-            let mut buf = shm.alloc_required(session, len, M::WHAT).await?;
-            // the message is encoded straight into the buffer; the finiteness verdict is for
-            // interface data (put_data), not needed here
-            encode_into_checked(msg, &mut buf)?;
-            return publisher.put(buf).await.map_err(ProtoError::zenoh);
-        }
-    }
-    publisher.put(encode(msg)?).await.map_err(ProtoError::zenoh)
+    let payload = shm.payload(session, msg).await?;
+    publisher.put(payload).await.map_err(ProtoError::zenoh)
 }
 
 /// The session's shared-memory provider (zenoh's own pool), `None` where shared memory is
@@ -120,6 +111,25 @@ impl ShmSend {
             .get_or_init(|| async { session.get_shm_provider().await })
             .await
             .as_ref()
+    }
+
+    /// The encoded message as a payload: an ordinary buffer, or — when it is too large for a
+    /// low-latency link — encoded straight into a buffer of the pool ([`Self::alloc_required`]).
+    async fn payload<M: Message>(
+        &self,
+        session: &zenoh::Session,
+        msg: &M,
+    ) -> Result<zenoh::bytes::ZBytes, ProtoError> {
+        if self.lowlatency {
+            let len = encoded_len(msg)?;
+            if len > LOWLATENCY_INLINE_MAX {
+                let mut buf = self.alloc_required(session, len, M::WHAT).await?;
+                // the finiteness verdict is for interface data (put_data), not needed here
+                encode_into_checked(msg, &mut buf)?;
+                return Ok(buf.into());
+            }
+        }
+        Ok(encode(msg)?.into())
     }
 
     /// A shared-memory buffer of `len` bytes for a message (`what`) that a low-latency link
@@ -184,35 +194,33 @@ async fn put_data<M: Message>(
     if let Some(provider) = provider {
         let len = encoded_len(msg)?;
         // take back what the partners have released first, so that the pool's warm front is
-        // reused instead of fresh pages further on (each first touch is a page fault)
+        // reused instead of buffers further on, cold in every cache
         provider.garbage_collect();
-        match provider
+        let buf = match provider
             .alloc(len)
             .with_policy::<zenoh::shm::GarbageCollect>()
             .wait()
         {
-            Ok(mut buf) => {
-                if !encode_into_checked(msg, &mut buf)? {
-                    check()?;
-                }
-                publisher.put(buf).await.map_err(ProtoError::zenoh)?;
-                shm.sent.add(true);
-                return Ok(());
-            }
+            Ok(buf) => Some(buf),
             Err(e) if shm.lowlatency && len > LOWLATENCY_INLINE_MAX => {
                 tracing::debug!("{} of {len} bytes waits for the pool ({e:?})", M::WHAT);
-                let mut buf = shm.alloc_required(session, len, M::WHAT).await?;
-                if !encode_into_checked(msg, &mut buf)? {
-                    check()?;
-                }
-                publisher.put(buf).await.map_err(ProtoError::zenoh)?;
-                shm.sent.add(true);
-                return Ok(());
+                Some(shm.alloc_required(session, len, M::WHAT).await?)
             }
-            Err(e) => tracing::debug!(
-                "{} of {len} bytes not in shared memory ({e:?}): sent as a buffer",
-                M::WHAT
-            ),
+            Err(e) => {
+                tracing::debug!(
+                    "{} of {len} bytes not in shared memory ({e:?}): sent as a buffer",
+                    M::WHAT
+                );
+                None
+            }
+        };
+        if let Some(mut buf) = buf {
+            if !encode_into_checked(msg, &mut buf)? {
+                check()?;
+            }
+            publisher.put(buf).await.map_err(ProtoError::zenoh)?;
+            shm.sent.add(true);
+            return Ok(());
         }
     }
     check()?;
@@ -567,19 +575,9 @@ impl Participant {
     /// FEM side: serve the interface mesh to whoever asks (the DEM node, the coordinator).
     pub async fn provide_mesh(&mut self, mesh: &InterfaceMesh) -> Result<(), ProtoError> {
         mesh.validate()?;
-        let encoded = encode(mesh)?;
         // every reply shares this one payload (on low-latency links a large mesh is placed in
         // shared memory once)
-        let bytes = if self.shm.lowlatency && encoded.len() > LOWLATENCY_INLINE_MAX {
-            let mut buf = self
-                .shm
-                .alloc_required(&self.session, encoded.len(), InterfaceMesh::WHAT)
-                .await?;
-            buf.copy_from_slice(&encoded);
-            zenoh::bytes::ZBytes::from(buf)
-        } else {
-            zenoh::bytes::ZBytes::from(encoded)
-        };
+        let bytes = self.shm.payload(&self.session, mesh).await?;
         let key = self.keys.mesh(&mesh.interface);
         let reply_key = key.clone();
         let q = self
