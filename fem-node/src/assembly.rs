@@ -340,7 +340,7 @@ fn corner_anchors(mesh: &Mesh, dofs: &DofMap, p: &Pattern) -> Vec<[u32; 2]> {
 
 /// faer's symbolic Cholesky analysis of the symmetric pattern `a` eliminated in `order`
 /// (`order[i]`: the row and column eliminated i-th).
-fn analyse_in_order(
+pub(crate) fn analyse_in_order(
     a: SymbolicSparseColMatRef<'_, u32>,
     order: &[u32],
 ) -> Result<SymbolicCholesky<u32>, faer::sparse::FaerError> {
@@ -1001,14 +1001,52 @@ fn leaf_order(adj: &[Vec<u32>], nodes: &[u32], local: &mut [u32], out: &mut Vec<
 }
 
 /// Sparse Cholesky factor LLᵀ computed by faer (simplicial or supernodal, chosen by faer),
-/// with our nested-dissection ordering or faer's AMD, whichever gives less fill.
+/// with our nested-dissection ordering or faer's AMD, whichever gives less fill; factors of
+/// [`SPLIT_FROM`]..[`PARALLEL_FACTOR_FROM`] entries whose elimination tree splits well are
+/// computed as two halves side by side ([`crate::tree_factor`]).
 pub struct Factor {
-    symbolic: Arc<SymbolicCholesky<u32>>,
-    values: Vec<f64>,
+    symbolic: Symbolic,
+    values: FactorValues,
 }
 
-/// Cached symbolic analysis (ordering, elimination tree, supernodes) of one pattern.
-pub type Symbolic = Arc<SymbolicCholesky<u32>>;
+enum FactorValues {
+    Whole(Vec<f64>),
+    Split(crate::tree_factor::SplitFactor),
+}
+
+/// The symbolic analysis of one pattern (ordering, elimination tree, supernodes) and, where
+/// it pays, the split of its tree into two halves factorised side by side.
+pub struct FactorPlan {
+    full: SymbolicCholesky<u32>,
+    split: Option<crate::tree_factor::SplitPlan>,
+}
+
+impl FactorPlan {
+    /// The whole factor's symbolic analysis.
+    pub fn full(&self) -> &SymbolicCholesky<u32> {
+        &self.full
+    }
+
+    /// The tree split [`Factor`] uses, if any.
+    pub fn split(&self) -> Option<&crate::tree_factor::SplitPlan> {
+        self.split.as_ref()
+    }
+}
+
+impl std::ops::Deref for FactorPlan {
+    type Target = SymbolicCholesky<u32>;
+    fn deref(&self) -> &SymbolicCholesky<u32> {
+        &self.full
+    }
+}
+
+/// Cached symbolic analysis of one pattern.
+pub type Symbolic = Arc<FactorPlan>;
+
+/// Factors of at least this many entries (and fewer than [`PARALLEL_FACTOR_FROM`]) are
+/// factorised as two halves side by side when their elimination tree splits well: below it
+/// the dense separator and the hand-offs cost more than the halves save.
+pub const SPLIT_FROM: usize = 2_000_000;
 
 fn timing() -> bool {
     tracing::enabled!(tracing::Level::DEBUG)
@@ -1029,6 +1067,35 @@ pub fn ensure_symbolic(
     symbolic: &mut Option<Symbolic>,
 ) -> Result<Symbolic, FemError> {
     if symbolic.is_none() {
+        let sizes = if tree_split_enabled() {
+            SPLIT_FROM..PARALLEL_FACTOR_FROM
+        } else {
+            0..0
+        };
+        *symbolic = Some(analyse(pattern, sizes)?);
+    }
+    Ok(symbolic.clone().expect("set above"))
+}
+
+/// `COSIM_TREE_SPLIT=0` (or off/false/no) keeps every factor whole: for comparisons and
+/// diagnosis (FEM.md).
+fn tree_split_enabled() -> bool {
+    !matches!(
+        std::env::var("COSIM_TREE_SPLIT")
+            .as_deref()
+            .map(str::to_ascii_lowercase)
+            .as_deref(),
+        Ok("0" | "off" | "false" | "no")
+    )
+}
+
+/// The symbolic analysis of [`ensure_symbolic`], with the tree split planned when the
+/// factor's size lies in `split_sizes` (tests pass their own range).
+pub fn analyse(
+    pattern: &Pattern,
+    split_sizes: std::ops::Range<usize>,
+) -> Result<Symbolic, FemError> {
+    {
         let t0 = std::time::Instant::now();
         let mut chosen = "nested dissection";
         let mut order: Option<Vec<u32>> = None;
@@ -1068,16 +1135,31 @@ pub fn ensure_symbolic(
         let order = order.as_deref().unwrap_or(&pattern.order);
         let sym = analyse_in_order(pattern.symbolic(), order)
             .map_err(|e| FemError::Solver(format!("symbolic Cholesky failed: {e:?}")))?;
+        let t_split = std::time::Instant::now();
+        let split = split_sizes
+            .contains(&sym.len_val())
+            .then(|| crate::tree_factor::SplitPlan::new(pattern, &sym))
+            .flatten();
         if timing() {
             tracing::debug!(
-                "  ordering: {chosen}, nnz(L) = {} (node-graph fills: {fills}), {:?}",
+                "  ordering: {chosen}, nnz(L) = {} (node-graph fills: {fills}), {:?}; {}",
                 sym.len_val(),
-                t0.elapsed()
+                t0.elapsed(),
+                match &split {
+                    Some(s) => format!(
+                        "tree split: separator {}, halves' nnz(L) {}, predicted {:.2} of the \
+                         whole's work, planned in {:?}",
+                        s.separator(),
+                        s.factor_nnz(),
+                        s.predicted,
+                        t_split.elapsed()
+                    ),
+                    None => "no tree split".into(),
+                }
             );
         }
-        *symbolic = Some(Arc::new(sym));
+        Ok(Arc::new(FactorPlan { full: sym, split }))
     }
-    Ok(symbolic.clone().expect("set above"))
 }
 
 /// Factors with fewer entries than this are factorised and solved on one thread: faer
@@ -1105,7 +1187,24 @@ fn numeric_llt<T: faer::traits::ComplexField + Copy>(
     pattern: &Pattern,
     vals: &[T],
 ) -> Result<Vec<T>, String> {
-    let par = factor_par(sym.len_val());
+    numeric_llt_on(sym, pattern.symbolic(), vals, factor_par(sym.len_val()))
+}
+
+/// [`numeric_llt`] of a matrix given by its structure `a`, on one thread.
+pub(crate) fn numeric_llt_seq(
+    sym: &SymbolicCholesky<u32>,
+    a: SymbolicSparseColMatRef<'_, u32>,
+    vals: &[f64],
+) -> Result<Vec<f64>, String> {
+    numeric_llt_on(sym, a, vals, faer::Par::Seq)
+}
+
+fn numeric_llt_on<T: faer::traits::ComplexField + Copy>(
+    sym: &SymbolicCholesky<u32>,
+    a: SymbolicSparseColMatRef<'_, u32>,
+    vals: &[T],
+    par: faer::Par,
+) -> Result<Vec<T>, String> {
     let mut values = Vec::new();
     values
         .try_reserve_exact(sym.len_val())
@@ -1116,7 +1215,7 @@ fn numeric_llt<T: faer::traits::ComplexField + Copy>(
             .map_err(|_| "out of memory for the Cholesky workspace".to_string())?;
     sym.factorize_numeric_llt::<T>(
         &mut values,
-        SparseColMatRef::new(pattern.symbolic(), vals),
+        SparseColMatRef::new(a, vals),
         Side::Lower,
         Default::default(),
         par,
@@ -1138,12 +1237,16 @@ impl Factor {
         let t0 = std::time::Instant::now();
         let sym = ensure_symbolic(pattern, symbolic)?;
         let t_sym = t0.elapsed();
-        let values = numeric_llt(&sym, pattern, vals).map_err(|e| {
+        let not_pd = |e: String| {
             FemError::Solver(format!(
                 "{e}: the matrix is not positive definite — check that the supports remove all \
                  rigid-body motions"
             ))
-        })?;
+        };
+        let values = match sym.split() {
+            Some(plan) => FactorValues::Split(plan.factorize(vals).map_err(not_pd)?),
+            None => FactorValues::Whole(numeric_llt(&sym, pattern, vals).map_err(not_pd)?),
+        };
         if timing() {
             tracing::debug!(
                 "  cholesky n={} nnz(A)={} nnz(L)={}: symbolic {:?}, numeric {:?}",
@@ -1165,13 +1268,26 @@ impl Factor {
         self.symbolic.len_val()
     }
 
+    /// Whether the factor was computed as two halves side by side ([`crate::tree_factor`]).
+    pub fn is_split(&self) -> bool {
+        matches!(self.values, FactorValues::Split(_))
+    }
+
     /// Solves A x = b in place.
     pub fn solve_in_place(&self, b: &mut [f64]) {
+        let values = match &self.values {
+            FactorValues::Whole(v) => v,
+            FactorValues::Split(f) => {
+                let plan = self.symbolic.split().expect("a split factor has its plan");
+                plan.solve_in_place(f, b);
+                return;
+            }
+        };
         let par = factor_par(self.symbolic.len_val());
         let mut buf = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(1, par));
         let n = b.len();
         let rhs = faer::MatMut::from_column_major_slice_mut(b, n, 1);
-        LltRef::new(&self.symbolic, &self.values).solve_in_place_with_conj(
+        LltRef::new(self.symbolic.full(), values).solve_in_place_with_conj(
             Conj::No,
             rhs,
             par,
@@ -1203,7 +1319,7 @@ pub struct RefinedSolve {
 /// few iterations while κ(A)·ε_f32 ≪ 1 (Higham, *Accuracy and Stability*, ch. 12). Shares the
 /// symbolic analysis with [`Factor`].
 pub struct MixedFactor {
-    symbolic: Arc<SymbolicCholesky<u32>>,
+    symbolic: Symbolic,
     values: Vec<f32>,
     /// ‖A‖∞ of the matrix factored (computed at the first solve).
     a_norm: std::sync::OnceLock<f64>,
@@ -1274,7 +1390,7 @@ impl MixedFactor {
         }
         let n = work.len();
         let rhs = faer::MatMut::from_column_major_slice_mut(work, n, 1);
-        LltRef::new(&self.symbolic, &self.values).solve_in_place_with_conj(
+        LltRef::new(self.symbolic.full(), &self.values).solve_in_place_with_conj(
             Conj::No,
             rhs,
             factor_par(self.symbolic.len_val()),

@@ -36,6 +36,7 @@ pub mod resources;
 pub mod shell;
 mod shell_model;
 pub mod surface;
+pub mod tree_factor;
 
 pub use config::{parse_scene_section, parse_scene_table};
 pub use element::ElementKind;

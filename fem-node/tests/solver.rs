@@ -298,3 +298,164 @@ fn metis_on_a_tet10_mesh_orders_the_corners_and_places_each_midside_node_before_
     p.mul(&vals, &x, &mut ax);
     assert!(max_rel_diff(&ax, &b) < 1e-12);
 }
+
+/// The elastic stiffness of a steel cantilever of hex8 elements (`div` along x, y, z),
+/// clamped at x = 0: its pattern and values.
+fn cantilever(div: [usize; 3], kind: fem::ElementKind) -> (fem::assembly::Pattern, Vec<f64>) {
+    use fem::assembly::{assemble, ElementProps, Operator, Pattern};
+    let mesh = fem::mesh::box_mesh([0.0; 3], [1.0, 0.1, 0.1], div, kind);
+    let mut fixed = vec![false; 3 * mesh.num_nodes()];
+    for (n, x) in mesh.nodes.iter().enumerate() {
+        if x[0] == 0.0 {
+            fixed[3 * n..3 * n + 3].fill(true);
+        }
+    }
+    let (dofs, p) = Pattern::build(&mesh, &fixed).unwrap();
+    let of = vec![0u32; mesh.num_elements()];
+    let lame = [fem::element::Lame::from_young_poisson(210e9, 0.3)];
+    let props = ElementProps {
+        of: &of,
+        lame: &lame,
+        density: &[7850.0],
+    };
+    let k = assemble(&mesh, &dofs, &p, Operator::Stiffness, props).unwrap();
+    (p, k)
+}
+
+/// The tree split (fem::tree_factor): the two halves under the top separator factorised
+/// side by side and the dense separator give the whole factor's answer on a cantilever's
+/// stiffness (the cancellation in the separator's Schur complement bounded), the separator
+/// is a cross-section of the bar, and the answer is the same bit for bit on one thread and
+/// on two.
+#[test]
+fn the_tree_split_factor_solves_a_cantilever_as_the_whole_factor_does() {
+    use fem::assembly::{analyse, Factor};
+    for kind in [fem::ElementKind::Hex8, fem::ElementKind::Tet10] {
+        let div = if kind == fem::ElementKind::Hex8 {
+            [60, 6, 6]
+        } else {
+            [40, 3, 3]
+        };
+        let (p, k) = cantilever(div, kind);
+        // the tet10 bar in its bisection order (AMD, which fills less on this small bar, has
+        // a long dense chain at the top of its tree: no split pays there)
+        let p = fem::assembly::Pattern {
+            node_first: Vec::new(),
+            ..p
+        };
+        // a tip load and a spread of small loads
+        let b: Vec<f64> = (0..p.n)
+            .map(|i| {
+                if i + 3 >= p.n {
+                    -1e3
+                } else {
+                    ((i * 13) % 7) as f64 - 3.0
+                }
+            })
+            .collect();
+        let mut whole_plan = Some(analyse(&p, 0..0).unwrap());
+        assert!(whole_plan.as_ref().unwrap().split().is_none());
+        let whole = Factor::new(&p, &k, &mut whole_plan).unwrap();
+        assert!(!whole.is_split());
+        let mut x_whole = b.clone();
+        whole.solve_in_place(&mut x_whole);
+
+        let mut plan = Some(analyse(&p, 0..usize::MAX).unwrap());
+        let split = plan
+            .as_ref()
+            .unwrap()
+            .split()
+            .unwrap_or_else(|| panic!("{kind:?}: the bar's tree splits"));
+        // the top separator of a bar is a cross-section: (div_y + 1)(div_z + 1) nodes for
+        // hex8 (3 equations each), about 4× that for tet10's corner and mid-side nodes
+        let section = 3 * (div[1] + 1) * (div[2] + 1);
+        let bound = if kind == fem::ElementKind::Hex8 {
+            section
+        } else {
+            4 * section
+        };
+        assert!(
+            split.separator() > 0 && split.separator() <= bound,
+            "{kind:?}: separator {} (a cross-section has {section} equations)",
+            split.separator()
+        );
+        assert!(split.predicted < 0.75, "{}", split.predicted);
+        let f = Factor::new(&p, &k, &mut plan).unwrap();
+        assert!(f.is_split());
+        let mut x = b.clone();
+        f.solve_in_place(&mut x);
+        let diff = max_rel_diff(&x, &x_whole);
+        assert!(diff < 1e-9, "{kind:?}: split vs whole {diff:e}");
+        let mut ax = vec![0.0; p.n];
+        p.mul(&k, &x, &mut ax);
+        let scale = p.norm_inf(&k) * x.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let res = ax
+            .iter()
+            .zip(&b)
+            .fold(0.0f64, |m, (a, c)| m.max((a - c).abs()))
+            / scale;
+        assert!(res < 1e-13, "{kind:?}: backward error {res:e}");
+
+        // the same bits on one thread and on two
+        let on = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| {
+                    let mut plan = Some(analyse(&p, 0..usize::MAX).unwrap());
+                    let f = Factor::new(&p, &k, &mut plan).unwrap();
+                    let mut x = b.clone();
+                    f.solve_in_place(&mut x);
+                    x
+                })
+        };
+        let (x1, x2) = (on(1), on(2));
+        assert!(x1.iter().zip(&x2).all(|(a, c)| a.to_bits() == c.to_bits()));
+        assert!(x1.iter().zip(&x).all(|(a, c)| a.to_bits() == c.to_bits()));
+    }
+}
+
+/// The split is planned only where it can pay: a factor below the size range stays whole,
+/// and a matrix whose elimination tree is a path (a chain of springs) has no branch to split.
+#[test]
+fn the_tree_split_is_planned_only_where_it_pays() {
+    use fem::assembly::{analyse, ensure_symbolic, Factor, Pattern, SPLIT_FROM};
+    let (p, k) = cantilever([20, 2, 2], fem::ElementKind::Hex8);
+    let mut sym = None;
+    let plan = ensure_symbolic(&p, &mut sym).unwrap();
+    assert!(plan.len_val() < SPLIT_FROM);
+    assert!(plan.split().is_none());
+    assert!(!Factor::new(&p, &k, &mut sym).unwrap().is_split());
+    // a chain of 2,000 springs: tridiagonal, eliminated in order, its tree a path
+    let n = 2000usize;
+    let (mut col_ptr, mut row_idx) = (vec![0u32], Vec::new());
+    for j in 0..n {
+        row_idx.extend((j.saturating_sub(1)..(j + 2).min(n)).map(|i| i as u32));
+        col_ptr.push(row_idx.len() as u32);
+    }
+    let chain = Pattern {
+        n,
+        col_ptr,
+        row_idx,
+        order: (0..n as u32).collect(),
+        elem_order: Vec::new(),
+        node_first: Vec::new(),
+        anchors: Vec::new(),
+    };
+    let vals: Vec<f64> = (0..n)
+        .flat_map(|j| {
+            (j.saturating_sub(1)..(j + 2).min(n)).map(move |i| if i == j { 2.5 } else { -1.0 })
+        })
+        .collect();
+    let plan = analyse(&chain, 0..usize::MAX).unwrap();
+    assert!(plan.split().is_none());
+    let mut sym = Some(plan);
+    let f = Factor::new(&chain, &vals, &mut sym).unwrap();
+    assert!(!f.is_split());
+    let mut x = vec![1.0; n];
+    f.solve_in_place(&mut x);
+    let mut ax = vec![0.0; n];
+    chain.mul(&vals, &x, &mut ax);
+    assert!(max_rel_diff(&ax, &vec![1.0; n]) < 1e-12);
+}

@@ -1,0 +1,482 @@
+//! Tree-level parallel sparse Cholesky: the two halves under the top separator of the
+//! elimination tree factorised side by side, one thread each, then the separator.
+//!
+//! faer parallelises a supernodal factorisation inside its dense blocks only; on a mesh of
+//! ~10⁴ nodes those blocks are too small to pay for the hand-offs (docs/performance.md: the
+//! 10 mm beam factorises faster on one thread than on two). The elimination tree offers
+//! coarser work: with the equations in elimination order [A | B | S], where S is the chain of
+//! the tree's top (its root down to the first node with two or more children, a separator of
+//! the graph) and A, B the subtrees below it split into two groups of about equal work,
+//! K_AB = 0 and
+//!
+//! ```text
+//!     L = | L_AA             |      L_AA L_AAᵀ = K_AA,    L_SA = K_SA L_AA⁻ᵀ,
+//!         |       L_BB       |      L_BB, L_SB likewise,
+//!         | L_SA  L_SB  L_SS |      L_SS L_SSᵀ = K_SS − L_SA L_SAᵀ − L_SB L_SBᵀ.
+//! ```
+//!
+//! faer factorises the principal submatrices K[A∪S] and K[B∪S] (both positive definite as
+//! principal submatrices of K; one thread each, at the same time): their leading blocks are
+//! L_AA, L_SA (resp. L_BB, L_SB) exactly, and their trailing blocks L₁, L₂ satisfy
+//! L₁L₁ᵀ = K_SS − L_SA L_SAᵀ and likewise L₂, so the separator's Schur complement is
+//! L₁L₁ᵀ + L₂L₂ᵀ − K_SS, a dense s × s matrix factorised by faer's dense Cholesky. The cost
+//! beyond the halves is about s³ (each half's trailing block, the two products, the dense
+//! factor): the split is taken only when the tree is balanced and the separator small enough
+//! for that to pay ([`SplitPlan::new`]). The cancellation in the Schur complement costs
+//! about log₁₀(‖K_SS‖/‖L_SS L_SSᵀ‖) digits, which the tests bound.
+//!
+//! A solve runs the forward substitution of both halves' own columns side by side (their
+//! separator rows collect −L_SA y_A and −L_SB y_B), the dense separator solves, then both
+//! backward substitutions side by side. Every result is independent of the thread count: the
+//! halves are computed the same way whether `rayon::join` runs them on one thread or two.
+
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::matmul::triangular::{self as tri, BlockStructure};
+use faer::sparse::linalg::cholesky::{SymbolicCholesky, SymbolicCholeskyRaw};
+use faer::sparse::SymbolicSparseColMatRef;
+use faer::{Accum, Mat, Par};
+
+use crate::assembly::Pattern;
+
+const NONE: u32 = u32::MAX;
+
+/// One supernode of a half's factor: its columns `start..end`, the offset of its dense
+/// column-major values (`end − start + pattern` rows), and its off-diagonal rows
+/// `row_idx[p0..p0 + plen]` of the half's symbolic factor.
+#[derive(Clone, Copy, Debug)]
+struct Node {
+    start: u32,
+    end: u32,
+    voff: usize,
+    p0: u32,
+    plen: u32,
+}
+
+/// One half: the principal submatrix K[own ∪ S], own equations first.
+struct Half {
+    /// The original equation of each local column: the half's own equations, then the
+    /// separator's (both in the whole factor's elimination order).
+    eqs: Vec<u32>,
+    /// Number of own equations (the separator follows).
+    own: usize,
+    /// Lower triangle of the submatrix in local numbering, compressed columns.
+    col_ptr: Vec<u32>,
+    row_idx: Vec<u32>,
+    /// For each entry, its index in the whole pattern's values.
+    src: Vec<u32>,
+    sym: SymbolicCholesky<u32>,
+    /// The factor's supernodes and their off-diagonal rows (a copy of faer's structure).
+    nodes: Vec<Node>,
+    rows: Vec<u32>,
+}
+
+/// The split of a factorisation at the top of its elimination tree (module docs), computed
+/// once per pattern beside the symbolic analysis.
+pub struct SplitPlan {
+    halves: [Half; 2],
+    /// The separator's equations (original numbering) in elimination order.
+    sep: Vec<u32>,
+    /// Lower triangle of K_SS: (row, column) in separator numbering, entry in the pattern.
+    kss: Vec<(u32, u32, u32)>,
+    /// Predicted work of the split path over the whole factor's (for the debug log).
+    pub predicted: f64,
+}
+
+/// The numeric factor of a [`SplitPlan`]: both halves' values and the separator's dense
+/// Cholesky factor L_SS.
+pub struct SplitFactor {
+    values: [Vec<f64>; 2],
+    lss: Mat<f64>,
+}
+
+/// The supernodal structure of `sym`, None for a simplicial factor.
+fn nodes_of(sym: &SymbolicCholesky<u32>) -> Option<(Vec<Node>, Vec<u32>)> {
+    let SymbolicCholeskyRaw::Supernodal(s) = sym.raw() else {
+        return None;
+    };
+    let ns = s.n_supernodes();
+    let (begin, cptr_rows, cptr_val) = (
+        s.supernode_begin(),
+        s.col_ptr_for_row_idx(),
+        s.col_ptr_for_val(),
+    );
+    let nodes = (0..ns)
+        .map(|k| Node {
+            start: begin[k],
+            end: s.supernode_end()[k],
+            voff: cptr_val[k] as usize,
+            p0: cptr_rows[k],
+            plen: s.supernode(k).pattern().len() as u32,
+        })
+        .collect();
+    Some((nodes, s.row_idx().to_vec()))
+}
+
+impl SplitPlan {
+    /// Plans the split of `sym` (the symbolic factor of `pattern`), or None when the factor is
+    /// simplicial, its tree has no branch, the halves are unbalanced or the separator's dense
+    /// work would eat the gain: the split's predicted critical path — the larger half plus
+    /// about s³ for the separator — must be under 3/4 of the whole factorisation's work.
+    pub fn new(pattern: &Pattern, sym: &SymbolicCholesky<u32>) -> Option<SplitPlan> {
+        let n = pattern.n;
+        if n < 2 {
+            return None;
+        }
+        let (nodes, rows) = nodes_of(sym)?;
+        let (fwd, inv) = sym.perm()?.arrays();
+        // the column elimination tree (positions in elimination order) and each column's
+        // entry count in L
+        let mut parent = vec![NONE; n];
+        let mut work = vec![0.0f64; n];
+        for nd in &nodes {
+            let pat = &rows[nd.p0 as usize..(nd.p0 + nd.plen) as usize];
+            for j in nd.start..nd.end {
+                parent[j as usize] = if j + 1 < nd.end {
+                    j + 1
+                } else {
+                    pat.iter().copied().min().unwrap_or(NONE)
+                };
+                let c = (nd.end - j + nd.plen) as f64;
+                work[j as usize] = c * c;
+            }
+        }
+        let total: f64 = work.iter().sum();
+        // subtree work, bottom-up (a parent comes after its children)
+        let mut sub = work.clone();
+        let mut children: Vec<Vec<u32>> = vec![Vec::new(); n];
+        let mut roots = Vec::new();
+        for j in 0..n {
+            match parent[j] {
+                NONE => roots.push(j as u32),
+                p => {
+                    sub[p as usize] += sub[j];
+                    children[p as usize].push(j as u32);
+                }
+            }
+        }
+        // The separator: the top of the tree, grown from the roots by taking in the heaviest
+        // subtree of the frontier (its root joins S, its children the frontier) until the
+        // frontier's subtrees split into two groups of about equal work — on a nested
+        // dissection the chain down to the first branch, on an unbalanced tree (AMD, METIS on
+        // a small graph) more. Each frontier is split largest first into the lighter group,
+        // and the frontier with the least predicted work wins: the larger group plus about
+        // s³ for the separator's dense steps.
+        let mut frontier = roots;
+        let mut taken: Vec<u32> = Vec::new();
+        let partition = |frontier: &mut Vec<u32>| -> [f64; 2] {
+            frontier.sort_by(|a, b| sub[*b as usize].total_cmp(&sub[*a as usize]));
+            let mut w = [0.0f64; 2];
+            for &k in frontier.iter() {
+                let g = usize::from(w[1] < w[0]);
+                w[g] += sub[k as usize];
+            }
+            w
+        };
+        let mut best: Option<(f64, usize, Vec<u32>)> = None; // (predicted, |S|, frontier)
+        while !frontier.is_empty() {
+            let s3 = (taken.len() as f64).powi(3);
+            if best.as_ref().is_some_and(|b| s3 / total >= b.0) || taken.len() > 4000 {
+                break; // a larger separator cannot win
+            }
+            let w = partition(&mut frontier);
+            if frontier.len() >= 2 {
+                let predicted = (w[0].max(w[1]) + s3) / total;
+                if best.as_ref().is_none_or(|b| predicted < b.0) {
+                    best = Some((predicted, taken.len(), frontier.clone()));
+                }
+            }
+            // frontier is sorted heaviest first: take in its root
+            let k = frontier.remove(0);
+            taken.push(k);
+            frontier.extend(std::mem::take(&mut children[k as usize]));
+        }
+        let (predicted, s, frontier) = best?;
+        if predicted > 0.75 {
+            return None;
+        }
+        let mut label = vec![NONE; n];
+        let mut group_work = [0.0f64; 2];
+        for &k in &frontier {
+            let g = usize::from(group_work[1] < group_work[0]);
+            group_work[g] += sub[k as usize];
+            label[k as usize] = g as u32;
+        }
+        let mut sep_pos: Vec<u32> = taken[..s].to_vec();
+        sep_pos.sort_unstable(); // elimination order
+        for &c in &sep_pos {
+            label[c as usize] = 2;
+        }
+        // every other column takes its parent's group
+        for j in (0..n).rev() {
+            if label[j] == NONE && parent[j] != NONE {
+                let p = label[parent[j] as usize];
+                label[j] = p;
+            }
+        }
+        // local numbering of each half: own positions ascending, then the separator's
+        let mut local = vec![NONE; n]; // by position: index in its half (own) or in S
+        let mut own_pos: [Vec<u32>; 2] = [Vec::new(), Vec::new()];
+        for p in 0..n {
+            match label[p] {
+                g @ (0 | 1) => {
+                    local[p] = own_pos[g as usize].len() as u32;
+                    own_pos[g as usize].push(p as u32);
+                }
+                2 => {}
+                _ => return None, // unreachable for a tree; refuse rather than guess
+            }
+        }
+        for (k, &p) in sep_pos.iter().enumerate() {
+            local[p as usize] = k as u32;
+        }
+        let sep: Vec<u32> = sep_pos.iter().map(|&p| fwd[p as usize]).collect();
+        // K_SS's lower triangle
+        let mut kss = Vec::new();
+        for (jl, &e) in sep.iter().enumerate() {
+            let e = e as usize;
+            for q in pattern.col_ptr[e] as usize..pattern.col_ptr[e + 1] as usize {
+                let rp = inv[pattern.row_idx[q] as usize] as usize;
+                if label[rp] == 2 && local[rp] as usize >= jl {
+                    kss.push((local[rp], jl as u32, q as u32));
+                }
+            }
+        }
+        let build = |g: u32| -> Option<Half> {
+            let own = own_pos[g as usize].len();
+            let mut eqs: Vec<u32> = own_pos[g as usize]
+                .iter()
+                .map(|&p| fwd[p as usize])
+                .collect();
+            eqs.extend_from_slice(&sep);
+            let loc = |rp: usize| -> Option<u32> {
+                match label[rp] {
+                    2 => Some(own as u32 + local[rp]),
+                    l if l == g => Some(local[rp]),
+                    _ => None,
+                }
+            };
+            let mut col_ptr = Vec::with_capacity(eqs.len() + 1);
+            col_ptr.push(0u32);
+            let (mut row_idx, mut src) = (Vec::new(), Vec::new());
+            let mut col: Vec<(u32, u32)> = Vec::new();
+            for (jl, &e) in eqs.iter().enumerate() {
+                let e = e as usize;
+                col.clear();
+                for q in pattern.col_ptr[e] as usize..pattern.col_ptr[e + 1] as usize {
+                    let rp = inv[pattern.row_idx[q] as usize] as usize;
+                    match loc(rp) {
+                        Some(r) if r as usize >= jl => col.push((r, q as u32)),
+                        Some(_) => {}
+                        // an entry between the two halves' own equations: not a tree split after
+                        // all (the separator's columns meet both halves)
+                        None if jl < own && label[rp] != 2 && label[rp] != g => return None,
+                        None => {}
+                    }
+                }
+                col.sort_unstable();
+                row_idx.extend(col.iter().map(|c| c.0));
+                src.extend(col.iter().map(|c| c.1));
+                col_ptr.push(row_idx.len() as u32);
+            }
+            let m = eqs.len();
+            let a = SymbolicSparseColMatRef::new_checked(m, m, &col_ptr, None, &row_idx);
+            let identity: Vec<u32> = (0..m as u32).collect();
+            let sym = crate::assembly::analyse_in_order(a, &identity).ok()?;
+            let (nodes, rows) = nodes_of(&sym)?;
+            Some(Half {
+                eqs,
+                own,
+                col_ptr,
+                row_idx,
+                src,
+                sym,
+                nodes,
+                rows,
+            })
+        };
+        let (h0, h1) = rayon::join(|| build(0), || build(1));
+        Some(SplitPlan {
+            halves: [h0?, h1?],
+            sep,
+            kss,
+            predicted,
+        })
+    }
+
+    /// Size of the separator (the dense block).
+    pub fn separator(&self) -> usize {
+        self.sep.len()
+    }
+
+    /// Entries of both halves' factors.
+    pub fn factor_nnz(&self) -> usize {
+        self.halves.iter().map(|h| h.sym.len_val()).sum()
+    }
+
+    /// Numeric factorisation of the matrix with `vals` on the pattern the plan was made for.
+    pub fn factorize(&self, vals: &[f64]) -> Result<SplitFactor, String> {
+        let half = |h: &Half| -> Result<(Vec<f64>, Mat<f64>), String> {
+            let sub: Vec<f64> = h.src.iter().map(|&q| vals[q as usize]).collect();
+            let m = h.eqs.len();
+            let a = SymbolicSparseColMatRef::new_checked(m, m, &h.col_ptr, None, &h.row_idx);
+            let values = crate::assembly::numeric_llt_seq(&h.sym, a, &sub)?;
+            // the trailing block L_h and its product L_h L_hᵀ (lower triangle)
+            let s = m - h.own;
+            let mut lh = Mat::<f64>::zeros(s, s);
+            for nd in &h.nodes {
+                if (nd.end as usize) <= h.own {
+                    continue;
+                }
+                let size = (nd.end - nd.start) as usize;
+                let nrows = size + nd.plen as usize;
+                let pat = &h.rows[nd.p0 as usize..(nd.p0 + nd.plen) as usize];
+                for j in (nd.start as usize).max(h.own)..nd.end as usize {
+                    let c = j - nd.start as usize;
+                    let col = &values[nd.voff + c * nrows..][..nrows];
+                    for r in c..size {
+                        lh[(nd.start as usize + r - h.own, j - h.own)] = col[r];
+                    }
+                    for (k, &i) in pat.iter().enumerate() {
+                        lh[(i as usize - h.own, j - h.own)] = col[size + k];
+                    }
+                }
+            }
+            let mut g = Mat::<f64>::zeros(s, s);
+            tri::matmul(
+                g.as_mut(),
+                BlockStructure::TriangularLower,
+                Accum::Replace,
+                lh.as_ref(),
+                BlockStructure::TriangularLower,
+                lh.transpose(),
+                BlockStructure::TriangularUpper,
+                1.0,
+                Par::Seq,
+            );
+            Ok((values, g))
+        };
+        let (r0, r1) = rayon::join(|| half(&self.halves[0]), || half(&self.halves[1]));
+        let ((v0, mut schur), (v1, g1)) = (r0?, r1?);
+        // L_SS L_SSᵀ = L₁L₁ᵀ + L₂L₂ᵀ − K_SS (lower triangle)
+        for j in 0..schur.ncols() {
+            for i in j..schur.nrows() {
+                schur[(i, j)] += g1[(i, j)];
+            }
+        }
+        for &(i, j, q) in &self.kss {
+            schur[(i as usize, j as usize)] -= vals[q as usize];
+        }
+        let s = self.sep.len();
+        let mut buf = MemBuffer::try_new(
+            faer::linalg::cholesky::llt::factor::cholesky_in_place_scratch::<f64>(
+                s,
+                Par::Seq,
+                Default::default(),
+            ),
+        )
+        .map_err(|_| "out of memory for the separator's Cholesky workspace".to_string())?;
+        faer::linalg::cholesky::llt::factor::cholesky_in_place(
+            schur.as_mut(),
+            Default::default(),
+            Par::Seq,
+            MemStack::new(&mut buf),
+            Default::default(),
+        )
+        .map_err(|e| format!("Cholesky factorisation of the top separator failed ({e:?})"))?;
+        Ok(SplitFactor {
+            values: [v0, v1],
+            lss: schur,
+        })
+    }
+
+    /// Solves A x = b in place with the factor `f` of this plan.
+    pub fn solve_in_place(&self, f: &SplitFactor, b: &mut [f64]) {
+        let forward = |h: &Half, values: &[f64]| -> Vec<f64> {
+            let mut z: Vec<f64> = h.eqs[..h.own].iter().map(|&e| b[e as usize]).collect();
+            z.resize(h.eqs.len(), 0.0);
+            for nd in &h.nodes {
+                if nd.start as usize >= h.own {
+                    break;
+                }
+                let size = (nd.end - nd.start) as usize;
+                let nrows = size + nd.plen as usize;
+                let pat = &h.rows[nd.p0 as usize..(nd.p0 + nd.plen) as usize];
+                for j in nd.start as usize..(nd.end as usize).min(h.own) {
+                    let c = j - nd.start as usize;
+                    let col = &values[nd.voff + c * nrows..][..nrows];
+                    let xj = z[j] / col[c];
+                    z[j] = xj;
+                    for r in c + 1..size {
+                        z[nd.start as usize + r] -= col[r] * xj;
+                    }
+                    for (k, &i) in pat.iter().enumerate() {
+                        z[i as usize] -= col[size + k] * xj;
+                    }
+                }
+            }
+            z
+        };
+        let (mut z0, mut z1) = rayon::join(
+            || forward(&self.halves[0], &f.values[0]),
+            || forward(&self.halves[1], &f.values[1]),
+        );
+        // the separator: b_S − L_SA y_A − L_SB y_B, then L_SS L_SSᵀ x_S = that
+        let (o0, o1) = (self.halves[0].own, self.halves[1].own);
+        let mut xs: Vec<f64> = self
+            .sep
+            .iter()
+            .enumerate()
+            .map(|(k, &e)| b[e as usize] + z0[o0 + k] + z1[o1 + k])
+            .collect();
+        {
+            let s = xs.len();
+            let mut rhs = faer::MatMut::from_column_major_slice_mut(&mut xs, s, 1);
+            faer::linalg::triangular_solve::solve_lower_triangular_in_place(
+                f.lss.as_ref(),
+                rhs.as_mut(),
+                Par::Seq,
+            );
+            faer::linalg::triangular_solve::solve_upper_triangular_in_place(
+                f.lss.transpose(),
+                rhs.as_mut(),
+                Par::Seq,
+            );
+        }
+        z0[o0..].copy_from_slice(&xs);
+        z1[o1..].copy_from_slice(&xs);
+        let backward = |h: &Half, values: &[f64], z: &mut [f64]| {
+            for nd in h.nodes.iter().rev() {
+                if nd.start as usize >= h.own {
+                    continue;
+                }
+                let size = (nd.end - nd.start) as usize;
+                let nrows = size + nd.plen as usize;
+                let pat = &h.rows[nd.p0 as usize..(nd.p0 + nd.plen) as usize];
+                for j in (nd.start as usize..(nd.end as usize).min(h.own)).rev() {
+                    let c = j - nd.start as usize;
+                    let col = &values[nd.voff + c * nrows..][..nrows];
+                    let mut acc = z[j];
+                    for r in c + 1..size {
+                        acc -= col[r] * z[nd.start as usize + r];
+                    }
+                    for (k, &i) in pat.iter().enumerate() {
+                        acc -= col[size + k] * z[i as usize];
+                    }
+                    z[j] = acc / col[c];
+                }
+            }
+        };
+        rayon::join(
+            || backward(&self.halves[0], &f.values[0], &mut z0),
+            || backward(&self.halves[1], &f.values[1], &mut z1),
+        );
+        for (h, z) in self.halves.iter().zip([&z0, &z1]) {
+            for (&e, &v) in h.eqs[..h.own].iter().zip(z.iter()) {
+                b[e as usize] = v;
+            }
+        }
+        for (&e, &v) in self.sep.iter().zip(&xs) {
+            b[e as usize] = v;
+        }
+    }
+}
