@@ -1017,26 +1017,45 @@ enum FactorValues {
 /// The symbolic analysis of one pattern (ordering, elimination tree, supernodes) and, where
 /// it pays, the split of its tree into two halves factorised side by side.
 pub struct FactorPlan {
-    full: SymbolicCholesky<u32>,
+    /// The whole factor's symbolic analysis: computed with the plan when there is no tree
+    /// split, else when first asked for.
+    full: std::sync::OnceLock<SymbolicCholesky<u32>>,
+    /// The elimination order of the equations.
+    order: Vec<u32>,
     split: Option<crate::tree_factor::SplitPlan>,
 }
 
 impl FactorPlan {
-    /// The whole factor's symbolic analysis.
-    pub fn full(&self) -> &SymbolicCholesky<u32> {
-        &self.full
+    /// The whole factor's symbolic analysis (of `pattern`, the pattern this plan is for).
+    pub fn full(&self, pattern: &Pattern) -> Result<&SymbolicCholesky<u32>, FemError> {
+        if let Some(sym) = self.full.get() {
+            return Ok(sym);
+        }
+        let sym = analyse_in_order(pattern.symbolic(), &self.order)
+            .map_err(|e| FemError::Solver(format!("symbolic Cholesky failed: {e:?}")))?;
+        Ok(self.full.get_or_init(|| sym))
+    }
+
+    /// The whole factor's symbolic analysis once [`FactorPlan::full`] has computed it.
+    fn full_computed(&self) -> &SymbolicCholesky<u32> {
+        self.full
+            .get()
+            .expect("the whole factor's analysis precedes its numeric factor")
+    }
+
+    /// Entries of the factor: the whole's, or with a tree split both halves' (each holds the
+    /// separator's block).
+    pub fn factor_nnz(&self) -> usize {
+        match (&self.split, self.full.get()) {
+            (Some(s), _) => s.factor_nnz(),
+            (None, Some(sym)) => sym.len_val(),
+            (None, None) => 0,
+        }
     }
 
     /// The tree split [`Factor`] uses, if any.
     pub fn split(&self) -> Option<&crate::tree_factor::SplitPlan> {
         self.split.as_ref()
-    }
-}
-
-impl std::ops::Deref for FactorPlan {
-    type Target = SymbolicCholesky<u32>;
-    fn deref(&self) -> &SymbolicCholesky<u32> {
-        &self.full
     }
 }
 
@@ -1095,71 +1114,186 @@ pub fn analyse(
     pattern: &Pattern,
     split_sizes: std::ops::Range<usize>,
 ) -> Result<Symbolic, FemError> {
-    {
-        let t0 = std::time::Instant::now();
-        let mut chosen = "nested dissection";
-        let mut order: Option<Vec<u32>> = None;
-        let mut fills = String::new();
-        if let Some(g) = NodeGraph::of(pattern) {
-            let identity: Vec<u32> = (0..g.n() as u32).collect();
-            let (nd, amd) = rayon::join(
-                || g.fill(&identity),
-                || g.amd().and_then(|o| g.fill(&o).map(|f| (o, f))),
-            );
-            fills = format!("nested dissection {nd:?}");
-            let t_fills = t0.elapsed();
-            if let (Some(nd), Some((amd_nodes, amd))) = (nd, amd) {
-                fills += &format!(", AMD {amd}");
-                if amd < nd {
-                    chosen = "AMD";
-                    let mut best_nodes = amd_nodes;
-                    let t_m = std::time::Instant::now();
-                    let metis = g.metis_anchored(&pattern.anchors);
-                    fills += &format!(
-                        " (node graph, AMD and fills {t_fills:?}, METIS {:?})",
-                        t_m.elapsed()
-                    );
-                    if let Some(m) = metis {
-                        if let Some(f) = g.fill(&m) {
-                            fills += &format!(", METIS {f}");
-                            if f < amd {
-                                chosen = "METIS";
-                                best_nodes = m;
-                            }
+    let t0 = std::time::Instant::now();
+    let mut chosen = "nested dissection";
+    let mut order: Option<Vec<u32>> = None;
+    let mut fills = String::new();
+    // the node graph, the chosen node order (None: the numbering) and its fill
+    let mut node_choice: Option<(NodeGraph, Option<Vec<u32>>, usize)> = None;
+    if let Some(g) = NodeGraph::of(pattern) {
+        let identity: Vec<u32> = (0..g.n() as u32).collect();
+        let (nd, amd) = rayon::join(
+            || g.fill(&identity),
+            || g.amd().and_then(|o| g.fill(&o).map(|f| (o, f))),
+        );
+        fills = format!("nested dissection {nd:?}");
+        let t_fills = t0.elapsed();
+        let mut best: Option<(Option<Vec<u32>>, usize)> = nd.map(|f| (None, f));
+        if let (Some(nd), Some((amd_nodes, amd))) = (nd, amd) {
+            fills += &format!(", AMD {amd}");
+            if amd < nd {
+                chosen = "AMD";
+                let mut best_nodes = (amd_nodes, amd);
+                let t_m = std::time::Instant::now();
+                let metis = g.metis_anchored(&pattern.anchors);
+                fills += &format!(
+                    " (node graph, AMD and fills {t_fills:?}, METIS {:?})",
+                    t_m.elapsed()
+                );
+                if let Some(m) = metis {
+                    if let Some(f) = g.fill(&m) {
+                        fills += &format!(", METIS {f}");
+                        if f < amd {
+                            chosen = "METIS";
+                            best_nodes = (m, f);
                         }
                     }
-                    order = Some(expand_nodes(pattern, &best_nodes));
                 }
+                order = Some(expand_nodes(pattern, &best_nodes.0));
+                best = Some((Some(best_nodes.0), best_nodes.1));
             }
         }
-        let order = order.as_deref().unwrap_or(&pattern.order);
-        let sym = analyse_in_order(pattern.symbolic(), order)
-            .map_err(|e| FemError::Solver(format!("symbolic Cholesky failed: {e:?}")))?;
-        let t_split = std::time::Instant::now();
-        let split = split_sizes
-            .contains(&sym.len_val())
-            .then(|| crate::tree_factor::SplitPlan::new(pattern, &sym))
-            .flatten();
-        if timing() {
-            tracing::debug!(
-                "  ordering: {chosen}, nnz(L) = {} (node-graph fills: {fills}), {:?}; {}",
-                sym.len_val(),
-                t0.elapsed(),
-                match &split {
-                    Some(s) => format!(
-                        "tree split: separator {}, halves' nnz(L) {}, predicted {:.2} of the \
-                         whole's work, planned in {:?}",
-                        s.separator(),
-                        s.factor_nnz(),
-                        s.predicted,
-                        t_split.elapsed()
-                    ),
-                    None => "no tree split".into(),
-                }
-            );
-        }
-        Ok(Arc::new(FactorPlan { full: sym, split }))
+        node_choice = best.map(|(o, f)| (g, o, f));
     }
+    let order = order.unwrap_or_else(|| pattern.order.clone());
+    // The tree split is planned on the node graph's elimination tree (9× smaller than the
+    // equations'; a node's equations are one chain of it), where the node fill puts the
+    // factor (about 9× the node fill for 3 equations per node) in range; the whole factor's
+    // symbolic analysis is then left until something asks for it.
+    let t_split = std::time::Instant::now();
+    let split = match &node_choice {
+        Some((g, node_order, fill)) if split_sizes.contains(&(9 * fill)) => {
+            split_on_nodes(pattern, g, node_order.as_deref(), &order)
+        }
+        _ => None,
+    };
+    let full = std::sync::OnceLock::new();
+    let mut split = split;
+    if split.is_none() {
+        let sym = analyse_in_order(pattern.symbolic(), &order)
+            .map_err(|e| FemError::Solver(format!("symbolic Cholesky failed: {e:?}")))?;
+        // a pattern without its nodes: planned on the equations' tree
+        if node_choice.is_none() && split_sizes.contains(&sym.len_val()) {
+            split = crate::tree_factor::SplitPlan::new(pattern, &sym);
+        }
+        let _ = full.set(sym);
+    }
+    if timing() {
+        tracing::debug!(
+            "  ordering: {chosen}, {} (node-graph fills: {fills}), {:?}; {}",
+            match full.get() {
+                Some(sym) => format!("nnz(L) = {}", sym.len_val()),
+                None => "whole factor not analysed".into(),
+            },
+            t0.elapsed(),
+            match &split {
+                Some(s) => format!(
+                    "tree split: separator {}, halves' nnz(L) {}, predicted {:.2} of the \
+                     whole's work, planned in {:?}",
+                    s.separator(),
+                    s.factor_nnz(),
+                    s.predicted,
+                    t_split.elapsed(),
+                ),
+                None => "no tree split".into(),
+            }
+        );
+    }
+    Ok(Arc::new(FactorPlan { full, order, split }))
+}
+
+/// The tree split of the factor of `pattern` in the equation order `order`, planned on the
+/// elimination tree of its node graph `g` in `node_order` (None: the numbering): faer's
+/// elimination tree and column counts of the node graph (no symbolic factor), expanded to
+/// the equations — each node's equations a chain whose last one hangs below the first of
+/// the parent node's, column counts about three times the node's.
+fn split_on_nodes(
+    pattern: &Pattern,
+    g: &NodeGraph,
+    node_order: Option<&[u32]>,
+    order: &[u32],
+) -> Option<crate::tree_factor::SplitPlan> {
+    use faer::sparse::linalg::cholesky::simplicial::{
+        prefactorize_symbolic_cholesky, prefactorize_symbolic_cholesky_scratch,
+    };
+    let nn = g.n();
+    let identity: Vec<u32>;
+    let node_order = match node_order {
+        Some(o) => o,
+        None => {
+            identity = (0..nn as u32).collect();
+            &identity
+        }
+    };
+    // the equation order must be the node order expanded
+    let mut first = Vec::with_capacity(nn + 1);
+    first.push(0u32);
+    for &v in node_order {
+        let (a, b) = (
+            pattern.node_first[v as usize],
+            pattern.node_first[v as usize + 1],
+        );
+        if b <= a || order.get(*first.last()? as usize) != Some(&a) {
+            return None;
+        }
+        first.push(first.last()? + (b - a));
+    }
+    if *first.last()? as usize != pattern.n {
+        return None;
+    }
+    let mut npos = vec![0u32; nn];
+    for (p, &v) in node_order.iter().enumerate() {
+        npos[v as usize] = p as u32;
+    }
+    // the upper triangle of the node graph in node_order
+    let mut col_ptr = Vec::with_capacity(nn + 1);
+    col_ptr.push(0u32);
+    let mut rows = Vec::with_capacity(g.row_idx.len() / 2 + nn);
+    for &v in node_order {
+        let start = rows.len();
+        let pj = npos[v as usize];
+        rows.extend(
+            g.row_idx[g.col_ptr[v as usize] as usize..g.col_ptr[v as usize + 1] as usize]
+                .iter()
+                .map(|&m| npos[m as usize])
+                .filter(|&pi| pi <= pj),
+        );
+        rows[start..].sort_unstable();
+        col_ptr.push(rows.len() as u32);
+    }
+    let a = SymbolicSparseColMatRef::new_checked(nn, nn, &col_ptr, None, &rows);
+    let mut etree = vec![0i32; nn];
+    let mut counts = vec![0u32; nn];
+    let mut mem = MemBuffer::try_new(prefactorize_symbolic_cholesky_scratch::<u32>(
+        nn,
+        rows.len(),
+    ))
+    .ok()?;
+    prefactorize_symbolic_cholesky::<u32>(&mut etree, &mut counts, a, MemStack::new(&mut mem));
+    const NONE: u32 = u32::MAX;
+    let n = pattern.n;
+    let mut parent = vec![NONE; n];
+    let mut work = vec![0.0f64; n];
+    for p in 0..nn {
+        let (a, b) = (first[p], first[p + 1]);
+        let c = 3.0 * counts[p] as f64;
+        for e in a..b {
+            parent[e as usize] = if e + 1 < b {
+                e + 1
+            } else if etree[p] >= 0 {
+                first[etree[p] as usize]
+            } else {
+                NONE
+            };
+            let ce = c - (e - a) as f64;
+            work[e as usize] = ce * ce;
+        }
+    }
+    let mut inv = vec![0u32; n];
+    for (p, &e) in order.iter().enumerate() {
+        inv[e as usize] = p as u32;
+    }
+    crate::tree_factor::SplitPlan::from_tree(pattern, order, &inv, &parent, &work)
 }
 
 /// Factors with fewer entries than this are factorised and solved on one thread: faer
@@ -1245,14 +1379,21 @@ impl Factor {
         };
         let values = match sym.split() {
             Some(plan) => FactorValues::Split(plan.factorize(vals).map_err(not_pd)?),
-            None => FactorValues::Whole(numeric_llt(&sym, pattern, vals).map_err(not_pd)?),
+            None => {
+                FactorValues::Whole(numeric_llt(sym.full(pattern)?, pattern, vals).map_err(not_pd)?)
+            }
         };
         if timing() {
             tracing::debug!(
-                "  cholesky n={} nnz(A)={} nnz(L)={}: symbolic {:?}, numeric {:?}",
+                "  cholesky n={} nnz(A)={} nnz(L)={}{}: symbolic {:?}, numeric {:?}",
                 pattern.n,
                 pattern.nnz(),
-                sym.len_val(),
+                sym.factor_nnz(),
+                if sym.split().is_some() {
+                    " (two halves)"
+                } else {
+                    ""
+                },
                 t_sym,
                 t0.elapsed() - t_sym
             );
@@ -1263,9 +1404,10 @@ impl Factor {
         })
     }
 
-    /// Entries of the factor L (the fill of the chosen ordering).
+    /// Entries of the factor L (the fill of the chosen ordering; both halves' with a tree
+    /// split).
     pub fn factor_nnz(&self) -> usize {
-        self.symbolic.len_val()
+        self.symbolic.factor_nnz()
     }
 
     /// Whether the factor was computed as two halves side by side ([`crate::tree_factor`]).
@@ -1283,11 +1425,12 @@ impl Factor {
                 return;
             }
         };
-        let par = factor_par(self.symbolic.len_val());
-        let mut buf = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(1, par));
+        let full = self.symbolic.full_computed();
+        let par = factor_par(full.len_val());
+        let mut buf = MemBuffer::new(full.solve_in_place_scratch::<f64>(1, par));
         let n = b.len();
         let rhs = faer::MatMut::from_column_major_slice_mut(b, n, 1);
-        LltRef::new(self.symbolic.full(), values).solve_in_place_with_conj(
+        LltRef::new(full, values).solve_in_place_with_conj(
             Conj::No,
             rhs,
             par,
@@ -1364,14 +1507,14 @@ impl MixedFactor {
                     *out = (vals[p] * scale[i] * scale[j]) as f32;
                 }
             });
-        let values = numeric_llt(&sym, pattern, &a32).map_err(|e| {
+        let values = numeric_llt(sym.full(pattern)?, pattern, &a32).map_err(|e| {
             FemError::Solver(format!("{e}: not positive definite in single precision"))
         })?;
         if timing() {
             tracing::debug!(
                 "  f32 cholesky n={} nnz(L)={}: numeric {:?}",
                 pattern.n,
-                sym.len_val(),
+                sym.full_computed().len_val(),
                 t0.elapsed()
             );
         }
@@ -1390,10 +1533,11 @@ impl MixedFactor {
         }
         let n = work.len();
         let rhs = faer::MatMut::from_column_major_slice_mut(work, n, 1);
-        LltRef::new(self.symbolic.full(), &self.values).solve_in_place_with_conj(
+        let full = self.symbolic.full_computed();
+        LltRef::new(full, &self.values).solve_in_place_with_conj(
             Conj::No,
             rhs,
-            factor_par(self.symbolic.len_val()),
+            factor_par(full.len_val()),
             MemStack::new(buf),
         );
         for ((zi, &w), &s) in z.iter_mut().zip(work.iter()).zip(&self.scale) {
@@ -1424,10 +1568,11 @@ impl MixedFactor {
                 relative_residual: 0.0,
             });
         }
-        let mut buf = MemBuffer::new(
-            self.symbolic
-                .solve_in_place_scratch::<f32>(1, factor_par(self.symbolic.len_val())),
-        );
+        let mut buf =
+            MemBuffer::new(self.symbolic.full_computed().solve_in_place_scratch::<f32>(
+                1,
+                factor_par(self.symbolic.full_computed().len_val()),
+            ));
         let mut work = vec![0.0f32; n];
         let mut x = vec![0.0; n];
         let mut r = b.to_vec();

@@ -114,14 +114,9 @@ fn nodes_of(sym: &SymbolicCholesky<u32>) -> Option<(Vec<Node>, Vec<u32>)> {
 
 impl SplitPlan {
     /// Plans the split of `sym` (the symbolic factor of `pattern`), or None when the factor is
-    /// simplicial, its tree has no branch, the halves are unbalanced or the separator's dense
-    /// work would eat the gain: the split's predicted critical path — the larger half plus
-    /// about s³ for the separator — must be under 3/4 of the whole factorisation's work.
+    /// simplicial or [`SplitPlan::from_tree`] refuses.
     pub fn new(pattern: &Pattern, sym: &SymbolicCholesky<u32>) -> Option<SplitPlan> {
         let n = pattern.n;
-        if n < 2 {
-            return None;
-        }
         let (nodes, rows) = nodes_of(sym)?;
         let (fwd, inv) = sym.perm()?.arrays();
         // the column elimination tree (positions in elimination order) and each column's
@@ -140,9 +135,30 @@ impl SplitPlan {
                 work[j as usize] = c * c;
             }
         }
+        Self::from_tree(pattern, fwd, inv, &parent, &work)
+    }
+
+    /// Plans the split of the factor of `pattern` eliminated in `fwd` (`fwd[p]`: the equation
+    /// eliminated p-th, `inv` its inverse) whose elimination tree is `parent` (by position,
+    /// `u32::MAX` at a root; a parent comes after its children) with `work[p]` the cost of
+    /// column p (its entry count squared). None when the tree has no branch, the halves are
+    /// unbalanced or the separator's dense work would eat the gain: the split's predicted
+    /// critical path — the larger half plus about s³ for the separator — must be under 3/4 of
+    /// the whole factorisation's work.
+    pub fn from_tree(
+        pattern: &Pattern,
+        fwd: &[u32],
+        inv: &[u32],
+        parent: &[u32],
+        work: &[f64],
+    ) -> Option<SplitPlan> {
+        let n = pattern.n;
+        if n < 2 || fwd.len() != n || inv.len() != n || parent.len() != n || work.len() != n {
+            return None;
+        }
         let total: f64 = work.iter().sum();
         // subtree work, bottom-up (a parent comes after its children)
-        let mut sub = work.clone();
+        let mut sub = work.to_vec();
         let mut children: Vec<Vec<u32>> = vec![Vec::new(); n];
         let mut roots = Vec::new();
         for j in 0..n {
