@@ -756,6 +756,25 @@ impl Run<'_> {
                         stability.step_limit = Some((w, r));
                     }
                 }
+                // how far inside the schedule's estimated limit the (longest) window is
+                let dem_limits = scene
+                    .dem_node()
+                    .and_then(|d| self.summary.nodes.get(d))
+                    .map(|n| n.limits.clone())
+                    .unwrap_or_default();
+                let longest = scene
+                    .adaptive
+                    .as_ref()
+                    .map_or(scene.window, |a| a.max_window);
+                stability.window_over_limit = scene
+                    .fem_nodes()
+                    .filter_map(|f| self.summary.nodes.get(f))
+                    .filter_map(|n| {
+                        crate::limits::window_limit(scene.schedule, &dem_limits, &n.limits)
+                    })
+                    .fold(None, |a: Option<f64>, b| Some(a.map_or(b, |a| a.min(b))))
+                    .filter(|&l| l > 0.0)
+                    .map(|l| longest / l);
                 (scheduler, stability, actions, String::new())
             }
             Some((dir, state)) => {
