@@ -583,6 +583,21 @@ impl Run<'_> {
         self.sender_of(interface, kind)
     }
 
+    /// The tightest estimated window limit of the scene's schedule over its structures
+    /// (limits.rs, from the nodes' `ready` numbers), when known.
+    fn tightest_window_limit(&self, scene: &Scene) -> Option<f64> {
+        let dem_limits = scene
+            .dem_node()
+            .and_then(|d| self.summary.nodes.get(d))
+            .map(|n| n.limits.clone())
+            .unwrap_or_default();
+        scene
+            .fem_nodes()
+            .filter_map(|f| self.summary.nodes.get(f))
+            .filter_map(|n| crate::limits::window_limit(scene.schedule, &dem_limits, &n.limits))
+            .fold(None, |a: Option<f64>, b| Some(a.map_or(b, |a| a.min(b))))
+    }
+
     fn limit(&self, node: &str, key: &str) -> Option<f64> {
         self.summary
             .nodes
@@ -660,19 +675,11 @@ impl Run<'_> {
         // adaptive windows: the limits the controller keeps, from the nodes' `ready` numbers
         // (the tightest structure's stiffness limit)
         let adaptive = scene.adaptive.clone().map(|settings| {
-            let dem_limits = scene
-                .dem_node()
-                .and_then(|d| self.summary.nodes.get(d))
-                .map(|n| n.limits.clone())
-                .unwrap_or_default();
-            let loaded = scene
-                .fem_nodes()
-                .filter_map(|f| self.summary.nodes.get(f))
-                .filter_map(|n| crate::limits::window_limit(scene.schedule, &dem_limits, &n.limits))
-                .fold(None, |a: Option<f64>, b| Some(a.map_or(b, |a| a.min(b))));
             let limits = crate::schedule::adaptive::Limits {
-                loaded,
-                radius_min: dem_limits.get("particle_radius_min").copied(),
+                loaded: self.tightest_window_limit(scene),
+                radius_min: scene
+                    .dem_node()
+                    .and_then(|d| self.limit(d, "particle_radius_min")),
             };
             (settings, limits, scene.end_time)
         });
@@ -757,22 +764,12 @@ impl Run<'_> {
                     }
                 }
                 // how far inside the schedule's estimated limit the (longest) window is
-                let dem_limits = scene
-                    .dem_node()
-                    .and_then(|d| self.summary.nodes.get(d))
-                    .map(|n| n.limits.clone())
-                    .unwrap_or_default();
                 let longest = scene
                     .adaptive
                     .as_ref()
                     .map_or(scene.window, |a| a.max_window);
-                stability.window_over_limit = scene
-                    .fem_nodes()
-                    .filter_map(|f| self.summary.nodes.get(f))
-                    .filter_map(|n| {
-                        crate::limits::window_limit(scene.schedule, &dem_limits, &n.limits)
-                    })
-                    .fold(None, |a: Option<f64>, b| Some(a.map_or(b, |a| a.min(b))))
+                stability.window_over_limit = self
+                    .tightest_window_limit(scene)
                     .filter(|&l| l > 0.0)
                     .map(|l| longest / l);
                 (scheduler, stability, actions, String::new())
