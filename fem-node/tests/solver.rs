@@ -464,3 +464,43 @@ fn the_tree_split_is_planned_only_where_it_pays() {
     chain.mul(&vals, &x, &mut ax);
     assert!(max_rel_diff(&ax, &vec![1.0; n]) < 1e-12);
 }
+
+/// Two bodies in one model (two cubes apart): the elimination tree is a forest, the split
+/// takes one body per half with an empty separator, and solves as the whole factor does.
+#[test]
+fn the_tree_split_of_two_separate_bodies_has_an_empty_separator() {
+    use fem::assembly::{analyse, Factor, Pattern};
+    let (mut coords, mut cells) = grid(10);
+    let n0 = coords.len() as u32;
+    let shifted: Vec<[f64; 3]> = coords.iter().map(|x| [x[0] + 100.0, x[1], x[2]]).collect();
+    let more: Vec<[u32; 8]> = cells.iter().map(|c| c.map(|i| i + n0)).collect();
+    coords.extend(shifted);
+    cells.extend(more);
+    // each cube held at its x = min face
+    let mut fixed = vec![false; 3 * coords.len()];
+    for (n, x) in coords.iter().enumerate() {
+        if x[0] == 0.0 || x[0] == 100.0 {
+            fixed[3 * n..3 * n + 3].fill(true);
+        }
+    }
+    let used = vec![true; coords.len()];
+    let (_, p) =
+        Pattern::for_elements(&coords, cells.len(), |e| &cells[e][..], &fixed, &used, 3).unwrap();
+    let vals = spd_values(&p);
+    let b: Vec<f64> = (0..p.n).map(|i| ((i * 29) % 13) as f64 - 6.0).collect();
+    let mut plan = Some(analyse(&p, 0..usize::MAX).unwrap());
+    let split = plan.as_ref().unwrap().split().expect("two bodies split");
+    assert_eq!(split.separator(), 0);
+    let f = Factor::new(&p, &vals, &mut plan).unwrap();
+    assert!(f.is_split());
+    let mut x = b.clone();
+    f.solve_in_place(&mut x);
+    let mut whole_plan = Some(analyse(&p, 0..0).unwrap());
+    let whole = Factor::new(&p, &vals, &mut whole_plan).unwrap();
+    let mut x_whole = b.clone();
+    whole.solve_in_place(&mut x_whole);
+    assert!(max_rel_diff(&x, &x_whole) < 1e-12);
+    let mut ax = vec![0.0; p.n];
+    p.mul(&vals, &x, &mut ax);
+    assert!(max_rel_diff(&ax, &b) < 1e-12);
+}
