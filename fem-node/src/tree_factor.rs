@@ -65,9 +65,24 @@ struct Half {
     /// For each entry, its index in the whole pattern's values.
     src: Vec<u32>,
     sym: SymbolicCholesky<u32>,
-    /// The factor's supernodes and their off-diagonal rows (a copy of faer's structure).
+    /// The factor's supernodes (their off-diagonal rows are `sym`'s, [`Half::rows`]).
     nodes: Vec<Node>,
-    rows: Vec<u32>,
+}
+
+impl Half {
+    /// The off-diagonal row indices of the supernodes of the half's factor.
+    fn rows(&self) -> &[u32] {
+        supernode_rows(&self.sym)
+    }
+}
+
+/// faer's off-diagonal row indices of a supernodal factor (empty for a simplicial one, which
+/// [`nodes_of`] refuses).
+fn supernode_rows(sym: &SymbolicCholesky<u32>) -> &[u32] {
+    match sym.raw() {
+        SymbolicCholeskyRaw::Supernodal(s) => s.row_idx(),
+        SymbolicCholeskyRaw::Simplicial(_) => &[],
+    }
 }
 
 /// The split of a factorisation at the top of its elimination tree (module docs), computed
@@ -89,8 +104,8 @@ pub struct SplitFactor {
     lss: Mat<f64>,
 }
 
-/// The supernodal structure of `sym`, None for a simplicial factor.
-fn nodes_of(sym: &SymbolicCholesky<u32>) -> Option<(Vec<Node>, Vec<u32>)> {
+/// The supernodes of `sym`, None for a simplicial factor.
+fn nodes_of(sym: &SymbolicCholesky<u32>) -> Option<Vec<Node>> {
     let SymbolicCholeskyRaw::Supernodal(s) = sym.raw() else {
         return None;
     };
@@ -109,7 +124,7 @@ fn nodes_of(sym: &SymbolicCholesky<u32>) -> Option<(Vec<Node>, Vec<u32>)> {
             plen: s.supernode(k).pattern().len() as u32,
         })
         .collect();
-    Some((nodes, s.row_idx().to_vec()))
+    Some(nodes)
 }
 
 impl SplitPlan {
@@ -117,7 +132,8 @@ impl SplitPlan {
     /// simplicial or [`SplitPlan::from_tree`] refuses.
     pub fn new(pattern: &Pattern, sym: &SymbolicCholesky<u32>) -> Option<SplitPlan> {
         let n = pattern.n;
-        let (nodes, rows) = nodes_of(sym)?;
+        let nodes = nodes_of(sym)?;
+        let rows = supernode_rows(sym);
         let (fwd, inv) = sym.perm()?.arrays();
         // the column elimination tree (positions in elimination order) and each column's
         // entry count in L
@@ -298,7 +314,7 @@ impl SplitPlan {
             let a = SymbolicSparseColMatRef::new_checked(m, m, &col_ptr, None, &row_idx);
             let identity: Vec<u32> = (0..m as u32).collect();
             let sym = crate::assembly::analyse_in_order(a, &identity).ok()?;
-            let (nodes, rows) = nodes_of(&sym)?;
+            let nodes = nodes_of(&sym)?;
             Some(Half {
                 eqs,
                 own,
@@ -307,7 +323,6 @@ impl SplitPlan {
                 src,
                 sym,
                 nodes,
-                rows,
             })
         };
         let (h0, h1) = rayon::join(|| build(0), || build(1));
@@ -345,7 +360,7 @@ impl SplitPlan {
                 }
                 let size = (nd.end - nd.start) as usize;
                 let nrows = size + nd.plen as usize;
-                let pat = &h.rows[nd.p0 as usize..(nd.p0 + nd.plen) as usize];
+                let pat = &h.rows()[nd.p0 as usize..(nd.p0 + nd.plen) as usize];
                 for j in (nd.start as usize).max(h.own)..nd.end as usize {
                     let c = j - nd.start as usize;
                     let col = &values[nd.voff + c * nrows..][..nrows];
@@ -416,7 +431,7 @@ impl SplitPlan {
                 }
                 let size = (nd.end - nd.start) as usize;
                 let nrows = size + nd.plen as usize;
-                let pat = &h.rows[nd.p0 as usize..(nd.p0 + nd.plen) as usize];
+                let pat = &h.rows()[nd.p0 as usize..(nd.p0 + nd.plen) as usize];
                 for j in nd.start as usize..(nd.end as usize).min(h.own) {
                     let c = j - nd.start as usize;
                     let col = &values[nd.voff + c * nrows..][..nrows];
@@ -467,7 +482,7 @@ impl SplitPlan {
                 }
                 let size = (nd.end - nd.start) as usize;
                 let nrows = size + nd.plen as usize;
-                let pat = &h.rows[nd.p0 as usize..(nd.p0 + nd.plen) as usize];
+                let pat = &h.rows()[nd.p0 as usize..(nd.p0 + nd.plen) as usize];
                 for j in (nd.start as usize..(nd.end as usize).min(h.own)).rev() {
                     let c = j - nd.start as usize;
                     let col = &values[nd.voff + c * nrows..][..nrows];
