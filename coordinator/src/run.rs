@@ -740,6 +740,11 @@ impl Run<'_> {
                 let mut scheduler = scheduler;
                 let actions = scheduler.start();
                 let mut stability = StabilityMonitor::new(scene.max_force_growth);
+                // adaptive: the longest window the controller may choose
+                let longest = scene
+                    .adaptive
+                    .as_ref()
+                    .map_or(scene.window, |a| a.max_window);
                 for (_, _, size) in &meshes {
                     stability.mesh_size =
                         Some(stability.mesh_size.map_or(*size, |s: f64| s.min(*size)));
@@ -755,19 +760,10 @@ impl Run<'_> {
                         .dem_node()
                         .and_then(|d| self.limit(d, "particle_radius_min"))
                     {
-                        // adaptive: the longest window the controller may choose
-                        let w = scene
-                            .adaptive
-                            .as_ref()
-                            .map_or(scene.window, |a| a.max_window);
-                        stability.step_limit = Some((w, r));
+                        stability.step_limit = Some((longest, r));
                     }
                 }
                 // how far inside the schedule's estimated limit the (longest) window is
-                let longest = scene
-                    .adaptive
-                    .as_ref()
-                    .map_or(scene.window, |a| a.max_window);
                 stability.window_over_limit = self
                     .tightest_window_limit(scene)
                     .filter(|&l| l > 0.0)

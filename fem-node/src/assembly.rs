@@ -1049,7 +1049,7 @@ impl FactorPlan {
         match (&self.split, self.full.get()) {
             (Some(s), _) => s.factor_nnz(),
             (None, Some(sym)) => sym.len_val(),
-            (None, None) => 0,
+            (None, None) => unreachable!("a plan without a split has its whole factor"),
         }
     }
 
@@ -1161,14 +1161,16 @@ pub fn analyse(
     // factor (about 9× the node fill for 3 equations per node) in range; the whole factor's
     // symbolic analysis is then left until something asks for it.
     let t_split = std::time::Instant::now();
-    let split = match &node_choice {
-        Some((g, node_order, fill)) if split_sizes.contains(&(9 * fill)) => {
+    let mut split = match &node_choice {
+        // d² entries per node-graph entry for d equations per node (3 for solids, 6 for shells)
+        Some((g, node_order, fill))
+            if split_sizes.contains(&(fill * (pattern.n / g.n().max(1)).pow(2))) =>
+        {
             split_on_nodes(pattern, g, node_order.as_deref(), &order)
         }
         _ => None,
     };
     let full = std::sync::OnceLock::new();
-    let mut split = split;
     if split.is_none() {
         let sym = analyse_in_order(pattern.symbolic(), &order)
             .map_err(|e| FemError::Solver(format!("symbolic Cholesky failed: {e:?}")))?;
@@ -1276,7 +1278,8 @@ fn split_on_nodes(
     let mut work = vec![0.0f64; n];
     for p in 0..nn {
         let (a, b) = (first[p], first[p + 1]);
-        let c = 3.0 * counts[p] as f64;
+        // a node column of count c is about (equations per node) × c equations long
+        let c = (b - a) as f64 * counts[p] as f64;
         for e in a..b {
             parent[e as usize] = if e + 1 < b {
                 e + 1

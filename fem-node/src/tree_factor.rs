@@ -40,6 +40,9 @@ use crate::assembly::Pattern;
 
 const NONE: u32 = u32::MAX;
 
+/// The largest separator planned (equations).
+const MAX_SEPARATOR: usize = 2000;
+
 /// One supernode of a half's factor: its columns `start..end`, the offset of its dense
 /// column-major values (`end − start + pattern` rows), and its off-diagonal rows
 /// `row_idx[p0..p0 + plen]` of the half's symbolic factor.
@@ -145,7 +148,7 @@ impl SplitPlan {
                 parent[j as usize] = if j + 1 < nd.end {
                     j + 1
                 } else {
-                    pat.iter().copied().min().unwrap_or(NONE)
+                    pat.first().copied().unwrap_or(NONE) // faer's rows are sorted
                 };
                 let c = (nd.end - j + nd.plen) as f64;
                 work[j as usize] = c * c;
@@ -195,26 +198,35 @@ impl SplitPlan {
         // s³ for the separator's dense steps.
         let mut frontier = roots;
         let mut taken: Vec<u32> = Vec::new();
-        let partition = |frontier: &mut Vec<u32>| -> [f64; 2] {
+        // sorts the frontier heaviest first; each root's group and the groups' work
+        let partition = |frontier: &mut Vec<u32>| -> (Vec<(u32, u32)>, [f64; 2]) {
             frontier.sort_by(|a, b| sub[*b as usize].total_cmp(&sub[*a as usize]));
             let mut w = [0.0f64; 2];
-            for &k in frontier.iter() {
-                let g = usize::from(w[1] < w[0]);
-                w[g] += sub[k as usize];
-            }
-            w
+            let groups = frontier
+                .iter()
+                .map(|&k| {
+                    let g = usize::from(w[1] < w[0]);
+                    w[g] += sub[k as usize];
+                    (k, g as u32)
+                })
+                .collect();
+            (groups, w)
         };
-        let mut best: Option<(f64, usize, Vec<u32>)> = None; // (predicted, |S|, frontier)
+        // (predicted, |S|, the frontier's roots with their groups)
+        type Candidate = (f64, usize, Vec<(u32, u32)>);
+        let mut best: Option<Candidate> = None;
         while !frontier.is_empty() {
             let s3 = (taken.len() as f64).powi(3);
-            if best.as_ref().is_some_and(|b| s3 / total >= b.0) || taken.len() > 4000 {
-                break; // a larger separator cannot win
+            // a larger separator cannot win; and its dense blocks (five s × s matrices while
+            // factorising) stay under 160 MB
+            if best.as_ref().is_some_and(|b| s3 / total >= b.0) || taken.len() >= MAX_SEPARATOR {
+                break;
             }
-            let w = partition(&mut frontier);
+            let (groups, w) = partition(&mut frontier);
             if frontier.len() >= 2 {
                 let predicted = (w[0].max(w[1]) + s3) / total;
                 if best.as_ref().is_none_or(|b| predicted < b.0) {
-                    best = Some((predicted, taken.len(), frontier.clone()));
+                    best = Some((predicted, taken.len(), groups));
                 }
             }
             // frontier is sorted heaviest first: take in its root
@@ -222,16 +234,13 @@ impl SplitPlan {
             taken.push(k);
             frontier.extend(std::mem::take(&mut children[k as usize]));
         }
-        let (predicted, s, frontier) = best?;
+        let (predicted, s, groups) = best?;
         if predicted > 0.75 {
             return None;
         }
         let mut label = vec![NONE; n];
-        let mut group_work = [0.0f64; 2];
-        for &k in &frontier {
-            let g = usize::from(group_work[1] < group_work[0]);
-            group_work[g] += sub[k as usize];
-            label[k as usize] = g as u32;
+        for (k, g) in groups {
+            label[k as usize] = g;
         }
         let mut sep_pos: Vec<u32> = taken[..s].to_vec();
         sep_pos.sort_unstable(); // elimination order
@@ -354,13 +363,14 @@ impl SplitPlan {
             // the trailing block L_h and its product L_h L_hᵀ (lower triangle)
             let s = m - h.own;
             let mut lh = Mat::<f64>::zeros(s, s);
+            let rows = h.rows();
             for nd in &h.nodes {
                 if (nd.end as usize) <= h.own {
                     continue;
                 }
                 let size = (nd.end - nd.start) as usize;
                 let nrows = size + nd.plen as usize;
-                let pat = &h.rows()[nd.p0 as usize..(nd.p0 + nd.plen) as usize];
+                let pat = &rows[nd.p0 as usize..(nd.p0 + nd.plen) as usize];
                 for j in (nd.start as usize).max(h.own)..nd.end as usize {
                     let c = j - nd.start as usize;
                     let col = &values[nd.voff + c * nrows..][..nrows];
@@ -425,13 +435,14 @@ impl SplitPlan {
         let forward = |h: &Half, values: &[f64]| -> Vec<f64> {
             let mut z: Vec<f64> = h.eqs[..h.own].iter().map(|&e| b[e as usize]).collect();
             z.resize(h.eqs.len(), 0.0);
+            let rows = h.rows();
             for nd in &h.nodes {
                 if nd.start as usize >= h.own {
                     break;
                 }
                 let size = (nd.end - nd.start) as usize;
                 let nrows = size + nd.plen as usize;
-                let pat = &h.rows()[nd.p0 as usize..(nd.p0 + nd.plen) as usize];
+                let pat = &rows[nd.p0 as usize..(nd.p0 + nd.plen) as usize];
                 for j in nd.start as usize..(nd.end as usize).min(h.own) {
                     let c = j - nd.start as usize;
                     let col = &values[nd.voff + c * nrows..][..nrows];
@@ -476,13 +487,14 @@ impl SplitPlan {
         z0[o0..].copy_from_slice(&xs);
         z1[o1..].copy_from_slice(&xs);
         let backward = |h: &Half, values: &[f64], z: &mut [f64]| {
+            let rows = h.rows();
             for nd in h.nodes.iter().rev() {
                 if nd.start as usize >= h.own {
                     continue;
                 }
                 let size = (nd.end - nd.start) as usize;
                 let nrows = size + nd.plen as usize;
-                let pat = &h.rows()[nd.p0 as usize..(nd.p0 + nd.plen) as usize];
+                let pat = &rows[nd.p0 as usize..(nd.p0 + nd.plen) as usize];
                 for j in (nd.start as usize..(nd.end as usize).min(h.own)).rev() {
                     let c = j - nd.start as usize;
                     let col = &values[nd.voff + c * nrows..][..nrows];
