@@ -40,6 +40,7 @@ impl NodeProcess {
         connect: Vec<String>,
         log_dir: &Path,
         scene_dir: &Path,
+        lease: Option<std::time::Duration>,
     ) -> anyhow::Result<NodeProcess> {
         let name = name.to_string();
         let mut node = NodeProcess {
@@ -93,7 +94,13 @@ impl NodeProcess {
         } else {
             program
         };
-        let child = tokio::process::Command::new(&program)
+        let mut command = tokio::process::Command::new(&program);
+        if let Some(lease) = lease {
+            // its links' lease (proto::link::LOCAL_LEASE): an environment variable, so that
+            // the node programs (the Python one, the users' own) need no new flag
+            command.env(proto::link::LEASE_ENV, lease.as_millis().to_string());
+        }
+        let child = command
             .args(&args)
             // the node ends when this process is gone, whatever the network says
             .env(

@@ -304,7 +304,18 @@ impl Run<'_> {
             if let Some((node, msg)) = overdue {
                 let detail = if msg.is_empty() {
                     self.node_mut(&node)
-                        .and_then(|n| n.exited())
+                        .map(
+                            |n| match (n.exited(), n.child.as_ref().and_then(|c| c.id())) {
+                                (Some(exit), _) => exit,
+                                (None, Some(pid)) => format!(
+                                "its liveliness token disappeared but its process ({pid}) still \
+                                 runs: its link closed (silent for longer than the links' lease, \
+                                 or the connection failed){}",
+                                n.log_tail()
+                            ),
+                                (None, None) => String::new(),
+                            },
+                        )
                         .unwrap_or_default()
                 } else {
                     msg
@@ -1415,11 +1426,17 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
         (None, None) => {
             let p0 = proto::link::free_loopback_port()?;
             (
-                LinkConfig::loopback_peer(Some(p0), &[]),
+                LinkConfig {
+                    lease: proto::link::LOCAL_LEASE,
+                    ..LinkConfig::loopback_peer(Some(p0), &[])
+                },
                 Some(format!("tcp/127.0.0.1:{p0}")),
             )
         }
     };
+    // every process on this host, started by this coordinator: the long local lease
+    let local_lease =
+        (opts.zenoh_config.is_none() && opts.listen.is_none()).then_some(proto::link::LOCAL_LEASE);
     let link = CoordinatorLink::open(&coord_link, &run_id)
         .await
         .context("opening the coordinator's zenoh session")?;
@@ -1503,6 +1520,7 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
             connect,
             &out_dir.join("logs"),
             &scene_dir,
+            local_lease,
         ) {
             Ok(n) => n,
             Err(e) => {

@@ -51,7 +51,8 @@ class Stopped(Exception):
 
 def zenoh_config(args):
     """PROTOCOL.md §1: a peer on exactly the given endpoints, multicast and gossip scouting off,
-    3 s lease; or a client of a router configured by `--zenoh-config`."""
+    3 s lease (or the one the coordinator that started it gives in COSIM_LINK_LEASE_MS); or a
+    client of a router configured by `--zenoh-config`."""
     if args.zenoh_config:
         config = zenoh.Config.from_file(args.zenoh_config)
     else:
@@ -67,7 +68,11 @@ def zenoh_config(args):
     config.insert_json5("scouting/multicast/enabled", "false")
     if not args.zenoh_config:
         config.insert_json5("scouting/gossip/enabled", "false")
-        config.insert_json5("transport/link/tx/lease", "3000")
+        lease = os.environ.get("COSIM_LINK_LEASE_MS", "3000").strip()
+        if not lease.isdigit() or not 100 <= int(lease) <= 3_600_000:
+            raise SystemExit(f"COSIM_LINK_LEASE_MS={lease}: give the links' lease in whole "
+                             "milliseconds, 100 to 3600000")
+        config.insert_json5("transport/link/tx/lease", lease)
         config.insert_json5("transport/link/tx/keep_alive", "4")
     return config
 

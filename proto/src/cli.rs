@@ -32,8 +32,11 @@ pub struct NodeArgs {
 }
 
 impl NodeArgs {
-    pub fn link(&self) -> LinkConfig {
-        LinkConfig {
+    /// The link this node opens; the lease from `COSIM_LINK_LEASE_MS` when the coordinator
+    /// that started the node gives one ([`crate::link::LEASE_ENV`]), else 3 s.
+    pub fn link(&self) -> Result<LinkConfig, crate::ProtoError> {
+        let lease = crate::link::lease_from_env()?.unwrap_or(LinkConfig::default().lease);
+        Ok(LinkConfig {
             mode: if self.mode == "client" || self.zenoh_config.is_some() && self.mode != "peer" {
                 LinkMode::Client
             } else {
@@ -42,8 +45,8 @@ impl NodeArgs {
             listen: self.listen.clone(),
             connect: self.connect.clone(),
             zenoh_config: self.zenoh_config.clone(),
-            ..Default::default()
-        }
+            lease,
+        })
     }
 
     pub fn data_timeout(&self) -> Duration {

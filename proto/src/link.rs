@@ -38,6 +38,38 @@ pub struct LinkConfig {
     pub lease: Duration,
 }
 
+/// Lease of the links between processes on one host when the coordinator starts them all
+/// (`cosim run` without `--listen` or `--zenoh-config`). On one host a process that dies is
+/// seen at once (its sockets close, the coordinator reaps it, a node watches the coordinator's
+/// process): the lease only guards against a silent peer, and a short one turned a process
+/// starved of CPU for a few seconds (a busy machine, a run at low priority) into a "dead" node
+/// and lost the run.
+pub const LOCAL_LEASE: Duration = Duration::from_secs(30);
+
+/// The coordinator gives the nodes it starts their links' lease here (milliseconds), so that
+/// the node programs need no new flag; a node started by hand does not have it and keeps the
+/// default 3 s.
+pub const LEASE_ENV: &str = "COSIM_LINK_LEASE_MS";
+
+/// The lease `COSIM_LINK_LEASE_MS` asks for: `None` when it is unset; an error naming the
+/// variable when it is not a whole number of milliseconds in 100..=3,600,000.
+pub fn lease_from_env() -> Result<Option<Duration>, ProtoError> {
+    let Some(v) = std::env::var_os(LEASE_ENV) else {
+        return Ok(None);
+    };
+    parse_lease(&v.to_string_lossy()).map(Some)
+}
+
+/// A lease in whole milliseconds, 100 to 3,600,000 (the text of [`LEASE_ENV`]).
+fn parse_lease(text: &str) -> Result<Duration, ProtoError> {
+    match text.trim().parse::<u64>() {
+        Ok(ms) if (100..=3_600_000).contains(&ms) => Ok(Duration::from_millis(ms)),
+        _ => Err(ProtoError::Config(format!(
+            "{LEASE_ENV}={text}: give the links' lease in whole milliseconds, 100 to 3600000"
+        ))),
+    }
+}
+
 impl Default for LinkConfig {
     fn default() -> Self {
         LinkConfig {
@@ -338,6 +370,25 @@ fn random_u32() -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_lease_variable_takes_whole_milliseconds_in_range_and_names_itself_otherwise() {
+        assert_eq!(parse_lease("30000").unwrap(), Duration::from_secs(30));
+        assert_eq!(parse_lease(" 100\n").unwrap(), Duration::from_millis(100));
+        for bad in ["", "3.5", "-1", "99", "3600001", "30s"] {
+            let e = parse_lease(bad).unwrap_err().to_string();
+            assert!(e.contains(LEASE_ENV), "{bad}: {e}");
+        }
+        // the lease reaches zenoh's configuration
+        let c = LinkConfig {
+            lease: LOCAL_LEASE,
+            ..LinkConfig::loopback_peer(Some(7000), &[])
+        }
+        .to_zenoh_config()
+        .unwrap();
+        let v: serde_json::Value = serde_json::from_str(&format!("{c}")).unwrap();
+        assert_eq!(v["transport"]["link"]["tx"]["lease"], 30000);
+    }
 
     #[test]
     fn default_config_has_multicast_off_and_explicit_endpoints() {

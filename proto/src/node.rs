@@ -214,7 +214,7 @@ pub async fn serve<S: Solver>(
     hello: Hello,
     mut solver: S,
 ) -> Result<(), NodeError> {
-    let mut p = Participant::connect(&args.link(), &args.run_id, &args.node, hello).await?;
+    let mut p = Participant::connect(&args.link()?, &args.run_id, &args.node, hello).await?;
     let mut window: Option<u64> = None;
     // the state at the start of the window an implicit scheme may repeat
     let mut kept: Option<Kept> = None;

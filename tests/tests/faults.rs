@@ -97,3 +97,60 @@ fn killing_the_fem_node_mid_iteration_of_an_implicit_run_ends_it_naming_node_and
     );
     assert_eq!(summary(&out)["status"], "failed");
 }
+
+/// A node that does not run for longer than zenoh's usual 3 s lease (stopped here with
+/// SIGSTOP, as a process starved of CPU on a busy machine would be) is not a dead node when
+/// the coordinator started it on this host: the run goes on and ends as it would have.
+#[test]
+fn a_local_node_stalled_longer_than_three_seconds_does_not_end_the_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(root().join("scenes/plate.toml")).unwrap();
+    let scene = write_scene(dir.path(), "plate.toml", &text);
+    let out = dir.path().join("out");
+    let run_id = format!("stall-{}", std::process::id());
+    let mut child = cosim()
+        .arg("run")
+        .arg(&scene)
+        .args(["--no-progress", "--run-id", &run_id, "--out"])
+        .arg(&out)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    wait_for_windows(&out, 20, &mut child, Duration::from_secs(120));
+    let pid = pid_of(&["dem-node", &run_id]).expect("the DEM node's process");
+    let signal = |sig: &str| {
+        let ok = std::process::Command::new("kill")
+            .args([sig, &pid.to_string()])
+            .status()
+            .unwrap();
+        assert!(ok.success(), "kill {sig} {pid}");
+    };
+    signal("-STOP");
+    std::thread::sleep(Duration::from_secs(6));
+    signal("-CONT");
+    let t0 = Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(300),
+            "the run did not end within 300 s of the stall"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let mut err = String::new();
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut err)
+        .unwrap();
+    assert!(status.success(), "{err}");
+    let s = summary(&out);
+    assert_eq!(s["status"], "completed", "{s}");
+    // all 300 windows are in the table
+    let rows = std::fs::read_to_string(out.join("windows.csv")).unwrap();
+    assert_eq!(rows.lines().count() - 1, 300, "{rows}");
+}
