@@ -1022,7 +1022,12 @@ pub struct FactorPlan {
     full: std::sync::OnceLock<SymbolicCholesky<u32>>,
     /// The elimination order of the equations.
     order: Vec<u32>,
-    split: Option<crate::tree_factor::SplitPlan>,
+    /// The tree split: planned with the analysis, or (a plan made for a solver that may not
+    /// factorise in f64, [`SplitWhen::Later`]) when [`Factor`] first asks for it.
+    split: std::sync::OnceLock<Option<crate::tree_factor::SplitPlan>>,
+    /// What a later split is planned from: the node graph and its chosen order (None: the
+    /// numbering), kept only while the split is pending.
+    pending: std::sync::Mutex<Option<(NodeGraph, Option<Vec<u32>>)>>,
 }
 
 impl FactorPlan {
@@ -1046,16 +1051,66 @@ impl FactorPlan {
     /// Entries of the factor: the whole's, or with a tree split both halves' (each holds the
     /// separator's block).
     pub fn factor_nnz(&self) -> usize {
-        match (&self.split, self.full.get()) {
+        match (self.split(), self.full.get()) {
             (Some(s), _) => s.factor_nnz(),
             (None, Some(sym)) => sym.len_val(),
             (None, None) => unreachable!("a plan without a split has its whole factor"),
         }
     }
 
-    /// The tree split [`Factor`] uses, if any.
+    /// The tree split [`Factor`] uses, if any (None also while a later split is pending).
     pub fn split(&self) -> Option<&crate::tree_factor::SplitPlan> {
-        self.split.as_ref()
+        self.split.get().and_then(Option::as_ref)
+    }
+
+    /// The tree split of `pattern` (the pattern this plan is for), planned now if it was left
+    /// for later.
+    fn plan_split(&self, pattern: &Pattern) -> Option<&crate::tree_factor::SplitPlan> {
+        self.split
+            .get_or_init(|| {
+                let pending = self
+                    .pending
+                    .lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner)
+                    .take();
+                let (g, node_order) = pending?;
+                let t0 = std::time::Instant::now();
+                let split = split_on_nodes(pattern, &g, node_order.as_deref(), &self.order);
+                if timing() {
+                    tracing::debug!(
+                        "  {}, planned in {:?}",
+                        describe_split(split.as_ref()),
+                        t0.elapsed()
+                    );
+                }
+                split
+            })
+            .as_ref()
+    }
+}
+
+/// When [`ensure_symbolic_with`] plans the tree split.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SplitWhen {
+    /// With the analysis (beside the assembly: the f64 factor will be used).
+    Now,
+    /// When the f64 factor is first computed: a plan for a solver that may factorise in f32
+    /// only ([`MixedFactor`], whose factor is whole: the halves' structures would cost more
+    /// memory than f32 saves, docs/performance.md, *FEM*).
+    Later,
+    /// Never.
+    Never,
+}
+
+fn describe_split(split: Option<&crate::tree_factor::SplitPlan>) -> String {
+    match split {
+        Some(s) => format!(
+            "tree split: separator {}, halves' nnz(L) {}, predicted {:.2} of the whole's work",
+            s.separator(),
+            s.factor_nnz(),
+            s.predicted,
+        ),
+        None => "no tree split".into(),
     }
 }
 
@@ -1085,13 +1140,22 @@ pub fn ensure_symbolic(
     pattern: &Pattern,
     symbolic: &mut Option<Symbolic>,
 ) -> Result<Symbolic, FemError> {
+    ensure_symbolic_with(pattern, symbolic, SplitWhen::Now)
+}
+
+/// [`ensure_symbolic`], with the tree split planned `when`.
+pub fn ensure_symbolic_with(
+    pattern: &Pattern,
+    symbolic: &mut Option<Symbolic>,
+    when: SplitWhen,
+) -> Result<Symbolic, FemError> {
     if symbolic.is_none() {
-        let sizes = if tree_split_enabled() {
+        let sizes = if when != SplitWhen::Never && tree_split_enabled() {
             SPLIT_FROM..PARALLEL_FACTOR_FROM
         } else {
             0..0
         };
-        *symbolic = Some(analyse(pattern, sizes)?);
+        *symbolic = Some(analyse_with(pattern, sizes, when == SplitWhen::Later)?);
     }
     Ok(symbolic.clone().expect("set above"))
 }
@@ -1113,6 +1177,16 @@ fn tree_split_enabled() -> bool {
 pub fn analyse(
     pattern: &Pattern,
     split_sizes: std::ops::Range<usize>,
+) -> Result<Symbolic, FemError> {
+    analyse_with(pattern, split_sizes, false)
+}
+
+/// [`analyse`]; `later`: a split planned on the node graph is left until [`Factor`] asks for
+/// it (and the whole factor's analysis until something asks for that).
+pub fn analyse_with(
+    pattern: &Pattern,
+    split_sizes: std::ops::Range<usize>,
+    later: bool,
 ) -> Result<Symbolic, FemError> {
     let t0 = std::time::Instant::now();
     let mut chosen = "nested dissection";
@@ -1161,21 +1235,28 @@ pub fn analyse(
     // factor (about 9× the node fill for 3 equations per node) in range; the whole factor's
     // symbolic analysis is then left until something asks for it.
     let t_split = std::time::Instant::now();
-    let mut split = match &node_choice {
+    let had_nodes = node_choice.is_some();
+    let mut pending = None;
+    let mut split = match node_choice {
         // d² entries per node-graph entry for d equations per node (3 for solids, 6 for shells)
         Some((g, node_order, fill))
             if split_sizes.contains(&(fill * (pattern.n / g.n().max(1)).pow(2))) =>
         {
-            split_on_nodes(pattern, g, node_order.as_deref(), &order)
+            if later {
+                pending = Some((g, node_order));
+                None
+            } else {
+                split_on_nodes(pattern, &g, node_order.as_deref(), &order)
+            }
         }
         _ => None,
     };
     let full = std::sync::OnceLock::new();
-    if split.is_none() {
+    if split.is_none() && pending.is_none() {
         let sym = analyse_in_order(pattern.symbolic(), &order)
             .map_err(|e| FemError::Solver(format!("symbolic Cholesky failed: {e:?}")))?;
         // a pattern without its nodes: planned on the equations' tree
-        if node_choice.is_none() && split_sizes.contains(&sym.len_val()) {
+        if !had_nodes && split_sizes.contains(&sym.len_val()) {
             split = crate::tree_factor::SplitPlan::new(pattern, &sym);
         }
         let _ = full.set(sym);
@@ -1188,20 +1269,27 @@ pub fn analyse(
                 None => "whole factor not analysed".into(),
             },
             t0.elapsed(),
-            match &split {
-                Some(s) => format!(
-                    "tree split: separator {}, halves' nnz(L) {}, predicted {:.2} of the \
-                     whole's work, planned in {:?}",
-                    s.separator(),
-                    s.factor_nnz(),
-                    s.predicted,
-                    t_split.elapsed(),
-                ),
-                None => "no tree split".into(),
+            if pending.is_some() {
+                "tree split left for the f64 factor".to_string()
+            } else {
+                format!(
+                    "{}, planned in {:?}",
+                    describe_split(split.as_ref()),
+                    t_split.elapsed()
+                )
             }
         );
     }
-    Ok(Arc::new(FactorPlan { full, order, split }))
+    let split_cell = std::sync::OnceLock::new();
+    if pending.is_none() {
+        let _ = split_cell.set(split);
+    }
+    Ok(Arc::new(FactorPlan {
+        full,
+        order,
+        split: split_cell,
+        pending: std::sync::Mutex::new(pending),
+    }))
 }
 
 /// The tree split of the factor of `pattern` in the equation order `order`, planned on the
@@ -1380,7 +1468,7 @@ impl Factor {
                  rigid-body motions"
             ))
         };
-        let values = match sym.split() {
+        let values = match sym.plan_split(pattern) {
             Some(plan) => FactorValues::Split(plan.factorize(vals).map_err(not_pd)?),
             None => {
                 FactorValues::Whole(numeric_llt(sym.full(pattern)?, pattern, vals).map_err(not_pd)?)
@@ -1482,7 +1570,7 @@ impl MixedFactor {
         vals: &[f64],
         symbolic: &mut Option<Symbolic>,
     ) -> Result<MixedFactor, FemError> {
-        let sym = ensure_symbolic(pattern, symbolic)?;
+        let sym = ensure_symbolic_with(pattern, symbolic, SplitWhen::Later)?;
         let t0 = std::time::Instant::now();
         let scale: Vec<f64> = (0..pattern.n)
             .map(|j| {
@@ -1564,6 +1652,7 @@ impl MixedFactor {
         max_iter: usize,
     ) -> Result<RefinedSolve, FemError> {
         let n = b.len();
+        let t0 = std::time::Instant::now();
         let bnorm = dot(b, b).sqrt();
         if bnorm == 0.0 {
             return Ok(RefinedSolve {
@@ -1624,7 +1713,10 @@ impl MixedFactor {
             }
         }
         if timing() {
-            tracing::debug!("  mixed-precision PCG: {it} iterations, relative residual {rel:.2e}");
+            tracing::debug!(
+                "  mixed-precision PCG: {it} iterations, relative residual {rel:.2e}, {:?}",
+                t0.elapsed()
+            );
         }
         if !(rel <= accept) {
             return Err(FemError::Solver(format!(

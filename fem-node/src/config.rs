@@ -114,7 +114,8 @@ pub enum ShellFaces {
 #[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
 #[serde(rename_all = "lowercase")]
 pub enum LinearSolver {
-    /// `mixed` from [`LinearSolver::AUTO_MIXED_FROM`] free equations on, `direct` below.
+    /// `mixed` from [`LinearSolver::AUTO_MIXED_FROM`] free equations on (a one-shot static
+    /// solve: from [`LinearSolver::AUTO_MIXED_ONE_SHOT_FROM`]), `direct` below.
     #[default]
     Auto,
     /// Sparse Cholesky in f64 (faer).
@@ -127,10 +128,20 @@ pub enum LinearSolver {
 impl LinearSolver {
     /// Size from which `auto` picks `mixed`: where the factor's memory starts to matter.
     pub const AUTO_MIXED_FROM: usize = 100_000;
-    /// Whether a static solve of `n_eq` equations uses the mixed-precision solver.
-    pub fn mixed_for(self, n_eq: usize) -> bool {
+    /// Size from which `auto` picks `mixed` for a one-shot static solve (a stand-alone static
+    /// analysis, the closing solve of one-way coupling and its pressure-equivalent reference):
+    /// solved once, the f32 factor's half-size and faster factorisation win; a structure
+    /// re-solved every coupling window keeps the f64 factor below [`Self::AUTO_MIXED_FROM`],
+    /// whose single triangular solve per window is cheaper than the conjugate gradients'
+    /// three or four (docs/performance.md, *FEM*).
+    pub const AUTO_MIXED_ONE_SHOT_FROM: usize = 20_000;
+    /// Whether a static solve of `n_eq` equations uses the mixed-precision solver
+    /// (`one_shot`: a solve not repeated every window).
+    pub fn mixed_for(self, n_eq: usize, one_shot: bool) -> bool {
         match self {
-            LinearSolver::Auto => n_eq >= Self::AUTO_MIXED_FROM,
+            LinearSolver::Auto => {
+                n_eq >= Self::AUTO_MIXED_FROM || one_shot && n_eq >= Self::AUTO_MIXED_ONE_SHOT_FROM
+            }
             LinearSolver::Direct => false,
             LinearSolver::Mixed => true,
         }

@@ -45,6 +45,29 @@ fn mixed_precision_solve_gives_the_f64_answer_on_the_a3_beam() {
     assert_eq!(auto, direct);
 }
 
+/// `auto` above 20,000 equations: the mixed solver for a one-shot static solve, the f64
+/// factor for a structure solved every window (`advance`), both with the f64 answer.
+#[test]
+fn auto_picks_the_f32_factor_for_a_one_shot_solve_and_the_f64_factor_for_windows() {
+    // 88 × 10 × 10 nodes, both ends clamped: 25,800 equations
+    let beam = a3_beam("hex8", 0.0115);
+    let (direct, none) = solve(&with_solver(&beam, "direct"));
+    assert!(none.is_none());
+    let (auto, info) = solve(&beam);
+    let info = info.expect("auto solved a one-shot static problem of 25,800 equations mixed");
+    let d = max_rel_diff(&auto, &direct);
+    println!("auto, one shot: {info:?}, max difference {d:.1e}");
+    assert!(d < 1e-9, "{d:e}");
+    let mut m = model(&beam);
+    m.advance(1e-3).unwrap();
+    assert!(
+        m.last_mixed_solve().is_none(),
+        "windows keep the f64 factor"
+    );
+    let d = max_rel_diff(m.displacements(), &direct);
+    assert!(d < 1e-12, "{d:e}");
+}
+
 /// A 1 m × 2 mm × 2 mm cantilever (κ(K) ~ (L/t)⁴): single precision cannot factor or
 /// precondition it: the solver falls back to the f64 factor and gives its answer exactly.
 #[test]
@@ -385,8 +408,31 @@ fn the_tree_split_factor_solves_a_cantilever_as_the_whole_factor_does() {
             split.separator()
         );
         assert!(split.predicted < 0.75, "{}", split.predicted);
+        let separator = split.separator();
         let f = Factor::new(&p, &k, &mut plan).unwrap();
         assert!(f.is_split());
+        if kind == fem::ElementKind::Hex8 {
+            // planned later (a static analysis that may factorise in f32 only): the f32
+            // factor is whole and leaves the split pending; the f64 factor plans the same one
+            let mut later = Some(fem::assembly::analyse_with(&p, 0..usize::MAX, true).unwrap());
+            assert!(later.as_ref().unwrap().split().is_none());
+            let mixed = fem::assembly::MixedFactor::new(&p, &k, &mut later).unwrap();
+            assert!(later.as_ref().unwrap().split().is_none());
+            let mut x = b.clone();
+            mixed.solve(&p, &k, &mut x, 1e-11, 1e-9, 200).unwrap();
+            assert!(max_rel_diff(&x, &x_whole) < 1e-8);
+            let f_later = Factor::new(&p, &k, &mut later).unwrap();
+            assert!(f_later.is_split());
+            assert_eq!(
+                later.as_ref().unwrap().split().unwrap().separator(),
+                separator
+            );
+            let mut x = b.clone();
+            f_later.solve_in_place(&mut x);
+            let mut x_now = b.clone();
+            f.solve_in_place(&mut x_now);
+            assert_eq!(x, x_now, "the same split, the same bits");
+        }
         let mut x = b.clone();
         f.solve_in_place(&mut x);
         let diff = max_rel_diff(&x, &x_whole);

@@ -386,12 +386,20 @@ impl Model {
         // factorises on this pattern) run beside the stiffness assembly: the ordering is
         // mostly sequential, the assembly parallel
         let explicit = matches!(cfg.analysis, Analysis::Explicit { .. });
+        // a static analysis that may factorise in f32 only (a one-shot solve with `auto`,
+        // or `mixed`) leaves the tree split of the f64 factor until that is needed
+        let split =
+            if matches!(cfg.analysis, Analysis::Static) && cfg.solver.mixed_for(dofs.n_eq, true) {
+                assembly::SplitWhen::Later
+            } else {
+                assembly::SplitWhen::Now
+            };
         let (k, symbolic) = rayon::join(
             || assembly::assemble(&mesh, &dofs, &pattern, Operator::Stiffness, props),
             || {
                 let mut sym = None;
                 (!explicit)
-                    .then(|| assembly::ensure_symbolic(&pattern, &mut sym))
+                    .then(|| assembly::ensure_symbolic_with(&pattern, &mut sym, split))
                     .transpose()
             },
         );
@@ -711,7 +719,7 @@ impl Model {
                 let before =
                     (self.overlap.is_some() && self.st.steps > 0).then(|| self.st.u.clone());
                 self.move_supports(t);
-                self.static_solve_at(t)?;
+                self.static_solve_at(t, false)?;
                 if let Some(u0) = before {
                     for ((v, u), u0) in self.st.v.iter_mut().zip(&self.st.u).zip(&u0) {
                         *v = (u - u0) / dt;
@@ -757,7 +765,7 @@ impl Model {
     /// Static solve at the current time (loads(t) + interface forces), any analysis type.
     pub fn solve_static(&mut self) -> Result<(), FemError> {
         let t = self.st.time;
-        self.static_solve_at(t)
+        self.static_solve_at(t, true)
     }
 
     /// The interface forces held since the last `set_interface_forces` (flat xyz, interface
@@ -1558,13 +1566,20 @@ impl Model {
     /// K u = F (2.28) with the cached Cholesky factor of K.
     /// With the mixed-precision solver (`[fem] solver`), an f32 factor preconditions f64
     /// conjugate gradients; when that fails the f64 factor takes over (logged once).
-    fn static_solve_at(&mut self, t: f64) -> Result<(), FemError> {
+    /// `one_shot`: a solve not repeated every window ([`Model::solve_static`]), for the
+    /// choice of `[fem] solver = "auto"`.
+    fn static_solve_at(&mut self, t: f64, one_shot: bool) -> Result<(), FemError> {
         if self.nonlinear {
             return self.newton_static(t);
         }
         let mut rhs = self.free_rhs(t);
         let mut solved = false;
-        if self.k_factor.is_none() && !self.mixed_failed && self.solver.mixed_for(self.dofs.n_eq) {
+        if self.k_factor.is_none()
+            && !self.mixed_failed
+            && self
+                .solver
+                .mixed_for(self.dofs.n_eq, one_shot || self.k_mixed.is_some())
+        {
             if self.k_mixed.is_none() {
                 match MixedFactor::new(&self.pattern, &self.k, &mut self.symbolic) {
                     Ok(f) => self.k_mixed = Some(f),
