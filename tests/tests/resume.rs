@@ -194,8 +194,13 @@ fn resume_without_a_checkpoint_says_how_to_get_one() {
 #[test]
 fn a_periodic_rve_killed_in_its_programme_resumes_bitwise_equal() {
     let dir = tempfile::tempdir().unwrap();
-    let text = std::fs::read_to_string(root().join("scenes/rve-triaxial-ci.toml")).unwrap()
+    // the shear cut to 3 % (640 windows instead of 869): the checkpoint at window 299 is in
+    // the middle of the programme's stages either way
+    let text = std::fs::read_to_string(root().join("scenes/rve-triaxial-ci.toml"))
+        .unwrap()
+        .replace("strain = { z = -0.1 }", "strain = { z = -0.03 }")
         + "\n[output]\ncheckpoint_every = 100\nfinal_state = true\n";
+    assert!(text.contains("z = -0.03"));
     let scene = write_scene(dir.path(), "rve.toml", &text);
     let whole = dir.path().join("whole");
     let mut c = cosim();
