@@ -244,6 +244,51 @@ pub fn spawn_run(scene: &Path, run_id: &str, out: &Path) -> Child {
         .expect("start cosim run")
 }
 
+/// Runs `scene` once uninterrupted into `<dir>/whole`, once into `<dir>/broken` killing
+/// `victim` (a node id, or `cosim`) once the checkpoint after `window` exists, then resumes
+/// the broken run (which must succeed). Returns the two output folders and the resume's
+/// output.
+pub fn whole_and_resumed(
+    dir: &Path,
+    scene: &Path,
+    tag: &str,
+    window: u64,
+    victim: &str,
+) -> (PathBuf, PathBuf, Output) {
+    let whole = dir.join("whole");
+    let mut c = cosim();
+    c.arg("run")
+        .arg(scene)
+        .arg("--no-progress")
+        .arg("--out")
+        .arg(&whole);
+    assert!(run(c).status.success());
+
+    let broken = dir.join("broken");
+    let run_id = format!("{tag}-{victim}-{}", std::process::id());
+    let mut child = spawn_run(scene, &run_id, &broken);
+    wait_for_checkpoint(&broken, window, &mut child);
+    let pid = match victim {
+        "cosim" => child.id(),
+        node => pid_of(&[&format!("{node}-node"), &run_id]).expect("the node's process"),
+    };
+    kill(pid);
+    assert!(
+        !child.wait().unwrap().success(),
+        "the interrupted run must fail"
+    );
+    if victim == "cosim" {
+        // the nodes notice that the coordinator is gone and leave by themselves
+        wait_for_nodes_to_leave(&run_id);
+    }
+    assert!(!broken.join("final").exists());
+    let mut c = cosim();
+    c.arg("resume").arg(&broken).arg("--no-progress");
+    let o = run(c);
+    assert!(o.status.success());
+    (whole, broken, o)
+}
+
 /// Waits until the checkpoint after `window` exists in `out`; fails if `child` (the run) ends
 /// first or a minute passes.
 pub fn wait_for_checkpoint(out: &Path, window: u64, child: &mut Child) {

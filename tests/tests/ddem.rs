@@ -2,7 +2,7 @@
 //! sample's moduli in the summary, `cosim check` refusing a DDEM scene past ρ(B) = 1 (and the
 //! run stopping when the refusal is overridden), and a killed run resumed bit for bit.
 
-use cosim_tests::{cosim, kill, pid_of, root, run, run_scene, summary, write_scene};
+use cosim_tests::{cosim, root, run, run_scene, summary, write_scene};
 
 fn sc() -> String {
     std::fs::read_to_string(root().join("scenes/ddem-sc.toml")).unwrap()
@@ -104,24 +104,8 @@ fn a_killed_disc_run_resumes_bit_for_bit() {
             1,
         );
     let scene = write_scene(dir.path(), "sc.toml", &text);
-    let whole = dir.path().join("whole");
-    let mut c = cosim();
-    c.arg("run")
-        .arg(&scene)
-        .arg("--no-progress")
-        .arg("--out")
-        .arg(&whole);
-    assert!(run(c).status.success());
-
-    let broken = dir.path().join("broken");
-    let run_id = format!("ddem-resume-{}", std::process::id());
-    let mut child = cosim_tests::spawn_run(&scene, &run_id, &broken);
-    cosim_tests::wait_for_checkpoint(&broken, 19, &mut child);
-    kill(pid_of(&["dem-node", &run_id]).expect("the dem-node process"));
-    assert!(!child.wait().unwrap().success());
-    let mut c = cosim();
-    c.arg("resume").arg(&broken).arg("--no-progress");
-    assert!(run(c).status.success());
+    let (whole, broken, _) =
+        cosim_tests::whole_and_resumed(dir.path(), &scene, "ddem-resume", 19, "dem");
     let s = summary(&broken);
     assert_eq!(s["status"], "completed");
     assert!(s["resumed_after_window"].as_u64().unwrap() >= 19, "{s}");

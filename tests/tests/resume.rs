@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use cosim_tests::{cosim, kill, pid_of, root, run, summary, write_scene};
+use cosim_tests::{cosim, root, run, summary, write_scene};
 
 fn plate_scene(dir: &Path, schedule: &str, tables: &str) -> std::path::PathBuf {
     let text = std::fs::read_to_string(root().join("scenes/plate.toml"))
@@ -45,36 +45,8 @@ fn killed_and_resumed_equals_uninterrupted_with(schedule: &str, tables: &str, vi
     let dir = tempfile::tempdir().unwrap();
     let scene = plate_scene(dir.path(), schedule, tables);
 
-    let whole = dir.path().join("whole");
-    let mut c = cosim();
-    c.arg("run")
-        .arg(&scene)
-        .arg("--no-progress")
-        .arg("--out")
-        .arg(&whole);
-    assert!(run(c).status.success());
-
-    let broken = dir.path().join("broken");
-    let run_id = format!("resume-{victim}-{}", std::process::id());
-    let mut child = cosim_tests::spawn_run(&scene, &run_id, &broken);
-    cosim_tests::wait_for_checkpoint(&broken, 49, &mut child);
-    let pid = match victim {
-        "cosim" => child.id(),
-        node => pid_of(&[&format!("{node}-node"), &run_id]).expect("node process"),
-    };
-    kill(pid);
-    let status = child.wait().unwrap();
-    assert!(!status.success(), "the interrupted run must fail");
-    if victim == "cosim" {
-        // the nodes notice that the coordinator is gone and leave by themselves
-        cosim_tests::wait_for_nodes_to_leave(&run_id);
-    }
-    assert!(!broken.join("final").exists());
-
-    let mut c = cosim();
-    c.arg("resume").arg(&broken).arg("--no-progress");
-    let o = run(c);
-    assert!(o.status.success());
+    let (whole, broken, _) =
+        cosim_tests::whole_and_resumed(dir.path(), &scene, "resume", 49, victim);
     let s = summary(&broken);
     assert_eq!(s["status"], "completed");
     // fixed windows: 120; adaptive: as many as the uninterrupted run had
@@ -202,29 +174,8 @@ fn a_periodic_rve_killed_in_its_programme_resumes_bitwise_equal() {
         + "\n[output]\ncheckpoint_every = 100\nfinal_state = true\n";
     assert!(text.contains("z = -0.03"));
     let scene = write_scene(dir.path(), "rve.toml", &text);
-    let whole = dir.path().join("whole");
-    let mut c = cosim();
-    c.arg("run")
-        .arg(&scene)
-        .arg("--no-progress")
-        .arg("--out")
-        .arg(&whole);
-    assert!(run(c).status.success());
-
-    let broken = dir.path().join("broken");
-    let run_id = format!("resume-rve-{}", std::process::id());
-    let mut child = cosim_tests::spawn_run(&scene, &run_id, &broken);
-    cosim_tests::wait_for_checkpoint(&broken, 299, &mut child);
-    kill(pid_of(&["dem-node", &run_id]).expect("node process"));
-    assert!(
-        !child.wait().unwrap().success(),
-        "the interrupted run must fail"
-    );
-
-    let mut c = cosim();
-    c.arg("resume").arg(&broken).arg("--no-progress");
-    let o = run(c);
-    assert!(o.status.success());
+    let (whole, broken, _) =
+        cosim_tests::whole_and_resumed(dir.path(), &scene, "resume-rve", 299, "dem");
     let s = summary(&broken);
     assert_eq!(s["status"], "completed");
     assert!(s["resumed_after_window"].as_u64().unwrap() >= 299, "{s}");
