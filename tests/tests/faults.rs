@@ -6,6 +6,57 @@ use std::time::{Duration, Instant};
 
 use cosim_tests::{cosim, kill, pid_of, root, summary, wait_for_windows, write_scene};
 
+/// Starts `cosim run` of `scene` into `out` with its stderr piped, and waits until `windows`
+/// windows are done. Returns the process and the pid of its node `node`.
+fn start_and_wait(
+    scene: &std::path::Path,
+    run_id: &str,
+    out: &std::path::Path,
+    windows: usize,
+    node: &str,
+) -> (std::process::Child, u32) {
+    let mut child = cosim()
+        .arg("run")
+        .arg(scene)
+        .args(["--no-progress", "--run-id", run_id, "--out"])
+        .arg(out)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    wait_for_windows(out, windows, &mut child, Duration::from_secs(120));
+    let pid = pid_of(&[&format!("{node}-node"), run_id]).expect("the node's process");
+    (child, pid)
+}
+
+/// Waits at most `limit` after `since` for `child` to end (`what` names the wait in the
+/// failure); its exit status and stderr.
+fn wait_exit(
+    child: &mut std::process::Child,
+    since: Instant,
+    limit: Duration,
+    what: &str,
+) -> (std::process::ExitStatus, String) {
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        assert!(
+            since.elapsed() < limit,
+            "cosim still running {limit:?} after {what}"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let mut err = String::new();
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut err)
+        .unwrap();
+    (status, err)
+}
+
 /// Runs `text` as a scene, kills node `victim` once `windows` windows are done, and waits (at
 /// most 5 s) for cosim to end. Returns its exit status, its stderr and the output folder.
 fn kill_mid_run(
@@ -17,38 +68,15 @@ fn kill_mid_run(
     let scene = write_scene(dir, "scene.toml", text);
     let out = dir.join("out");
     let run_id = format!("kill-{victim}-{}", std::process::id());
-    let mut c = cosim();
-    c.arg("run")
-        .arg(&scene)
-        .args(["--no-progress", "--run-id", &run_id, "--out"])
-        .arg(&out);
-    let mut child = c
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    // wait until windows are being computed
-    wait_for_windows(&out, windows, &mut child, Duration::from_secs(120));
-    let pid = pid_of(&[&format!("{victim}-node"), &run_id]).expect("the node's process");
+    let (mut child, pid) = start_and_wait(&scene, &run_id, &out, windows, victim);
     let killed = Instant::now();
     kill(pid);
-    let status = loop {
-        if let Some(s) = child.try_wait().unwrap() {
-            break s;
-        }
-        assert!(
-            killed.elapsed() < Duration::from_secs(5),
-            "cosim still running 5 s after the {victim} node was killed"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    };
-    let mut err = String::new();
-    child
-        .stderr
-        .take()
-        .unwrap()
-        .read_to_string(&mut err)
-        .unwrap();
+    let (status, err) = wait_exit(
+        &mut child,
+        killed,
+        Duration::from_secs(5),
+        &format!("the {victim} node was killed"),
+    );
     eprintln!(
         "cosim exited {status} {:.2} s after the kill:\n{err}",
         killed.elapsed().as_secs_f64()
@@ -108,17 +136,7 @@ fn a_local_node_stalled_longer_than_three_seconds_does_not_end_the_run() {
     let scene = write_scene(dir.path(), "plate.toml", &text);
     let out = dir.path().join("out");
     let run_id = format!("stall-{}", std::process::id());
-    let mut child = cosim()
-        .arg("run")
-        .arg(&scene)
-        .args(["--no-progress", "--run-id", &run_id, "--out"])
-        .arg(&out)
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    wait_for_windows(&out, 20, &mut child, Duration::from_secs(120));
-    let pid = pid_of(&["dem-node", &run_id]).expect("the DEM node's process");
+    let (mut child, pid) = start_and_wait(&scene, &run_id, &out, 20, "dem");
     let signal = |sig: &str| {
         let ok = std::process::Command::new("kill")
             .args([sig, &pid.to_string()])
@@ -129,24 +147,12 @@ fn a_local_node_stalled_longer_than_three_seconds_does_not_end_the_run() {
     signal("-STOP");
     std::thread::sleep(Duration::from_secs(6));
     signal("-CONT");
-    let t0 = Instant::now();
-    let status = loop {
-        if let Some(s) = child.try_wait().unwrap() {
-            break s;
-        }
-        assert!(
-            t0.elapsed() < Duration::from_secs(300),
-            "the run did not end within 300 s of the stall"
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    };
-    let mut err = String::new();
-    child
-        .stderr
-        .take()
-        .unwrap()
-        .read_to_string(&mut err)
-        .unwrap();
+    let (status, err) = wait_exit(
+        &mut child,
+        Instant::now(),
+        Duration::from_secs(300),
+        "the stall",
+    );
     assert!(status.success(), "{err}");
     let s = summary(&out);
     assert_eq!(s["status"], "completed", "{s}");
