@@ -95,11 +95,13 @@ impl NodeProcess {
             program
         };
         let mut command = tokio::process::Command::new(&program);
-        if let Some(lease) = lease {
+        match lease {
             // its links' lease (proto::link::LOCAL_LEASE): an environment variable, so that
             // the node programs (the Python one, the users' own) need no new flag
-            command.env(proto::link::LEASE_ENV, lease.as_millis().to_string());
-        }
+            Some(lease) => command.env(proto::link::LEASE_ENV, lease.as_millis().to_string()),
+            // not one from the user's shell either: the node keeps the default
+            None => command.env_remove(proto::link::LEASE_ENV),
+        };
         let child = command
             .args(&args)
             // the node ends when this process is gone, whatever the network says

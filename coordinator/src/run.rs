@@ -1532,8 +1532,17 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
         };
         if node.child.is_none() {
             eprintln!(
-                "waiting for the external {kind} node `{id}`: start it with --run-id {run_id} --node {id}{}",
-                node.connect.iter().map(|c| format!(" --connect {c}")).collect::<String>()
+                "waiting for the external {kind} node `{id}`: start it with --run-id {run_id} --node {id}{}{}",
+                node.connect.iter().map(|c| format!(" --connect {c}")).collect::<String>(),
+                match local_lease {
+                    Some(l) => format!(
+                        " and {}={} in its environment (this run's links have a {} s lease)",
+                        proto::link::LEASE_ENV,
+                        l.as_millis(),
+                        l.as_secs()
+                    ),
+                    None => String::new(),
+                }
             );
         }
         started.extend(listen);

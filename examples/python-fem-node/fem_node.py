@@ -13,6 +13,7 @@ import logging
 import os
 import pickle
 import queue
+import re
 import sys
 import time
 from collections import deque
@@ -69,7 +70,7 @@ def zenoh_config(args):
     if not args.zenoh_config:
         config.insert_json5("scouting/gossip/enabled", "false")
         lease = os.environ.get("COSIM_LINK_LEASE_MS", "3000").strip()
-        if not lease.isdigit() or not 100 <= int(lease) <= 3_600_000:
+        if not re.fullmatch(r"[0-9]+", lease) or not 100 <= int(lease) <= 3_600_000:
             raise SystemExit(f"COSIM_LINK_LEASE_MS={lease}: give the links' lease in whole "
                              "milliseconds, 100 to 3600000")
         config.insert_json5("transport/link/tx/lease", lease)

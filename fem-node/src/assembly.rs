@@ -1025,9 +1025,15 @@ pub struct FactorPlan {
     /// The tree split: planned with the analysis, or (a plan made for a solver that may not
     /// factorise in f64, [`SplitWhen::Later`]) when [`Factor`] first asks for it.
     split: std::sync::OnceLock<Option<crate::tree_factor::SplitPlan>>,
-    /// What a later split is planned from: the node graph and its chosen order (None: the
-    /// numbering), kept only while the split is pending.
-    pending: std::sync::Mutex<Option<(NodeGraph, Option<Vec<u32>>)>>,
+    /// What a later split is planned from, kept only while the split is pending.
+    pending: std::sync::Mutex<Option<PendingSplit>>,
+}
+
+/// A tree split left for later: on the node graph (with its chosen order, None: the
+/// numbering), or on the whole factor's elimination tree (a pattern without its nodes).
+enum PendingSplit {
+    Nodes(NodeGraph, Option<Vec<u32>>),
+    Equations,
 }
 
 impl FactorPlan {
@@ -1049,12 +1055,13 @@ impl FactorPlan {
     }
 
     /// Entries of the factor: the whole's, or with a tree split both halves' (each holds the
-    /// separator's block).
+    /// separator's block). Known once a factor has been computed on the plan (a plan with its
+    /// split left for later knows neither before).
     pub fn factor_nnz(&self) -> usize {
         match (self.split(), self.full.get()) {
             (Some(s), _) => s.factor_nnz(),
             (None, Some(sym)) => sym.len_val(),
-            (None, None) => unreachable!("a plan without a split has its whole factor"),
+            (None, None) => unreachable!("factor_nnz before a factor was computed on the plan"),
         }
     }
 
@@ -1073,9 +1080,15 @@ impl FactorPlan {
                     .lock()
                     .unwrap_or_else(std::sync::PoisonError::into_inner)
                     .take();
-                let (g, node_order) = pending?;
                 let t0 = std::time::Instant::now();
-                let split = split_on_nodes(pattern, &g, node_order.as_deref(), &self.order);
+                let split = match pending? {
+                    PendingSplit::Nodes(g, node_order) => {
+                        split_on_nodes(pattern, &g, node_order.as_deref(), &self.order)
+                    }
+                    PendingSplit::Equations => {
+                        crate::tree_factor::SplitPlan::new(pattern, self.full(pattern).ok()?)
+                    }
+                };
                 if timing() {
                     tracing::debug!(
                         "  {}, planned in {:?}",
@@ -1098,8 +1111,6 @@ pub enum SplitWhen {
     /// only ([`MixedFactor`], whose factor is whole: the halves' structures would cost more
     /// memory than f32 saves, docs/performance.md, *FEM*).
     Later,
-    /// Never.
-    Never,
 }
 
 fn describe_split(split: Option<&crate::tree_factor::SplitPlan>) -> String {
@@ -1150,7 +1161,7 @@ pub fn ensure_symbolic_with(
     when: SplitWhen,
 ) -> Result<Symbolic, FemError> {
     if symbolic.is_none() {
-        let sizes = if when != SplitWhen::Never && tree_split_enabled() {
+        let sizes = if tree_split_enabled() {
             SPLIT_FROM..PARALLEL_FACTOR_FROM
         } else {
             0..0
@@ -1243,7 +1254,7 @@ pub fn analyse_with(
             if split_sizes.contains(&(fill * (pattern.n / g.n().max(1)).pow(2))) =>
         {
             if later {
-                pending = Some((g, node_order));
+                pending = Some(PendingSplit::Nodes(g, node_order));
                 None
             } else {
                 split_on_nodes(pattern, &g, node_order.as_deref(), &order)
@@ -1257,7 +1268,11 @@ pub fn analyse_with(
             .map_err(|e| FemError::Solver(format!("symbolic Cholesky failed: {e:?}")))?;
         // a pattern without its nodes: planned on the equations' tree
         if !had_nodes && split_sizes.contains(&sym.len_val()) {
-            split = crate::tree_factor::SplitPlan::new(pattern, &sym);
+            if later {
+                pending = Some(PendingSplit::Equations);
+            } else {
+                split = crate::tree_factor::SplitPlan::new(pattern, &sym);
+            }
         }
         let _ = full.set(sym);
     }

@@ -35,7 +35,12 @@ impl NodeArgs {
     /// The link this node opens; the lease from `COSIM_LINK_LEASE_MS` when the coordinator
     /// that started the node gives one ([`crate::link::LEASE_ENV`]), else 3 s.
     pub fn link(&self) -> Result<LinkConfig, crate::ProtoError> {
-        let lease = crate::link::lease_from_env()?.unwrap_or(LinkConfig::default().lease);
+        // a configuration file sets its own lease (the variable is then not read)
+        let lease = match &self.zenoh_config {
+            None => crate::link::lease_from_env()?,
+            Some(_) => None,
+        }
+        .unwrap_or(LinkConfig::default().lease);
         Ok(LinkConfig {
             mode: if self.mode == "client" || self.zenoh_config.is_some() && self.mode != "peer" {
                 LinkMode::Client

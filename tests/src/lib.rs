@@ -187,11 +187,16 @@ pub fn wait_for_nodes_to_leave(run: &str) {
 
 /// SIGKILL.
 pub fn kill(pid: u32) {
+    signal(pid, "KILL");
+}
+
+/// Sends signal `sig` (`KILL`, `STOP`, `CONT`, ...) to process `pid`.
+pub fn signal(pid: u32, sig: &str) {
     let ok = Command::new("kill")
-        .args(["-KILL", &pid.to_string()])
+        .args([&format!("-{sig}"), &pid.to_string()])
         .status()
         .map(|s| s.success());
-    assert!(matches!(ok, Ok(true)), "kill -KILL {pid}");
+    assert!(matches!(ok, Ok(true)), "kill -{sig} {pid}");
 }
 
 /// Kills and reaps its processes when dropped (also when a test fails half-way).

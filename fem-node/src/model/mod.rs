@@ -388,12 +388,14 @@ impl Model {
         let explicit = matches!(cfg.analysis, Analysis::Explicit { .. });
         // a static analysis that may factorise in f32 only (a one-shot solve with `auto`,
         // or `mixed`) leaves the tree split of the f64 factor until that is needed
-        let split =
-            if matches!(cfg.analysis, Analysis::Static) && cfg.solver.mixed_for(dofs.n_eq, true) {
-                assembly::SplitWhen::Later
-            } else {
-                assembly::SplitWhen::Now
-            };
+        let split = if matches!(cfg.analysis, Analysis::Static)
+            && !nonlinear
+            && cfg.solver.mixed_for(dofs.n_eq, true)
+        {
+            assembly::SplitWhen::Later
+        } else {
+            assembly::SplitWhen::Now
+        };
         let (k, symbolic) = rayon::join(
             || assembly::assemble(&mesh, &dofs, &pattern, Operator::Stiffness, props),
             || {
