@@ -1055,13 +1055,12 @@ impl FactorPlan {
     }
 
     /// Entries of the factor: the whole's, or with a tree split both halves' (each holds the
-    /// separator's block). Known once a factor has been computed on the plan (a plan with its
-    /// split left for later knows neither before).
+    /// separator's block).
     pub fn factor_nnz(&self) -> usize {
         match (self.split(), self.full.get()) {
             (Some(s), _) => s.factor_nnz(),
             (None, Some(sym)) => sym.len_val(),
-            (None, None) => unreachable!("factor_nnz before a factor was computed on the plan"),
+            (None, None) => unreachable!("a plan without a split has its whole factor"),
         }
     }
 
@@ -1109,7 +1108,8 @@ pub enum SplitWhen {
     Now,
     /// When the f64 factor is first computed: a plan for a solver that may factorise in f32
     /// only ([`MixedFactor`], whose factor is whole: the halves' structures would cost more
-    /// memory than f32 saves, docs/performance.md, *FEM*).
+    /// memory than f32 saves, docs/performance.md, *FEM*). The whole factor's analysis is
+    /// made with the plan (beside the assembly), as the f32 factor needs it.
     Later,
 }
 
@@ -1263,7 +1263,9 @@ pub fn analyse_with(
         _ => None,
     };
     let full = std::sync::OnceLock::new();
-    if split.is_none() && pending.is_none() {
+    // without a split (or with one left for later: the f32 factor, which is whole, will need
+    // it) the whole factor's analysis runs now, beside the assembly
+    if split.is_none() {
         let sym = analyse_in_order(pattern.symbolic(), &order)
             .map_err(|e| FemError::Solver(format!("symbolic Cholesky failed: {e:?}")))?;
         // a pattern without its nodes: planned on the equations' tree
