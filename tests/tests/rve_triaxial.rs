@@ -41,6 +41,22 @@ fn an_rve_of_superquadric_sand_consolidates_shears_and_fits_a_mohr_coulomb_mater
     // the shear: stage 3
     let shear: Vec<usize> = (0..stage.len()).filter(|&k| stage[k] == 3.0).collect();
     let (first, last) = (shear[0], *shear.last().unwrap());
+    // summary.json reports the programme's end — the last window-end state inside the shear,
+    // not the held cell after it (which relaxes) — and the held ratio beside it
+    let reported = s["results"]["dem.cell.stress_ratio"].as_f64().unwrap();
+    // (the CSV prints 13 significant digits)
+    assert!(
+        (reported - ratio[last]).abs() <= 1e-11 * ratio[last].abs(),
+        "reported {reported}, the last shear row's ratio {}",
+        ratio[last]
+    );
+    assert!(
+        s["results"]["dem.cell.held_stress_ratio"]
+            .as_f64()
+            .is_some(),
+        "{s}"
+    );
+    assert_eq!(s["results"]["dem.cell.programme_finished"], 1.0);
     let peak = shear
         .iter()
         .copied()
