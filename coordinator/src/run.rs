@@ -1402,8 +1402,9 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
     proto::keys::validate_name("run id", &run_id)?;
 
     // Local peers: every process listens on its own loopback port and connects explicitly
-    // to those started before it (a full mesh without any scouting).
-    let (coord_link, ports) = match (&opts.zenoh_config, &opts.listen) {
+    // to those started before it (a full mesh without any scouting), with the long local lease
+    // the nodes it starts are given too.
+    let (coord_link, ports, local_lease) = match (&opts.zenoh_config, &opts.listen) {
         // the file decides the mode (client of a router, or a router itself)
         (Some(cfg), _) => (
             LinkConfig {
@@ -1411,6 +1412,7 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
                 zenoh_config: Some(cfg.clone()),
                 ..Default::default()
             },
+            None,
             None,
         ),
         (None, Some(endpoint)) => {
@@ -1421,6 +1423,7 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
                     ..Default::default()
                 },
                 Some(endpoint.clone()),
+                None,
             )
         }
         (None, None) => {
@@ -1431,12 +1434,10 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
                     ..LinkConfig::loopback_peer(Some(p0), &[])
                 },
                 Some(format!("tcp/127.0.0.1:{p0}")),
+                Some(proto::link::LOCAL_LEASE),
             )
         }
     };
-    // every process on this host, started by this coordinator: the long local lease
-    let local_lease =
-        (opts.zenoh_config.is_none() && opts.listen.is_none()).then_some(proto::link::LOCAL_LEASE);
     let link = CoordinatorLink::open(&coord_link, &run_id)
         .await
         .context("opening the coordinator's zenoh session")?;

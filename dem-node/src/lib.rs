@@ -210,11 +210,12 @@ pub struct Engine {
     /// The bodies' Arlequin weights by slot, while a volume interface exists.
     volume_weights: Option<volume_coupling::SlotWeights>,
     /// The periodic cell's results at the start of the last window [`Engine::advance`] ran
-    /// inside its programme: what `summary.json` reports once the programme is done (the
-    /// cell is held after its last stage, and a held cell relaxes — at I = 1e-3 the ratio
-    /// σ1/σ3 fell by 12 % within the rest of the last window). Not part of snapshots: the
-    /// first window after a restore recomputes it.
-    programme_end: Option<Vec<(String, f64)>>,
+    /// inside its programme, with the step they are of: what `summary.json` reports once the
+    /// programme is done (the cell is held after its last stage, and a held cell relaxes — at
+    /// I = 1e-3 the ratio σ1/σ3 fell by 12 % within the rest of the last window). Kept by
+    /// [`Engine::write_outputs`] from the averages of its `periodic.csv` row, else computed by
+    /// `advance`; not part of snapshots (the first window after a restore computes it).
+    programme_end: Option<(u64, std::collections::BTreeMap<String, f64>)>,
 }
 
 /// The penalty's explicit step limit of a volume coupling, 2 min_α √(w_α m_α / k̂_α) with the
@@ -1770,11 +1771,17 @@ impl Engine {
         if substeps == 0 {
             return Ok(());
         }
-        if let (Some(cell), Some(servo), false) =
-            (&self.state.cell, &self.servo, self.programme_finished())
-        {
+        let steps = self.state.steps;
+        if let (Some(cell), Some(servo), false, false) = (
+            &self.state.cell,
+            &self.servo,
+            self.programme_finished(),
+            self.programme_end
+                .as_ref()
+                .is_some_and(|(s, _)| *s == steps),
+        ) {
             let avg = self.cell_averages().expect("a cell has averages");
-            self.programme_end = Some(periodic::results(cell, servo, &avg).into_iter().collect());
+            self.programme_end = Some((steps, periodic::results(cell, servo, &avg)));
         }
         if self.cfg.impact_substeps > 1 {
             // each step decides on refinement from its start state: no fused passes
@@ -2520,6 +2527,10 @@ impl Engine {
                 &out_dir.join("periodic.csv"),
                 &periodic::csv_row(self.time(), cell, servo, &avg),
             )?;
+            // the next window's start state: `advance` need not average it again
+            if cell.stage < servo.stages.len() {
+                self.programme_end = Some((self.state.steps, periodic::results(cell, servo, &avg)));
+            }
         }
         if let Some(values) = new_rows.then(|| self.sample_sensors()).flatten() {
             let mut row = vec![("time".to_string(), self.time())];
@@ -2649,13 +2660,13 @@ impl Engine {
         let mut r = self.engine_results();
         // a finished programme: the cell's quantities at its end (the last window-end state
         // inside it), the held cell's ratio beside them
-        if let (Some(end), true) = (&self.programme_end, self.programme_finished()) {
+        if let (Some((_, end)), true) = (&self.programme_end, self.programme_finished()) {
             let mut held = None;
             for (k, v) in r.iter_mut() {
                 if !k.starts_with("cell.") || k == "cell.stage" || k == "cell.programme_finished" {
                     continue;
                 }
-                if let Some((_, e)) = end.iter().find(|(ek, _)| ek == k) {
+                if let Some(e) = end.get(k.as_str()) {
                     if k == "cell.stress_ratio" {
                         held = Some(*v);
                     }

@@ -1166,7 +1166,7 @@ pub fn ensure_symbolic_with(
         } else {
             0..0
         };
-        *symbolic = Some(analyse_with(pattern, sizes, when == SplitWhen::Later)?);
+        *symbolic = Some(analyse_with(pattern, sizes, when)?);
     }
     Ok(symbolic.clone().expect("set above"))
 }
@@ -1189,16 +1189,17 @@ pub fn analyse(
     pattern: &Pattern,
     split_sizes: std::ops::Range<usize>,
 ) -> Result<Symbolic, FemError> {
-    analyse_with(pattern, split_sizes, false)
+    analyse_with(pattern, split_sizes, SplitWhen::Now)
 }
 
-/// [`analyse`]; `later`: a split planned on the node graph is left until [`Factor`] asks for
-/// it (and the whole factor's analysis until something asks for that).
+/// [`analyse`], with the tree split planned `when` ([`SplitWhen::Later`]: left until
+/// [`Factor`] asks for it).
 pub fn analyse_with(
     pattern: &Pattern,
     split_sizes: std::ops::Range<usize>,
-    later: bool,
+    when: SplitWhen,
 ) -> Result<Symbolic, FemError> {
+    let later = when == SplitWhen::Later;
     let t0 = std::time::Instant::now();
     let mut chosen = "nested dissection";
     let mut order: Option<Vec<u32>> = None;

@@ -414,7 +414,10 @@ fn the_tree_split_factor_solves_a_cantilever_as_the_whole_factor_does() {
         if kind == fem::ElementKind::Hex8 {
             // planned later (a static analysis that may factorise in f32 only): the f32
             // factor is whole and leaves the split pending; the f64 factor plans the same one
-            let mut later = Some(fem::assembly::analyse_with(&p, 0..usize::MAX, true).unwrap());
+            let mut later = Some(
+                fem::assembly::analyse_with(&p, 0..usize::MAX, fem::assembly::SplitWhen::Later)
+                    .unwrap(),
+            );
             assert!(later.as_ref().unwrap().split().is_none());
             let mixed = fem::assembly::MixedFactor::new(&p, &k, &mut later).unwrap();
             assert!(later.as_ref().unwrap().split().is_none());
