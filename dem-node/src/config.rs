@@ -342,10 +342,15 @@ pub enum ParticleSource {
     /// `count` particles or `mass` kg are placed (exactly one of them). With `radius`, inside
     /// the cylinder of that radius about the vertical axis through the box's centre (and
     /// between the box's z bounds): a triaxial sample's mould.
+    ///
+    /// In a periodic cell (`[dem.periodic]`) `min` and `max` may be left out: the fill fills
+    /// the cell, [0, size].
     Fill {
         material: String,
-        min: [f64; 3],
-        max: [f64; 3],
+        #[serde(default)]
+        min: Option<[f64; 3]>,
+        #[serde(default)]
+        max: Option<[f64; 3]>,
         #[serde(default)]
         radius: Option<f64>,
         #[serde(default)]
@@ -1294,13 +1299,27 @@ impl DemConfig {
                 } => {
                     c.material(f("material"), material, self);
                     c.shape(&pi(&["dem", "particles"], k, &[]), shape);
-                    c.finite3(f("min"), min);
-                    c.finite3(f("max"), max);
+                    for (name, v) in [("min", min), ("max", max)] {
+                        match v {
+                            Some(v) => c.finite3(f(name), v),
+                            // a periodic fill fills its cell (checked with the cell)
+                            None if self.periodic.is_some() => {}
+                            None => c.fail(
+                                f(name),
+                                "missing: a fill needs the box it fills, `min = [x, y, z]` and \
+                                 `max = [x, y, z]` (m); only a fill of a periodic cell may leave \
+                                 them out"
+                                    .into(),
+                            ),
+                        }
+                    }
                     if let Some(r) = radius {
                         c.positive(f("radius"), *r);
                     }
                     c.finite3(f("velocity"), velocity);
-                    c.box_max(f("max"), min, max);
+                    if let (Some(min), Some(max)) = (min, max) {
+                        c.box_max(f("max"), min, max);
+                    }
                     match (count, mass) {
                         (Some(0), None) => c.fail(f("count"), "must be >= 1".into()),
                         (Some(_), None) => {}
@@ -1687,9 +1706,9 @@ impl DemConfig {
                 min, max, radius, ..
             } = src
             {
-                let field = if *min != [0.0; 3] {
+                let field = if min.is_some_and(|m| m != [0.0; 3]) {
                     Some("min")
-                } else if *max != cell.size {
+                } else if max.is_some_and(|m| m != cell.size) {
                     Some("max")
                 } else if radius.is_some() {
                     Some("radius")
@@ -1701,8 +1720,10 @@ impl DemConfig {
                         pi(&["dem", "particles"], k, &[field]),
                         format!(
                             "a fill of a periodic cell fills the whole cell: min = [0, 0, 0], \
-                             max = size = {:?}, no radius (got min {min:?}, max {max:?})",
-                            cell.size
+                             max = size = {:?} (or leave both out), no radius (got min {}, max {})",
+                            cell.size,
+                            min.map_or("none".into(), |m| format!("{m:?}")),
+                            max.map_or("none".into(), |m| format!("{m:?}")),
                         ),
                     );
                 }

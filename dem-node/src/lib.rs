@@ -644,9 +644,21 @@ impl Engine {
                         radii = bodies.iter().map(|b| b.0.bounding_radius()).collect();
                     }
                     let period = cfg.periodic.as_ref().map(|c| v3(&c.size));
+                    // a periodic fill without a box fills its cell [0, size] (validated: the
+                    // others have one)
+                    let cell = cfg.periodic.as_ref().map(|c| c.size);
+                    let (Some(min), Some(max)) = (min.or(cell.map(|_| [0.0; 3])), max.or(cell))
+                    else {
+                        return Err(DemError::Generation {
+                            source_index: k,
+                            message: "a fill needs `min` and `max` (only a periodic cell's fill \
+                                      may leave them out)"
+                                .into(),
+                        });
+                    };
                     let placed = generate::fill_box(
-                        v3(min),
-                        v3(max),
+                        v3(&min),
+                        v3(&max),
                         *radius,
                         &mut radii,
                         *seed,

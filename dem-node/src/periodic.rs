@@ -33,7 +33,9 @@ const RAMP_FLOOR: f64 = 0.02;
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct PeriodicConfig {
-    /// Edge lengths L (m) at the start; the particle sources fill [0, L].
+    /// Edge lengths L (m) at the start, `[L1, L2, L3]`, or one number for a cube; the
+    /// particle sources fill [0, L].
+    #[serde(deserialize_with = "edges_or_cube")]
     pub size: [f64; 3],
     /// Inertial number I of the loading rates (5.8): ε̇ = I √(d̄ p / m̄). Default 1e-4 (W ch. 5).
     #[serde(default = "default_inertial_number")]
@@ -58,6 +60,23 @@ pub struct PeriodicConfig {
     /// and the run ends (the DEM reports `programme_finished`).
     #[serde(default)]
     pub stages: Vec<StageConfig>,
+}
+
+/// `size = [L1, L2, L3]` or `size = L` (a cube).
+fn edges_or_cube<'de, D: serde::Deserializer<'de>>(d: D) -> Result<[f64; 3], D::Error> {
+    #[derive(Deserialize)]
+    #[serde(
+        untagged,
+        expecting = "edge lengths [L1, L2, L3] or one length L (m) for a cube"
+    )]
+    enum Size {
+        Cube(f64),
+        Edges([f64; 3]),
+    }
+    Ok(match Size::deserialize(d)? {
+        Size::Cube(l) => [l; 3],
+        Size::Edges(e) => e,
+    })
 }
 
 fn default_inertial_number() -> f64 {

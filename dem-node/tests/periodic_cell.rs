@@ -513,6 +513,36 @@ fn bad_periodic_scenes_are_refused_by_name() {
     }
 }
 
+/// `size = L` is the cube [L, L, L], and a fill of a periodic cell without `min`/`max` fills
+/// the cell: the same particles bit for bit as the explicit scene (a size series then varies
+/// only `dem.periodic.size` and the fill's `count`). Outside a periodic cell a fill still
+/// needs its box, and the error names the missing field.
+#[test]
+fn a_periodic_fill_fills_its_cube_without_a_box() {
+    let explicit = compression_scene(10e3, 5.0, 1);
+    let short = explicit
+        .replace("min = [0.0, 0.0, 0.0]\nmax = [0.008, 0.008, 0.008]\n", "")
+        .replace("size = [0.008, 0.008, 0.008]", "size = 0.008");
+    assert_ne!(short, explicit);
+    assert!(!short.contains("max = [0.008"));
+    let (a, b) = (engine(&explicit), engine(&short));
+    assert_eq!(a.particles().position, b.particles().position);
+    assert_eq!(a.particles().radius, b.particles().radius);
+    assert_eq!(a.cell(), b.cell());
+    // no cell: the box is required
+    let walled = short
+        .split("[dem.periodic]")
+        .next()
+        .unwrap()
+        .replace("gravity = [0.0, 0.0, 0.0]", "gravity = [0.0, 0.0, -9.81]");
+    let e = dem::parse_scene_section(&walled).unwrap_err().to_string();
+    println!("{e}");
+    assert!(
+        e.contains("dem.particles[0].min") && e.contains("missing"),
+        "{e}"
+    );
+}
+
 /// A strain stage with a `ramp` starts slowly and reaches its full rate at the ramp's strain,
 /// the rate growing as √(strain/ramp) (a rate rising linearly in time).
 #[test]
