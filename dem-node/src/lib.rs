@@ -643,10 +643,10 @@ impl Engine {
                         });
                         radii = bodies.iter().map(|b| b.0.bounding_radius()).collect();
                     }
-                    let period = cfg.periodic.as_ref().map(|c| v3(&c.size));
+                    let cell = cfg.periodic.as_ref().map(|c| c.size);
+                    let period = cell.as_ref().map(v3);
                     // a periodic fill without a box fills its cell [0, size] (validated: the
                     // others have one)
-                    let cell = cfg.periodic.as_ref().map(|c| c.size);
                     let (Some(min), Some(max)) = (min.or(cell.map(|_| [0.0; 3])), max.or(cell))
                     else {
                         return Err(DemError::Generation {

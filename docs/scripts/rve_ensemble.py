@@ -63,7 +63,8 @@ def read_run(folder: Path):
     with open(folder / "dem" / "periodic.csv", newline="") as f:
         rows = list(csv.DictReader(f))
     if not rows:
-        raise SystemExit(f"{folder}/dem/periodic.csv: no rows")
+        print(f"{folder}: left out, dem/periodic.csv has no rows yet", file=sys.stderr)
+        return None
     stages = len(dem["periodic"]["stages"])
     shear = [r for r in rows if round(float(r["stage"])) == stages - 1]
     if not shear:

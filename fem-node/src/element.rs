@@ -465,7 +465,8 @@ fn hex8i_bubble_gradients(x: &[[f64; 3]], tab: &Tabulated, wdet: &[f64]) -> Vec<
 type Mat9 = SMatrix<f64, 9, 9>;
 type Mat24x9 = SMatrix<f64, 24, 9>;
 
-/// Extended 11-"node" (8 nodes + 3 bubbles) stiffness blocks of the incompatible hex.
+/// Extended 11-"node" (8 nodes + 3 bubbles) stiffness blocks of the incompatible hex: the
+/// upper triangle of the 33×33 matrix (row-major), K_ci and the whole K_ii.
 fn hex8i_blocks(x: &[[f64; 3]], mat: Lame, g: &[[f64; 3]], w: &[f64]) -> (Vec<f64>, Mat24x9, Mat9) {
     let tab = stiffness_rule(ElementKind::Hex8i);
     let bub = hex8i_bubble_gradients(x, tab, w);
@@ -476,9 +477,10 @@ fn hex8i_blocks(x: &[[f64; 3]], mat: Lame, g: &[[f64; 3]], w: &[f64]) -> (Vec<f6
         ga[8..].copy_from_slice(&bub[q * 3..(q + 1) * 3]);
         add_isotropic_block(&mut ext, 33, &ga, w[q], mat);
     }
-    mirror_upper(&mut ext, 33);
+    // only the upper triangle of `ext` is added (its users read no more): K_ci lies in it,
+    // K_ii is read from it symmetrically
     let kci = Mat24x9::from_fn(|r, c| ext[r * 33 + 24 + c]);
-    let kii = Mat9::from_fn(|r, c| ext[(24 + r) * 33 + 24 + c]);
+    let kii = Mat9::from_fn(|r, c| ext[(24 + r.min(c)) * 33 + 24 + r.max(c)]);
     (ext, kci, kii)
 }
 
