@@ -11,6 +11,7 @@ pub mod launch;
 pub mod limits;
 pub mod outdir;
 pub mod plot;
+pub mod programme;
 pub mod run;
 pub mod scene;
 pub mod schedule;

@@ -17,6 +17,9 @@ use crate::schedule::implicit::{Estimate, Outputs};
 use crate::schedule::{substeps, Action, Scheduler, SchedulerConfig, Topology};
 use crate::stability::StabilityMonitor;
 
+/// A run's one-line progress note, shared with whoever shows it.
+pub type ProgressNote = std::sync::Arc<std::sync::Mutex<String>>;
+
 /// How to run.
 #[derive(Debug, Clone)]
 pub struct RunOptions {
@@ -31,6 +34,9 @@ pub struct RunOptions {
     pub startup_timeout: Duration,
     /// Show a progress bar.
     pub progress: bool,
+    /// Where the run keeps a one-line note of its progress (the window, or a DEM programme's
+    /// stage): `cosim study` shows its runs' notes on its own bar.
+    pub progress_note: Option<ProgressNote>,
     /// Override the run id (default: scene name + a random suffix).
     pub run_id: Option<String>,
     /// Local runs: the coordinator's own endpoint (default: a free loopback port).
@@ -52,6 +58,7 @@ impl Default for RunOptions {
             out_dir: None,
             startup_timeout: Duration::from_secs(120),
             progress: true,
+            progress_note: None,
             run_id: None,
             listen: None,
             external: Vec::new(),
@@ -664,6 +671,7 @@ impl Run<'_> {
         &mut self,
         monitor: &Monitor,
         progress: bool,
+        note: Option<&ProgressNote>,
         resume: Option<(PathBuf, crate::checkpoint::CheckpointState)>,
     ) -> anyhow::Result<()> {
         let scene = self.scene;
@@ -823,8 +831,24 @@ impl Run<'_> {
         // what the scheduler allows for this schedule (0 where its windows depend on the reports)
         self.summary.lookahead = scheduler.effective_lookahead();
         self.defer_interrupt = true;
-        let bar = progress_bar(progress, scene.windows, scene.adaptive.is_some());
-        bar.set_position(self.summary.windows_done);
+        // a DEM programme ends the run by itself: the bar counts its stages, not the windows
+        let mut programme = scene
+            .dem_node()
+            .and_then(|d| self.limit(d, "programme_stages"))
+            .filter(|&n| n >= 1.0)
+            .map(|n| crate::programme::ProgrammeProgress::new(&scene.text, n as usize));
+        let bar = match &programme {
+            Some(p) => programme_bar(progress, p.length()),
+            None => {
+                let bar = progress_bar(progress, scene.windows, scene.adaptive.is_some());
+                bar.set_position(self.summary.windows_done);
+                bar
+            }
+        };
+        let mut programme_line: Option<crate::programme::ProgressLine> = None;
+        // asked for progress but no terminal to draw it on: a log line every few minutes
+        let log_progress = progress && bar.is_hidden();
+        let mut last_progress_log = Instant::now();
         let mut csv = std::io::BufWriter::new(
             std::fs::File::create(&csv_path)
                 .with_context(|| format!("creating {}", csv_path.display()))?,
@@ -1026,6 +1050,11 @@ impl Run<'_> {
             if ke.is_some() {
                 row_ke = ke;
             }
+            if kind == NodeKind::Dem {
+                if let Some(p) = programme.as_mut() {
+                    programme_line = p.update(&values, Instant::now()).or(programme_line);
+                }
+            }
             for (key, v) in &values {
                 let side = match (kind, key.split_once('.')) {
                     (NodeKind::Dem, Some(("interface_work", i))) => Some(("dem", i)),
@@ -1193,12 +1222,42 @@ impl Run<'_> {
                 self.summary.windows_done = window + 1;
                 self.summary.windows_announced_ahead = scheduler.windows_announced_ahead();
                 self.summary.simulated_time_s = t_end;
-                bar.set_position(if scene.adaptive.is_some() {
-                    (t_end / scene.end_time * scene.windows as f64).round() as u64
+                if programme.is_some() {
+                    let line = programme_line.as_ref();
+                    bar.set_position(line.map_or(0, |l| l.position));
+                    let text = format!(
+                        "window {}, t = {t_end:.4e} s{}",
+                        window + 1,
+                        line.map(|l| format!("; {}", l.message)).unwrap_or_default()
+                    );
+                    if let Some(note) = note {
+                        *note.lock().unwrap_or_else(|e| e.into_inner()) =
+                            line.map_or_else(|| text.clone(), |l| l.message.clone());
+                    }
+                    bar.set_message(text);
                 } else {
-                    window + 1
-                });
-                bar.set_message(format!("t = {t_end:.4e} s"));
+                    if let Some(note) = note {
+                        *note.lock().unwrap_or_else(|e| e.into_inner()) =
+                            format!("window {}/{}, t = {t_end:.4e} s", window + 1, scene.windows);
+                    }
+                    bar.set_position(if scene.adaptive.is_some() {
+                        (t_end / scene.end_time * scene.windows as f64).round() as u64
+                    } else {
+                        window + 1
+                    });
+                    bar.set_message(format!("t = {t_end:.4e} s"));
+                }
+                if log_progress && last_progress_log.elapsed() >= crate::study::PROGRESS_LOG_EVERY {
+                    let note = match &programme {
+                        Some(_) => programme_line
+                            .as_ref()
+                            .map(|l| format!("; {}", l.message))
+                            .unwrap_or_default(),
+                        None => format!(" of {}", scene.windows),
+                    };
+                    tracing::info!("window {}{note}, t = {t_end:.4e} s", window + 1);
+                    last_progress_log = Instant::now();
+                }
                 let finishing = actions.iter().any(|a| matches!(a, Action::Finish { .. }));
                 let due = scene.checkpoint_every > 0 && (window + 1) % scene.checkpoint_every == 0;
                 // a checkpoint is of this window's end only if no node has a later command
@@ -1355,6 +1414,21 @@ fn progress_bar(show: bool, windows: u64, adaptive: bool) -> indicatif::Progress
         })
         .expect("valid template")
         .progress_chars("=> "),
+    );
+    bar
+}
+
+/// The progress of a run that a DEM programme ends: its stages, each filled by its progress
+/// (crate::programme), with the window and time in the message.
+fn programme_bar(show: bool, length: u64) -> indicatif::ProgressBar {
+    if !show {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = indicatif::ProgressBar::new(length);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {msg}")
+            .expect("valid template")
+            .progress_chars("=> "),
     );
     bar
 }
@@ -1620,8 +1694,13 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
         }
         let monitor = run.link.monitor().await?;
         run.windows_started = Instant::now();
-        run.windows(&monitor, opts.progress, opts.resume.clone())
-            .await?;
+        run.windows(
+            &monitor,
+            opts.progress,
+            opts.progress_note.as_ref(),
+            opts.resume.clone(),
+        )
+        .await?;
         run.summary.timing.windows_wall_s = run.windows_wall();
         if scene.final_state {
             let last = run.summary.windows_done.saturating_sub(1);

@@ -246,6 +246,25 @@ pub struct Outcome {
     pub error: Option<f64>,
 }
 
+/// How often a study or run without a terminal logs where it stands.
+pub const PROGRESS_LOG_EVERY: std::time::Duration = std::time::Duration::from_secs(600);
+
+/// The study bar's message: each running run's label and its progress note.
+fn running_notes(notes: &[(String, crate::run::ProgressNote)]) -> String {
+    notes
+        .iter()
+        .map(|(label, note)| {
+            let n = note.lock().unwrap_or_else(|e| e.into_inner());
+            if n.is_empty() {
+                label.clone()
+            } else {
+                format!("{label}: {n}")
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(" | ")
+}
+
 fn number(v: &serde_json::Value, path: &[&str]) -> f64 {
     path.iter()
         .fold(v, |v, p| &v[*p])
@@ -543,6 +562,9 @@ pub async fn run_study(
         .collect::<std::collections::VecDeque<_>>();
     bar.inc((variants.len() - pending.len()) as u64);
     let mut running = tokio::task::JoinSet::new();
+    // the running runs' progress notes (label → note), shown on the study's bar
+    let mut notes: Vec<(String, crate::run::ProgressNote)> = Vec::new();
+    let mut last_note = std::time::Instant::now();
     let mut interrupted = None;
     while !pending.is_empty() || !running.is_empty() {
         if let Some(sig) = signals.poll() {
@@ -554,7 +576,8 @@ pub async fn run_study(
             let Some(v) = pending.pop_front() else { break };
             let dir = out_dir.join(&v.name);
             let label = v.label();
-            bar.set_message(label.clone());
+            let note = crate::run::ProgressNote::default();
+            notes.push((label.clone(), note.clone()));
             // each variant is a scene of its own, next to the original (relative paths hold)
             let path = scene
                 .path
@@ -576,6 +599,7 @@ pub async fn run_study(
                 let opts = RunOptions {
                     out_dir: Some(dir.clone()),
                     progress: false,
+                    progress_note: Some(note),
                     overwrite: resume.is_none(),
                     resume,
                     ..Default::default()
@@ -585,16 +609,19 @@ pub async fn run_study(
                 if let Err(e) = &r {
                     tracing::info!("{label}: {e:#}");
                 }
-                anyhow::Ok(
+                anyhow::Ok((
+                    label,
                     r.err()
                         .and_then(|e| e.downcast_ref::<crate::interrupt::Interrupted>().copied()),
-                )
+                ))
             });
         }
         tokio::select! {
             done = running.join_next(), if !running.is_empty() => {
                 if let Some(done) = done {
-                    if let Some(i) = done.map_err(|e| anyhow!("a study run panicked: {e}"))?? {
+                    let (label, stop) = done.map_err(|e| anyhow!("a study run panicked: {e}"))??;
+                    notes.retain(|(l, _)| *l != label);
+                    if let Some(i) = stop {
                         pending.clear();
                         interrupted = Some(i);
                     }
@@ -602,6 +629,18 @@ pub async fn run_study(
                 }
             }
             _ = tokio::time::sleep(std::time::Duration::from_millis(200)) => {}
+        }
+        bar.set_message(running_notes(&notes));
+        // without a terminal (a log file, nohup) the bar is not drawn: say where the study
+        // stands every few minutes instead
+        if bar.is_hidden() && last_note.elapsed() >= PROGRESS_LOG_EVERY && !notes.is_empty() {
+            tracing::info!(
+                "study: {} of {} runs done; {}",
+                bar.position(),
+                variants.len(),
+                running_notes(&notes)
+            );
+            last_note = std::time::Instant::now();
         }
     }
     if let Some(i) = interrupted {
@@ -968,6 +1007,22 @@ pub fn table(outcomes: &[Outcome]) -> BTreeMap<String, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_study_bar_names_each_running_run_with_its_note() {
+        let a = crate::run::ProgressNote::default();
+        let b = crate::run::ProgressNote::default();
+        let notes = vec![
+            ("seed=1".to_string(), a.clone()),
+            ("seed=2".to_string(), b.clone()),
+        ];
+        assert_eq!(running_notes(&notes), "seed=1 | seed=2");
+        *a.lock().unwrap() = "stage 4/4 `shear`: 36.0 % of its strain".into();
+        assert_eq!(
+            running_notes(&notes),
+            "seed=1: stage 4/4 `shear`: 36.0 % of its strain | seed=2"
+        );
+    }
 
     #[test]
     fn errors_in_a_variant_name_the_users_scene_and_settings_not_the_temporary_file() {

@@ -1062,6 +1062,15 @@ impl Engine {
         self.apply_stage_friction();
     }
 
+    /// The periodic cell's programme: the current stage (0-based; the number of stages once
+    /// done) and its progress (`None` once done or without a programme).
+    pub fn programme_progress(&self) -> Option<(usize, Option<periodic::StageProgress>)> {
+        match (&self.servo, &self.state.cell) {
+            (Some(s), Some(c)) => Some((c.stage, s.stage_progress(c))),
+            _ => None,
+        }
+    }
+
     /// Whether the periodic cell's programme has run all its stages.
     pub fn programme_finished(&self) -> bool {
         match (&self.servo, &self.state.cell) {

@@ -324,6 +324,53 @@ impl Servo {
     }
 }
 
+/// How far the current stage has come, for progress displays: a strain-driven stage by
+/// the least advanced of its strain axes (e/ẽ, 1 when each reached its strain), a stage of
+/// stress-controlled axes only by the least advanced of their measured stresses (σ/σ̃, which
+/// can pass 1 while the servo settles). `None` once the programme is done.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum StageProgress {
+    Strain(f64),
+    Stress(f64),
+}
+
+impl Servo {
+    /// The current stage's progress ([`StageProgress`]); always finite.
+    pub fn stage_progress(&self, cell: &CellState) -> Option<StageProgress> {
+        if cell.stage >= self.stages.len() {
+            return None;
+        }
+        let least = |v: Vec<f64>| {
+            let m = v.into_iter().fold(f64::INFINITY, f64::min);
+            if m.is_finite() {
+                m
+            } else {
+                0.0
+            }
+        };
+        let strains: Vec<f64> = (0..3)
+            .filter_map(|a| match self.control(cell.stage, a) {
+                Control::Strain(target) if target != 0.0 => {
+                    let e = (cell.size[a] - cell.stage_size0[a]) / cell.stage_size0[a];
+                    Some((e / target).clamp(0.0, 1.0))
+                }
+                Control::Strain(_) => Some(1.0),
+                _ => None,
+            })
+            .collect();
+        if !strains.is_empty() {
+            return Some(StageProgress::Strain(least(strains)));
+        }
+        let stresses: Vec<f64> = (0..3)
+            .filter_map(|a| match self.control(cell.stage, a) {
+                Control::Stress(target) if target != 0.0 => Some(cell.stress[(a, a)] / target),
+                _ => None,
+            })
+            .collect();
+        Some(StageProgress::Stress(least(stresses)))
+    }
+}
+
 /// Mean pressure −tr σ/3 (compression positive).
 pub fn mean_pressure(s: &Matrix3<f64>) -> f64 {
     -s.trace() / 3.0

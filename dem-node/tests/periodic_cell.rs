@@ -7,6 +7,7 @@ use dem::broad_phase::{rebuild, NeighbourLists, HALF_SHIFTS};
 use dem::generate::SplitMix64;
 use dem::hertz_mindlin::V3;
 use dem::particles::Particles;
+use dem::periodic::StageProgress;
 
 /// Every pair of spheres that touch through any image is listed exactly once (inside the
 /// cell, or across its faces with the image of the second), the images across the faces are
@@ -388,10 +389,26 @@ strain = {{ z = -0.08 }}
     let mut stages = vec![];
     let mut shear_start = None;
     let t0 = std::time::Instant::now();
+    // the progress the DEM reports for displays: strain stages by their least advanced strain
+    // axis (rising to 1), stress stages by their stress against the target
+    let mut strain_progress: Vec<(usize, f64)> = vec![];
+    let mut stress_seen = [false; 4];
     while !e.programme_finished() {
         e.advance(200).unwrap();
         steps += 200;
         let c = e.cell().unwrap();
+        match e.programme_progress() {
+            Some((k, Some(StageProgress::Strain(f)))) if k == c.stage => {
+                assert!((0.0..=1.0).contains(&f), "stage {k}: strain fraction {f}");
+                strain_progress.push((k, f));
+            }
+            Some((k, Some(StageProgress::Stress(f)))) if k == c.stage => {
+                assert!(f.is_finite(), "stage {k}: stress fraction {f}");
+                stress_seen[k] = true;
+            }
+            Some((4, None)) if c.stage == 4 => {}
+            other => panic!("stage {}: progress {other:?}", c.stage),
+        }
         if stages.last() != Some(&c.stage) {
             let avg = e.cell_averages().unwrap();
             println!(
@@ -415,6 +432,24 @@ strain = {{ z = -0.08 }}
         stages.windows(2).all(|w| w[0] < w[1]) && stages.last() == Some(&4),
         "stages seen {stages:?}"
     );
+    assert_eq!(e.programme_progress(), Some((4, None)));
+    // compact (0) and shear (3) are strain-driven, consolidate (1) and pressure (2) stress-only
+    // (the pressure stage may pass between two looks)
+    assert!(!stress_seen[0] && stress_seen[1] && !stress_seen[3]);
+    assert!(strain_progress.iter().all(|p| p.0 == 0 || p.0 == 3));
+    for k in [0, 3] {
+        let f: Vec<f64> = strain_progress
+            .iter()
+            .filter(|p| p.0 == k)
+            .map(|p| p.1)
+            .collect();
+        assert!(
+            f.windows(2).all(|w| w[1] >= w[0]) && f[0] < 0.5 && *f.last().unwrap() > 0.9,
+            "stage {k}: strain fraction {:?} … {:?}",
+            &f[..2.min(f.len())],
+            f.last()
+        );
+    }
     let c = e.cell().unwrap();
     let avg = e.cell_averages().unwrap();
     let l0 = shear_start.unwrap();

@@ -370,6 +370,19 @@ impl Solver for DemNode {
             // a periodic cell ran its last stage: the coordinator ends the run here
             monitor.insert("programme_finished".to_string(), 1.0);
         }
+        // where the programme stands, for the coordinator's progress display
+        if let Some((stage, progress)) = engine.programme_progress() {
+            monitor.insert("programme_stage".to_string(), stage as f64);
+            match progress {
+                Some(dem::periodic::StageProgress::Strain(f)) => {
+                    monitor.insert("programme_strain_fraction".to_string(), f);
+                }
+                Some(dem::periodic::StageProgress::Stress(f)) => {
+                    monitor.insert("programme_stress_fraction".to_string(), f);
+                }
+                None => {}
+            }
+        }
         // the interface energy audit: the work of this window's contact forces on each
         // coupled mesh as it moved in the DEM, Σ_steps Δt Σ_nodes f·v
         for c in &self.coupled {
