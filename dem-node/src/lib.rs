@@ -959,6 +959,7 @@ impl Engine {
             tolerance: cfg.tolerance,
             mean_mass: (mass / n).max(f64::MIN_POSITIVE),
             mean_diameter: diameter,
+            image_velocity: cfg.image_velocity,
         });
         self.state.cell = Some(periodic::CellState {
             size,
@@ -2181,7 +2182,7 @@ impl Engine {
             gravity: self.gravity,
             hold_stiffness: self.cfg.superquadric_stiffness == config::StiffnessUpdate::FirstTouch,
             dt,
-            cell: s.cell.as_ref().map(|c| (c.size, c.rate)),
+            cell: force_cell(&self.servo, &s.cell),
             weights: self.volume_weights.as_ref(),
         };
         resolve_forces::contact_forces(&mut s.lists, &mut s.particles, &mut s.records, &ctx);
@@ -2668,7 +2669,7 @@ impl Engine {
             gravity: self.gravity,
             hold_stiffness: self.cfg.superquadric_stiffness == config::StiffnessUpdate::FirstTouch,
             dt: 0.0,
-            cell: s.cell.as_ref().map(|c| (c.size, c.rate)),
+            cell: force_cell(&self.servo, &s.cell),
             weights: None,
         };
         s.sensors
@@ -2706,7 +2707,7 @@ impl Engine {
             gravity: self.gravity,
             hold_stiffness: self.cfg.superquadric_stiffness == config::StiffnessUpdate::FirstTouch,
             dt: 0.0,
-            cell: s.cell.as_ref().map(|c| (c.size, c.rate)),
+            cell: force_cell(&self.servo, &s.cell),
             weights: None,
         };
         r.extend(
@@ -2865,4 +2866,16 @@ impl Engine {
         }
         r
     }
+}
+
+/// The periodic cell as a force evaluation sees it ([`periodic::Servo::force_cell`]).
+fn force_cell(
+    servo: &Option<periodic::Servo>,
+    cell: &Option<periodic::CellState>,
+) -> Option<(hertz_mindlin::V3, hertz_mindlin::V3)> {
+    let c = cell.as_ref()?;
+    Some(match servo {
+        Some(s) => s.force_cell(c),
+        None => (c.size, c.rate),
+    })
 }

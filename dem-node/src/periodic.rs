@@ -8,7 +8,7 @@
 //!   centres are not remapped when L changes, only the images move (with s∘L). *Departure*:
 //!   an image also moves with s∘L̇ besides its body's velocity (the thesis copies the
 //!   velocity), so the relative velocity a contact's damping and tangential spring see is the
-//!   rate of its relative position.
+//!   rate of its relative position; `image_velocity = "copied"` gives the thesis's rule.
 //! - **Average stress** (W 5.5): ⟨σ⟩ = (1/V) Σ_{B⁺} d(n) ⊗ f over the contacts across the
 //!   faces, f the force on the body whose partner is the image; tension positive.
 //! - **Servo** (W 5.7–5.10): each edge a "wall" of mass ρ t_w per area under the applied
@@ -60,6 +60,23 @@ pub struct PeriodicConfig {
     /// and the run ends (the DEM reports `programme_finished`).
     #[serde(default)]
     pub stages: Vec<StageConfig>,
+    /// How an image across a face moves: `"shifted"` (default) with its body's velocity plus
+    /// s∘L̇, so a contact across a face sees the rate of its relative position; `"copied"`
+    /// with its body's velocity only, as the thesis's ghosts (W §5.1.1: ghost states are
+    /// updated "using the displacement vectors d(n)", a shift of position): every contact
+    /// across a face then sees a relative velocity short by s∘L̇, which its damping and its
+    /// tangential spring take as real sliding.
+    #[serde(default)]
+    pub image_velocity: ImageVelocity,
+}
+
+/// `[dem.periodic] image_velocity`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ImageVelocity {
+    #[default]
+    Shifted,
+    Copied,
 }
 
 /// `size = [L1, L2, L3]` or `size = L` (a cube).
@@ -184,6 +201,18 @@ pub struct Servo {
     /// Mean particle mass m̄ and diameter d̄ (5.8).
     pub mean_mass: f64,
     pub mean_diameter: f64,
+    pub image_velocity: ImageVelocity,
+}
+
+impl Servo {
+    /// The cell as the force evaluation sees it: its edges, and the velocity shift s∘L̇ of an
+    /// image (zero when images copy their body's velocity, as the thesis's ghosts).
+    pub fn force_cell(&self, cell: &CellState) -> (V3, V3) {
+        match self.image_velocity {
+            ImageVelocity::Shifted => (cell.size, cell.rate),
+            ImageVelocity::Copied => (cell.size, V3::zeros()),
+        }
+    }
 }
 
 /// How an axis is driven in a stage.
