@@ -131,21 +131,7 @@ fn a_stretched_lattice_carries_the_exact_stress_of_its_contacts() {
     let a = [1.98e-3, 1.99e-3, 1.995e-3];
     let n = 4;
     let dir = tempfile::tempdir().unwrap();
-    let mut csv = String::from("x,y,z,radius\n");
-    for k in 0..n {
-        for j in 0..n {
-            for i in 0..n {
-                let x = [
-                    (i as f64 + 0.3) * a[0],
-                    (j as f64 + 0.6) * a[1],
-                    (k as f64 + 0.1) * a[2],
-                ];
-                csv.push_str(&format!("{},{},{},{r}\n", x[0], x[1], x[2]));
-            }
-        }
-    }
-    std::fs::write(dir.path().join("lattice.csv"), csv).unwrap();
-    let size = a.map(|v| v * n as f64);
+    let size = write_lattice(dir.path(), r, a, n, [0.3, 0.6, 0.1], 0.0);
     let toml = format!(
         r#"
 [dem]
@@ -629,27 +615,7 @@ fn images_move_with_the_cell_unless_they_copy_their_body_as_the_thesis_ghosts() 
     let n = 4;
     let rate = 2.0; // 1/s, compression along z
     let dir = tempfile::tempdir().unwrap();
-    let mut csv = String::from("x,y,z,radius,vx,vy,vz\n");
-    for k in 0..n {
-        for j in 0..n {
-            for i in 0..n {
-                let x = [
-                    (i as f64 + 0.5) * a[0],
-                    (j as f64 + 0.5) * a[1],
-                    (k as f64 + 0.5) * a[2],
-                ];
-                csv.push_str(&format!(
-                    "{},{},{},{r},0,0,{}\n",
-                    x[0],
-                    x[1],
-                    x[2],
-                    -rate * x[2]
-                ));
-            }
-        }
-    }
-    std::fs::write(dir.path().join("lattice.csv"), csv).unwrap();
-    let size = a.map(|v| v * n as f64);
+    let size = write_lattice(dir.path(), r, a, n, [0.5; 3], rate);
     let deviation = |images: &str| {
         let toml = format!(
             r#"
@@ -691,4 +657,38 @@ strain_rate = {rate}
         copied > 50.0 * shifted,
         "copied images: {copied:e} (shifted {shifted:e})"
     );
+}
+
+/// Writes `lattice.csv`: an n×n×n cube lattice of spheres of radius `r` at spacings `a`, the
+/// first at `offset`·a, moving with v_z = −`rate`·z (a homogeneous compression along z; 0:
+/// at rest); returns the cell's edges n·a.
+fn write_lattice(
+    dir: &std::path::Path,
+    r: f64,
+    a: [f64; 3],
+    n: usize,
+    offset: [f64; 3],
+    rate: f64,
+) -> [f64; 3] {
+    let mut csv = String::from("x,y,z,radius,vx,vy,vz\n");
+    for k in 0..n {
+        for j in 0..n {
+            for i in 0..n {
+                let x = [
+                    (i as f64 + offset[0]) * a[0],
+                    (j as f64 + offset[1]) * a[1],
+                    (k as f64 + offset[2]) * a[2],
+                ];
+                csv.push_str(&format!(
+                    "{},{},{},{r},0,0,{}\n",
+                    x[0],
+                    x[1],
+                    x[2],
+                    -rate * x[2]
+                ));
+            }
+        }
+    }
+    std::fs::write(dir.join("lattice.csv"), csv).unwrap();
+    a.map(|v| v * n as f64)
 }
