@@ -1222,24 +1222,20 @@ impl Run<'_> {
                 self.summary.windows_done = window + 1;
                 self.summary.windows_announced_ahead = scheduler.windows_announced_ahead();
                 self.summary.simulated_time_s = t_end;
+                // one status line for the study's note and the log: the programme's stage, or
+                // the window among all
+                let status = match (&programme, &programme_line) {
+                    (Some(_), Some(l)) => format!("window {}; {}", window + 1, l.message),
+                    (Some(_), None) => format!("window {}", window + 1),
+                    (None, _) => format!("window {}/{}", window + 1, scene.windows),
+                };
+                if let Some(note) = note {
+                    *note.lock().unwrap_or_else(|e| e.into_inner()) = status.clone();
+                }
                 if programme.is_some() {
-                    let line = programme_line.as_ref();
-                    bar.set_position(line.map_or(0, |l| l.position));
-                    let text = format!(
-                        "window {}, t = {t_end:.4e} s{}",
-                        window + 1,
-                        line.map(|l| format!("; {}", l.message)).unwrap_or_default()
-                    );
-                    if let Some(note) = note {
-                        *note.lock().unwrap_or_else(|e| e.into_inner()) =
-                            line.map_or_else(|| text.clone(), |l| l.message.clone());
-                    }
-                    bar.set_message(text);
+                    bar.set_position(programme_line.as_ref().map_or(0, |l| l.position));
+                    bar.set_message(format!("{status}, t = {t_end:.4e} s"));
                 } else {
-                    if let Some(note) = note {
-                        *note.lock().unwrap_or_else(|e| e.into_inner()) =
-                            format!("window {}/{}, t = {t_end:.4e} s", window + 1, scene.windows);
-                    }
                     bar.set_position(if scene.adaptive.is_some() {
                         (t_end / scene.end_time * scene.windows as f64).round() as u64
                     } else {
@@ -1248,14 +1244,7 @@ impl Run<'_> {
                     bar.set_message(format!("t = {t_end:.4e} s"));
                 }
                 if log_progress && last_progress_log.elapsed() >= crate::study::PROGRESS_LOG_EVERY {
-                    let note = match &programme {
-                        Some(_) => programme_line
-                            .as_ref()
-                            .map(|l| format!("; {}", l.message))
-                            .unwrap_or_default(),
-                        None => format!(" of {}", scene.windows),
-                    };
-                    tracing::info!("window {}{note}, t = {t_end:.4e} s", window + 1);
+                    tracing::info!("{status}, t = {t_end:.4e} s");
                     last_progress_log = Instant::now();
                 }
                 let finishing = actions.iter().any(|a| matches!(a, Action::Finish { .. }));
