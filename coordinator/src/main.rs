@@ -425,6 +425,11 @@ fn main() -> ExitCode {
                     dir.join("mohr_coulomb.toml")
                 });
                 let toml = coordinator::fit::material_toml(&f, &name, &runs);
+                // `--out fits/sand.toml`: the folder is made, as `--out` of run and study does
+                if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+                    std::fs::create_dir_all(dir)
+                        .with_context(|| format!("creating {}", dir.display()))?;
+                }
                 std::fs::write(&out, &toml)
                     .with_context(|| format!("writing {}", out.display()))?;
                 print!("{toml}");

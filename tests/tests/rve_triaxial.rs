@@ -117,6 +117,20 @@ fn an_rve_of_superquadric_sand_consolidates_shears_and_fits_a_mohr_coulomb_mater
     ] {
         assert!(out.join(png).metadata().unwrap().len() > 1000, "{png}");
     }
+    // `--out` into a folder that does not exist yet: made, the same table and its plots beside it
+    let elsewhere = out.join("fits").join("dense");
+    let mut c = cosim();
+    c.arg("fit")
+        .arg(&out)
+        .arg("--out")
+        .arg(elsewhere.join("sand.toml"));
+    let o = run(c);
+    assert!(o.status.success());
+    assert_eq!(
+        std::fs::read_to_string(elsewhere.join("sand.toml")).unwrap(),
+        std::fs::read_to_string(out.join("mohr_coulomb.toml")).unwrap()
+    );
+    assert!(elsewhere.join("sand_stress_ratio.png").exists());
 
     // the fitted single element (scenes/rve-triaxial-element.toml) through the same drained
     // test in the FEM, with this fit and this run's lateral stress
