@@ -1060,6 +1060,15 @@ impl Engine {
                 }
             }
         }
+        if servo.stages.get(cell.stage).is_some_and(|s| s.at_rest) {
+            let p = &mut self.state.particles;
+            p.velocity.fill(V3::zeros());
+            p.angular_velocity.fill(V3::zeros());
+            tracing::info!(
+                "periodic cell: the grains start stage `{}` at rest",
+                servo.stages[cell.stage].label(cell.stage)
+            );
+        }
         self.apply_stage_friction();
     }
 

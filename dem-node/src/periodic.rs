@@ -162,6 +162,12 @@ pub struct StageConfig {
     /// packing otherwise runs at the wall's terminal speed). Default: no cap.
     #[serde(default)]
     pub max_strain_rate: Option<f64>,
+    /// Stops every grain (velocity and spin set to zero) as the stage starts: the thesis
+    /// generates a *static* packing (random addition and geometric tightening, W §3.4.4)
+    /// before the servo compresses it with μ_gen, where a compaction of ours leaves the
+    /// grains moving. Default false.
+    #[serde(default)]
+    pub at_rest: bool,
 }
 
 impl StageConfig {

@@ -205,6 +205,58 @@ max_strain_rate = {rate}
     )
 }
 
+/// `at_rest = true` stops every grain as its stage starts (the thesis's static packing
+/// before μ_gen): a fast frictionless compaction leaves the grains moving, the next stage
+/// begins with the grains stopped (the stage changes between a step's forces and its second
+/// half kick: only that half kick moves them, measured 7e-4 of the kinetic energy before)
+/// and the overlaps push them apart only slowly (8e-3 a step later). Without it the grains
+/// keep their motion into the stage.
+#[test]
+fn a_stage_at_rest_starts_with_the_grains_stopped() {
+    for at_rest in [true, false] {
+        let scene = compression_scene(1e3, 1e9, 1).replace(
+            "[[dem.periodic.stages]]\nname = \"press\"",
+            &format!(
+                "[[dem.periodic.stages]]\nname = \"compact\"\nstrain = {{ x = -0.2, y = -0.2, \
+                 z = -0.2 }}\nstrain_rate = 50.0\n[[dem.periodic.stages]]\nname = \"press\"\n\
+                 at_rest = {at_rest}\nfriction = 1.0"
+            ),
+        );
+        let mut e = engine(&scene);
+        let energy = |e: &dem::Engine| {
+            let p = e.particles();
+            (0..p.len())
+                .map(|k| 0.5 * p.mass[k] * p.velocity[k].norm_squared())
+                .sum::<f64>()
+        };
+        let mut before = 0.0;
+        let mut steps = 0;
+        while e.cell().unwrap().stage == 0 {
+            before = energy(&e);
+            e.advance(1).unwrap();
+            steps += 1;
+            assert!(steps < 100_000, "the compaction did not end");
+        }
+        let at_start = energy(&e);
+        e.advance(1).unwrap();
+        let after_one = energy(&e);
+        println!(
+            "at_rest = {at_rest}: KE {before:.3e} J before the stage, {at_start:.3e} J at its \
+             start, {after_one:.3e} J a step later"
+        );
+        assert!(
+            before > 1e-9,
+            "the compaction should leave the grains moving: {before}"
+        );
+        if at_rest {
+            assert!(at_start < 5e-3 * before, "{at_start} at the stage's start");
+            assert!(after_one < 5e-2 * before, "{after_one} after one step");
+        } else {
+            assert!(at_start > 0.5 * before, "{at_start} of {before}");
+        }
+    }
+}
+
 /// The servo (5.7–5.10) compresses a loose packing to its target pressure, freely and with
 /// its strain rate capped: the stage ends, the stress is within the tolerance, and the
 /// pressure never overshoots the target by more than 5 % on the way (measured 0.3 % free,
