@@ -13,6 +13,9 @@ the volumetric strain counts from the shear's start (dilation positive), σ1/σ3
 `stress_ratio` column. Per run:
 
     final       σ1/σ3, mean of the rows with axial strain in [15 %, 20 %] (W's final value)
+    final_al    the same of the axial stress over the mean lateral stress (W's definition,
+                §4.3.4; within ≈ 1 % of σ1/σ3 at the shear's end)
+    images      dem.periodic.image_velocity: shifted (ours) or copied (the thesis's ghosts)
     end         σ1/σ3, mean of the last 20 rows of the shear (the programme's end)
     peak        largest σ1/σ3 and its axial strain
     dilatancy   Δε_V/Δε_a between 10 % and 15 % axial strain (W: 0.175 at L = 10 mm)
@@ -72,6 +75,8 @@ def read_run(folder: Path):
         return None
     strain = [-100.0 * float(r["stage_strain_z"]) for r in shear]
     ratio = [float(r["stress_ratio"]) for r in shear]
+    axial = [float(r["stress_zz"]) / (0.5 * (float(r["stress_xx"]) + float(r["stress_yy"])))
+             for r in shear]
     # (V − V_0)/V_0 with V_0 the cell's volume at the shear's start
     ev = [100.0 * float(r["stage_volumetric_strain"]) for r in shear]
     # keep the part where the axial strain grows (the held rest after the programme is not)
@@ -81,10 +86,12 @@ def read_run(folder: Path):
             keep.append(i)
     strain = [strain[i] for i in keep]
     ratio = [ratio[i] for i in keep]
+    axial = [axial[i] for i in keep]
     ev = [ev[i] for i in keep]
     # the programme ended: a row after its last stage (the held cell)
     done = any(round(float(r["stage"])) >= stages for r in rows)
     band = [r for s, r in zip(strain, ratio) if 15.0 <= s <= 20.0]
+    band_al = [r for s, r in zip(strain, axial) if 15.0 <= s <= 20.0]
     k = max(range(len(ratio)), key=ratio.__getitem__)
     e10, e15 = interp(strain, ev, 10.0), interp(strain, ev, 15.0)
     return {
@@ -92,12 +99,14 @@ def read_run(folder: Path):
         "seed": fill.get("seed", 1),
         "edge_m": edge,
         "grains": fill.get("count"),
+        "images": dem["periodic"].get("image_velocity", "shifted"),
         "status": summary.get("status", "?"),
         "complete": done,
         "wall_s": summary.get("timing", {}).get("total_wall_s"),
         "phi0": float(shear[0]["solid_fraction"]),
         "phi": float(shear[keep[-1]]["solid_fraction"]),
         "final": statistics.fmean(band) if band else None,
+        "final_al": statistics.fmean(band_al) if band_al else None,
         "end": statistics.fmean(ratio[-20:]),
         "peak": ratio[k],
         "peak_at_pct": strain[k],
@@ -123,15 +132,21 @@ def main():
     runs = [r for f in a.runs if (f / "dem" / "periodic.csv").exists() and (r := read_run(f))]
     if not runs:
         raise SystemExit("no run folder with dem/periodic.csv")
-    cols = ["run", "seed", "edge_m", "grains", "status", "complete", "wall_s", "phi0", "phi",
-            "final", "end", "peak", "peak_at_pct", "dilatancy"]
+    cols = ["run", "seed", "edge_m", "grains", "images", "status", "complete", "wall_s", "phi0",
+            "phi", "final", "final_al", "end", "peak", "peak_at_pct", "dilatancy"]
     w = csv.writer(sys.stdout)
     w.writerow(cols)
     for r in runs:
         w.writerow([fmt(r[c]) for c in cols])
     full = [r for r in runs if r["complete"]]
     print(f"\n{len(full)} complete of {len(runs)} runs")
-    for c in ["phi0", "phi", "final", "end", "peak", "peak_at_pct", "dilatancy", "wall_s"]:
+    for key in ["images", "edge_m"]:
+        kinds = sorted({str(r[key]) for r in full})
+        if len(kinds) > 1:
+            print(f"warning: the runs mix {key} = {', '.join(kinds)}: the statistics below "
+                  "are over different cells", file=sys.stderr)
+    for c in ["phi0", "phi", "final", "final_al", "end", "peak", "peak_at_pct", "dilatancy",
+              "wall_s"]:
         vals = [r[c] for r in full if r[c] is not None]
         if vals:
             sd = statistics.stdev(vals) if len(vals) > 1 else float("nan")
