@@ -44,6 +44,9 @@ pub struct CurveFit {
     pub poisson_ratio: f64,
     /// Rows (the stage's starting state included) up to a quarter of the peak deviator.
     pub initial_rows: usize,
+    /// E50, the secant from the stage's start to half the peak deviator (interpolated
+    /// between rows; NaN when the first row after the start is already past it).
+    pub secant_modulus: f64,
     /// (s, t) at the maximum axial stress.
     pub peak: (f64, f64),
     pub peak_ratio: f64,
@@ -69,6 +72,8 @@ pub struct Fit {
     pub spread: [f64; 3],
     /// How φ and c were found (a line through the circles, or the given c).
     pub envelope: String,
+    /// Which slope E is (when not given).
+    pub modulus: Modulus,
 }
 
 /// Reads the shear stage of a run folder's `dem/periodic.csv` (or of that file given
@@ -256,6 +261,16 @@ pub fn fit_curve(c: &Curve, window: (f64, f64)) -> anyhow::Result<CurveFit> {
     // the initial part: up to a quarter of the way to the peak deviator
     let limit = q[0] + 0.25 * (q[peak] - q[0]);
     let initial = (0..=peak).take_while(|&k| q[k] <= limit).count().max(1);
+    // E50: where the deviator first reaches half its rise to the peak
+    let half = q[0] + 0.5 * (q[peak] - q[0]);
+    let secant = match (1..=peak).find(|&k| q[k] >= half) {
+        Some(k) if k >= 2 && q[k] > q[k - 1] => {
+            let t = (half - q[k - 1]) / (q[k] - q[k - 1]);
+            let e50 = c.axial[k - 1] + t * (c.axial[k] - c.axial[k - 1]);
+            (half - q[0]) / (e50 - c.axial[0])
+        }
+        _ => f64::NAN,
+    };
     let (e, nu) = if initial >= 3 {
         let e = slope_from_first(&c.axial[..initial], &q[..initial]);
         let s = slope_from_first(&c.axial[..initial], &c.volumetric[..initial]);
@@ -291,6 +306,7 @@ pub fn fit_curve(c: &Curve, window: (f64, f64)) -> anyhow::Result<CurveFit> {
         youngs_modulus: e,
         poisson_ratio: nu,
         initial_rows: initial,
+        secant_modulus: secant,
         peak: (0.5 * (sa + sl), 0.5 * (sa - sl)),
         peak_ratio: sa / sl,
         lateral: sl,
@@ -300,12 +316,24 @@ pub fn fit_curve(c: &Curve, window: (f64, f64)) -> anyhow::Result<CurveFit> {
     })
 }
 
-/// Given values that replace fitted ones.
+/// Given values that replace fitted ones, and which modulus the table takes.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Given {
     pub youngs_modulus: Option<f64>,
     pub poisson_ratio: Option<f64>,
     pub density: Option<f64>,
+    pub modulus: Modulus,
+}
+
+/// Which slope of the σ_a–ε_a curve is the table's E.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum Modulus {
+    /// The initial tangent: the least-squares slope up to a quarter of the peak deviator.
+    #[default]
+    Tangent,
+    /// E50: the secant to half the peak deviator, the geotechnical stiffness of a
+    /// hardening curve (the thesis's E = 60 MPa is a fit "in the medium pressure regime").
+    Secant50,
 }
 
 /// Fits the Mohr–Coulomb parameters to `curves`. `cohesion` is used with one curve (and as
@@ -324,8 +352,10 @@ pub fn fit(
         .iter()
         .map(|c| fit_curve(c, window))
         .collect::<anyhow::Result<_>>()?;
+    let tangent_needed = given.poisson_ratio.is_none()
+        || (given.youngs_modulus.is_none() && given.modulus == Modulus::Tangent);
     if let Some(coarse) = fits.iter().position(|f| f.initial_rows < 3) {
-        if given.youngs_modulus.is_none() || given.poisson_ratio.is_none() {
+        if tangent_needed {
             bail!(
                 "{}: only {} row(s) (the stage's start included) before the deviator reaches a \
                  quarter of its peak: the initial slopes (E, ν) need 3 or more; write rows more \
@@ -334,6 +364,19 @@ pub fn fit(
                 curves[coarse].name,
                 fits[coarse].initial_rows
             );
+        }
+    }
+    if given.youngs_modulus.is_none() && given.modulus == Modulus::Secant50 {
+        if let Some(k) = fits.iter().position(|f| !f.secant_modulus.is_finite()) {
+            bail!(
+                "{}: the deviator passes half its peak before the second row: E50 needs rows \
+                 closer together (a smaller coupling.window, or a slower shear), or give \
+                 --youngs-modulus",
+                curves[k].name
+            );
+        }
+        for f in &mut fits {
+            f.youngs_modulus = f.secant_modulus;
         }
     }
     for f in &mut fits {
@@ -372,6 +415,7 @@ pub fn fit(
         curves: fits,
         spread: [e_sd, nu_sd, psi_sd],
         envelope,
+        modulus: given.modulus,
     })
 }
 
@@ -485,9 +529,14 @@ pub fn material_toml(f: &Fit, name: &str, sources: &[PathBuf]) -> String {
             ));
         }
         out.push_str(&format!(
-            "# curve {k}: E {:.4e} Pa, ν {:.4}, peak σa/σl {:.4} at s = {:.4e} Pa, dilation rate \
-             {:.4} over axial strain {:.3}–{:.3} (ψ {:.2}°)\n",
+            "# curve {k}: E {:.4e} Pa (E50 {}), ν {:.4}, peak σa/σl {:.4} at s = {:.4e} Pa, \
+             dilation rate {:.4} over axial strain {:.3}–{:.3} (ψ {:.2}°)\n",
             c.youngs_modulus,
+            if c.secant_modulus.is_finite() {
+                format!("{:.4e} Pa", c.secant_modulus)
+            } else {
+                "not resolved".to_string()
+            },
             c.poisson_ratio,
             c.peak_ratio,
             c.peak.0,
@@ -514,6 +563,11 @@ pub fn material_toml(f: &Fit, name: &str, sources: &[PathBuf]) -> String {
             ms(&|c| c.youngs_modulus * 1e-6),
             ms(&|c| c.poisson_ratio),
         ));
+    }
+    if f.modulus == Modulus::Secant50 {
+        out.push_str(
+            "# E is E50, the secant to half the peak deviator (--modulus secant50), unless given\n",
+        );
     }
     out.push_str(&format!("# {}\n", f.envelope));
     out.push_str(&format!(
@@ -623,6 +677,7 @@ mod tests {
             curves: vec![],
             spread: [0.0; 3],
             envelope: String::new(),
+            modulus: Modulus::Tangent,
         }
     }
 
@@ -664,6 +719,75 @@ mod tests {
         assert!(table.contains("E 60.0000 ± 0.0000 MPa"), "{table}");
     }
 
+    /// E50 is the secant to half the peak deviator: E itself on the fitted element's
+    /// elastic–plastic curve, and Ei (1 − q_p/(2 q_u)) on a hyperbolic (Duncan–Chang) curve
+    /// q = Ei ε/(1 + Ei ε/q_u) whose peak q_p is its last row; `Secant50` puts it in the
+    /// table, and refuses a curve that passes half its peak before its second row.
+    #[test]
+    fn the_secant_modulus_is_the_slope_to_half_the_peak_deviator() {
+        let one = synthetic(&thesis(), 25e3, 20001, 0.2);
+        let f = fit(
+            std::slice::from_ref(&one),
+            (0.10, 0.15),
+            15.0,
+            Given::default(),
+        )
+        .unwrap();
+        assert!((f.curves[0].secant_modulus / 60e6 - 1.0).abs() < 1e-9);
+        let (ei, qu, end, sl) = (160e6, 40e3, 0.02, 25e3);
+        let mut c = Curve {
+            name: "hyperbolic".into(),
+            ..Default::default()
+        };
+        for k in 0..4001 {
+            let e = end * k as f64 / 4000.0;
+            c.axial.push(e);
+            c.volumetric.push(-0.2 * e);
+            c.sigma_axial.push(sl + ei * e / (1.0 + ei * e / qu));
+            c.sigma_lateral.push(sl);
+        }
+        let qp = ei * end / (1.0 + ei * end / qu);
+        let exact = ei * (1.0 - qp / (2.0 * qu));
+        let given = Given {
+            modulus: Modulus::Secant50,
+            ..Default::default()
+        };
+        let f = fit(std::slice::from_ref(&c), (0.10, 0.15), 15.0, given).unwrap();
+        println!("E50 {:.6e} (exact {exact:.6e})", f.youngs_modulus);
+        assert!((f.youngs_modulus / exact - 1.0).abs() < 1e-4);
+        assert!(material_toml(&f, "sand", &[]).contains("# E is E50"));
+        // the tangent of the first quarter is the stiffer one
+        let t = fit(
+            std::slice::from_ref(&c),
+            (0.10, 0.15),
+            15.0,
+            Given::default(),
+        )
+        .unwrap();
+        assert!(t.youngs_modulus > 1.5 * exact, "{}", t.youngs_modulus);
+        // rows so far apart that the first is past half the peak
+        let coarse = Curve {
+            name: "coarse".into(),
+            axial: vec![0.0, 0.01, 0.015, 0.02],
+            volumetric: vec![0.0, -0.002, -0.003, -0.004],
+            sigma_axial: vec![sl, sl + 30e3, sl + 31e3, sl + 32e3],
+            sigma_lateral: vec![sl; 4],
+            ..Default::default()
+        };
+        let e = fit(
+            &[coarse],
+            (0.10, 0.15),
+            15.0,
+            Given {
+                poisson_ratio: Some(0.2),
+                ..given
+            },
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("E50 needs rows closer"), "{e}");
+    }
+
     /// A curve too coarse to show its initial slope is refused with what to change, and
     /// fitted with E and ν given.
     #[test]
@@ -685,6 +809,7 @@ mod tests {
             youngs_modulus: Some(60e6),
             poisson_ratio: Some(0.145),
             density: Some(1600.0),
+            ..Default::default()
         };
         let f = fit(&[c], (0.10, 0.15), 15.0, given).unwrap();
         assert_eq!((f.youngs_modulus, f.poisson_ratio), (60e6, 0.145));

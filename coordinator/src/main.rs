@@ -158,6 +158,10 @@ enum Command {
         /// ν instead of the initial slope.
         #[arg(long)]
         poisson_ratio: Option<f64>,
+        /// Which slope is E: the initial tangent (up to a quarter of the peak deviator) or
+        /// E50, the secant to half the peak deviator (both are in the table's comments).
+        #[arg(long, value_enum, default_value_t)]
+        modulus: coordinator::fit::Modulus,
         /// Output TOML (default: mohr_coulomb.toml in the first run's folder); the plots go
         /// beside it.
         #[arg(long)]
@@ -403,6 +407,7 @@ fn main() -> ExitCode {
                 density,
                 youngs_modulus,
                 poisson_ratio,
+                modulus,
                 out,
             } => {
                 let curves = runs
@@ -413,6 +418,7 @@ fn main() -> ExitCode {
                     youngs_modulus,
                     poisson_ratio,
                     density,
+                    modulus,
                 };
                 let f = coordinator::fit::fit(&curves, (window[0], window[1]), cohesion, given)?;
                 let out = out.unwrap_or_else(|| {
