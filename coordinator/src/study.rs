@@ -359,6 +359,20 @@ fn strip_line_column(rest: &str) -> Option<&str> {
     (m > 0).then(|| &rest[rest.len() - t.len() + m..])
 }
 
+/// The scene file of a variant: a scene of its own next to the user's (its relative paths
+/// hold), named after the study's folder too, so that two studies of one scene at once (other
+/// `--out`s) do not write the same file.
+fn variant_scene_path(scene: &Scene, out_dir: &Path, v: &Variant) -> PathBuf {
+    let folder = std::fs::canonicalize(out_dir).unwrap_or_else(|_| out_dir.to_path_buf());
+    let tag = crate::checkpoint::scene_fingerprint(&folder.display().to_string());
+    scene.path.with_file_name(format!(
+        ".study-{}-{}-{}.toml",
+        scene.name,
+        &tag[..8],
+        v.name
+    ))
+}
+
 /// Every variant is checked before any runs (`cosim check` of each: the coordinator's tables
 /// here, the nodes' tables and limits by the nodes); one invalid variant refuses the study,
 /// naming the user's scene and the settings. Variants whose node tables are the same are
@@ -373,9 +387,7 @@ async fn validate_variants(
     let mut node_checks: Vec<(Variant, Scene)> = Vec::new();
     let mut seen = std::collections::BTreeSet::new();
     for v in variants {
-        let tmp = scene
-            .path
-            .with_file_name(format!(".study-{}-{}.toml", scene.name, v.name));
+        let tmp = variant_scene_path(scene, out_dir, v);
         match Scene::parse(&tmp, v.text.clone()) {
             Err(e) => errors.push(in_user_terms(&e.to_string(), &tmp, &scene.path, &v.label())),
             Ok(s) => {
@@ -578,10 +590,7 @@ pub async fn run_study(
             let label = v.label();
             let note = crate::run::ProgressNote::default();
             notes.push((label.clone(), note.clone()));
-            // each variant is a scene of its own, next to the original (relative paths hold)
-            let path = scene
-                .path
-                .with_file_name(format!(".study-{}-{}.toml", scene.name, v.name));
+            let path = variant_scene_path(scene, out_dir, &v);
             running.spawn(async move {
                 // validated above: every variant parses
                 let s = Scene::parse(&path, v.text.clone())?;

@@ -74,6 +74,38 @@ fn study_sweeps_and_resumes() {
         .contains("\"completed\""));
 }
 
+/// Two studies of one scene at once, into two folders: each variant's scene file (beside the
+/// user's scene, for its relative paths) is the study's own, so neither overwrites the
+/// other's, and both complete.
+#[test]
+fn two_studies_of_one_scene_at_once_keep_their_variant_files_apart() {
+    let dir = tempfile::tempdir().unwrap();
+    let outs = [dir.path().join("a"), dir.path().join("b")];
+    let handles: Vec<_> = outs
+        .iter()
+        .cloned()
+        .map(|out| std::thread::spawn(move || study_of_minimal(&out, "1e-5")))
+        .collect();
+    for h in handles {
+        let o = h.join().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let files: Vec<String> = outs
+        .iter()
+        .map(|out| {
+            let record = std::fs::read_to_string(out.join("run000/run.json")).unwrap();
+            let v: serde_json::Value = serde_json::from_str(&record).unwrap();
+            v["scene_file"].as_str().unwrap().to_string()
+        })
+        .collect();
+    println!("{files:?}");
+    assert!(
+        files.iter().all(|f| f.contains(".study-minimal-")),
+        "{files:?}"
+    );
+    assert_ne!(files[0], files[1]);
+}
+
 /// `cosim study scenes/minimal.toml --vary <vary>` that must be refused before any run: its
 /// error output.
 fn refused_study(out: &Path, vary: &str) -> String {
