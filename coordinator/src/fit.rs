@@ -666,6 +666,11 @@ mod tests {
         c
     }
 
+    /// One curve fitted over W's 10–15 % window with the thesis's c = 15 Pa.
+    fn fit_one(c: &Curve, given: Given) -> anyhow::Result<Fit> {
+        fit(std::slice::from_ref(c), (0.10, 0.15), 15.0, given)
+    }
+
     fn thesis() -> Fit {
         Fit {
             youngs_modulus: 60e6,
@@ -687,7 +692,7 @@ mod tests {
     fn fitting_the_thesis_elements_curves_returns_its_parameters() {
         let truth = thesis();
         let one = synthetic(&truth, 25e3, 20001, 0.2);
-        let f = fit(&[one], (0.10, 0.15), 15.0, Given::default()).unwrap();
+        let f = fit_one(&one, Given::default()).unwrap();
         println!("{f:?}");
         assert!((f.youngs_modulus / 60e6 - 1.0).abs() < 1e-9);
         assert!((f.poisson_ratio - 0.145).abs() < 1e-9);
@@ -726,13 +731,7 @@ mod tests {
     #[test]
     fn the_secant_modulus_is_the_slope_to_half_the_peak_deviator() {
         let one = synthetic(&thesis(), 25e3, 20001, 0.2);
-        let f = fit(
-            std::slice::from_ref(&one),
-            (0.10, 0.15),
-            15.0,
-            Given::default(),
-        )
-        .unwrap();
+        let f = fit_one(&one, Given::default()).unwrap();
         assert!((f.curves[0].secant_modulus / 60e6 - 1.0).abs() < 1e-9);
         let (ei, qu, end, sl) = (160e6, 40e3, 0.02, 25e3);
         let mut c = Curve {
@@ -752,18 +751,12 @@ mod tests {
             modulus: Modulus::Secant50,
             ..Default::default()
         };
-        let f = fit(std::slice::from_ref(&c), (0.10, 0.15), 15.0, given).unwrap();
+        let f = fit_one(&c, given).unwrap();
         println!("E50 {:.6e} (exact {exact:.6e})", f.youngs_modulus);
         assert!((f.youngs_modulus / exact - 1.0).abs() < 1e-4);
         assert!(material_toml(&f, "sand", &[]).contains("# E is E50"));
         // the tangent of the first quarter is the stiffer one
-        let t = fit(
-            std::slice::from_ref(&c),
-            (0.10, 0.15),
-            15.0,
-            Given::default(),
-        )
-        .unwrap();
+        let t = fit_one(&c, Given::default()).unwrap();
         assert!(t.youngs_modulus > 1.5 * exact, "{}", t.youngs_modulus);
         // rows so far apart that the first is past half the peak
         let coarse = Curve {
@@ -774,10 +767,8 @@ mod tests {
             sigma_lateral: vec![sl; 4],
             ..Default::default()
         };
-        let e = fit(
-            &[coarse],
-            (0.10, 0.15),
-            15.0,
+        let e = fit_one(
+            &coarse,
             Given {
                 poisson_ratio: Some(0.2),
                 ..given
@@ -793,14 +784,7 @@ mod tests {
     #[test]
     fn a_coarse_curve_needs_its_elastic_constants_given() {
         let c = synthetic(&thesis(), 25e3, 21, 0.2);
-        let e = fit(
-            std::slice::from_ref(&c),
-            (0.10, 0.15),
-            15.0,
-            Given::default(),
-        )
-        .unwrap_err()
-        .to_string();
+        let e = fit_one(&c, Given::default()).unwrap_err().to_string();
         assert!(
             e.contains("coupling.window") && e.contains("--youngs-modulus"),
             "{e}"
@@ -811,7 +795,7 @@ mod tests {
             density: Some(1600.0),
             ..Default::default()
         };
-        let f = fit(&[c], (0.10, 0.15), 15.0, given).unwrap();
+        let f = fit_one(&c, given).unwrap();
         assert_eq!((f.youngs_modulus, f.poisson_ratio), (60e6, 0.145));
         assert!((f.friction_angle - 23.15).abs() < 1e-6);
         assert!((f.dilation_angle - 5.17).abs() < 1e-9);

@@ -132,23 +132,7 @@ fn a_stretched_lattice_carries_the_exact_stress_of_its_contacts() {
     let n = 4;
     let dir = tempfile::tempdir().unwrap();
     let size = write_lattice(dir.path(), r, a, n, [0.3, 0.6, 0.1], 0.0);
-    let toml = format!(
-        r#"
-[dem]
-time_step = 1e-6
-gravity = [0.0, 0.0, 0.0]
-{SAND}
-[[dem.particles]]
-kind = "file"
-material = "sand"
-path = "lattice.csv"
-[dem.periodic]
-size = [{}, {}, {}]
-[[dem.periodic.stages]]
-stress = {{ x = -1e3 }}
-"#,
-        size[0], size[1], size[2]
-    );
+    let toml = lattice_scene(size, 1e-6, "[[dem.periodic.stages]]\nstress = { x = -1e3 }");
     let cfg = dem::parse_scene_section(&toml).unwrap().unwrap();
     let e = dem::Engine::from_config(&cfg, dir.path()).unwrap();
     let avg = e.cell_averages().unwrap();
@@ -221,6 +205,10 @@ fn a_stage_at_rest_starts_with_the_grains_stopped() {
                  z = -0.2 }}\nstrain_rate = 50.0\n[[dem.periodic.stages]]\nname = \"press\"\n\
                  at_rest = {at_rest}\nfriction = 1.0"
             ),
+        );
+        assert!(
+            scene.contains("at_rest"),
+            "the compaction stage was not added"
         );
         let mut e = engine(&scene);
         let energy = |e: &dem::Engine| {
@@ -669,24 +657,13 @@ fn images_move_with_the_cell_unless_they_copy_their_body_as_the_thesis_ghosts() 
     let dir = tempfile::tempdir().unwrap();
     let size = write_lattice(dir.path(), r, a, n, [0.5; 3], rate);
     let deviation = |images: &str| {
-        let toml = format!(
-            r#"
-[dem]
-time_step = 1e-7
-gravity = [0.0, 0.0, 0.0]
-{SAND}
-[[dem.particles]]
-kind = "file"
-material = "sand"
-path = "lattice.csv"
-[dem.periodic]
-size = [{}, {}, {}]
-image_velocity = "{images}"
-[[dem.periodic.stages]]
-strain = {{ z = -0.01 }}
-strain_rate = {rate}
-"#,
-            size[0], size[1], size[2]
+        let toml = lattice_scene(
+            size,
+            1e-7,
+            &format!(
+                "image_velocity = \"{images}\"\n[[dem.periodic.stages]]\nstrain = {{ z = -0.01 }}\n\
+                 strain_rate = {rate}"
+            ),
         );
         let cfg = dem::parse_scene_section(&toml).unwrap().unwrap();
         let mut e = dem::Engine::from_config(&cfg, dir.path()).unwrap();
@@ -714,6 +691,27 @@ strain_rate = {rate}
 /// Writes `lattice.csv`: an n×n×n cube lattice of spheres of radius `r` at spacings `a`, the
 /// first at `offset`·a, moving with v_z = −`rate`·z (a homogeneous compression along z; 0:
 /// at rest); returns the cell's edges n·a.
+/// A scene of the sand spheres of `lattice.csv` ([`write_lattice`]) in a periodic cell of
+/// edges `size`, with `periodic` (more `[dem.periodic]` keys and its stages) after the size.
+fn lattice_scene(size: [f64; 3], time_step: f64, periodic: &str) -> String {
+    format!(
+        r#"
+[dem]
+time_step = {time_step:e}
+gravity = [0.0, 0.0, 0.0]
+{SAND}
+[[dem.particles]]
+kind = "file"
+material = "sand"
+path = "lattice.csv"
+[dem.periodic]
+size = [{}, {}, {}]
+{periodic}
+"#,
+        size[0], size[1], size[2]
+    )
+}
+
 fn write_lattice(
     dir: &std::path::Path,
     r: f64,
