@@ -34,6 +34,11 @@ pub struct CheckpointState {
     /// `cosim resume` refuses a folder whose scene.toml no longer matches.
     #[serde(default)]
     pub scene_fingerprint: Option<String>,
+    /// Fingerprint of the scene's settings ([`settings_fingerprint`]: comments, layout and
+    /// key order do not count), so that a scene whose comments were edited since still
+    /// resumes. Checkpoints from before it have none.
+    #[serde(default)]
+    pub settings_fingerprint: Option<String>,
 }
 
 /// FNV-1a (64 bit) of the scene text, as 16 hex digits: a stable fingerprint to tell whether
@@ -47,19 +52,98 @@ pub fn scene_fingerprint(text: &str) -> String {
     format!("{h:016x}")
 }
 
+/// Fingerprint of a scene's settings: its TOML parsed and written out canonically (keys
+/// sorted, numbers exact), so that comments, blank lines, quoting, key order and the
+/// checkpoint period do not change it; `None` if the text is not TOML.
+pub fn settings_fingerprint(text: &str) -> Option<String> {
+    fn canon(v: &toml::Value, out: &mut String) {
+        match v {
+            toml::Value::String(s) => out.push_str(&format!("{s:?}")),
+            toml::Value::Integer(i) => out.push_str(&format!("i{i}")),
+            toml::Value::Float(x) => out.push_str(&format!("f{x:?}")),
+            toml::Value::Boolean(b) => out.push_str(if *b { "true" } else { "false" }),
+            toml::Value::Datetime(d) => out.push_str(&format!("d{d}")),
+            toml::Value::Array(a) => {
+                out.push('[');
+                for x in a {
+                    canon(x, out);
+                    out.push(',');
+                }
+                out.push(']');
+            }
+            toml::Value::Table(t) => {
+                let mut keys: Vec<&String> = t.keys().collect();
+                keys.sort();
+                out.push('{');
+                for k in keys {
+                    out.push_str(&format!("{k:?}="));
+                    canon(&t[k], out);
+                    out.push(',');
+                }
+                out.push('}');
+            }
+        }
+    }
+    let mut table: toml::Table = toml::from_str(text).ok()?;
+    // how often checkpoints are written does not change the run (resumes are bitwise)
+    if let Some(toml::Value::Table(output)) = table.get_mut("output") {
+        output.remove("checkpoint_every");
+        output.remove("checkpoint_wall");
+        if output.is_empty() {
+            table.remove("output");
+        }
+    }
+    let mut out = String::new();
+    canon(&toml::Value::Table(table), &mut out);
+    Some(scene_fingerprint(&out))
+}
+
+/// Whether `scene_text` is the scene a checkpoint recorded by its text fingerprint `text` and
+/// settings fingerprint `settings` (either may be missing in older checkpoints: no text
+/// fingerprint accepts any scene; without the settings one, those of `started()`, the text
+/// the run began with, count if that is the recorded text).
+fn same_scene(
+    text: Option<&str>,
+    settings: Option<&str>,
+    started: impl FnOnce() -> Option<String>,
+    scene_text: &str,
+) -> bool {
+    let Some(text) = text else { return true };
+    if text == scene_fingerprint(scene_text) {
+        return true;
+    }
+    let recorded = settings.map(str::to_string).or_else(|| {
+        let t = started()?;
+        (scene_fingerprint(&t) == text)
+            .then(|| settings_fingerprint(&t))
+            .flatten()
+    });
+    let now = settings_fingerprint(scene_text);
+    now.is_some() && now == recorded
+}
+
 /// Refuses to resume from a checkpoint that another scene wrote: its scene name and, when
-/// recorded, its scene text must be those of the folder's `scene.toml`. Touches nothing.
+/// recorded, its scene text must be those of the folder's `scene.toml` — or its settings,
+/// when only comments or layout were edited since (recorded in the checkpoint, or for older
+/// checkpoints in the run folder's `scene.toml` the run was started with). Touches nothing.
 pub fn check_belongs(
     dir: &Path,
     state: &CheckpointState,
     scene_name: &str,
     scene_text: &str,
 ) -> anyhow::Result<()> {
+    // the text of the run folder's scene.toml (the run's start), for older checkpoints
+    let started = || {
+        let path = dir.parent()?.parent()?.join("scene.toml");
+        std::fs::read_to_string(path).ok()
+    };
     let other = state.summary.scene != scene_name
-        || state
-            .scene_fingerprint
-            .as_deref()
-            .is_some_and(|f| f != scene_fingerprint(scene_text));
+        || !same_scene(
+            state.scene_fingerprint.as_deref(),
+            state.settings_fingerprint.as_deref(),
+            started,
+            scene_text,
+        );
     if other {
         anyhow::bail!(
             "{}: this checkpoint was written by a run of scene `{}` ({}), not by the scene in the folder's scene.toml (`{scene_name}`): refusing to resume a different scene; start it anew with `cosim run <scene> --out <folder> --overwrite`",
@@ -146,7 +230,7 @@ pub fn latest(out_dir: &Path) -> anyhow::Result<(PathBuf, CheckpointState)> {
     let pointer = checkpoints_dir(out_dir).join("latest.json");
     if !pointer.exists() {
         anyhow::bail!(
-            "{} has no checkpoint ({} is missing): set `[output] checkpoint_every` in the scene to make runs resumable",
+            "{} has no checkpoint ({} is missing): set `[output] checkpoint_every` (windows) or `checkpoint_wall` (wall time) in the scene to make runs resumable",
             out_dir.display(),
             pointer.display()
         );
@@ -167,4 +251,66 @@ pub fn latest(out_dir: &Path) -> anyhow::Result<(PathBuf, CheckpointState)> {
 
 pub fn read_record(out_dir: &Path) -> anyhow::Result<RunRecord> {
     read_json(&out_dir.join("run.json"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const SCENE: &str = "[scene]\nname = \"a\"\nend_time = \"1 s\" # comment\n\n[dem]\ntime_step = 1e-5\ngravity = [0.0, 0.0, -9.81]\n";
+
+    #[test]
+    fn settings_ignore_comments_layout_and_key_order_but_not_values() {
+        let edited = "# a new first line\n[dem]\ngravity = [ 0.0,0.0, -9.81 ]   # g\ntime_step = 1e-5\n\n[scene]\nend_time = '1 s'\nname = \"a\"\n";
+        assert_ne!(scene_fingerprint(SCENE), scene_fingerprint(edited));
+        assert_eq!(settings_fingerprint(SCENE), settings_fingerprint(edited));
+        assert!(settings_fingerprint(SCENE).is_some());
+        // nor does a checkpoint period added or changed
+        for period in [
+            "[output]\ncheckpoint_wall = \"20 min\"\n",
+            "[output]\ncheckpoint_every = 500\ncheckpoint_wall = 60\n",
+        ] {
+            let text = format!("{SCENE}{period}");
+            assert_eq!(settings_fingerprint(SCENE), settings_fingerprint(&text));
+        }
+        for changed in [
+            SCENE.replace("1e-5", "2e-5"),
+            SCENE.replace("\"1 s\"", "\"2 s\""),
+            SCENE.replace("-9.81]", "-9.81, 1.0]"),
+            // an integer is not the float of the same value: the scene reader may tell them apart
+            SCENE.replace("0.0, 0.0,", "0, 0.0,"),
+            SCENE.replace("[dem]", "[dem]\nthreads = 1"),
+            format!("{SCENE}[output]\nfinal_state = true\n"),
+        ] {
+            assert_ne!(
+                settings_fingerprint(SCENE),
+                settings_fingerprint(&changed),
+                "{changed}"
+            );
+        }
+        assert_eq!(settings_fingerprint("[scene"), None);
+    }
+
+    #[test]
+    fn a_checkpoint_belongs_to_its_text_or_its_settings() {
+        let text = scene_fingerprint(SCENE);
+        let settings = settings_fingerprint(SCENE).unwrap();
+        let commented = format!("{SCENE}# edited later\n");
+        let changed = SCENE.replace("1e-5", "2e-5");
+        let none = || None;
+        // the same text; any text for checkpoints without a fingerprint
+        assert!(same_scene(Some(&text), None, none, SCENE));
+        assert!(same_scene(None, None, none, &changed));
+        // comments edited: by the recorded settings ...
+        assert!(same_scene(Some(&text), Some(&settings), none, &commented));
+        assert!(!same_scene(Some(&text), Some(&settings), none, &changed));
+        // ... or, for older checkpoints, by the text the run began with ...
+        let started = || Some(SCENE.to_string());
+        assert!(same_scene(Some(&text), None, started, &commented));
+        assert!(!same_scene(Some(&text), None, started, &changed));
+        // ... if that is the recorded text; without it, only the recorded text counts
+        let other_start = || Some(commented.clone());
+        assert!(!same_scene(Some(&text), None, other_start, &commented));
+        assert!(!same_scene(Some(&text), None, none, &commented));
+    }
 }

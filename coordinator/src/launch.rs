@@ -27,6 +27,9 @@ pub fn bin_dir() -> anyhow::Result<PathBuf> {
     Ok(exe.parent().map(Path::to_path_buf).unwrap_or_default())
 }
 
+/// The thread-pool size a launched node reads (rayon's, used by the DEM and FEM nodes).
+pub const THREADS_ENV: &str = "RAYON_NUM_THREADS";
+
 impl NodeProcess {
     /// Starts node `name` of `kind`: the scene's command if it gives one, else the built-in
     /// binary of its kind. Output goes to `<log_dir>/<name>.log`.
@@ -41,6 +44,7 @@ impl NodeProcess {
         log_dir: &Path,
         scene_dir: &Path,
         lease: Option<std::time::Duration>,
+        threads: Option<usize>,
     ) -> anyhow::Result<NodeProcess> {
         let name = name.to_string();
         let mut node = NodeProcess {
@@ -102,6 +106,9 @@ impl NodeProcess {
             // not one from the user's shell either: the node keeps the default
             None => command.env_remove(proto::link::LEASE_ENV),
         };
+        if let Some(n) = threads.filter(|_| std::env::var_os(THREADS_ENV).is_none()) {
+            command.env(THREADS_ENV, n.max(1).to_string());
+        }
         let child = command
             .args(&args)
             // the node ends when this process is gone, whatever the network says

@@ -104,7 +104,8 @@ enum Command {
         /// Mark a completed run `inaccurate` when its error exceeds this (default 1.0 = 100 %).
         #[arg(long)]
         inaccurate_above: Option<f64>,
-        /// Runs at the same time (default: one per two cores; each run is two processes).
+        /// Runs at the same time (default: one per two cores; each run is two processes, whose
+        /// thread pools then share the cores: RAYON_NUM_THREADS = cores / runs at once).
         #[arg(long)]
         jobs: Option<usize>,
         #[arg(long)]

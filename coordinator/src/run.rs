@@ -48,6 +48,10 @@ pub struct RunOptions {
     /// A new run into a folder that holds an earlier run's files clears it first (else it
     /// is refused).
     pub overwrite: bool,
+    /// Threads of each launched node's pool (`RAYON_NUM_THREADS` in its environment, unless
+    /// the user's shell sets it; a DEM scene's `dem.threads` still wins): `cosim study --jobs`
+    /// shares the cores between its runs instead of starting every pool on all of them.
+    pub node_threads: Option<usize>,
 }
 
 impl Default for RunOptions {
@@ -64,6 +68,7 @@ impl Default for RunOptions {
             external: Vec::new(),
             resume: None,
             overwrite: false,
+            node_threads: None,
         }
     }
 }
@@ -285,7 +290,7 @@ impl Run<'_> {
                     eprintln!(
                         "\n{}: stopping after the windows already announced{} (again to stop at once)",
                         crate::interrupt::signal_name(sig),
-                        if self.scene.checkpoint_every > 0 {
+                        if self.scene.checkpoints() {
                             ", after a checkpoint"
                         } else {
                             ""
@@ -856,6 +861,7 @@ impl Run<'_> {
         write!(csv, "{header}\n{done_rows}")?;
         csv.flush()?;
         let mut window_start = Instant::now();
+        let mut last_checkpoint = Instant::now();
         // this window's compute time per node, end time and DEM kinetic energy
         let mut computed: BTreeMap<String, f64> = BTreeMap::new();
         let mut on_path: BTreeMap<String, f64> = BTreeMap::new();
@@ -1249,11 +1255,16 @@ impl Run<'_> {
                 }
                 let finishing = actions.iter().any(|a| matches!(a, Action::Finish { .. }));
                 let due = scene.checkpoint_every > 0 && (window + 1) % scene.checkpoint_every == 0;
+                // `checkpoint_wall`: once that much wall time has passed, the windows already
+                // announced finish (held), then the checkpoint is written, as for an interrupt
+                let wall_due = scene
+                    .checkpoint_wall
+                    .is_some_and(|w| last_checkpoint.elapsed().as_secs_f64() >= w);
                 // a checkpoint is of this window's end only if no node has a later command
                 // (the scheduler does not announce past a due checkpoint; an interrupt first
                 // lets the windows already announced finish)
                 let ahead = scheduler.announced_ahead();
-                if self.pending_interrupt.is_some() && ahead && !finishing {
+                if (self.pending_interrupt.is_some() || wall_due) && ahead && !finishing {
                     scheduler.hold();
                     window_start = Instant::now();
                     continue;
@@ -1265,7 +1276,7 @@ impl Run<'_> {
                     // a second signal now stops at once, without the checkpoint
                     self.defer_interrupt = false;
                     bar.finish_and_clear();
-                    if scene.checkpoint_every > 0 {
+                    if scene.checkpoints() {
                         self.checkpoint(window, &scheduler, &stability, timeout)
                             .await?;
                         eprintln!(
@@ -1275,9 +1286,11 @@ impl Run<'_> {
                     }
                     return Err(crate::interrupt::Interrupted { signal: sig }.into());
                 }
-                if due && !finishing {
+                if (due || wall_due) && !finishing {
+                    scheduler.release();
                     self.checkpoint(window, &scheduler, &stability, timeout)
                         .await?;
+                    last_checkpoint = Instant::now();
                 }
                 window_start = Instant::now();
             }
@@ -1325,6 +1338,7 @@ impl Run<'_> {
             stability: stability.clone(),
             summary: self.summary.clone(),
             scene_fingerprint: Some(crate::checkpoint::scene_fingerprint(&self.scene.text)),
+            settings_fingerprint: crate::checkpoint::settings_fingerprint(&self.scene.text),
         };
         crate::checkpoint::commit(&self.out_dir, &state)?;
         tracing::debug!("checkpoint after window {window}");
@@ -1585,6 +1599,7 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
             &out_dir.join("logs"),
             &scene_dir,
             local_lease,
+            opts.node_threads,
         ) {
             Ok(n) => n,
             Err(e) => {

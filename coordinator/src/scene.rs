@@ -193,6 +193,12 @@ pub struct OutputSection {
     /// from the newest checkpoint.
     #[serde(default)]
     pub checkpoint_every: u64,
+    /// Also checkpoint once this much wall time has passed since the run (or its resume) began
+    /// or since the last checkpoint, e.g. `"20 min"`: long runs whose windows take seconds
+    /// lose at most this much work when the machine goes away (alone or with
+    /// `checkpoint_every`; either makes a run resumable).
+    #[serde(default)]
+    pub checkpoint_wall: Option<Spanned<Seconds>>,
     /// At the end, every node writes its full final state to `<out>/final/<node>.state`.
     #[serde(default)]
     pub final_state: bool,
@@ -267,6 +273,8 @@ pub struct Scene {
     pub out_dir: PathBuf,
     pub trace_interfaces: bool,
     pub checkpoint_every: u64,
+    /// `[output] checkpoint_wall` in seconds.
+    pub checkpoint_wall: Option<f64>,
     pub final_state: bool,
     pub has_dem: bool,
     pub has_fem: bool,
@@ -275,6 +283,12 @@ pub struct Scene {
 }
 
 impl Scene {
+    /// The run writes checkpoints (`[output] checkpoint_every` or `checkpoint_wall`), so it
+    /// can be resumed and an interrupt saves one.
+    pub fn checkpoints(&self) -> bool {
+        self.checkpoint_every > 0 || self.checkpoint_wall.is_some()
+    }
+
     /// The DEM node's id, if the scene has one.
     pub fn dem_node(&self) -> Option<&str> {
         self.nodes
@@ -588,6 +602,20 @@ impl Scene {
                 ),
             ));
         }
+        let checkpoint_wall = match &raw.output.checkpoint_wall {
+            Some(w) if w.get_ref().0 <= 0.0 => {
+                return Err(err_at(
+                    w.span().start,
+                    "output.checkpoint_wall",
+                    format!(
+                        "must be a positive wall time (e.g. \"20 min\"), got {} s",
+                        w.get_ref().0
+                    ),
+                ))
+            }
+            Some(w) => Some(w.get_ref().0),
+            None => None,
+        };
         if c.window_timeout.0 <= 0.0 {
             return Err(err_at(
                 text.find("window_timeout").unwrap_or(0),
@@ -708,6 +736,7 @@ impl Scene {
             out_dir,
             trace_interfaces: raw.output.trace_interfaces,
             checkpoint_every: raw.output.checkpoint_every,
+            checkpoint_wall,
             final_state: raw.output.final_state,
             has_dem,
             has_fem,
@@ -977,6 +1006,34 @@ mod tests {
             ))
             .unwrap_err();
             assert_eq!(e.line, 5, "{line}: {e}");
+            assert!(e.to_string().contains(what), "{line}: {e}");
+        }
+    }
+
+    #[test]
+    fn a_wall_time_checkpoint_period_is_read_with_its_unit_and_must_be_positive() {
+        let scene = |line: &str| {
+            parse(&format!(
+                "[scene]\nend_time = 1\n[coupling]\nwindow = 0.1\n[dem]\n[output]\n{line}\n"
+            ))
+        };
+        let s = scene("checkpoint_wall = \"20 min\"").unwrap();
+        assert_eq!((s.checkpoint_wall, s.checkpoint_every), (Some(1200.0), 0));
+        assert!(s.checkpoints());
+        assert_eq!(
+            scene("checkpoint_wall = \"1.5 h\"")
+                .unwrap()
+                .checkpoint_wall,
+            Some(5400.0)
+        );
+        assert!(!scene("final_state = true").unwrap().checkpoints());
+        for (line, what) in [
+            ("checkpoint_wall = 0", "must be a positive wall time"),
+            ("checkpoint_wall = \"-5 min\"", "got -300 s"),
+            ("checkpoint_wall = \"20 m\"", "expected a time"),
+        ] {
+            let e = scene(line).unwrap_err();
+            assert_eq!(e.line, 7, "{line}: {e}");
             assert!(e.to_string().contains(what), "{line}: {e}");
         }
     }

@@ -567,6 +567,7 @@ pub async fn run_study(
     );
     // run what is missing (or was interrupted), `jobs` at a time
     let jobs = opts.jobs.max(1);
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let mut pending = variants
         .iter()
         .filter(|v| !run_is_done(&out_dir.join(&v.name)))
@@ -585,6 +586,9 @@ pub async fn run_study(
             interrupted = Some(crate::interrupt::Interrupted { signal: sig });
         }
         while running.len() < jobs {
+            // the cores shared by the runs that will run together (the last ones get more)
+            let together = jobs.min(running.len() + pending.len());
+            let node_threads = (jobs > 1).then(|| (cores / together.max(1)).max(1));
             let Some(v) = pending.pop_front() else { break };
             let dir = out_dir.join(&v.name);
             let label = v.label();
@@ -600,7 +604,14 @@ pub async fn run_study(
                 // checkpoint when the scene writes them (the same variant's, checked), else
                 // it starts again
                 let resume = crate::checkpoint::latest(&dir).ok().filter(|(d, st)| {
-                    crate::checkpoint::check_belongs(d, st, &s.name, &s.text).is_ok()
+                    let belongs = crate::checkpoint::check_belongs(d, st, &s.name, &s.text);
+                    if belongs.is_err() {
+                        tracing::warn!(
+                            "{label}: its checkpoint after window {} was written from other settings of the scene: the run starts again",
+                            st.window
+                        );
+                    }
+                    belongs.is_ok()
                 });
                 if let Some((_, st)) = &resume {
                     tracing::info!("{label}: resuming after window {}", st.window);
@@ -611,6 +622,7 @@ pub async fn run_study(
                     progress_note: Some(note),
                     overwrite: resume.is_none(),
                     resume,
+                    node_threads,
                     ..Default::default()
                 };
                 let r = run_scene(&s, &opts).await;

@@ -43,6 +43,7 @@ fn unit_factor(unit: &str) -> Option<(Dim, f64)> {
         "us" | "µs" => (Dim::Time, 1e-6),
         "ns" => (Dim::Time, 1e-9),
         "min" => (Dim::Time, 60.0),
+        "h" => (Dim::Time, 3600.0),
         "m" => (Dim::Length, 1.0),
         "cm" => (Dim::Length, 1e-2),
         "mm" => (Dim::Length, 1e-3),

@@ -878,6 +878,14 @@ impl Engine {
             ),
             None => None,
         };
+        let threads = pool
+            .as_ref()
+            .map_or_else(rayon::current_num_threads, |p| p.current_num_threads());
+        tracing::info!(
+            "{} particles on {threads} thread{}",
+            particles.len(),
+            if threads == 1 { "" } else { "s" }
+        );
         let sensors = sensors::SensorState::new(&cfg.sensors, &particles, 0.0);
         let mut engine = Engine {
             cfg: cfg.clone(),

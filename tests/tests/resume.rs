@@ -145,6 +145,43 @@ fn run_with_the_coordinator_killed_resumes_bitwise_equal() {
     killed_and_resumed_equals_uninterrupted("predictive", "cosim");
 }
 
+/// `checkpoint_wall`: checkpoints by wall time alone (no window count), taken while windows
+/// are announced ahead (the predictive schedule holds them, checkpoints, and goes on); a run
+/// killed after one resumes bitwise.
+#[test]
+fn wall_time_checkpoints_resume_bitwise_equal() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(plate_scene(dir.path(), "predictive", ""))
+        .unwrap()
+        .replace("checkpoint_every = 10", "checkpoint_wall = \"0.05 s\"")
+        .replace("end_time = \"12 ms\"", "end_time = \"30 ms\"");
+    assert!(text.contains("checkpoint_wall") && !text.contains("checkpoint_every"));
+    let scene = write_scene(dir.path(), "plate.toml", &text);
+    let (whole, broken, _) = cosim_tests::whole_and_resumed(dir.path(), &scene, "wall", 1, "dem");
+    let checkpoints = std::fs::read_dir(whole.join("checkpoints"))
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().starts_with('w'))
+        .count();
+    assert!(
+        checkpoints >= 2,
+        "{checkpoints} checkpoints in the whole run"
+    );
+    let s = summary(&broken);
+    assert_eq!(s["status"], "completed");
+    assert!(s["resumed_after_window"].as_u64().unwrap() >= 1, "{s}");
+    assert!(
+        s["windows_announced_ahead"].as_u64().unwrap() > 0,
+        "the predictive schedule announced windows ahead: {s}"
+    );
+    assert_eq!(s["windows_done"], summary(&whole)["windows_done"]);
+    for node in ["dem", "fem"] {
+        let a = read(&whole.join(format!("final/{node}.state")));
+        let b = read(&broken.join(format!("final/{node}.state")));
+        assert!(a == b, "{node}: the resumed final state differs");
+    }
+}
+
 #[test]
 fn resume_without_a_checkpoint_says_how_to_get_one() {
     let dir = tempfile::tempdir().unwrap();

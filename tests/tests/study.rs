@@ -74,6 +74,61 @@ fn study_sweeps_and_resumes() {
         .contains("\"completed\""));
 }
 
+/// `--jobs 2`: the two runs at once share the cores (each node's pool gets half of them),
+/// where one run alone keeps them all.
+#[test]
+fn runs_of_a_study_at_once_share_the_cores() {
+    if std::env::var_os("RAYON_NUM_THREADS").is_some() {
+        eprintln!("RAYON_NUM_THREADS is set: the study keeps it, nothing to test");
+        return;
+    }
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let dir = tempfile::tempdir().unwrap();
+    let threads = |out: &Path, run: &str| {
+        let log = std::fs::read_to_string(out.join(run).join("logs/dem.log")).unwrap();
+        let line = log
+            .lines()
+            .find(|l| l.contains("particles on"))
+            .unwrap_or_else(|| panic!("no thread count in {run}'s DEM log:\n{log}"))
+            .to_string();
+        line.split("particles on ")
+            .nth(1)
+            .unwrap()
+            .split(' ')
+            .next()
+            .unwrap()
+            .parse::<usize>()
+            .unwrap()
+    };
+    let study = |out: &Path, jobs: &str| {
+        let mut c = cosim();
+        c.args([
+            "study",
+            "scenes/minimal.toml",
+            "--vary",
+            "dem.time_step=1e-5,2e-5",
+            "--metric",
+            "dem.kinetic_energy",
+            "--jobs",
+            jobs,
+            "--out",
+        ])
+        .arg(out);
+        let o = run(c);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    };
+    let two = dir.path().join("two");
+    study(&two, "2");
+    for r in ["run000", "run001"] {
+        assert_eq!(threads(&two, r), (cores / 2).max(1), "{r}");
+    }
+    let one = dir.path().join("one");
+    study(&one, "1");
+    for r in ["run000", "run001"] {
+        assert_eq!(threads(&one, r), cores, "{r}");
+    }
+}
+
 /// Two studies of one scene at once, into two folders: each variant's scene file (beside the
 /// user's scene, for its relative paths) is the study's own, so neither overwrites the
 /// other's, and both complete.
@@ -279,6 +334,12 @@ fn a_study_stopped_half_way_continues_its_run_from_the_checkpoint() {
     cosim_tests::wait_for_nodes_to_leave(&name);
     let s = cosim_tests::summary(&broken.join("run000"));
     assert_ne!(s["status"], "completed", "{s}");
+    // the scene's comments edited meanwhile: the settings are the same, the run continues
+    std::fs::write(
+        &scene,
+        format!("# edited while the study was stopped\n{text}"),
+    )
+    .unwrap();
 
     let o = run(study(&broken));
     let err = String::from_utf8_lossy(&o.stderr);

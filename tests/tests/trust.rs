@@ -294,7 +294,25 @@ fn resume_refuses_a_checkpoint_of_another_scene_and_touches_nothing() {
         String::from_utf8_lossy(&o.stderr)
     );
     assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), before);
-    // the same name with another text is refused too
+    // comments edited since: the same settings, so the checkpoint is its own (and the run
+    // is complete)
+    std::fs::write(
+        out.join("scene.toml"),
+        format!(
+            "# notes added later\n{}",
+            std::fs::read_to_string(&scene).unwrap()
+        ),
+    )
+    .unwrap();
+    let mut c = cosim();
+    c.arg("resume").arg(&out).arg("--no-progress");
+    let o = run(c);
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("completed; there is nothing to resume"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    // the same name with other settings is refused
     let changed = std::fs::read_to_string(&scene)
         .unwrap()
         .replace("friction = 0.3", "friction = 0.4");

@@ -678,6 +678,12 @@ impl Scheduler {
         self.held = true;
     }
 
+    /// Windows may be announced ahead again after a [`Scheduler::hold`] (a wall-time
+    /// checkpoint is written).
+    pub fn release(&mut self) {
+        self.held = false;
+    }
+
     /// The running window's commands went out before the window before it was complete:
     /// the nodes may be computing it already, so a checkpoint now would not be of its start.
     pub fn announced_ahead(&self) -> bool {
@@ -1671,6 +1677,11 @@ mod tests {
         assert_eq!(advances(&a), resumed);
         assert!(!restored.announced_ahead());
         assert_eq!(restored.effective_lookahead(), 2);
+        // a wall-time checkpoint releases the hold in the same process
+        s.hold();
+        assert_eq!(s.effective_lookahead(), 0);
+        s.release();
+        assert_eq!(s.effective_lookahead(), 2);
     }
 
     #[test]
