@@ -312,6 +312,14 @@ fn main() -> ExitCode {
                 for (name, line) in coordinator::study::table(&outcomes) {
                     println!("  {name} {line}");
                 }
+                let ensembles = coordinator::study::ensembles(&outcomes);
+                if !ensembles.is_empty() {
+                    println!("ensembles (runs that differ only in a seed):");
+                    for e in &ensembles {
+                        println!("  {}", e.line(&metric));
+                    }
+                    println!("ensembles: {}", out.join("ensembles.csv").display());
+                }
                 println!("study: {}", out.join("study.csv").display());
                 Ok(())
             }

@@ -3,7 +3,9 @@
 //! time, cost split, error against a reference run and whether it stayed stable, in a CSV and
 //! two plots (error vs wall time, one colour per schedule; stability map). A half-done sweep
 //! resumes: runs that ended are not run again, a run that was stopped half-way continues
-//! from its newest checkpoint (scenes with `[output] checkpoint_every`) or starts again.
+//! from its newest checkpoint (scenes with `[output] checkpoint_every` or `checkpoint_wall`)
+//! or starts again. Runs that differ only in a seed are an ensemble: `ensembles.csv` has the
+//! metric's mean and standard deviation per case.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -769,6 +771,11 @@ pub async fn run_study(
     if let Err(e) = crate::plot::study_pngs(out_dir, &outcomes, vars, metric) {
         tracing::warn!("PNG plots not written ({e:#}); the SVG plots are");
     }
+    write_ensembles(
+        &out_dir.join("ensembles.csv"),
+        metric,
+        &ensembles(&outcomes),
+    )?;
     Ok((metric.to_string(), outcomes))
 }
 
@@ -1025,9 +1032,205 @@ pub fn table(outcomes: &[Outcome]) -> BTreeMap<String, String> {
         .collect()
 }
 
+/// The runs of a study that differ only in a seed (`--vary dem.particles.0.seed=1,2,3`): an
+/// ensemble of random samples of one case (Wellmann Table 5.2), summarised by mean and
+/// standard deviation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Ensemble {
+    /// The case: every varied setting but the seeds (`key=value`).
+    pub case: Vec<(String, String)>,
+    /// Its runs, and how many of them completed with a value of the metric.
+    pub runs: usize,
+    pub values: Vec<f64>,
+    /// Mean wall time of the completed runs (s).
+    pub wall_mean_s: f64,
+}
+
+impl Ensemble {
+    pub fn mean(&self) -> Option<f64> {
+        (!self.values.is_empty())
+            .then(|| self.values.iter().sum::<f64>() / self.values.len() as f64)
+    }
+
+    /// Sample standard deviation (n − 1), with at least two values.
+    pub fn std_dev(&self) -> Option<f64> {
+        let m = self.mean()?;
+        let n = self.values.len();
+        (n >= 2).then(|| {
+            (self.values.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt()
+        })
+    }
+
+    /// `case: mean ± s.d. (n of runs)`.
+    pub fn line(&self, metric: &str) -> String {
+        let case = if self.case.is_empty() {
+            "all runs".to_string()
+        } else {
+            self.case
+                .iter()
+                .map(|(k, v)| format!("{k}={v}"))
+                .collect::<Vec<_>>()
+                .join(" ")
+        };
+        let value = match (self.mean(), self.std_dev()) {
+            (Some(m), Some(sd)) => format!("{m:.6e} ± {sd:.2e}"),
+            (Some(m), None) => format!("{m:.6e}"),
+            _ => "-".into(),
+        };
+        format!(
+            "{case}: {metric} {value} ({} of {} runs)",
+            self.values.len(),
+            self.runs
+        )
+    }
+}
+
+/// A setting that picks a random sample: its last dotted part is `seed`.
+fn is_seed(key: &str) -> bool {
+    key.rsplit('.').next() == Some("seed")
+}
+
+/// The study's ensembles: its runs grouped by every varied setting except the seeds, in the
+/// order of their first run; empty when no seed is varied.
+pub fn ensembles(outcomes: &[Outcome]) -> Vec<Ensemble> {
+    if !outcomes
+        .iter()
+        .any(|o| o.variant.settings.iter().any(|(k, _)| is_seed(k)))
+    {
+        return Vec::new();
+    }
+    let mut out: Vec<Ensemble> = Vec::new();
+    for o in outcomes {
+        let case: Vec<(String, String)> = o
+            .variant
+            .settings
+            .iter()
+            .filter(|(k, _)| !is_seed(k))
+            .map(|(k, v)| (k.clone(), value_text(v)))
+            .collect();
+        let i = match out.iter().position(|e| e.case == case) {
+            Some(i) => i,
+            None => {
+                out.push(Ensemble {
+                    case,
+                    runs: 0,
+                    values: Vec::new(),
+                    wall_mean_s: 0.0,
+                });
+                out.len() - 1
+            }
+        };
+        let e = &mut out[i];
+        e.runs += 1;
+        // a completed run (`inaccurate` is one too: its error is against another seed)
+        let done = matches!(o.status.as_str(), "completed" | "inaccurate");
+        if let Some(m) = o.metric.filter(|m| done && m.is_finite()) {
+            let n = e.values.len() as f64;
+            e.wall_mean_s = (e.wall_mean_s * n + o.wall_s) / (n + 1.0);
+            e.values.push(m);
+        }
+    }
+    out
+}
+
+/// `ensembles.csv`: one row per case, its runs, and the metric's mean, standard deviation,
+/// minimum and maximum over the completed ones.
+fn write_ensembles(path: &Path, metric: &str, ensembles: &[Ensemble]) -> anyhow::Result<()> {
+    let Some(first) = ensembles.first() else {
+        return Ok(());
+    };
+    let mut s = String::new();
+    for (k, _) in &first.case {
+        write!(s, "{k},")?;
+    }
+    writeln!(
+        s,
+        "runs,completed,{metric}_mean,{metric}_std_dev,{metric}_min,{metric}_max,wall_mean_s"
+    )?;
+    let opt = |x: Option<f64>| x.map(|x| format!("{x:e}")).unwrap_or_default();
+    for e in ensembles {
+        for (_, v) in &e.case {
+            write!(s, "{},", v.replace(',', ";"))?;
+        }
+        let min = e.values.iter().copied().reduce(f64::min);
+        let max = e.values.iter().copied().reduce(f64::max);
+        writeln!(
+            s,
+            "{},{},{},{},{},{},{:.4}",
+            e.runs,
+            e.values.len(),
+            opt(e.mean()),
+            opt(e.std_dev()),
+            opt(min),
+            opt(max),
+            e.wall_mean_s
+        )?;
+    }
+    std::fs::write(path, s).with_context(|| format!("writing {}", path.display()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn runs_that_differ_only_in_a_seed_form_an_ensemble_with_mean_and_spread() {
+        let vars = [
+            parse_variation("dem.periodic.size+dem.particles.0.count=0.01:100,0.02:800").unwrap(),
+            parse_variation("dem.particles.0.seed=1,2,3").unwrap(),
+        ];
+        let vs = variants("[dem]\n[[dem.particles]]\nseed = 0\n", &vars).unwrap();
+        assert_eq!(vs.len(), 6);
+        let outcome = |i: usize, v: &Variant| Outcome {
+            variant: v.clone(),
+            status: ["completed", "inaccurate", "failed"][i % 3].into(),
+            error_message: None,
+            wall_s: 10.0 * (i + 1) as f64,
+            dem_s: 0.0,
+            fem_s: 0.0,
+            overhead_s: 0.0,
+            metric: Some(2.0 + i as f64),
+            error: None,
+        };
+        let outcomes: Vec<Outcome> = vs.iter().enumerate().map(|(i, v)| outcome(i, v)).collect();
+        let e = ensembles(&outcomes);
+        assert_eq!(e.len(), 2);
+        let case = |size: &str, count: &str| {
+            vec![
+                ("dem.periodic.size".to_string(), size.to_string()),
+                ("dem.particles.0.count".to_string(), count.to_string()),
+            ]
+        };
+        assert_eq!(e[0].case, case("0.01", "100"));
+        assert_eq!(e[1].case, case("0.02", "800"));
+        // seeds 1, 2 of each case counted (seed 3 failed)
+        assert_eq!((e[0].runs, e[0].values.clone()), (3, vec![2.0, 3.0]));
+        assert_eq!(e[1].values, vec![5.0, 6.0]);
+        assert_eq!(e[0].mean(), Some(2.5));
+        assert!((e[0].std_dev().unwrap() - 0.5f64.sqrt()).abs() < 1e-15);
+        assert_eq!(e[0].wall_mean_s, 15.0);
+        assert_eq!(
+            e[1].line("m"),
+            "dem.periodic.size=0.02 dem.particles.0.count=800: m 5.500000e0 ± 7.07e-1 (2 of 3 runs)"
+        );
+        // one value: no spread; no seed varied: no ensembles
+        let one = Ensemble {
+            values: vec![1.0],
+            ..e[0].clone()
+        };
+        assert_eq!(one.std_dev(), None);
+        let plain = variants(
+            "[dem]\ntime_step = 1\n",
+            &[parse_variation("dem.time_step=1,2").unwrap()],
+        )
+        .unwrap();
+        let outcomes: Vec<Outcome> = plain
+            .iter()
+            .enumerate()
+            .map(|(i, v)| outcome(i, v))
+            .collect();
+        assert!(ensembles(&outcomes).is_empty());
+    }
 
     #[test]
     fn the_study_bar_names_each_running_run_with_its_note() {

@@ -1,6 +1,7 @@
 //! `cosim study`: a sweep writes its table and plots, names a failing combination, and a second
 //! call reuses the runs it already has.
 
+use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::Output;
 
@@ -72,6 +73,83 @@ fn study_sweeps_and_resumes() {
     assert!(std::fs::read_to_string(&s)
         .unwrap()
         .contains("\"completed\""));
+}
+
+/// Seeds varied: the runs of each case form an ensemble; `ensembles.csv` and the printed
+/// summary give the metric's mean and spread over the seeds.
+#[test]
+fn a_study_over_seeds_reports_each_cases_mean_and_spread() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("seeds");
+    let mut c = cosim();
+    c.args([
+        "study",
+        "scenes/minimal.toml",
+        "--vary",
+        "dem.particles.0.jitter=1e-3",
+        "--vary",
+        "dem.time_step=1e-5,2e-5",
+        "--vary",
+        "dem.particles.0.seed=1,2,3",
+        "--metric",
+        "dem.kinetic_energy",
+        "--jobs",
+        "2",
+        "--out",
+    ])
+    .arg(&out);
+    let o = run(c);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // the per-run values, by case
+    let study = std::fs::read_to_string(out.join("study.csv")).unwrap();
+    let header: Vec<&str> = study.lines().next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let mut by_step: BTreeMap<String, Vec<f64>> = BTreeMap::new();
+    for r in rows(&study) {
+        assert_eq!(r[col("status")], "completed", "{r:?}");
+        by_step
+            .entry(r[col("dem.time_step")].to_string())
+            .or_default()
+            .push(r[col("dem.kinetic_energy")].parse().unwrap());
+    }
+    let ens = std::fs::read_to_string(out.join("ensembles.csv")).unwrap();
+    let eh: Vec<&str> = ens.lines().next().unwrap().split(',').collect();
+    assert_eq!(
+        eh,
+        [
+            "dem.particles.0.jitter",
+            "dem.time_step",
+            "runs",
+            "completed",
+            "dem.kinetic_energy_mean",
+            "dem.kinetic_energy_std_dev",
+            "dem.kinetic_energy_min",
+            "dem.kinetic_energy_max",
+            "wall_mean_s"
+        ]
+    );
+    let ens_rows = rows(&ens);
+    assert_eq!(ens_rows.len(), 2);
+    for r in ens_rows {
+        let v = &by_step[r[1]];
+        assert_eq!((r[2], r[3]), ("3", "3"));
+        let mean = v.iter().sum::<f64>() / 3.0;
+        let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / 2.0).sqrt();
+        let got = |i: usize| r[i].parse::<f64>().unwrap();
+        assert!(
+            (got(4) - mean).abs() <= 1e-12 * mean.abs(),
+            "{r:?} vs {v:?}"
+        );
+        assert!((got(5) - sd).abs() <= 1e-9 * sd.abs(), "{r:?} vs {v:?}");
+        // the jittered lattices differ from seed to seed
+        assert!(sd > 0.0, "{v:?}");
+        assert!(
+            stdout.contains(&format!("dem.time_step={}: dem.kinetic_energy", r[1])),
+            "{stdout}"
+        );
+    }
+    assert!(stdout.contains("(3 of 3 runs)"), "{stdout}");
 }
 
 /// `--jobs 2`: the two runs at once share the cores (each node's pool gets half of them),
@@ -334,10 +412,16 @@ fn a_study_stopped_half_way_continues_its_run_from_the_checkpoint() {
     cosim_tests::wait_for_nodes_to_leave(&name);
     let s = cosim_tests::summary(&broken.join("run000"));
     assert_ne!(s["status"], "completed", "{s}");
-    // the scene's comments edited meanwhile: the settings are the same, the run continues
+    // a wall-time checkpoint period (and a comment) added meanwhile: the variant's text
+    // differs, its settings do not, so the run continues
+    let edited = text.replace(
+        "checkpoint_every = 10",
+        "checkpoint_every = 10 # a note\ncheckpoint_wall = \"1 h\"",
+    );
+    assert_ne!(edited, text);
     std::fs::write(
         &scene,
-        format!("# edited while the study was stopped\n{text}"),
+        format!("# edited while the study was stopped\n{edited}"),
     )
     .unwrap();
 
