@@ -124,8 +124,9 @@ fn same_scene(
 
 /// Refuses to resume from a checkpoint that another scene wrote: its scene name and, when
 /// recorded, its scene text must be those of the folder's `scene.toml` — or its settings,
-/// when only comments or layout were edited since (recorded in the checkpoint, or for older
-/// checkpoints in the run folder's `scene.toml` the run was started with). Touches nothing.
+/// when only comments, layout or the checkpoint period were edited since (recorded in the
+/// checkpoint; for older checkpoints, those of the run folder's `scene.toml` the run was
+/// started with, which helps a study, whose variant text is not that file). Touches nothing.
 pub fn check_belongs(
     dir: &Path,
     state: &CheckpointState,
@@ -146,10 +147,15 @@ pub fn check_belongs(
         );
     if other {
         anyhow::bail!(
-            "{}: this checkpoint was written by a run of scene `{}` ({}), not by the scene in the folder's scene.toml (`{scene_name}`): refusing to resume a different scene; start it anew with `cosim run <scene> --out <folder> --overwrite`",
+            "{}: this checkpoint was written by a run of scene `{}` ({}), not by the scene in the folder's scene.toml (`{scene_name}`{}): refusing to resume a different scene; start it anew with `cosim run <scene> --out <folder> --overwrite`",
             dir.display(),
             state.summary.scene,
-            state.summary.scene_file
+            state.summary.scene_file,
+            if state.summary.scene == scene_name {
+                ", with other settings"
+            } else {
+                ""
+            }
         );
     }
     Ok(())

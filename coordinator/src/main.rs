@@ -105,7 +105,8 @@ enum Command {
         #[arg(long)]
         inaccurate_above: Option<f64>,
         /// Runs at the same time (default: one per two cores; each run is two processes, whose
-        /// thread pools then share the cores: RAYON_NUM_THREADS = cores / runs at once).
+        /// thread pools then share the cores: RAYON_NUM_THREADS = cores / runs at once, one
+        /// core each for serial schedules, where a run's two nodes take turns).
         #[arg(long)]
         jobs: Option<usize>,
         #[arg(long)]

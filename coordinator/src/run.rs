@@ -1341,6 +1341,14 @@ impl Run<'_> {
             settings_fingerprint: crate::checkpoint::settings_fingerprint(&self.scene.text),
         };
         crate::checkpoint::commit(&self.out_dir, &state)?;
+        // a run resumed from a scene whose text differs in settings-neutral parts (comments,
+        // the checkpoint period): its folder's scene.toml becomes this text once a checkpoint
+        // of it exists (before, the older checkpoint still matches the older text)
+        let text_path = self.out_dir.join("scene.toml");
+        if std::fs::read_to_string(&text_path).is_ok_and(|t| t != self.scene.text) {
+            proto::node::write_atomically(&text_path, self.scene.text.as_bytes())
+                .with_context(|| format!("writing {}", text_path.display()))?;
+        }
         tracing::debug!("checkpoint after window {window}");
         Ok(())
     }

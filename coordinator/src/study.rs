@@ -771,11 +771,9 @@ pub async fn run_study(
     if let Err(e) = crate::plot::study_pngs(out_dir, &outcomes, vars, metric) {
         tracing::warn!("PNG plots not written ({e:#}); the SVG plots are");
     }
-    write_ensembles(
-        &out_dir.join("ensembles.csv"),
-        metric,
-        &ensembles(&outcomes),
-    )?;
+    let ensembles_csv = out_dir.join("ensembles.csv");
+    let _ = std::fs::remove_file(&ensembles_csv); // an earlier study's, over other settings
+    write_ensembles(&ensembles_csv, metric, &ensembles(&outcomes))?;
     Ok((metric.to_string(), outcomes))
 }
 
@@ -1130,6 +1128,10 @@ pub fn ensembles(outcomes: &[Outcome]) -> Vec<Ensemble> {
             e.values.push(m);
         }
     }
+    // a seed linked to another setting gives one run per case: no ensemble
+    if out.iter().all(|e| e.runs < 2) {
+        out.clear();
+    }
     out
 }
 
@@ -1156,14 +1158,18 @@ fn write_ensembles(path: &Path, metric: &str, ensembles: &[Ensemble]) -> anyhow:
         let max = e.values.iter().copied().reduce(f64::max);
         writeln!(
             s,
-            "{},{},{},{},{},{},{:.4}",
+            "{},{},{},{},{},{},{}",
             e.runs,
             e.values.len(),
             opt(e.mean()),
             opt(e.std_dev()),
             opt(min),
             opt(max),
-            e.wall_mean_s
+            if e.values.is_empty() {
+                String::new()
+            } else {
+                format!("{:.4}", e.wall_mean_s)
+            }
         )?;
     }
     std::fs::write(path, s).with_context(|| format!("writing {}", path.display()))
@@ -1225,6 +1231,18 @@ mod tests {
         )
         .unwrap();
         let outcomes: Vec<Outcome> = plain
+            .iter()
+            .enumerate()
+            .map(|(i, v)| outcome(i, v))
+            .collect();
+        assert!(ensembles(&outcomes).is_empty());
+        // a seed linked to another setting: one run per case, no ensemble
+        let linked = variants(
+            "[dem]\ntime_step = 1\nseed = 0\n",
+            &[parse_variation("dem.time_step+dem.seed=1:1,2:2").unwrap()],
+        )
+        .unwrap();
+        let outcomes: Vec<Outcome> = linked
             .iter()
             .enumerate()
             .map(|(i, v)| outcome(i, v))

@@ -433,6 +433,9 @@ fn a_study_stopped_half_way_continues_its_run_from_the_checkpoint() {
     assert_eq!(s["status"], "completed", "{s}");
     assert!(s["resumed_after_window"].as_u64().unwrap() >= 49, "{s}");
     assert_eq!(s["windows_done"], 120);
+    // the run's folder has the text it went on with (after its next checkpoint)
+    let kept = std::fs::read_to_string(broken.join("run000/scene.toml")).unwrap();
+    assert!(kept.contains("checkpoint_wall"), "{kept}");
     for node in ["dem", "fem"] {
         let a = std::fs::read(whole.join(format!("run000/final/{node}.state"))).unwrap();
         let b = std::fs::read(broken.join(format!("run000/final/{node}.state"))).unwrap();

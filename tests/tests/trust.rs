@@ -319,7 +319,13 @@ fn resume_refuses_a_checkpoint_of_another_scene_and_touches_nothing() {
     std::fs::write(out.join("scene.toml"), &changed).unwrap();
     let mut c = cosim();
     c.arg("resume").arg(&out).arg("--no-progress");
-    assert!(!run(c).status.success());
+    let o = run(c);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("refusing to resume a different scene") && err.contains("with other settings"),
+        "{err}"
+    );
     assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), before);
 }
 
