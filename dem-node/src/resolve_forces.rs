@@ -36,6 +36,8 @@ pub struct ForceContext<'a> {
     /// Hold the elliptic Hertz stiffness of a shaped contact from its first touch
     /// ([`crate::config::StiffnessUpdate::FirstTouch`]).
     pub hold_stiffness: bool,
+    /// `dem.superquadric_surface_budget` ([`crate::narrow::superquadric::SearchSettings`]).
+    pub surface_budget: f64,
     /// Tangential history increment time (Δt, or 0 for a pure evaluation).
     pub dt: f64,
     /// A periodic cell: its edges L and their rates L̇ (an image s of a body is shifted by

@@ -294,7 +294,10 @@ fn pair_contact(
         },
     );
     let mut stats = SearchStats::default();
-    let settings = SearchSettings::default();
+    let settings = SearchSettings {
+        surface_budget: ctx.surface_budget,
+        ..SearchSettings::default()
+    };
     // the search updates the record's linearised surfaces in place
     let (normal, overlap) = (c.normal, c.overlap);
     let found = if c.touching() {

@@ -433,6 +433,16 @@ fn shape_keys_are_validated_with_the_limit_named() {
         "kind = \"superquadric\", colour = 3",
     );
     assert!(e.contains("colour"), "{e}");
+    for budget in ["0", "-1", "nan", "1e7"] {
+        let e = bad(
+            "time_step = 2e-5",
+            &format!("time_step = 2e-5\nsuperquadric_surface_budget = {budget}"),
+        );
+        assert!(
+            e.contains("dem.superquadric_surface_budget") && e.contains("0 < budget <= 1e6"),
+            "{e}"
+        );
+    }
 }
 
 /// Wellmann's sand (SEED-SPEC §3.4): semi-axes Gaussian with means 0.57, 0.395, 0.305 mm,
@@ -738,114 +748,168 @@ fn superquadric_dashpots_quasi_static_and_viscoelastic() {
 /// measures the map's error each time and sizes the reach from it).
 #[test]
 fn linearised_tracking_matches_exact_tracking() {
-    use dem::generate::{random_orientation, random_unit_vector, SplitMix64};
-    use dem::narrow::superquadric::{
-        detect, detect_tracked, track, Detection, Linearised, SearchSettings, SearchStats, SqBody,
-    };
-    let settings = SearchSettings::default();
-    let mut rng = SplitMix64::new(2026);
+    let settings = dem::narrow::superquadric::SearchSettings::default();
+    let mut rng = dem::generate::SplitMix64::new(2026);
     // (exponent range, largest turn per step in rad): a creeping bed (W's sand), a flowing
     // one, and sharp bodies
     for (eps, turn) in [((0.6, 1.2), 1e-6), ((0.6, 1.2), 1e-4), ((0.3, 1.7), 1e-6)] {
-        let (mut steps, mut exact_evaluations) = (0u32, 0u32);
-        let (mut worst_overlap, mut worst_normal, mut worst_point) = (0.0f64, 0.0f64, 0.0f64);
-        for _ in 0..30 {
-            let mut draw = || {
-                let r = V3::new(
-                    0.3 + 0.3 * rng.uniform(),
-                    0.3 + 0.3 * rng.uniform(),
-                    0.3 + 0.3 * rng.uniform(),
-                ) * 1e-3;
-                let e = |u: f64| eps.0 + (eps.1 - eps.0) * u;
-                sq([r.x, r.y, r.z], e(rng.uniform()), e(rng.uniform()))
-            };
-            let (s1, s2) = (draw(), draw());
-            let scale = 0.5 * (s1.bounding_radius() + s2.bounding_radius());
-            let target = 1e-3 * scale;
-            let mut q = [random_orientation(&mut rng), random_orientation(&mut rng)];
-            let axis = random_unit_vector(&mut rng);
-            let mut x2 = axis * (s1.bounding_radius() + s2.bounding_radius());
-            let bodies = |q: &[Orientation; 2], x2: V3| {
-                [
-                    SqBody {
-                        shape: &s1,
-                        position: V3::zeros(),
-                        rotation: q[0].to_rotation_matrix().into_inner(),
-                    },
-                    SqBody {
-                        shape: &s2,
-                        position: x2,
-                        rotation: q[1].to_rotation_matrix().into_inner(),
-                    },
-                ]
-            };
-            // bring the pair into contact with an overlap ≈ target
-            let mut start = None;
-            for _ in 0..50 {
-                let [b1, b2] = bodies(&q, x2);
-                let st = &mut SearchStats::default();
-                match detect(&b1, &b2, None, &settings, st) {
-                    Detection::Separated { normal, gap } if gap.is_finite() => {
-                        x2 -= normal * (gap + target)
-                    }
-                    Detection::Contact(c) if (c.overlap - target).abs() < 0.5 * target => {
-                        start = Some(c);
-                        break;
-                    }
-                    Detection::Contact(c) => x2 += c.normal * (c.overlap - target),
-                    Detection::Separated { .. } => x2 -= axis * target,
-                }
-            }
-            let start = start.expect("the pair comes into contact");
-            let (mut exact_prev, mut lin_prev) = ((start.normal, start.overlap), start);
-            let mut lin = Linearised::NONE;
-            for _ in 0..300 {
-                for qk in q.iter_mut() {
-                    let a = nalgebra::Unit::new_normalize(random_unit_vector(&mut rng));
-                    *qk = Orientation::from_axis_angle(&a, turn * rng.uniform()) * *qk;
-                }
-                // a random shift of the order of the turn, and back towards the target overlap
-                x2 += random_unit_vector(&mut rng) * (turn * scale * rng.uniform())
-                    + lin_prev.normal * (lin_prev.overlap - target) * 0.1;
-                let [b1, b2] = bodies(&q, x2);
-                let st = &mut SearchStats::default();
-                let exact = detect_tracked(&b1, &b2, exact_prev.0, exact_prev.1, &settings, st);
-                let st = &mut SearchStats::default();
-                let tracked = track(
-                    &b1,
-                    &b2,
-                    lin_prev.normal,
-                    lin_prev.overlap,
-                    &mut lin,
-                    &settings,
-                    st,
-                );
-                let (Detection::Contact(e), Detection::Contact(l)) = (exact, tracked) else {
-                    panic!("a pair held in contact separated: {exact:?} / {tracked:?}");
-                };
-                steps += 1;
-                exact_evaluations += st.exact_evaluations;
-                worst_overlap = worst_overlap.max((l.overlap - e.overlap).abs() / scale);
-                worst_normal = worst_normal.max((l.normal - e.normal).norm());
-                worst_point =
-                    worst_point.max((l.p1 - e.p1).norm().max((l.p2 - e.p2).norm()) / scale);
-                exact_prev = (e.normal, e.overlap);
-                lin_prev = l;
-            }
-        }
-        let per_step = exact_evaluations as f64 / steps as f64;
+        let t = linearised_tracking(eps, turn, &settings, &mut rng);
         println!(
-            "exponents {eps:?}, turns ≤ {turn:e} rad a step: {per_step:.3} exact evaluations \
-             a step; worst |Δδ|/scale {worst_overlap:.1e}, |Δc| {worst_normal:.1e}, \
-             |Δp|/scale {worst_point:.1e}"
+            "exponents {eps:?}, turns ≤ {turn:e} rad a step: {:.3} exact evaluations \
+             a step; worst |Δδ|/scale {:.1e}, |Δc| {:.1e}, |Δp|/scale {:.1e}",
+            t.per_step, t.overlap, t.normal, t.point
         );
         // the search tolerance is 1e-10 × scale in |d_t|
-        assert!(worst_overlap < 1e-10, "{worst_overlap:e}");
-        assert!(worst_point < 1e-8, "{worst_point:e}");
-        assert!(worst_normal < 1e-8, "{worst_normal:e}");
+        assert!(t.overlap < 1e-10, "{:e}", t.overlap);
+        assert!(t.point < 1e-8, "{:e}", t.point);
+        assert!(t.normal < 1e-8, "{:e}", t.normal);
         if turn <= 1e-6 {
-            assert!(per_step < 0.5, "{per_step}");
+            assert!(t.per_step < 0.5, "{}", t.per_step);
         }
+    }
+}
+
+/// `dem.superquadric_surface_budget`: a hundred times the linearisation error lets the
+/// tracked search stay on the linearised surfaces far longer (fewer exact evaluations) and
+/// moves its result by at most about as much more (still ≤ 1e-8 of the grain size here).
+#[test]
+fn a_larger_surface_budget_trades_exact_evaluations_for_a_bounded_error() {
+    use dem::narrow::superquadric::SearchSettings;
+    for (eps, turn) in [((0.6, 1.2), 1e-5), ((0.6, 1.2), 1e-4)] {
+        let run = |budget: f64| {
+            let settings = SearchSettings {
+                surface_budget: budget,
+                ..SearchSettings::default()
+            };
+            linearised_tracking(eps, turn, &settings, &mut dem::generate::SplitMix64::new(7))
+        };
+        let (tight, loose) = (run(1.0), run(100.0));
+        println!(
+            "turns ≤ {turn:e}: exact evaluations a step {:.3} → {:.3}; worst |Δδ|/scale \
+             {:.1e} → {:.1e}, |Δp|/scale {:.1e} → {:.1e}",
+            tight.per_step, loose.per_step, tight.overlap, loose.overlap, tight.point, loose.point
+        );
+        // measured: 1.05 → 0.05 at 1e-5 rad a step, 1.97 → 1.05 at 1e-4
+        assert!(loose.per_step < 0.6 * tight.per_step, "{tight:?} {loose:?}");
+        assert!(loose.overlap < 1e-8 && loose.point < 1e-6, "{loose:?}");
+        assert!(tight.overlap < 1e-10, "{tight:?}");
+    }
+}
+
+/// Worst deviations of the linearised tracked search from the exact tracked search, relative
+/// to the pair's size, and its exact evaluations per step.
+#[derive(Debug)]
+struct Tracking {
+    per_step: f64,
+    overlap: f64,
+    normal: f64,
+    point: f64,
+}
+
+/// 30 random pairs of superquadrics with exponents in `eps`, each held in contact for 300 steps
+/// of small random turns (≤ `turn` rad) and shifts, tracked both on the exact surfaces and on
+/// linearised ones with `settings`.
+fn linearised_tracking(
+    eps: (f64, f64),
+    turn: f64,
+    settings: &dem::narrow::superquadric::SearchSettings,
+    rng: &mut dem::generate::SplitMix64,
+) -> Tracking {
+    use dem::generate::{random_orientation, random_unit_vector};
+    use dem::narrow::superquadric::{
+        detect, detect_tracked, track, Detection, Linearised, SearchSettings, SearchStats, SqBody,
+    };
+    let exact_settings = SearchSettings::default();
+    let (mut steps, mut exact_evaluations) = (0u32, 0u32);
+    let (mut worst_overlap, mut worst_normal, mut worst_point) = (0.0f64, 0.0f64, 0.0f64);
+    for _ in 0..30 {
+        let mut draw = || {
+            let r = V3::new(
+                0.3 + 0.3 * rng.uniform(),
+                0.3 + 0.3 * rng.uniform(),
+                0.3 + 0.3 * rng.uniform(),
+            ) * 1e-3;
+            let e = |u: f64| eps.0 + (eps.1 - eps.0) * u;
+            sq([r.x, r.y, r.z], e(rng.uniform()), e(rng.uniform()))
+        };
+        let (s1, s2) = (draw(), draw());
+        let scale = 0.5 * (s1.bounding_radius() + s2.bounding_radius());
+        let target = 1e-3 * scale;
+        let mut q = [random_orientation(rng), random_orientation(rng)];
+        let axis = random_unit_vector(rng);
+        let mut x2 = axis * (s1.bounding_radius() + s2.bounding_radius());
+        let bodies = |q: &[Orientation; 2], x2: V3| {
+            [
+                SqBody {
+                    shape: &s1,
+                    position: V3::zeros(),
+                    rotation: q[0].to_rotation_matrix().into_inner(),
+                },
+                SqBody {
+                    shape: &s2,
+                    position: x2,
+                    rotation: q[1].to_rotation_matrix().into_inner(),
+                },
+            ]
+        };
+        // bring the pair into contact with an overlap ≈ target
+        let mut start = None;
+        for _ in 0..50 {
+            let [b1, b2] = bodies(&q, x2);
+            let st = &mut SearchStats::default();
+            match detect(&b1, &b2, None, &exact_settings, st) {
+                Detection::Separated { normal, gap } if gap.is_finite() => {
+                    x2 -= normal * (gap + target)
+                }
+                Detection::Contact(c) if (c.overlap - target).abs() < 0.5 * target => {
+                    start = Some(c);
+                    break;
+                }
+                Detection::Contact(c) => x2 += c.normal * (c.overlap - target),
+                Detection::Separated { .. } => x2 -= axis * target,
+            }
+        }
+        let start = start.expect("the pair comes into contact");
+        let (mut exact_prev, mut lin_prev) = ((start.normal, start.overlap), start);
+        let mut lin = Linearised::NONE;
+        for _ in 0..300 {
+            for qk in q.iter_mut() {
+                let a = nalgebra::Unit::new_normalize(random_unit_vector(rng));
+                *qk = Orientation::from_axis_angle(&a, turn * rng.uniform()) * *qk;
+            }
+            // a random shift of the order of the turn, and back towards the target overlap
+            x2 += random_unit_vector(rng) * (turn * scale * rng.uniform())
+                + lin_prev.normal * (lin_prev.overlap - target) * 0.1;
+            let [b1, b2] = bodies(&q, x2);
+            let st = &mut SearchStats::default();
+            let exact = detect_tracked(&b1, &b2, exact_prev.0, exact_prev.1, &exact_settings, st);
+            let st = &mut SearchStats::default();
+            let tracked = track(
+                &b1,
+                &b2,
+                lin_prev.normal,
+                lin_prev.overlap,
+                &mut lin,
+                settings,
+                st,
+            );
+            let (Detection::Contact(e), Detection::Contact(l)) = (exact, tracked) else {
+                panic!("a pair held in contact separated: {exact:?} / {tracked:?}");
+            };
+            steps += 1;
+            exact_evaluations += st.exact_evaluations;
+            worst_overlap = worst_overlap.max((l.overlap - e.overlap).abs() / scale);
+            worst_normal = worst_normal.max((l.normal - e.normal).norm());
+            worst_point = worst_point.max((l.p1 - e.p1).norm().max((l.p2 - e.p2).norm()) / scale);
+            exact_prev = (e.normal, e.overlap);
+            lin_prev = l;
+        }
+    }
+    Tracking {
+        per_step: exact_evaluations as f64 / steps as f64,
+        overlap: worst_overlap,
+        normal: worst_normal,
+        point: worst_point,
     }
 }
 

@@ -47,6 +47,10 @@ pub struct SearchSettings {
     pub max_iterations: u32,
     /// Restarts after a local minimum or no convergence.
     pub max_restarts: u32,
+    /// A tracked pair's linearised surfaces may err by this multiple of a quarter of the
+    /// tolerance before they are evaluated exactly again (`dem.superquadric_surface_budget`;
+    /// 1: the search's own accuracy).
+    pub surface_budget: f64,
 }
 
 impl Default for SearchSettings {
@@ -55,6 +59,7 @@ impl Default for SearchSettings {
             tolerance: 1e-10,
             max_iterations: 50,
             max_restarts: 16,
+            surface_budget: 1.0,
         }
     }
 }
@@ -310,8 +315,10 @@ struct Surfaces<'a, 'b> {
     b2: &'b SqBody<'a>,
     x21: V3,
     lin: &'b mut Linearised,
-    /// The search tolerance (a length): the linearisation keeps its error below a quarter.
+    /// The search tolerance (a length): the linearisation keeps its error below a quarter,
+    /// times `budget` ([`SearchSettings::surface_budget`]).
     tol: f64,
+    budget: f64,
     /// The count of exact evaluations ([`SearchStats::exact_evaluations`]).
     exact: &'b mut u32,
 }
@@ -379,7 +386,7 @@ impl Surfaces<'_, '_> {
                     // the old map against the exact point (the new map at its own normal)
                     let err = (new.point(k, n) - old.point(k, n)).norm();
                     if err > 0.0 {
-                        reach = reach.min(theta * (self.tol / (4.0 * err)).sqrt());
+                        reach = reach.min(theta * (self.budget * self.tol / (4.0 * err)).sqrt());
                     }
                     measured = true;
                 }
@@ -390,7 +397,7 @@ impl Surfaces<'_, '_> {
             for b in &s.blocks {
                 let (_, hi, ..) = sym2_eigen(b[0], b[1], b[2]);
                 if hi > 0.0 {
-                    reach = reach.min((self.tol / (2.0 * hi)).sqrt());
+                    reach = reach.min((self.budget * self.tol / (2.0 * hi)).sqrt());
                 }
             }
         } else if measured {
@@ -622,6 +629,7 @@ pub fn track(
         x21,
         lin: &mut *lin,
         tol,
+        budget: settings.surface_budget,
         exact: &mut stats.exact_evaluations,
     };
     let run = newton(
@@ -680,6 +688,7 @@ pub fn search(
         x21,
         lin,
         tol,
+        budget: settings.surface_budget,
         exact: &mut stats.exact_evaluations,
     };
     let finish = |e: Eval| finish(b1, e);
