@@ -1198,7 +1198,10 @@ mod tests {
             metric: Some(2.0 + i as f64),
             error: None,
         };
-        let outcomes: Vec<Outcome> = vs.iter().enumerate().map(|(i, v)| outcome(i, v)).collect();
+        let outcomes_of = |vs: &[Variant]| -> Vec<Outcome> {
+            vs.iter().enumerate().map(|(i, v)| outcome(i, v)).collect()
+        };
+        let outcomes = outcomes_of(&vs);
         let e = ensembles(&outcomes);
         assert_eq!(e.len(), 2);
         let case = |size: &str, count: &str| {
@@ -1230,24 +1233,14 @@ mod tests {
             &[parse_variation("dem.time_step=1,2").unwrap()],
         )
         .unwrap();
-        let outcomes: Vec<Outcome> = plain
-            .iter()
-            .enumerate()
-            .map(|(i, v)| outcome(i, v))
-            .collect();
-        assert!(ensembles(&outcomes).is_empty());
+        assert!(ensembles(&outcomes_of(&plain)).is_empty());
         // a seed linked to another setting: one run per case, no ensemble
         let linked = variants(
             "[dem]\ntime_step = 1\nseed = 0\n",
             &[parse_variation("dem.time_step+dem.seed=1:1,2:2").unwrap()],
         )
         .unwrap();
-        let outcomes: Vec<Outcome> = linked
-            .iter()
-            .enumerate()
-            .map(|(i, v)| outcome(i, v))
-            .collect();
-        assert!(ensembles(&outcomes).is_empty());
+        assert!(ensembles(&outcomes_of(&linked)).is_empty());
     }
 
     #[test]

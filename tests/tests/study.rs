@@ -7,21 +7,20 @@ use std::process::Output;
 
 use cosim_tests::{cosim, run};
 
+/// `cosim study scenes/minimal.toml <args>` comparing the kinetic energy, into `out`.
+fn study_minimal(out: &Path, args: &[&str]) -> Output {
+    let mut c = cosim();
+    c.args(["study", "scenes/minimal.toml"])
+        .args(args)
+        .args(["--metric", "dem.kinetic_energy", "--out"])
+        .arg(out);
+    run(c)
+}
+
 /// `cosim study scenes/minimal.toml --vary dem.time_step=<steps>` comparing the kinetic
 /// energy, into `out`.
 fn study_of_minimal(out: &Path, steps: &str) -> Output {
-    let mut c = cosim();
-    c.args([
-        "study",
-        "scenes/minimal.toml",
-        "--vary",
-        &format!("dem.time_step={steps}"),
-        "--metric",
-        "dem.kinetic_energy",
-        "--out",
-    ])
-    .arg(out);
-    run(c)
+    study_minimal(out, &["--vary", &format!("dem.time_step={steps}")])
 }
 
 /// The data rows of a study.csv, split into cells.
@@ -81,24 +80,19 @@ fn study_sweeps_and_resumes() {
 fn a_study_over_seeds_reports_each_cases_mean_and_spread() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("seeds");
-    let mut c = cosim();
-    c.args([
-        "study",
-        "scenes/minimal.toml",
-        "--vary",
-        "dem.particles.0.jitter=1e-3",
-        "--vary",
-        "dem.time_step=1e-5,2e-5",
-        "--vary",
-        "dem.particles.0.seed=1,2,3",
-        "--metric",
-        "dem.kinetic_energy",
-        "--jobs",
-        "2",
-        "--out",
-    ])
-    .arg(&out);
-    let o = run(c);
+    let o = study_minimal(
+        &out,
+        &[
+            "--vary",
+            "dem.particles.0.jitter=1e-3",
+            "--vary",
+            "dem.time_step=1e-5,2e-5",
+            "--vary",
+            "dem.particles.0.seed=1,2,3",
+            "--jobs",
+            "2",
+        ],
+    );
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     // the per-run values, by case
@@ -179,20 +173,7 @@ fn runs_of_a_study_at_once_share_the_cores() {
             .unwrap()
     };
     let study = |out: &Path, jobs: &str| {
-        let mut c = cosim();
-        c.args([
-            "study",
-            "scenes/minimal.toml",
-            "--vary",
-            "dem.time_step=1e-5,2e-5",
-            "--metric",
-            "dem.kinetic_energy",
-            "--jobs",
-            jobs,
-            "--out",
-        ])
-        .arg(out);
-        let o = run(c);
+        let o = study_minimal(out, &["--vary", "dem.time_step=1e-5,2e-5", "--jobs", jobs]);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     };
     let two = dir.path().join("two");
@@ -288,18 +269,7 @@ fn a_study_where_no_run_completes_still_writes_its_table_and_stability_map() {
     // no window's messages arrive within a microsecond: both runs fail (timed out)
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("study");
-    let mut c = cosim();
-    c.args([
-        "study",
-        "scenes/minimal.toml",
-        "--vary",
-        "coupling.window_timeout=1e-6,2e-6",
-        "--metric",
-        "dem.kinetic_energy",
-        "--out",
-    ])
-    .arg(&out);
-    let o = run(c);
+    let o = study_minimal(&out, &["--vary", "coupling.window_timeout=1e-6,2e-6"]);
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{stderr}");
     assert!(stderr.contains("no run of the study completed"), "{stderr}");
