@@ -106,8 +106,10 @@ impl NodeProcess {
             // not one from the user's shell either: the node keeps the default
             None => command.env_remove(proto::link::LEASE_ENV),
         };
-        if let Some(n) = threads.filter(|_| std::env::var_os(THREADS_ENV).is_none()) {
-            command.env(THREADS_ENV, n.max(1).to_string());
+        // a user's own setting wins (an empty one is rayon's "unset")
+        let users = std::env::var_os(THREADS_ENV).is_some_and(|v| !v.is_empty());
+        if let Some(n) = threads.filter(|_| !users) {
+            command.env(THREADS_ENV, n.to_string());
         }
         let child = command
             .args(&args)
