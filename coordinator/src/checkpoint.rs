@@ -56,34 +56,6 @@ pub fn scene_fingerprint(text: &str) -> String {
 /// sorted, numbers exact), so that comments, blank lines, quoting, key order and the
 /// checkpoint period do not change it; `None` if the text is not TOML.
 pub fn settings_fingerprint(text: &str) -> Option<String> {
-    fn canon(v: &toml::Value, out: &mut String) {
-        match v {
-            toml::Value::String(s) => out.push_str(&format!("{s:?}")),
-            toml::Value::Integer(i) => out.push_str(&format!("i{i}")),
-            toml::Value::Float(x) => out.push_str(&format!("f{x:?}")),
-            toml::Value::Boolean(b) => out.push_str(if *b { "true" } else { "false" }),
-            toml::Value::Datetime(d) => out.push_str(&format!("d{d}")),
-            toml::Value::Array(a) => {
-                out.push('[');
-                for x in a {
-                    canon(x, out);
-                    out.push(',');
-                }
-                out.push(']');
-            }
-            toml::Value::Table(t) => {
-                let mut keys: Vec<&String> = t.keys().collect();
-                keys.sort();
-                out.push('{');
-                for k in keys {
-                    out.push_str(&format!("{k:?}="));
-                    canon(&t[k], out);
-                    out.push(',');
-                }
-                out.push('}');
-            }
-        }
-    }
     let mut table: toml::Table = toml::from_str(text).ok()?;
     // how often checkpoints are written does not change the run (resumes are bitwise)
     if let Some(toml::Value::Table(output)) = table.get_mut("output") {
@@ -93,9 +65,9 @@ pub fn settings_fingerprint(text: &str) -> Option<String> {
             table.remove("output");
         }
     }
-    let mut out = String::new();
-    canon(&toml::Value::Table(table), &mut out);
-    Some(scene_fingerprint(&out))
+    // serde_json's maps are sorted by key; integers and floats stay apart (1 vs 1.0)
+    let canonical = serde_json::to_value(&table).ok()?.to_string();
+    Some(scene_fingerprint(&canonical))
 }
 
 /// Whether `scene_text` is the scene a checkpoint recorded by its text fingerprint `text` and

@@ -255,6 +255,9 @@ struct Run<'a> {
     /// is reported every [`WAITING_NOTICE`], or every quarter of `coupling.window_timeout`
     /// if that is shorter).
     last_heard: Instant,
+    /// A resumed run's folder holds another text of its scene (a settings-neutral edit):
+    /// the next checkpoint writes this one there.
+    stale_scene_text: bool,
 }
 
 /// How often a long wait for the nodes is reported in the log.
@@ -1344,8 +1347,8 @@ impl Run<'_> {
         // a run resumed from a scene whose text differs in settings-neutral parts (comments,
         // the checkpoint period): its folder's scene.toml becomes this text once a checkpoint
         // of it exists (before, the older checkpoint still matches the older text)
-        let text_path = self.out_dir.join("scene.toml");
-        if std::fs::read_to_string(&text_path).is_ok_and(|t| t != self.scene.text) {
+        if std::mem::take(&mut self.stale_scene_text) {
+            let text_path = self.out_dir.join("scene.toml");
             proto::node::write_atomically(&text_path, self.scene.text.as_bytes())
                 .with_context(|| format!("writing {}", text_path.display()))?;
         }
@@ -1655,6 +1658,8 @@ pub async fn run_scene(scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summa
         defer_interrupt: false,
         pending_interrupt: None,
         last_heard: Instant::now(),
+        stale_scene_text: opts.resume.is_some()
+            && std::fs::read_to_string(out_dir.join("scene.toml")).is_ok_and(|t| t != scene.text),
     };
     if let Some((_, state)) = &opts.resume {
         // the run continues: its summary so far comes from the checkpoint

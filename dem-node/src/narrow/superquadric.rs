@@ -315,10 +315,9 @@ struct Surfaces<'a, 'b> {
     b2: &'b SqBody<'a>,
     x21: V3,
     lin: &'b mut Linearised,
-    /// The search tolerance (a length): the linearisation keeps its error below a quarter,
-    /// times `budget` ([`SearchSettings::surface_budget`]).
+    /// The search tolerance (a length) times [`SearchSettings::surface_budget`]: the
+    /// linearisation keeps its error below a quarter of it.
     tol: f64,
-    budget: f64,
     /// The count of exact evaluations ([`SearchStats::exact_evaluations`]).
     exact: &'b mut u32,
 }
@@ -386,7 +385,7 @@ impl Surfaces<'_, '_> {
                     // the old map against the exact point (the new map at its own normal)
                     let err = (new.point(k, n) - old.point(k, n)).norm();
                     if err > 0.0 {
-                        reach = reach.min(theta * (self.budget * self.tol / (4.0 * err)).sqrt());
+                        reach = reach.min(theta * (self.tol / (4.0 * err)).sqrt());
                     }
                     measured = true;
                 }
@@ -397,7 +396,7 @@ impl Surfaces<'_, '_> {
             for b in &s.blocks {
                 let (_, hi, ..) = sym2_eigen(b[0], b[1], b[2]);
                 if hi > 0.0 {
-                    reach = reach.min((self.budget * self.tol / (2.0 * hi)).sqrt());
+                    reach = reach.min((self.tol / (2.0 * hi)).sqrt());
                 }
             }
         } else if measured {
@@ -628,8 +627,7 @@ pub fn track(
         b2,
         x21,
         lin: &mut *lin,
-        tol,
-        budget: settings.surface_budget,
+        tol: settings.surface_budget * tol,
         exact: &mut stats.exact_evaluations,
     };
     let run = newton(
@@ -687,8 +685,7 @@ pub fn search(
         b2,
         x21,
         lin,
-        tol,
-        budget: settings.surface_budget,
+        tol: settings.surface_budget * tol,
         exact: &mut stats.exact_evaluations,
     };
     let finish = |e: Eval| finish(b1, e);
