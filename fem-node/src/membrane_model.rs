@@ -1010,11 +1010,8 @@ impl MembraneModel {
     /// volume and outward interface force; probe displacements) and `fem_<window>.vtu` every `output.vtu_every`
     /// windows.
     pub fn write_outputs(&mut self, out_dir: &Path) -> Result<(), FemError> {
-        let io = |e: std::io::Error, p: &Path| FemError::Io {
-            path: p.display().to_string(),
-            message: e.to_string(),
-        };
-        std::fs::create_dir_all(out_dir).map_err(|e| io(e, out_dir))?;
+        let io = output::io_error;
+        output::create_dir(out_dir)?;
         self.st.windows += 1;
         let volume = self.enclosed_volume();
         if self.output.csv && (!self.probes.is_empty() || volume.is_some()) {
@@ -1025,11 +1022,7 @@ impl MembraneModel {
                 if volume.is_some() {
                     text.push_str(",volume,outward_force,top_ring_z");
                 }
-                for (name, _) in &self.probes {
-                    for c in ["ux", "uy", "uz"] {
-                        text.push_str(&format!(",probe.{name}.{c}"));
-                    }
-                }
+                output::probe_header(&mut text, &self.probes);
                 text.push('\n');
             }
             text.push_str(&format!("{:.9e}", self.st.time));
@@ -1038,11 +1031,7 @@ impl MembraneModel {
                 let z = self.top_ring_height().unwrap_or(f64::NAN);
                 text.push_str(&format!(",{v:.9e},{f:.9e},{z:.9e}"));
             }
-            for &(_, n) in &self.probes {
-                for c in 0..3 {
-                    text.push_str(&format!(",{:.9e}", self.st.u[3 * n as usize + c]));
-                }
-            }
+            output::probe_row(&mut text, &self.probes, &self.st.u, 3);
             text.push('\n');
             output::append(&path, &text, !self.st.csv_started).map_err(|e| io(e, &path))?;
             self.st.csv_started = true;
@@ -1094,9 +1083,7 @@ impl MembraneModel {
                 ],
             )
             .map_err(|e| io(e, &path))?;
-            self.vtu_files.push((self.st.time, name));
-            let pvd = out_dir.join("fem.pvd");
-            output::write_pvd(&pvd, &self.vtu_files).map_err(|e| io(e, &pvd))?;
+            output::add_to_series(out_dir, &mut self.vtu_files, self.st.time, name)?;
         }
         Ok(())
     }
@@ -1118,18 +1105,8 @@ impl MembraneModel {
         if let Some(z) = self.top_ring_height() {
             r.push(("top_ring_z".to_string(), z));
         }
-        for (name, n) in &self.probes {
-            for (c, ax) in ["ux", "uy", "uz"].iter().enumerate() {
-                r.push((format!("probe.{name}.{ax}"), self.st.u[3 * *n as usize + c]));
-            }
-        }
-        let mut total = [0.0; 3];
-        for (i, f) in self.st.interface_forces.iter().enumerate() {
-            total[i % 3] += f;
-        }
-        for (c, ax) in ["x", "y", "z"].iter().enumerate() {
-            r.push((format!("interface_force.{ax}"), total[c]));
-        }
+        output::probe_results(&mut r, &self.probes, &self.st.u, 3);
+        output::interface_force_results(&mut r, &self.st.interface_forces);
         let umax = self
             .st
             .u

@@ -143,6 +143,76 @@ pub fn write_pvd(path: &Path, files: &[(f64, String)]) -> std::io::Result<()> {
 }
 
 /// Appends (or, with `truncate`, starts) a text file.
+/// A window output's I/O failure, naming the file.
+pub(crate) fn io_error(e: std::io::Error, path: &Path) -> crate::FemError {
+    crate::FemError::Io {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    }
+}
+
+/// Creates a window's output folder.
+pub(crate) fn create_dir(out_dir: &Path) -> Result<(), crate::FemError> {
+    std::fs::create_dir_all(out_dir).map_err(|e| io_error(e, out_dir))
+}
+
+/// `fem_probes.csv`'s probe columns: `probe.<name>.ux`, `.uy`, `.uz` for each probe.
+pub(crate) fn probe_header(text: &mut String, probes: &[(String, u32)]) {
+    for (name, _) in probes {
+        for c in ["ux", "uy", "uz"] {
+            let _ = write!(text, ",probe.{name}.{c}");
+        }
+    }
+}
+
+/// The probes' displacements in a `fem_probes.csv` row: the first three of the `stride`
+/// dofs of each probe's node in `u`.
+pub(crate) fn probe_row(text: &mut String, probes: &[(String, u32)], u: &[f64], stride: usize) {
+    for &(_, n) in probes {
+        for c in 0..3 {
+            let _ = write!(text, ",{:.9e}", u[stride * n as usize + c]);
+        }
+    }
+}
+
+/// The probes' displacements as `summary.json` results (`probe.<name>.ux`, …).
+pub(crate) fn probe_results(
+    r: &mut Vec<(String, f64)>,
+    probes: &[(String, u32)],
+    u: &[f64],
+    stride: usize,
+) {
+    for (name, n) in probes {
+        for (c, ax) in ["ux", "uy", "uz"].iter().enumerate() {
+            r.push((format!("probe.{name}.{ax}"), u[stride * *n as usize + c]));
+        }
+    }
+}
+
+/// The sum of the interface forces (x, y, z per interface node) as `summary.json` results
+/// `interface_force.x`, `.y`, `.z`.
+pub(crate) fn interface_force_results(r: &mut Vec<(String, f64)>, forces: &[f64]) {
+    let mut total = [0.0; 3];
+    for (i, f) in forces.iter().enumerate() {
+        total[i % 3] += f;
+    }
+    for (c, ax) in ["x", "y", "z"].iter().enumerate() {
+        r.push((format!("interface_force.{ax}"), total[c]));
+    }
+}
+
+/// Adds the `.vtu` file `name` written at `time` to the series and rewrites `fem.pvd`.
+pub(crate) fn add_to_series(
+    out_dir: &Path,
+    files: &mut Vec<(f64, String)>,
+    time: f64,
+    name: String,
+) -> Result<(), crate::FemError> {
+    files.push((time, name));
+    let pvd = out_dir.join("fem.pvd");
+    write_pvd(&pvd, files).map_err(|e| io_error(e, &pvd))
+}
+
 pub fn append(path: &Path, text: &str, truncate: bool) -> std::io::Result<()> {
     let mut f = std::fs::OpenOptions::new()
         .create(true)

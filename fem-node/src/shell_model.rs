@@ -1377,30 +1377,19 @@ impl ShellModel {
     /// After each window: probe rows to `fem_probes.csv` and `fem_<window>.vtu` (+ `fem.pvd`)
     /// every `output.vtu_every` windows.
     pub fn write_outputs(&mut self, out_dir: &Path) -> Result<(), FemError> {
-        let io = |e: std::io::Error, p: &Path| FemError::Io {
-            path: p.display().to_string(),
-            message: e.to_string(),
-        };
-        std::fs::create_dir_all(out_dir).map_err(|e| io(e, out_dir))?;
+        let io = output::io_error;
+        output::create_dir(out_dir)?;
         self.st.windows += 1;
         if self.output.csv && !self.probes.is_empty() {
             let path = out_dir.join("fem_probes.csv");
             let mut text = String::new();
             if !self.st.csv_started {
                 text.push_str("time");
-                for (name, _) in &self.probes {
-                    for c in ["ux", "uy", "uz"] {
-                        text.push_str(&format!(",probe.{name}.{c}"));
-                    }
-                }
+                output::probe_header(&mut text, &self.probes);
                 text.push('\n');
             }
             text.push_str(&format!("{:.9e}", self.st.time));
-            for &(_, n) in &self.probes {
-                for c in 0..3 {
-                    text.push_str(&format!(",{:.9e}", self.st.u[6 * n as usize + c]));
-                }
-            }
+            output::probe_row(&mut text, &self.probes, &self.st.u, 6);
             text.push('\n');
             output::append(&path, &text, !self.st.csv_started).map_err(|e| io(e, &path))?;
             self.st.csv_started = true;
@@ -1437,9 +1426,7 @@ impl ShellModel {
                 ],
             )
             .map_err(|e| io(e, &path))?;
-            self.vtu_files.push((self.st.time, name));
-            let pvd = out_dir.join("fem.pvd");
-            output::write_pvd(&pvd, &self.vtu_files).map_err(|e| io(e, &pvd))?;
+            output::add_to_series(out_dir, &mut self.vtu_files, self.st.time, name)?;
         }
         Ok(())
     }
@@ -1452,18 +1439,8 @@ impl ShellModel {
             ("elements".to_string(), self.mesh.shells.len() as f64),
             ("time".to_string(), self.st.time),
         ];
-        for (name, n) in &self.probes {
-            for (c, ax) in ["ux", "uy", "uz"].iter().enumerate() {
-                r.push((format!("probe.{name}.{ax}"), self.st.u[6 * *n as usize + c]));
-            }
-        }
-        let mut total = [0.0; 3];
-        for (i, f) in self.st.interface_forces.iter().enumerate() {
-            total[i % 3] += f;
-        }
-        for (c, ax) in ["x", "y", "z"].iter().enumerate() {
-            r.push((format!("interface_force.{ax}"), total[c]));
-        }
+        output::probe_results(&mut r, &self.probes, &self.st.u, 6);
+        output::interface_force_results(&mut r, &self.st.interface_forces);
         let umax = (0..self.mesh.num_nodes())
             .map(|n| norm(part(&self.st.u, n, 0)))
             .fold(0.0, f64::max);

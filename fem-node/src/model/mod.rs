@@ -995,11 +995,8 @@ impl Model {
     /// Called after each coupling window: appends probe rows to `fem_probes.csv` and writes
     /// `fem_<window>.vtu` (+ `fem.pvd`) every `output.vtu_every` windows.
     pub fn write_outputs(&mut self, out_dir: &Path) -> Result<(), FemError> {
-        let io = |e: std::io::Error, p: &Path| FemError::Io {
-            path: p.display().to_string(),
-            message: e.to_string(),
-        };
-        std::fs::create_dir_all(out_dir).map_err(|e| io(e, out_dir))?;
+        let io = output::io_error;
+        output::create_dir(out_dir)?;
         self.st.windows += 1;
         let strains = self.gauge_strains();
         for (peak, now) in self.st.strain_peaks.iter_mut().zip(&strains) {
@@ -1018,11 +1015,7 @@ impl Model {
             let mut text = String::new();
             if !self.st.csv_started {
                 text.push_str("time");
-                for (name, _) in &self.probes {
-                    for c in ["ux", "uy", "uz"] {
-                        text.push_str(&format!(",probe.{name}.{c}"));
-                    }
-                }
+                output::probe_header(&mut text, &self.probes);
                 for (name, _) in &self.gauges {
                     for q in STRAIN_QUANTITIES {
                         text.push_str(&format!(",strain.{name}.{q}"));
@@ -1043,11 +1036,7 @@ impl Model {
                 text.push('\n');
             }
             text.push_str(&format!("{:.9e}", self.st.time));
-            for &(_, n) in &self.probes {
-                for c in 0..3 {
-                    text.push_str(&format!(",{:.9e}", self.st.u[3 * n as usize + c]));
-                }
-            }
+            output::probe_row(&mut text, &self.probes, &self.st.u, 3);
             for v in strains.iter().flatten() {
                 text.push_str(&format!(",{v:.9e}"));
             }
@@ -1100,9 +1089,7 @@ impl Model {
                 )
             };
             written.map_err(|e| io(e, &path))?;
-            self.vtu_files.push((self.st.time, name));
-            let pvd = out_dir.join("fem.pvd");
-            output::write_pvd(&pvd, &self.vtu_files).map_err(|e| io(e, &pvd))?;
+            output::add_to_series(out_dir, &mut self.vtu_files, self.st.time, name)?;
         }
         Ok(())
     }
@@ -1115,23 +1102,13 @@ impl Model {
             ("elements".to_string(), self.mesh.num_elements() as f64),
             ("time".to_string(), self.st.time),
         ];
-        for (name, n) in &self.probes {
-            for (c, ax) in ["ux", "uy", "uz"].iter().enumerate() {
-                r.push((format!("probe.{name}.{ax}"), self.st.u[3 * *n as usize + c]));
-            }
-        }
+        output::probe_results(&mut r, &self.probes, &self.st.u, 3);
         for (name, f) in self.support_reactions() {
             for (c, ax) in ["x", "y", "z"].iter().enumerate() {
                 r.push((format!("reaction.{name}.{ax}"), f[c]));
             }
         }
-        let mut total = [0.0; 3];
-        for (i, f) in self.st.interface_forces.iter().enumerate() {
-            total[i % 3] += f;
-        }
-        for (c, ax) in ["x", "y", "z"].iter().enumerate() {
-            r.push((format!("interface_force.{ax}"), total[c]));
-        }
+        output::interface_force_results(&mut r, &self.st.interface_forces);
         let umax = (0..self.mesh.num_nodes())
             .map(|n| {
                 (0..3)
