@@ -16,13 +16,15 @@
 #              steps of fall, impacts and settling: ns per particle-step
 #   polyhedra  2,000 dilated polyhedra (30 triangles) settled (cached), 500 steps: core-µs per
 #              particle-step
+#   superquadrics  2,000 superquadrics of Wellmann's sand settled (cached), 2,000 steps: core-µs
+#              per particle-step
 #   fem10      static beam, hex8 10 mm (36,663 dof): build + assembly + factorise + solve, s
 #   transport  10k-node kinematics round trip on loopback: median µs
 #   window     the coupling overhead per window of scenes/sheet-ci.toml (7,000 windows of a
 #              predictive DEM-FEM run, release binaries, ~30 s): (wall − critical path) / windows, µs
 #
 # Environment: N [3] runs per case; TOLERANCE [10] percent; THREADS [2] cores per benchmark;
-# GUARD_CASES ["dense pour polyhedra fem10 transport window"]; GUARD_FILE [bench/guard.tsv];
+# GUARD_CASES ["dense pour polyhedra superquadrics fem10 transport window"]; GUARD_FILE [bench/guard.tsv];
 # GUARD_CACHE [~/.cache/cosim-guard] (settled states, the pour's start file, logs);
 # GUARD_NO_BUILD [0] (1: use the newest bench executables found, see bench/lib.sh).
 #
@@ -36,7 +38,7 @@ ROOT=$(dirname "$HERE")
 N=${N:-3}
 TOLERANCE=${TOLERANCE:-10}
 THREADS=${THREADS:-2}
-GUARD_CASES=${GUARD_CASES:-"dense pour polyhedra fem10 transport window"}
+GUARD_CASES=${GUARD_CASES:-"dense pour polyhedra superquadrics fem10 transport window"}
 GUARD_FILE=${GUARD_FILE:-$HERE/guard.tsv}
 CACHE=${GUARD_CACHE:-$HOME/.cache/cosim-guard}
 RECORD=0
@@ -56,8 +58,8 @@ done
 mkdir -p "$CACHE"
 source "$HERE/lib.sh"
 
-bench_of() { case $1 in dense) echo dense_bed ;; pour) echo pour ;; polyhedra) echo polyhedron_bed ;; fem10) echo static_beam ;; transport) echo transport ;; window) echo cosim ;; *) die "unknown case '$1' (dense pour polyhedra fem10 transport window)" ;; esac; }
-unit_of() { case $1 in dense | pour) echo ns/particle-step ;; polyhedra) echo core-µs/particle-step ;; fem10) echo s ;; transport | window) echo µs ;; esac; }
+bench_of() { case $1 in dense) echo dense_bed ;; pour) echo pour ;; polyhedra) echo polyhedron_bed ;; superquadrics) echo superquadric_bed ;; fem10) echo static_beam ;; transport) echo transport ;; window) echo cosim ;; *) die "unknown case '$1' (dense pour polyhedra superquadrics fem10 transport window)" ;; esac; }
+unit_of() { case $1 in dense | pour) echo ns/particle-step ;; polyhedra | superquadrics) echo core-µs/particle-step ;; fem10) echo s ;; transport | window) echo µs ;; esac; }
 
 # one run of a case: prints its figure (stdout), log in $CACHE/<case>.<run>.log
 measure() { # case run
@@ -79,6 +81,11 @@ measure() { # case run
     polyhedra)
         PB_THREADS=$THREADS PB_COUNT=2000 PB_STEPS=500 PB_NARROW=0 PB_CACHE="$CACHE/poly2000.snap" \
             "$bin" >"$log" 2>&1 || die "polyhedron bed failed: $log"
+        sed -n 's/.* timed steps: .* = \([0-9.]*\) core-µs per particle-step.*/\1/p' "$log"
+        ;;
+    superquadrics)
+        SQ_BED_THREADS=$THREADS SQ_BED_COUNT=2000 SQ_BED_STEPS=2000 SQ_PROTOCOL_PAIRS=0 SQ_BED_NARROW=0 \
+            SQ_BED_CACHE="$CACHE/sq2000.snap" "$bin" >"$log" 2>&1 || die "superquadric bed failed: $log"
         sed -n 's/.* timed steps: .* = \([0-9.]*\) core-µs per particle-step.*/\1/p' "$log"
         ;;
     fem10)

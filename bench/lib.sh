@@ -41,6 +41,7 @@ build_bench() {
     dense_bed) (cd "$ROOT" && cargo bench --no-run -p dem-node --bench dense_bed) ;;
     pour) (cd "$ROOT" && cargo bench --no-run -p dem-node --bench pour) ;;
     polyhedron_bed) (cd "$ROOT" && cargo bench --no-run -p dem-node --bench polyhedron_bed) ;;
+    superquadric_bed) (cd "$ROOT" && cargo bench --no-run -p dem-node --bench superquadric_bed) ;;
     static_beam) (cd "$ROOT" && cargo bench --no-run -p fem-node --no-default-features --bench static_beam) ;;
     transport) (cd "$ROOT" && cargo bench --no-run -p proto --bench transport) ;;
     esac
