@@ -49,7 +49,7 @@ die() { log "guard.sh: $*"; exit 2; }
 for a in "$@"; do
     case $a in
     --record) RECORD=1 ;;
-    -h | --help) sed -n '2,30p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h | --help) awk 'NR > 1 && /^#/ {sub(/^# ?/, ""); print; next} NR > 1 {exit}' "${BASH_SOURCE[0]}"; exit 0 ;;
     *) die "unknown argument '$a' (--record, --help)" ;;
     esac
 done

@@ -142,7 +142,6 @@ pub fn write_pvd(path: &Path, files: &[(f64, String)]) -> std::io::Result<()> {
     std::fs::write(path, s)
 }
 
-/// Appends (or, with `truncate`, starts) a text file.
 /// A window output's I/O failure, naming the file.
 pub(crate) fn io_error(e: std::io::Error, path: &Path) -> crate::FemError {
     crate::FemError::Io {
@@ -213,6 +212,7 @@ pub(crate) fn add_to_series(
     write_pvd(&pvd, files).map_err(|e| io_error(e, &pvd))
 }
 
+/// Appends (or, with `truncate`, starts) a text file.
 pub fn append(path: &Path, text: &str, truncate: bool) -> std::io::Result<()> {
     let mut f = std::fs::OpenOptions::new()
         .create(true)
