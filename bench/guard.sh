@@ -16,8 +16,8 @@
 #              steps of fall, impacts and settling: ns per particle-step
 #   polyhedra  2,000 dilated polyhedra (30 triangles) settled (cached), 500 steps: core-µs per
 #              particle-step
-#   superquadrics  2,000 superquadrics of Wellmann's sand settled (cached), 2,000 steps: core-µs
-#              per particle-step
+#   superquadrics  2,000 superquadrics of Wellmann's sand settled (cached), 2,000 steps on one
+#              thread (on two the runs spread by ±20 % on the VM): core-µs per particle-step
 #   fem10      static beam, hex8 10 mm (36,663 dof): build + assembly + factorise + solve, s
 #   transport  10k-node kinematics round trip on loopback: median µs
 #   window     the coupling overhead per window of scenes/sheet-ci.toml (7,000 windows of a
@@ -84,7 +84,7 @@ measure() { # case run
         sed -n 's/.* timed steps: .* = \([0-9.]*\) core-µs per particle-step.*/\1/p' "$log"
         ;;
     superquadrics)
-        SQ_BED_THREADS=$THREADS SQ_BED_COUNT=2000 SQ_BED_STEPS=2000 SQ_PROTOCOL_PAIRS=0 SQ_BED_NARROW=0 \
+        SQ_BED_THREADS=1 SQ_BED_COUNT=2000 SQ_BED_STEPS=2000 SQ_PROTOCOL_PAIRS=0 SQ_BED_NARROW=0 \
             SQ_BED_CACHE="$CACHE/sq2000.snap" "$bin" >"$log" 2>&1 || die "superquadric bed failed: $log"
         sed -n 's/.* timed steps: .* = \([0-9.]*\) core-µs per particle-step.*/\1/p' "$log"
         ;;
