@@ -499,42 +499,13 @@ impl MembraneModel {
                 }
             })
             .collect();
-        // probes
-        let longest = elems
-            .iter()
-            .flat_map(|p| (0..p.len()).map(|k| (p[k] as usize, p[(k + 1) % p.len()] as usize)))
-            .map(|(a, b)| norm(sub(mesh.nodes[a], mesh.nodes[b])))
-            .fold(0.0, f64::max);
-        let mut probes = Vec::new();
-        for (i, p) in cfg.probes.iter().enumerate() {
-            let node = if let Some(id) = p.node {
-                mesh.node_ids
-                    .iter()
-                    .position(|&x| x == id)
-                    .filter(|&n| used[n])
-                    .ok_or_else(|| {
-                        FemError::Selection(format!(
-                            "fem.probes[{i}] '{}': node {id} is not a membrane node of {}",
-                            p.name, mesh.source
-                        ))
-                    })? as u32
-            } else {
-                let q = p.point.expect("validated");
-                let (d, n) = (0..nn)
-                    .filter(|&n| used[n])
-                    .map(|n| (norm(sub(mesh.nodes[n], q)), n as u32))
-                    .fold((f64::INFINITY, 0), |a, b| if b.0 < a.0 { b } else { a });
-                if d > longest {
-                    return Err(FemError::Selection(format!(
-                        "fem.probes[{i}] '{}': point {q:?} is {d:.3e} m from the nearest \
-                         membrane node, farther than the longest edge ({longest:.3e} m)",
-                        p.name
-                    )));
-                }
-                n
-            };
-            probes.push((p.name.clone(), node));
-        }
+        let probes = crate::output::thin_probes(
+            &cfg.probes,
+            &mesh,
+            &used,
+            elems.iter().map(|p| &p[..]),
+            "membrane",
+        )?;
         let n_iface = iface_nodes.len();
         Ok(MembraneModel {
             st: State {

@@ -156,6 +156,57 @@ pub(crate) fn create_dir(out_dir: &Path) -> Result<(), crate::FemError> {
 }
 
 /// `fem_probes.csv`'s probe columns: `probe.<name>.ux`, `.uy`, `.uz` for each probe.
+/// The probes of a thin structure (`kind`: "shell", "membrane") as (name, node): a node named
+/// by its file id must be one of the structure's (`used`); a point takes the used node nearest
+/// to it, which must lie within the structure's longest edge of it (from `cells`, each a
+/// closed polygon of node indices).
+pub(crate) fn thin_probes<'a>(
+    probes: &[crate::config::Probe],
+    mesh: &Mesh,
+    used: &[bool],
+    cells: impl Iterator<Item = &'a [u32]>,
+    kind: &str,
+) -> Result<Vec<(String, u32)>, crate::FemError> {
+    let dist = |a: [f64; 3], b: [f64; 3]| {
+        ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+    };
+    let longest = cells
+        .flat_map(|c| (0..c.len()).map(move |k| (c[k] as usize, c[(k + 1) % c.len()] as usize)))
+        .map(|(a, b)| dist(mesh.nodes[a], mesh.nodes[b]))
+        .fold(0.0, f64::max);
+    let mut out = Vec::with_capacity(probes.len());
+    for (i, p) in probes.iter().enumerate() {
+        let node = if let Some(id) = p.node {
+            mesh.node_ids
+                .iter()
+                .position(|&x| x == id)
+                .filter(|&n| used[n])
+                .ok_or_else(|| {
+                    crate::FemError::Selection(format!(
+                        "fem.probes[{i}] '{}': node {id} is not a {kind} node of {}",
+                        p.name, mesh.source
+                    ))
+                })? as u32
+        } else {
+            let q = p.point.expect("validated");
+            let (d, n) = (0..mesh.nodes.len())
+                .filter(|&n| used[n])
+                .map(|n| (dist(mesh.nodes[n], q), n as u32))
+                .fold((f64::INFINITY, 0), |a, b| if b.0 < a.0 { b } else { a });
+            if d > longest {
+                return Err(crate::FemError::Selection(format!(
+                    "fem.probes[{i}] '{}': point {q:?} is {d:.3e} m from the nearest {kind} \
+                     node ({}), farther than the longest {kind} edge ({longest:.3e} m)",
+                    p.name, mesh.node_ids[n as usize]
+                )));
+            }
+            n
+        };
+        out.push((p.name.clone(), node));
+    }
+    Ok(out)
+}
+
 pub(crate) fn probe_header(text: &mut String, probes: &[(String, u32)]) {
     for (name, _) in probes {
         for c in ["ux", "uy", "uz"] {

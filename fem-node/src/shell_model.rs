@@ -530,41 +530,13 @@ impl ShellModel {
             None => ShellInterface::new(&mesh, &(0..ns).collect::<Vec<_>>(), ShellFaces::Both),
         };
 
-        let mut probes = Vec::new();
-        let longest = quads
-            .iter()
-            .flat_map(|q| (0..4).map(move |k| (q[k], q[(k + 1) % 4])))
-            .map(|(a, b)| norm(sub(mesh.nodes[a as usize], mesh.nodes[b as usize])))
-            .fold(0.0, f64::max);
-        for (i, p) in cfg.probes.iter().enumerate() {
-            let node = if let Some(id) = p.node {
-                mesh.node_ids
-                    .iter()
-                    .position(|&x| x == id)
-                    .filter(|&n| used[n])
-                    .ok_or_else(|| {
-                        FemError::Selection(format!(
-                            "fem.probes[{i}] '{}': node {id} is not a shell node of {}",
-                            p.name, mesh.source
-                        ))
-                    })? as u32
-            } else {
-                let q = p.point.expect("validated");
-                let (d, n) = (0..nn)
-                    .filter(|&n| used[n])
-                    .map(|n| (norm(sub(mesh.nodes[n], q)), n as u32))
-                    .fold((f64::INFINITY, 0), |a, b| if b.0 < a.0 { b } else { a });
-                if d > longest {
-                    return Err(FemError::Selection(format!(
-                        "fem.probes[{i}] '{}': point {q:?} is {d:.3e} m from the nearest shell \
-                         node ({}), farther than the longest shell edge ({longest:.3e} m)",
-                        p.name, mesh.node_ids[n as usize]
-                    )));
-                }
-                n
-            };
-            probes.push((p.name.clone(), node));
-        }
+        let probes = crate::output::thin_probes(
+            &cfg.probes,
+            &mesh,
+            &used,
+            quads.iter().map(|q| &q[..]),
+            "shell",
+        )?;
 
         let n_iface = iface.nodes.len();
         Ok(ShellModel {

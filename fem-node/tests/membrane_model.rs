@@ -349,6 +349,19 @@ fn bad_membrane_scenes_are_refused_with_the_field_named() {
         let e = refusal(&base.replacen(from, to, 1));
         assert!(e.contains(needle), "expected {needle}: {e}");
     }
+    // probes: a point far from the tube, a node that is not one of it
+    let probe = format!("point = [{R}, 0.0, 0.01]");
+    assert!(base.contains(&probe));
+    let e = refusal(&base.replacen(&probe, "point = [1.0, 0.0, 0.01]", 1));
+    assert!(
+        e.contains("fem.probes[0] 'side'") && e.contains("farther than the longest membrane edge"),
+        "{e}"
+    );
+    let e = refusal(&base.replacen(&probe, "node = 999999", 1));
+    assert!(
+        e.contains("fem.probes[0] 'side': node 999999 is not a membrane node"),
+        "{e}"
+    );
     // a membrane with a volume material, a driven component also held
     let e = refusal(&base.replace(
         "[fem.membrane]",

@@ -455,6 +455,23 @@ fn bad_shell_scenes_are_refused_by_name() {
     assert!(e.contains("fem.solver"), "{e}");
     let e = err(&nonlinear(&strip("[fem.newton]\nalways = true\n")), here);
     assert!(e.contains("fem.newton.always"), "{e}");
+    // probes: a point off the strip, a node that is not one of it
+    let e = err(
+        &strip("[[fem.probes]]\nname = \"off\"\npoint = [0.15, 0.025, 1.0]\n"),
+        here,
+    );
+    assert!(
+        e.contains("fem.probes[0] 'off'") && e.contains("farther than the longest shell edge"),
+        "{e}"
+    );
+    let e = err(
+        &strip("[[fem.probes]]\nname = \"gone\"\nnode = 999999\n"),
+        here,
+    );
+    assert!(
+        e.contains("fem.probes[0] 'gone': node 999999 is not a shell node"),
+        "{e}"
+    );
     // a support of rotations only is a support
     let rotations_only =
         strip("") + "[[fem.supports]]\non = { set = \"xmax\" }\nfix = []\nrotations = [\"x\"]\n";
