@@ -155,7 +155,6 @@ pub(crate) fn create_dir(out_dir: &Path) -> Result<(), crate::FemError> {
     std::fs::create_dir_all(out_dir).map_err(|e| io_error(e, out_dir))
 }
 
-/// `fem_probes.csv`'s probe columns: `probe.<name>.ux`, `.uy`, `.uz` for each probe.
 /// The probes of a thin structure (`kind`: "shell", "membrane") as (name, node): a node named
 /// by its file id must be one of the structure's (`used`); a point takes the used node nearest
 /// to it, which must lie within the structure's longest edge of it (from `cells`, each a
@@ -207,6 +206,7 @@ pub(crate) fn thin_probes<'a>(
     Ok(out)
 }
 
+/// `fem_probes.csv`'s probe columns: `probe.<name>.ux`, `.uy`, `.uz` for each probe.
 pub(crate) fn probe_header(text: &mut String, probes: &[(String, u32)]) {
     for (name, _) in probes {
         for c in ["ux", "uy", "uz"] {

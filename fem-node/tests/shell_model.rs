@@ -502,6 +502,21 @@ fn bad_shell_scenes_are_refused_by_name() {
     std::fs::write(dir.path().join("thick.inp"), inp).unwrap();
     let e = err(&format!("[fem]\nmesh = \"thick.inp\"\n{mat}"), dir.path());
     assert!(e.contains("thick.inp:") && e.contains("curvature"), "{e}");
+    // a probe on a node of the file that no shell uses
+    std::fs::write(
+        dir.path().join("orphan.inp"),
+        "*NODE\n1, 0, 0, 0\n2, 1, 0, 0\n3, 1, 1, 0\n4, 0, 1, 0\n9, 0.5, 0.5, 0\n\
+         *ELEMENT, TYPE=S4, ELSET=A\n1, 1, 2, 3, 4\n*SHELL SECTION, ELSET=A, MATERIAL=S\n0.01\n",
+    )
+    .unwrap();
+    let e = err(
+        &format!("[fem]\nmesh = \"orphan.inp\"\n{mat}[[fem.probes]]\nname = \"lone\"\nnode = 9\n"),
+        dir.path(),
+    );
+    assert!(
+        e.contains("fem.probes[0] 'lone': node 9 is not a shell node"),
+        "{e}"
+    );
     // a solid deck keeps parsing with shell sections a shell model could not use
     std::fs::write(
         dir.path().join("solid.inp"),
