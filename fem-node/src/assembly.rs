@@ -340,7 +340,7 @@ fn corner_anchors(mesh: &Mesh, dofs: &DofMap, p: &Pattern) -> Vec<[u32; 2]> {
 
 /// faer's symbolic Cholesky analysis of the symmetric pattern `a` eliminated in `order`
 /// (`order[i]`: the row and column eliminated i-th).
-pub(crate) fn analyse_in_order(
+fn analyse_in_order(
     a: SymbolicSparseColMatRef<'_, u32>,
     order: &[u32],
 ) -> Result<SymbolicCholesky<u32>, faer::sparse::FaerError> {
@@ -1011,7 +1011,7 @@ pub struct Factor {
 
 enum FactorValues {
     Whole(Vec<f64>),
-    Split(crate::tree_factor::SplitFactor),
+    Split(crate::tree_factor::SplitFactor<f64>),
 }
 
 /// The symbolic analysis of one pattern (ordering, elimination tree, supernodes) and, where
@@ -1022,18 +1022,9 @@ pub struct FactorPlan {
     full: std::sync::OnceLock<SymbolicCholesky<u32>>,
     /// The elimination order of the equations.
     order: Vec<u32>,
-    /// The tree split: planned with the analysis, or (a plan made for a solver that may not
-    /// factorise in f64, [`SplitWhen::Later`]) when [`Factor`] first asks for it.
-    split: std::sync::OnceLock<Option<crate::tree_factor::SplitPlan>>,
-    /// What a later split is planned from, kept only while the split is pending.
-    pending: std::sync::Mutex<Option<PendingSplit>>,
-}
-
-/// A tree split left for later: on the node graph (with its chosen order, None: the
-/// numbering), or on the whole factor's elimination tree (a pattern without its nodes).
-enum PendingSplit {
-    Nodes(NodeGraph, Option<Vec<u32>>),
-    Equations,
+    /// The tree split, planned with the analysis: both [`Factor`] (f64) and [`MixedFactor`]
+    /// (f32) factorise as its two halves side by side.
+    split: Option<crate::tree_factor::SplitPlan>,
 }
 
 impl FactorPlan {
@@ -1064,53 +1055,10 @@ impl FactorPlan {
         }
     }
 
-    /// The tree split [`Factor`] uses, if any (None also while a later split is pending).
+    /// The tree split the factors use, if any.
     pub fn split(&self) -> Option<&crate::tree_factor::SplitPlan> {
-        self.split.get().and_then(Option::as_ref)
+        self.split.as_ref()
     }
-
-    /// The tree split of `pattern` (the pattern this plan is for), planned now if it was left
-    /// for later.
-    fn plan_split(&self, pattern: &Pattern) -> Option<&crate::tree_factor::SplitPlan> {
-        self.split
-            .get_or_init(|| {
-                let pending = self
-                    .pending
-                    .lock()
-                    .unwrap_or_else(std::sync::PoisonError::into_inner)
-                    .take();
-                let t0 = std::time::Instant::now();
-                let split = match pending? {
-                    PendingSplit::Nodes(g, node_order) => {
-                        split_on_nodes(pattern, &g, node_order.as_deref(), &self.order)
-                    }
-                    PendingSplit::Equations => {
-                        crate::tree_factor::SplitPlan::new(pattern, self.full(pattern).ok()?)
-                    }
-                };
-                if timing() {
-                    tracing::debug!(
-                        "  {}, planned in {:?}",
-                        describe_split(split.as_ref()),
-                        t0.elapsed()
-                    );
-                }
-                split
-            })
-            .as_ref()
-    }
-}
-
-/// When [`ensure_symbolic_with`] plans the tree split.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum SplitWhen {
-    /// With the analysis (beside the assembly: the f64 factor will be used).
-    Now,
-    /// When the f64 factor is first computed: a plan for a solver that may factorise in f32
-    /// only ([`MixedFactor`], whose factor is whole: the halves' structures would cost more
-    /// memory than f32 saves, docs/performance.md, *FEM*). The whole factor's analysis is
-    /// made with the plan (beside the assembly), as the f32 factor needs it.
-    Later,
 }
 
 fn describe_split(split: Option<&crate::tree_factor::SplitPlan>) -> String {
@@ -1151,22 +1099,13 @@ pub fn ensure_symbolic(
     pattern: &Pattern,
     symbolic: &mut Option<Symbolic>,
 ) -> Result<Symbolic, FemError> {
-    ensure_symbolic_with(pattern, symbolic, SplitWhen::Now)
-}
-
-/// [`ensure_symbolic`], with the tree split planned `when`.
-pub fn ensure_symbolic_with(
-    pattern: &Pattern,
-    symbolic: &mut Option<Symbolic>,
-    when: SplitWhen,
-) -> Result<Symbolic, FemError> {
     if symbolic.is_none() {
         let sizes = if tree_split_enabled() {
             SPLIT_FROM..PARALLEL_FACTOR_FROM
         } else {
             0..0
         };
-        *symbolic = Some(analyse_with(pattern, sizes, when)?);
+        *symbolic = Some(analyse(pattern, sizes)?);
     }
     Ok(symbolic.clone().expect("set above"))
 }
@@ -1189,17 +1128,6 @@ pub fn analyse(
     pattern: &Pattern,
     split_sizes: std::ops::Range<usize>,
 ) -> Result<Symbolic, FemError> {
-    analyse_with(pattern, split_sizes, SplitWhen::Now)
-}
-
-/// [`analyse`], with the tree split planned `when` ([`SplitWhen::Later`]: left until
-/// [`Factor`] asks for it).
-pub fn analyse_with(
-    pattern: &Pattern,
-    split_sizes: std::ops::Range<usize>,
-    when: SplitWhen,
-) -> Result<Symbolic, FemError> {
-    let later = when == SplitWhen::Later;
     let t0 = std::time::Instant::now();
     let mut chosen = "nested dissection";
     let mut order: Option<Vec<u32>> = None;
@@ -1248,66 +1176,39 @@ pub fn analyse_with(
     // symbolic analysis is then left until something asks for it.
     let t_split = std::time::Instant::now();
     let had_nodes = node_choice.is_some();
-    let mut pending = None;
     let mut split = match node_choice {
         // d² entries per node-graph entry for d equations per node (3 for solids, 6 for shells)
         Some((g, node_order, fill))
             if split_sizes.contains(&(fill * (pattern.n / g.n().max(1)).pow(2))) =>
         {
-            if later {
-                pending = Some(PendingSplit::Nodes(g, node_order));
-                None
-            } else {
-                split_on_nodes(pattern, &g, node_order.as_deref(), &order)
-            }
+            split_on_nodes(pattern, &g, node_order.as_deref(), &order)
         }
         _ => None,
     };
     let full = std::sync::OnceLock::new();
-    // without a split (or with one left for later: the f32 factor, which is whole, will need
-    // it) the whole factor's analysis runs now, beside the assembly
+    // without a split the whole factor's analysis runs now, beside the assembly
     if split.is_none() {
         let sym = analyse_in_order(pattern.symbolic(), &order)
             .map_err(|e| FemError::Solver(format!("symbolic Cholesky failed: {e:?}")))?;
         // a pattern without its nodes: planned on the equations' tree
         if !had_nodes && split_sizes.contains(&sym.len_val()) {
-            if later {
-                pending = Some(PendingSplit::Equations);
-            } else {
-                split = crate::tree_factor::SplitPlan::new(pattern, &sym);
-            }
+            split = crate::tree_factor::SplitPlan::new(pattern, &sym);
         }
         let _ = full.set(sym);
     }
     if timing() {
         tracing::debug!(
-            "  ordering: {chosen}, {} (node-graph fills: {fills}), {:?}; {}",
+            "  ordering: {chosen}, {} (node-graph fills: {fills}), {:?}; {}, planned in {:?}",
             match full.get() {
                 Some(sym) => format!("nnz(L) = {}", sym.len_val()),
                 None => "whole factor not analysed".into(),
             },
             t0.elapsed(),
-            if pending.is_some() {
-                "tree split left for the f64 factor".to_string()
-            } else {
-                format!(
-                    "{}, planned in {:?}",
-                    describe_split(split.as_ref()),
-                    t_split.elapsed()
-                )
-            }
+            describe_split(split.as_ref()),
+            t_split.elapsed()
         );
     }
-    let split_cell = std::sync::OnceLock::new();
-    if pending.is_none() {
-        let _ = split_cell.set(split);
-    }
-    Ok(Arc::new(FactorPlan {
-        full,
-        order,
-        split: split_cell,
-        pending: std::sync::Mutex::new(pending),
-    }))
+    Ok(Arc::new(FactorPlan { full, order, split }))
 }
 
 /// The tree split of the factor of `pattern` in the equation order `order`, planned on the
@@ -1434,11 +1335,11 @@ fn numeric_llt<T: faer::traits::ComplexField + Copy>(
 }
 
 /// [`numeric_llt`] of a matrix given by its structure `a`, on one thread.
-pub(crate) fn numeric_llt_seq(
+pub(crate) fn numeric_llt_seq<T: faer::traits::ComplexField + Copy>(
     sym: &SymbolicCholesky<u32>,
     a: SymbolicSparseColMatRef<'_, u32>,
-    vals: &[f64],
-) -> Result<Vec<f64>, String> {
+    vals: &[T],
+) -> Result<Vec<T>, String> {
     numeric_llt_on(sym, a, vals, faer::Par::Seq)
 }
 
@@ -1486,8 +1387,8 @@ impl Factor {
                  rigid-body motions"
             ))
         };
-        let values = match sym.plan_split(pattern) {
-            Some(plan) => FactorValues::Split(plan.factorize(vals).map_err(not_pd)?),
+        let values = match sym.split() {
+            Some(plan) => FactorValues::Split(plan.factorize(vals, None).map_err(not_pd)?),
             None => {
                 FactorValues::Whole(numeric_llt(sym.full(pattern)?, pattern, vals).map_err(not_pd)?)
             }
@@ -1569,15 +1470,21 @@ pub struct RefinedSolve {
 /// and stored in f32 (half the memory and about half the time of the f64 factor) used as the
 /// preconditioner of conjugate gradients on the f64 system, which restores full accuracy in a
 /// few iterations while κ(A)·ε_f32 ≪ 1 (Higham, *Accuracy and Stability*, ch. 12). Shares the
-/// symbolic analysis with [`Factor`].
+/// symbolic analysis with [`Factor`], and like it factorises as two halves side by side where
+/// the plan has a tree split ([`crate::tree_factor`]; its separator in f64).
 pub struct MixedFactor {
     symbolic: Symbolic,
-    values: Vec<f32>,
+    values: MixedValues,
     /// ‖A‖∞ of the matrix factored (computed at the first solve).
     a_norm: std::sync::OnceLock<f64>,
     /// The symmetric diagonal scaling S = diag(A)^(-1/2): the f32 factor is that of S A S,
     /// whose unit diagonal loses less to single precision than A's stiffness spread.
     scale: Vec<f64>,
+}
+
+enum MixedValues {
+    Whole(Vec<f32>),
+    Split(crate::tree_factor::SplitFactor<f32>),
 }
 
 impl MixedFactor {
@@ -1588,7 +1495,7 @@ impl MixedFactor {
         vals: &[f64],
         symbolic: &mut Option<Symbolic>,
     ) -> Result<MixedFactor, FemError> {
-        let sym = ensure_symbolic_with(pattern, symbolic, SplitWhen::Later)?;
+        let sym = ensure_symbolic(pattern, symbolic)?;
         let t0 = std::time::Instant::now();
         let scale: Vec<f64> = (0..pattern.n)
             .map(|j| {
@@ -1600,6 +1507,25 @@ impl MixedFactor {
                 }
             })
             .collect();
+        let not_pd =
+            |e: String| FemError::Solver(format!("{e}: not positive definite in single precision"));
+        if let Some(plan) = sym.split() {
+            let values = plan.factorize::<f32>(vals, Some(&scale)).map_err(not_pd)?;
+            if timing() {
+                tracing::debug!(
+                    "  f32 cholesky n={} nnz(L)={} (two halves): numeric {:?}",
+                    pattern.n,
+                    plan.factor_nnz(),
+                    t0.elapsed()
+                );
+            }
+            return Ok(MixedFactor {
+                symbolic: sym,
+                values: MixedValues::Split(values),
+                a_norm: std::sync::OnceLock::new(),
+                scale,
+            });
+        }
         let mut a32 = vec![0.0f32; vals.len()];
         a32.par_chunks_mut(4096)
             .enumerate()
@@ -1616,9 +1542,7 @@ impl MixedFactor {
                     *out = (vals[p] * scale[i] * scale[j]) as f32;
                 }
             });
-        let values = numeric_llt(sym.full(pattern)?, pattern, &a32).map_err(|e| {
-            FemError::Solver(format!("{e}: not positive definite in single precision"))
-        })?;
+        let values = numeric_llt(sym.full(pattern)?, pattern, &a32).map_err(not_pd)?;
         if timing() {
             tracing::debug!(
                 "  f32 cholesky n={} nnz(L)={}: numeric {:?}",
@@ -1629,10 +1553,15 @@ impl MixedFactor {
         }
         Ok(MixedFactor {
             symbolic: sym,
-            values,
+            values: MixedValues::Whole(values),
             a_norm: std::sync::OnceLock::new(),
             scale,
         })
+    }
+
+    /// Whether the f32 factor was computed as two halves side by side.
+    pub fn is_split(&self) -> bool {
+        matches!(self.values, MixedValues::Split(_))
     }
 
     /// z = S (L Lᵀ)⁻¹ S r in single precision (L Lᵀ ≈ S A S).
@@ -1640,15 +1569,23 @@ impl MixedFactor {
         for ((w, &v), &s) in work.iter_mut().zip(r).zip(&self.scale) {
             *w = (v * s) as f32;
         }
-        let n = work.len();
-        let rhs = faer::MatMut::from_column_major_slice_mut(work, n, 1);
-        let full = self.symbolic.full_computed();
-        LltRef::new(full, &self.values).solve_in_place_with_conj(
-            Conj::No,
-            rhs,
-            factor_par(full.len_val()),
-            MemStack::new(buf),
-        );
+        match &self.values {
+            MixedValues::Whole(values) => {
+                let n = work.len();
+                let rhs = faer::MatMut::from_column_major_slice_mut(work, n, 1);
+                let full = self.symbolic.full_computed();
+                LltRef::new(full, values).solve_in_place_with_conj(
+                    Conj::No,
+                    rhs,
+                    factor_par(full.len_val()),
+                    MemStack::new(buf),
+                );
+            }
+            MixedValues::Split(f) => {
+                let plan = self.symbolic.split().expect("a split factor has its plan");
+                plan.solve_in_place(f, work);
+            }
+        }
         for ((zi, &w), &s) in z.iter_mut().zip(work.iter()).zip(&self.scale) {
             *zi = w as f64 * s;
         }
@@ -1678,11 +1615,13 @@ impl MixedFactor {
                 relative_residual: 0.0,
             });
         }
-        let mut buf =
-            MemBuffer::new(self.symbolic.full_computed().solve_in_place_scratch::<f32>(
-                1,
-                factor_par(self.symbolic.full_computed().len_val()),
-            ));
+        let mut buf = MemBuffer::new(match &self.values {
+            MixedValues::Whole(_) => {
+                let full = self.symbolic.full_computed();
+                full.solve_in_place_scratch::<f32>(1, factor_par(full.len_val()))
+            }
+            MixedValues::Split(_) => faer::dyn_stack::StackReq::empty(),
+        });
         let mut work = vec![0.0f32; n];
         let mut x = vec![0.0; n];
         let mut r = b.to_vec();

@@ -27,14 +27,27 @@
 //!
 //! A solve runs the forward substitution of both halves' own columns side by side (their
 //! separator rows collect −L_SA y_A and −L_SB y_B), the dense separator solves, then both
-//! backward substitutions side by side. Every result is independent of the thread count: the
-//! halves are computed the same way whether `rayon::join` runs them on one thread or two.
+//! backward substitutions side by side, supernode by supernode with faer's dense kernels.
+//! Every result is independent of the thread count: the halves are computed the same way
+//! whether `rayon::join` runs them on one thread or two.
+//!
+//! The halves are computed and applied in f64 ([`crate::assembly::Factor`]) or in f32 (the
+//! preconditioner of [`crate::assembly::MixedFactor`], of the diagonally scaled matrix); the
+//! separator's Schur complement and its dense factor are f64 either way, so its cancellation
+//! costs no single-precision digits beyond those already in the halves' trailing blocks.
 
 use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::matmul::matmul;
 use faer::linalg::matmul::triangular::{self as tri, BlockStructure};
-use faer::sparse::linalg::cholesky::{SymbolicCholesky, SymbolicCholeskyRaw};
+use faer::linalg::triangular_solve::{
+    solve_lower_triangular_in_place, solve_upper_triangular_in_place,
+};
+use faer::sparse::linalg::cholesky::{
+    factorize_symbolic_cholesky, CholeskySymbolicParams, SymbolicCholesky, SymbolicCholeskyRaw,
+    SymmetricOrdering,
+};
 use faer::sparse::SymbolicSparseColMatRef;
-use faer::{Accum, Mat, Par};
+use faer::{Accum, Mat, MatMut, MatRef, Par, Side};
 
 use crate::assembly::Pattern;
 
@@ -100,11 +113,69 @@ pub struct SplitPlan {
     pub predicted: f64,
 }
 
-/// The numeric factor of a [`SplitPlan`]: both halves' values and the separator's dense
-/// Cholesky factor L_SS.
-pub struct SplitFactor {
-    values: [Vec<f64>; 2],
+/// The numeric factor of a [`SplitPlan`]: both halves' values (in `T`) and the separator's
+/// dense Cholesky factor L_SS (in f64).
+pub struct SplitFactor<T = f64> {
+    values: [Vec<T>; 2],
     lss: Mat<f64>,
+}
+
+/// The scalar a split factor's halves are computed and applied in: f64, or f32 for the
+/// mixed-precision preconditioner.
+pub trait FactorScalar: faer::traits::RealField + Copy + Send + Sync {
+    /// The nearest value of this type.
+    fn of(x: f64) -> Self;
+    /// The value in f64 (exact).
+    fn wide(self) -> f64;
+}
+
+impl FactorScalar for f64 {
+    fn of(x: f64) -> f64 {
+        x
+    }
+    fn wide(self) -> f64 {
+        self
+    }
+}
+
+impl FactorScalar for f32 {
+    fn of(x: f64) -> f32 {
+        x as f32
+    }
+    fn wide(self) -> f64 {
+        self as f64
+    }
+}
+
+impl Node {
+    /// The node's dense block (its columns' values, `end − start + plen` rows) in `values`,
+    /// and the number of its columns that are the half's own (below `own`).
+    fn block<'a, T>(&self, values: &'a [T], own: usize) -> (MatRef<'a, T>, usize) {
+        let size = (self.end - self.start) as usize;
+        let nrows = size + self.plen as usize;
+        let ls = MatRef::from_column_major_slice(&values[self.voff..][..nrows * size], nrows, size);
+        (ls, (self.end as usize).min(own) - self.start as usize)
+    }
+}
+
+/// The structure of the transpose of the m × m matrix (`col_ptr`, `row_idx`), rows sorted.
+fn transpose(m: usize, col_ptr: &[u32], row_idx: &[u32]) -> (Vec<u32>, Vec<u32>) {
+    let mut ptr = vec![0u32; m + 1];
+    for &i in row_idx {
+        ptr[i as usize + 1] += 1;
+    }
+    for i in 0..m {
+        ptr[i + 1] += ptr[i];
+    }
+    let mut next = ptr.clone();
+    let mut rows = vec![0u32; row_idx.len()];
+    for j in 0..m {
+        for &i in &row_idx[col_ptr[j] as usize..col_ptr[j + 1] as usize] {
+            rows[next[i as usize] as usize] = j as u32;
+            next[i as usize] += 1;
+        }
+    }
+    (ptr, rows)
 }
 
 /// The supernodes of `sym`, None for a simplicial factor.
@@ -320,9 +391,17 @@ impl SplitPlan {
                 col_ptr.push(row_idx.len() as u32);
             }
             let m = eqs.len();
-            let a = SymbolicSparseColMatRef::new_checked(m, m, &col_ptr, None, &row_idx);
-            let identity: Vec<u32> = (0..m as u32).collect();
-            let sym = crate::assembly::analyse_in_order(a, &identity).ok()?;
+            // analysed in its own order without a permutation (faer reads the upper triangle
+            // then), so that the numeric factorisation reads the lower triangle in place
+            // instead of copying it into a permuted one
+            let (ucol, urow) = transpose(m, &col_ptr, &row_idx);
+            let sym = factorize_symbolic_cholesky(
+                SymbolicSparseColMatRef::new_checked(m, m, &ucol, None, &urow),
+                Side::Upper,
+                SymmetricOrdering::Identity,
+                CholeskySymbolicParams::default(),
+            )
+            .ok()?;
             let nodes = nodes_of(&sym)?;
             Some(Half {
                 eqs,
@@ -353,14 +432,36 @@ impl SplitPlan {
         self.halves.iter().map(|h| h.sym.len_val()).sum()
     }
 
-    /// Numeric factorisation of the matrix with `vals` on the pattern the plan was made for.
-    pub fn factorize(&self, vals: &[f64]) -> Result<SplitFactor, String> {
-        let half = |h: &Half| -> Result<(Vec<f64>, Mat<f64>), String> {
-            let sub: Vec<f64> = h.src.iter().map(|&q| vals[q as usize]).collect();
+    /// Numeric factorisation in `T` of the matrix with `vals` on the pattern the plan was made
+    /// for, scaled symmetrically by `scale` (entry (i, j) times `scale[i]·scale[j]`) if given.
+    pub fn factorize<T: FactorScalar>(
+        &self,
+        vals: &[f64],
+        scale: Option<&[f64]>,
+    ) -> Result<SplitFactor<T>, String> {
+        let half = |h: &Half| -> Result<(Vec<T>, Mat<f64>), String> {
             let m = h.eqs.len();
+            let mut sub = Vec::new();
+            sub.try_reserve_exact(h.src.len())
+                .map_err(|_| "out of memory for a half of the split factor".to_string())?;
+            match scale {
+                None => sub.extend(h.src.iter().map(|&q| T::of(vals[q as usize]))),
+                Some(s) => {
+                    for (jl, &ej) in h.eqs.iter().enumerate() {
+                        let sj = s[ej as usize];
+                        let range = h.col_ptr[jl] as usize..h.col_ptr[jl + 1] as usize;
+                        sub.extend(h.row_idx[range.clone()].iter().zip(&h.src[range]).map(
+                            |(&il, &q)| {
+                                T::of(vals[q as usize] * s[h.eqs[il as usize] as usize] * sj)
+                            },
+                        ));
+                    }
+                }
+            }
             let a = SymbolicSparseColMatRef::new_checked(m, m, &h.col_ptr, None, &h.row_idx);
             let values = crate::assembly::numeric_llt_seq(&h.sym, a, &sub)?;
-            // the trailing block L_h and its product L_h L_hᵀ (lower triangle)
+            drop(sub);
+            // the trailing block L_h and its product L_h L_hᵀ (lower triangle), in f64
             let s = m - h.own;
             let mut lh = Mat::<f64>::zeros(s, s);
             let rows = h.rows();
@@ -375,10 +476,10 @@ impl SplitPlan {
                     let c = j - nd.start as usize;
                     let col = &values[nd.voff + c * nrows..][..nrows];
                     for r in c..size {
-                        lh[(nd.start as usize + r - h.own, j - h.own)] = col[r];
+                        lh[(nd.start as usize + r - h.own, j - h.own)] = col[r].wide();
                     }
                     for (k, &i) in pat.iter().enumerate() {
-                        lh[(i as usize - h.own, j - h.own)] = col[size + k];
+                        lh[(i as usize - h.own, j - h.own)] = col[size + k].wide();
                     }
                 }
             }
@@ -405,7 +506,15 @@ impl SplitPlan {
             }
         }
         for &(i, j, q) in &self.kss {
-            schur[(i as usize, j as usize)] -= vals[q as usize];
+            let scaled = match scale {
+                None => vals[q as usize],
+                Some(s) => {
+                    vals[q as usize]
+                        * s[self.sep[i as usize] as usize]
+                        * s[self.sep[j as usize] as usize]
+                }
+            };
+            schur[(i as usize, j as usize)] -= scaled;
         }
         let s = self.sep.len();
         let mut buf = MemBuffer::try_new(
@@ -430,30 +539,46 @@ impl SplitPlan {
         })
     }
 
-    /// Solves A x = b in place with the factor `f` of this plan.
-    pub fn solve_in_place(&self, f: &SplitFactor, b: &mut [f64]) {
-        let forward = |h: &Half, values: &[f64]| -> Vec<f64> {
-            let mut z: Vec<f64> = h.eqs[..h.own].iter().map(|&e| b[e as usize]).collect();
-            z.resize(h.eqs.len(), 0.0);
+    /// Solves A x = b in place with the factor `f` of this plan (in its own precision; for a
+    /// factor of the scaled matrix, b and x are scaled alike).
+    pub fn solve_in_place<T: FactorScalar>(&self, f: &SplitFactor<T>, b: &mut [T]) {
+        // forward substitution of the half's own columns: z's separator rows collect −L_S· y
+        let forward = |h: &Half, values: &[T]| -> Vec<T> {
+            let mut z: Vec<T> = h.eqs[..h.own].iter().map(|&e| b[e as usize]).collect();
+            z.resize(h.eqs.len(), T::zero());
             let rows = h.rows();
+            let mut tmp: Vec<T> = Vec::new();
             for nd in &h.nodes {
                 if nd.start as usize >= h.own {
                     break;
                 }
-                let size = (nd.end - nd.start) as usize;
-                let nrows = size + nd.plen as usize;
-                let pat = &rows[nd.p0 as usize..(nd.p0 + nd.plen) as usize];
-                for j in nd.start as usize..(nd.end as usize).min(h.own) {
-                    let c = j - nd.start as usize;
-                    let col = &values[nd.voff + c * nrows..][..nrows];
-                    let xj = z[j] / col[c];
-                    z[j] = xj;
-                    for r in c + 1..size {
-                        z[nd.start as usize + r] -= col[r] * xj;
-                    }
-                    for (k, &i) in pat.iter().enumerate() {
-                        z[i as usize] -= col[size + k] * xj;
-                    }
+                let (ls, c) = nd.block(values, h.own);
+                let (start, size) = (nd.start as usize, (nd.end - nd.start) as usize);
+                solve_lower_triangular_in_place(
+                    ls.get(..c, ..c),
+                    MatMut::from_column_major_slice_mut(&mut z[start..start + c], c, 1),
+                    Par::Seq,
+                );
+                let rest = ls.get(c.., ..c);
+                tmp.clear();
+                tmp.resize(rest.nrows(), T::zero());
+                matmul(
+                    MatMut::from_column_major_slice_mut(&mut tmp, rest.nrows(), 1),
+                    Accum::Replace,
+                    rest,
+                    MatRef::from_column_major_slice(&z[start..start + c], c, 1),
+                    T::one(),
+                    Par::Seq,
+                );
+                let (inner, below) = tmp.split_at(size - c);
+                for (zi, &t) in z[start + c..start + size].iter_mut().zip(inner) {
+                    *zi -= t;
+                }
+                for (&i, &t) in rows[nd.p0 as usize..(nd.p0 + nd.plen) as usize]
+                    .iter()
+                    .zip(below)
+                {
+                    z[i as usize] -= t;
                 }
             }
             z
@@ -462,51 +587,53 @@ impl SplitPlan {
             || forward(&self.halves[0], &f.values[0]),
             || forward(&self.halves[1], &f.values[1]),
         );
-        // the separator: b_S − L_SA y_A − L_SB y_B, then L_SS L_SSᵀ x_S = that
+        // the separator: b_S − L_SA y_A − L_SB y_B, then L_SS L_SSᵀ x_S = that (in f64)
         let (o0, o1) = (self.halves[0].own, self.halves[1].own);
         let mut xs: Vec<f64> = self
             .sep
             .iter()
             .enumerate()
-            .map(|(k, &e)| b[e as usize] + z0[o0 + k] + z1[o1 + k])
+            .map(|(k, &e)| b[e as usize].wide() + z0[o0 + k].wide() + z1[o1 + k].wide())
             .collect();
         {
             let s = xs.len();
             let mut rhs = faer::MatMut::from_column_major_slice_mut(&mut xs, s, 1);
-            faer::linalg::triangular_solve::solve_lower_triangular_in_place(
-                f.lss.as_ref(),
-                rhs.as_mut(),
-                Par::Seq,
-            );
-            faer::linalg::triangular_solve::solve_upper_triangular_in_place(
-                f.lss.transpose(),
-                rhs.as_mut(),
-                Par::Seq,
-            );
+            solve_lower_triangular_in_place(f.lss.as_ref(), rhs.as_mut(), Par::Seq);
+            solve_upper_triangular_in_place(f.lss.transpose(), rhs.as_mut(), Par::Seq);
         }
-        z0[o0..].copy_from_slice(&xs);
-        z1[o1..].copy_from_slice(&xs);
-        let backward = |h: &Half, values: &[f64], z: &mut [f64]| {
+        for (z, o) in [(&mut z0, o0), (&mut z1, o1)] {
+            for (zi, &x) in z[o..].iter_mut().zip(&xs) {
+                *zi = T::of(x);
+            }
+        }
+        // backward substitution of the half's own columns, the separator's x known
+        let backward = |h: &Half, values: &[T], z: &mut [T]| {
             let rows = h.rows();
+            let mut tmp: Vec<T> = Vec::new();
             for nd in h.nodes.iter().rev() {
                 if nd.start as usize >= h.own {
                     continue;
                 }
-                let size = (nd.end - nd.start) as usize;
-                let nrows = size + nd.plen as usize;
-                let pat = &rows[nd.p0 as usize..(nd.p0 + nd.plen) as usize];
-                for j in (nd.start as usize..(nd.end as usize).min(h.own)).rev() {
-                    let c = j - nd.start as usize;
-                    let col = &values[nd.voff + c * nrows..][..nrows];
-                    let mut acc = z[j];
-                    for r in c + 1..size {
-                        acc -= col[r] * z[nd.start as usize + r];
-                    }
-                    for (k, &i) in pat.iter().enumerate() {
-                        acc -= col[size + k] * z[i as usize];
-                    }
-                    z[j] = acc / col[c];
-                }
+                let (ls, c) = nd.block(values, h.own);
+                let (start, size) = (nd.start as usize, (nd.end - nd.start) as usize);
+                let rest = ls.get(c.., ..c);
+                tmp.clear();
+                tmp.extend_from_slice(&z[start + c..start + size]);
+                tmp.extend(
+                    rows[nd.p0 as usize..(nd.p0 + nd.plen) as usize]
+                        .iter()
+                        .map(|&i| z[i as usize]),
+                );
+                let mut top = MatMut::from_column_major_slice_mut(&mut z[start..start + c], c, 1);
+                matmul(
+                    top.as_mut(),
+                    Accum::Add,
+                    rest.transpose(),
+                    MatRef::from_column_major_slice(&tmp, rest.nrows(), 1),
+                    -T::one(),
+                    Par::Seq,
+                );
+                solve_upper_triangular_in_place(ls.get(..c, ..c).transpose(), top, Par::Seq);
             }
         };
         rayon::join(
@@ -518,8 +645,8 @@ impl SplitPlan {
                 b[e as usize] = v;
             }
         }
-        for (&e, &v) in self.sep.iter().zip(&xs) {
-            b[e as usize] = v;
+        for (&e, &x) in self.sep.iter().zip(&xs) {
+            b[e as usize] = T::of(x);
         }
     }
 }

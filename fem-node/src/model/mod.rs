@@ -386,22 +386,12 @@ impl Model {
         // factorises on this pattern) run beside the stiffness assembly: the ordering is
         // mostly sequential, the assembly parallel
         let explicit = matches!(cfg.analysis, Analysis::Explicit { .. });
-        // a static analysis that may factorise in f32 only (a one-shot solve with `auto`,
-        // or `mixed`) leaves the tree split of the f64 factor until that is needed
-        let split = if matches!(cfg.analysis, Analysis::Static)
-            && !nonlinear
-            && cfg.solver.mixed_for(dofs.n_eq, true)
-        {
-            assembly::SplitWhen::Later
-        } else {
-            assembly::SplitWhen::Now
-        };
         let (k, symbolic) = rayon::join(
             || assembly::assemble(&mesh, &dofs, &pattern, Operator::Stiffness, props),
             || {
                 let mut sym = None;
                 (!explicit)
-                    .then(|| assembly::ensure_symbolic_with(&pattern, &mut sym, split))
+                    .then(|| assembly::ensure_symbolic(&pattern, &mut sym))
                     .transpose()
             },
         );
