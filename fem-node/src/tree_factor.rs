@@ -427,6 +427,20 @@ impl SplitPlan {
         self.sep.len()
     }
 
+    /// Supernodes of the halves' factors that hold both own and separator columns (their
+    /// own columns are substituted, the rest belong to the dense separator).
+    pub fn straddling_supernodes(&self) -> usize {
+        self.halves
+            .iter()
+            .map(|h| {
+                h.nodes
+                    .iter()
+                    .filter(|nd| (nd.start as usize) < h.own && (nd.end as usize) > h.own)
+                    .count()
+            })
+            .sum()
+    }
+
     /// Entries of both halves' factors.
     pub fn factor_nnz(&self) -> usize {
         self.halves.iter().map(|h| h.sym.len_val()).sum()
@@ -514,7 +528,9 @@ impl SplitPlan {
                         * s[self.sep[j as usize] as usize]
                 }
             };
-            schur[(i as usize, j as usize)] -= scaled;
+            // K_SS as the halves saw it (rounded to T), so that the split factors the very
+            // matrix the whole factor in T would
+            schur[(i as usize, j as usize)] -= T::of(scaled).wide();
         }
         let s = self.sep.len();
         let mut buf = MemBuffer::try_new(

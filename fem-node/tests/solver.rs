@@ -408,6 +408,9 @@ fn the_tree_split_factor_solves_a_cantilever_as_the_whole_factor_does() {
             split.separator()
         );
         assert!(split.predicted < 0.75, "{}", split.predicted);
+        // faer's relaxed supernodes join the last own columns with the separator's: the
+        // substitutions' partial supernodes are exercised (one per half here)
+        assert!(split.straddling_supernodes() > 0, "{kind:?}");
         let f = Factor::new(&p, &k, &mut plan).unwrap();
         assert!(f.is_split());
         // the mixed solver's f32 factor (of the scaled matrix) splits on the same plan: its
@@ -558,6 +561,18 @@ fn the_tree_split_of_two_separate_bodies_has_an_empty_separator() {
     let mixed = fem::assembly::MixedFactor::new(&p, &vals, &mut plan).unwrap();
     assert!(mixed.is_split());
     let mut xm = b.clone();
-    mixed.solve(&p, &vals, &mut xm, 1e-11, 1e-9, 200).unwrap();
+    let info = mixed.solve(&p, &vals, &mut xm, 1e-11, 1e-9, 200).unwrap();
     assert!(max_rel_diff(&xm, &x_whole) < 1e-9);
+    // as good a preconditioner as the whole f32 factor
+    let whole_mixed = fem::assembly::MixedFactor::new(&p, &vals, &mut whole_plan).unwrap();
+    let mut xw = b.clone();
+    let info_whole = whole_mixed
+        .solve(&p, &vals, &mut xw, 1e-11, 1e-9, 200)
+        .unwrap();
+    assert!(
+        info.iterations <= info_whole.iterations,
+        "{} iterations split, {} whole",
+        info.iterations,
+        info_whole.iterations
+    );
 }
