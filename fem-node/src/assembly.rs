@@ -1006,12 +1006,47 @@ fn leaf_order(adj: &[Vec<u32>], nodes: &[u32], local: &mut [u32], out: &mut Vec<
 /// computed as two halves side by side ([`crate::tree_factor`]).
 pub struct Factor {
     symbolic: Symbolic,
-    values: FactorValues,
+    values: FactorValues<f64>,
 }
 
-enum FactorValues {
-    Whole(Vec<f64>),
-    Split(crate::tree_factor::SplitFactor<f64>),
+/// A factor's values in `T`: whole (faer's factor of the plan's whole analysis) or the tree
+/// split's two halves.
+enum FactorValues<T> {
+    Whole(Vec<T>),
+    Split(crate::tree_factor::SplitFactor<T>),
+}
+
+impl<T: crate::tree_factor::FactorScalar> FactorValues<T> {
+    /// The workspace [`FactorValues::solve_in_place`] needs (none for a split factor).
+    fn scratch(&self, plan: &FactorPlan) -> MemBuffer {
+        MemBuffer::new(match self {
+            FactorValues::Whole(_) => {
+                let full = plan.full_computed();
+                full.solve_in_place_scratch::<T>(1, factor_par(full.len_val()))
+            }
+            FactorValues::Split(_) => faer::dyn_stack::StackReq::empty(),
+        })
+    }
+
+    /// Solves (L Lᵀ) x = b in place with these values of `plan`'s factor.
+    fn solve_in_place(&self, plan: &FactorPlan, b: &mut [T], buf: &mut MemBuffer) {
+        match self {
+            FactorValues::Whole(values) => {
+                let full = plan.full_computed();
+                let n = b.len();
+                LltRef::new(full, values).solve_in_place_with_conj(
+                    Conj::No,
+                    faer::MatMut::from_column_major_slice_mut(b, n, 1),
+                    factor_par(full.len_val()),
+                    MemStack::new(buf),
+                );
+            }
+            FactorValues::Split(f) => plan
+                .split()
+                .expect("a split factor has its plan")
+                .solve_in_place(f, b),
+        }
+    }
 }
 
 /// The symbolic analysis of one pattern (ordering, elimination tree, supernodes) and, where
@@ -1427,25 +1462,8 @@ impl Factor {
 
     /// Solves A x = b in place.
     pub fn solve_in_place(&self, b: &mut [f64]) {
-        let values = match &self.values {
-            FactorValues::Whole(v) => v,
-            FactorValues::Split(f) => {
-                let plan = self.symbolic.split().expect("a split factor has its plan");
-                plan.solve_in_place(f, b);
-                return;
-            }
-        };
-        let full = self.symbolic.full_computed();
-        let par = factor_par(full.len_val());
-        let mut buf = MemBuffer::new(full.solve_in_place_scratch::<f64>(1, par));
-        let n = b.len();
-        let rhs = faer::MatMut::from_column_major_slice_mut(b, n, 1);
-        LltRef::new(full, values).solve_in_place_with_conj(
-            Conj::No,
-            rhs,
-            par,
-            MemStack::new(&mut buf),
-        );
+        let mut buf = self.values.scratch(&self.symbolic);
+        self.values.solve_in_place(&self.symbolic, b, &mut buf);
     }
 }
 
@@ -1474,17 +1492,12 @@ pub struct RefinedSolve {
 /// the plan has a tree split ([`crate::tree_factor`]; its separator in f64).
 pub struct MixedFactor {
     symbolic: Symbolic,
-    values: MixedValues,
+    values: FactorValues<f32>,
     /// ‖A‖∞ of the matrix factored (computed at the first solve).
     a_norm: std::sync::OnceLock<f64>,
     /// The symmetric diagonal scaling S = diag(A)^(-1/2): the f32 factor is that of S A S,
     /// whose unit diagonal loses less to single precision than A's stiffness spread.
     scale: Vec<f64>,
-}
-
-enum MixedValues {
-    Whole(Vec<f32>),
-    Split(crate::tree_factor::SplitFactor<f32>),
 }
 
 impl MixedFactor {
@@ -1521,7 +1534,7 @@ impl MixedFactor {
             }
             return Ok(MixedFactor {
                 symbolic: sym,
-                values: MixedValues::Split(values),
+                values: FactorValues::Split(values),
                 a_norm: std::sync::OnceLock::new(),
                 scale,
             });
@@ -1553,7 +1566,7 @@ impl MixedFactor {
         }
         Ok(MixedFactor {
             symbolic: sym,
-            values: MixedValues::Whole(values),
+            values: FactorValues::Whole(values),
             a_norm: std::sync::OnceLock::new(),
             scale,
         })
@@ -1561,7 +1574,7 @@ impl MixedFactor {
 
     /// Whether the f32 factor was computed as two halves side by side.
     pub fn is_split(&self) -> bool {
-        matches!(self.values, MixedValues::Split(_))
+        matches!(self.values, FactorValues::Split(_))
     }
 
     /// z = S (L Lᵀ)⁻¹ S r in single precision (L Lᵀ ≈ S A S).
@@ -1569,23 +1582,7 @@ impl MixedFactor {
         for ((w, &v), &s) in work.iter_mut().zip(r).zip(&self.scale) {
             *w = (v * s) as f32;
         }
-        match &self.values {
-            MixedValues::Whole(values) => {
-                let n = work.len();
-                let rhs = faer::MatMut::from_column_major_slice_mut(work, n, 1);
-                let full = self.symbolic.full_computed();
-                LltRef::new(full, values).solve_in_place_with_conj(
-                    Conj::No,
-                    rhs,
-                    factor_par(full.len_val()),
-                    MemStack::new(buf),
-                );
-            }
-            MixedValues::Split(f) => {
-                let plan = self.symbolic.split().expect("a split factor has its plan");
-                plan.solve_in_place(f, work);
-            }
-        }
+        self.values.solve_in_place(&self.symbolic, work, buf);
         for ((zi, &w), &s) in z.iter_mut().zip(work.iter()).zip(&self.scale) {
             *zi = w as f64 * s;
         }
@@ -1615,13 +1612,7 @@ impl MixedFactor {
                 relative_residual: 0.0,
             });
         }
-        let mut buf = MemBuffer::new(match &self.values {
-            MixedValues::Whole(_) => {
-                let full = self.symbolic.full_computed();
-                full.solve_in_place_scratch::<f32>(1, factor_par(full.len_val()))
-            }
-            MixedValues::Split(_) => faer::dyn_stack::StackReq::empty(),
-        });
+        let mut buf = self.values.scratch(&self.symbolic);
         let mut work = vec![0.0f32; n];
         let mut x = vec![0.0; n];
         let mut r = b.to_vec();
